@@ -1,0 +1,14 @@
+"""bayes-roadload: road load from coastdown tests, with honest uncertainty.
+
+Layers: :mod:`physics` (pure JAX) -> :mod:`simulate` -> :mod:`inference` -> :mod:`analysis`
+-> :mod:`data` / :mod:`cli`.  Importing the package enables 64-bit floats in JAX.
+"""
+
+from . import config as config  # enables x64 first
+from .physics import DragModel as DragModel
+from .physics import full_model as full_model
+from .physics import integrate_batch as integrate_batch
+from .physics import integrate_run as integrate_run
+from .physics import simplified_model as simplified_model
+
+__version__ = "0.1.0"

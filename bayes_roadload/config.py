@@ -1,0 +1,134 @@
+"""Every default of the package, in one place.
+
+Physical constants and the reference conditions of the thesis (Passmore 1990, section 2 and
+``ROADLOAD_MODEL.md``), the parameter names of the data contract with their units and O(1)
+scales, and the default settings of the integrator and of the samplers.  Other modules import
+from here rather than writing literals of their own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+# --- physical constants -------------------------------------------------------------------
+GRAVITY_MPS2 = 9.81
+"""Acceleration due to gravity used by the thesis (m/s^2)."""
+GAS_CONSTANT_AIR_J_PER_KG_K = 287.05
+"""Specific gas constant of dry air (J/(kg K))."""
+
+# --- reference conditions (thesis section 2.2.1.3) ----------------------------------------
+REFERENCE_PRESSURE_PA = 100_000.0
+REFERENCE_TEMPERATURE_K = 293.2
+TYRE_TEMPERATURE_COEFF_PER_K = 0.0086
+"""K_T of eq. 2.38-2.40: tyre loss falls by 0.86 % per kelvin above the reference."""
+
+# --- the data contract: parameter names, units and scales ----------------------------------
+PARAMETER_UNITS: dict[str, str] = {
+    "AD": "-",
+    "BD": "s/m",
+    "CD0": "-",
+    "KD": "rad^-2",
+    "At": "N",
+    "Bt": "N s/m",
+    "Ct": "N s^2/m^2",
+    "Au": "N",
+    "Bu": "N s/m",
+    "CL0": "-",
+    "KL": "rad^-2",
+    "KS": "rad^-1",
+    "Cy": "N/rad",
+    "Kalpha": "rad^-1",
+    "pitch_gain": "rad s^2/m",
+    "KT": "1/K",
+    "grade_rad": "rad",
+    "grade_scale": "-",
+    "airspeed_factor": "-",
+    "yaw_factor": "-",
+}
+"""Units of every named model parameter.  AD, BD, CD0, KD, At, Bt, Ct, Au, Bu are the
+contract names used in code, outputs and docs."""
+
+PARAMETER_SCALES: dict[str, float] = {
+    "AD": 0.01,
+    "BD": 1e-4,
+    "CD0": 0.4,
+    "KD": 1.0,
+    "At": 10.0,
+    "Bt": 1.0,
+    "Ct": 0.01,
+    "Au": 1.0,
+    "Bu": 0.1,
+    "CL0": 0.1,
+    "KL": 1.0,
+    "KS": 1.0,
+    "Cy": 1e4,
+    "Kalpha": 1.0,
+    "pitch_gain": 0.01,
+    "KT": 0.01,
+    "grade_rad": 0.001,
+    "grade_scale": 1.0,
+    "airspeed_factor": 1.0,
+    "yaw_factor": 1.0,
+}
+"""Typical magnitude of each parameter: optimisers and samplers work on ``value / scale`` so
+that every unknown is O(1)."""
+
+# --- the thesis test vehicle and simulation inputs (tables 6.3-6.6, section 3) --------------
+THESIS_VEHICLE = {
+    "mass_kg": 1100.0,
+    "effective_mass_kg": 1130.0,
+    "frontal_area_m2": 1.85,
+    "rolling_radius_m": 0.28,
+    "length_m": 4.5,
+}
+THESIS_COEFFICIENTS = {"AD": 0.01, "BD": 2.0e-4, "CD0": 0.4, "KD": 0.614}
+THESIS_FULL_MODEL = {
+    "CL0": 0.273,
+    "KL": 3.64,
+    "KS": 2.4,
+    "Cy": 25_000.0,
+    "Kalpha": 0.9,
+    # alpha = (M l_p / k_p) dv/dt with M = 1100 kg, l_p = 0.55 m (C of G height, reconstructed),
+    # k_p = 60e3 N m/rad.
+    "pitch_gain": 1100.0 * 0.55 / 60e3,
+}
+THESIS_DRIVELINE = {"At": 21.0, "Bt": 2.09, "Ct": -0.02}
+THESIS_UNDRIVEN = {"Au": 3.24, "Bu": 0.232}
+THESIS_TUNNEL_TABLE = {
+    "yaw_deg": [-25.0, -20.0, -15.0, -10.0, -5.0, 0.0, 5.0, 10.0, 15.0, 20.0, 25.0],
+    "cd": [0.491, 0.468, 0.455, 0.422, 0.412, 0.401, 0.409, 0.426, 0.456, 0.481, 0.486],
+    "cs": [-1.121, -0.873, -0.627, -0.415, -0.208, -0.013, 0.186, 0.387, 0.595, 0.841, 1.101],
+    "cl": [0.654, 0.629, 0.515, 0.407, 0.317, 0.273, 0.297, 0.383, 0.530, 0.667, 0.662],
+}
+
+# --- data validation limits -----------------------------------------------------------------
+MAX_SPEED_MPS = 100.0
+MIN_RUN_SAMPLES = 10
+MASS_RANGE_KG = (0.5, 60_000.0)
+AREA_RANGE_M2 = (0.001, 15.0)
+
+# --- reporting --------------------------------------------------------------------------------
+MPH_TO_MPS = 0.44704
+KPH_TO_MPS = 1.0 / 3.6
+SPEED_50MPH_MPS = 50.0 * MPH_TO_MPS
+
+
+@dataclass(frozen=True)
+class IntegratorConfig:
+    """Settings of the RK4 integrator.
+
+    Parameters
+    ----------
+    substeps : int
+        RK4 steps taken between consecutive samples (the measured inputs are linearly
+        interpolated inside the interval).  The thesis used one step per 0.25 s sample.
+    """
+
+    substeps: int = 1
+
+
+DEFAULT_INTEGRATOR = IntegratorConfig()

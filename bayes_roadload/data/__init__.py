@@ -1,0 +1,8 @@
+"""The campaign data contract (``docs/data-format.md``): load, validate, save."""
+
+from .campaign import Anemometer as Anemometer
+from .campaign import Campaign as Campaign
+from .campaign import CampaignError as CampaignError
+from .campaign import Vehicle as Vehicle
+from .campaign import load_campaign as load_campaign
+from .campaign import save_campaign as save_campaign

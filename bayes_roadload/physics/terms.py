@@ -1,0 +1,282 @@
+"""Drag terms: one class per physical effect of the thesis' drag function (eq. 2.48).
+
+Each term is a small frozen object that names its parameters (with defaults and units from
+:mod:`bayes_roadload.config`) and returns its contribution to the total resisting force, in
+newtons, as a pure JAX function of the parameters and the instantaneous :class:`Conditions`.
+A drag model (:mod:`bayes_roadload.physics.model`) is a tuple of terms; adding an effect is one
+new class here, registered with :func:`register_term`, and nothing else.
+
+Sign convention: a positive force opposes the motion (it decelerates the vehicle).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar, Mapping, NamedTuple
+
+import jax.numpy as jnp
+
+from .. import config
+
+Array = jnp.ndarray
+Params = Mapping[str, Array]
+
+
+class Conditions(NamedTuple):
+    """The instantaneous state and inputs a term may use (all SI, scalars or equal shapes).
+
+    Attributes
+    ----------
+    speed_mps : vehicle speed over the ground, v.
+    airspeed_mps : true relative airspeed v_r (after anemometer calibration).
+    yaw_rad : true aerodynamic yaw angle psi.
+    driveline_force_n : measured driveline (off-load) force at the wheels, 0 if not logged.
+    position_m : position along the track from a fixed reference (same for both directions).
+    distance_m : distance travelled since the start of the run.
+    time_s : time since the start of the run.
+    accel_mps2 : dv/dt, for terms that depend on it (pitch attitude, eq. 2.33).
+    direction : +1 or -1, the direction of travel along the track axis.
+    air_density_kgpm3 : ambient air density rho.
+    temperature_k : ambient (tyre) temperature T_0.
+    mass_kg : test mass M.
+    frontal_area_m2 : frontal area A.
+    """
+
+    speed_mps: Array
+    airspeed_mps: Array
+    yaw_rad: Array
+    driveline_force_n: Array
+    position_m: Array
+    distance_m: Array
+    time_s: Array
+    accel_mps2: Array
+    direction: Array
+    air_density_kgpm3: Array
+    temperature_k: Array
+    mass_kg: Array
+    frontal_area_m2: Array
+
+    @property
+    def dynamic_pressure_area_n(self) -> Array:
+        """q_r A = 0.5 rho v_r^2 A, in newtons (eq. 2.26)."""
+        return 0.5 * self.air_density_kgpm3 * self.airspeed_mps**2 * self.frontal_area_m2
+
+    @property
+    def weight_n(self) -> Array:
+        return self.mass_kg * config.GRAVITY_MPS2
+
+
+TERMS: dict[str, type["Term"]] = {}
+
+
+def register_term(cls: type["Term"]) -> type["Term"]:
+    """Class decorator: make a term available by its ``name`` (model TOML files use it)."""
+    if cls.name in TERMS:
+        raise ValueError(f"drag term {cls.name!r} registered twice")
+    TERMS[cls.name] = cls
+    return cls
+
+
+@dataclass(frozen=True)
+class Term:
+    """Base class of a drag term.
+
+    Subclasses set ``name`` (the registry key), ``defaults`` (parameter name -> default value
+    in SI units) and implement :meth:`force_n`.  ``uses_accel`` marks terms that depend on
+    dv/dt; the model then solves the (affine) implicit equation for the deceleration exactly.
+    """
+
+    name: ClassVar[str] = ""
+    defaults: ClassVar[Mapping[str, float]] = {}
+    uses_accel: ClassVar[bool] = False
+    equation: ClassVar[str] = ""
+
+    def force_n(self, p: Params, c: Conditions) -> Array:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+def tyre_temperature_factor(p: Params, c: Conditions) -> Array:
+    """[1 - K_T (T_0 - T_s)] of eq. 2.38-2.40, T_s the reference temperature."""
+    return 1.0 - p["KT"] * (c.temperature_k - config.REFERENCE_TEMPERATURE_K)
+
+
+@register_term
+@dataclass(frozen=True)
+class TyreRolling(Term):
+    """Tyre rolling loss M g (A_D + B_D v) [1 - K_T (T_0 - T_s)] (eq. 2.38-2.40, 2.49)."""
+
+    name: ClassVar[str] = "tyre_rolling"
+    defaults: ClassVar[Mapping[str, float]] = {
+        "AD": 0.01,
+        "BD": 2.0e-4,
+        "KT": config.TYRE_TEMPERATURE_COEFF_PER_K,
+    }
+    equation: ClassVar[str] = "2.38-2.40"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        return c.weight_n * (p["AD"] + p["BD"] * c.speed_mps) * tyre_temperature_factor(p, c)
+
+
+@register_term
+@dataclass(frozen=True)
+class LiftUnloading(Term):
+    """Tyre unloading by aerodynamic lift: -q_r A C_L(psi) (A_D + B_D v)[1 - K_T(T_0 - T_s)],
+    with C_L = C_L0 + K_L psi^2 (eq. 2.40, 2.48).  Uses the tyre coefficients AD, BD."""
+
+    name: ClassVar[str] = "lift_unloading"
+    defaults: ClassVar[Mapping[str, float]] = {"CL0": 0.273, "KL": 3.64}
+    equation: ClassVar[str] = "2.40, 2.48"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        cl = p["CL0"] + p["KL"] * c.yaw_rad**2
+        tyre = (p["AD"] + p["BD"] * c.speed_mps) * tyre_temperature_factor(p, c)
+        return -c.dynamic_pressure_area_n * cl * tyre
+
+
+@register_term
+@dataclass(frozen=True)
+class AeroDrag(Term):
+    """Aerodynamic drag q_r A (C_D0 + K_D psi^2) (eq. 2.26, 2.31)."""
+
+    name: ClassVar[str] = "aero_drag"
+    defaults: ClassVar[Mapping[str, float]] = {"CD0": 0.4, "KD": 0.614}
+    equation: ClassVar[str] = "2.26, 2.31"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        return c.dynamic_pressure_area_n * (p["CD0"] + p["KD"] * c.yaw_rad**2)
+
+
+@register_term
+@dataclass(frozen=True)
+class AeroDragTable(Term):
+    """Aerodynamic drag with C_D(psi) from a wind-tunnel table, linearly interpolated:
+    C_D = C_D0 + [C_D,table(psi) - C_D,table(0)], so C_D0 stays the fitted zero-yaw value and
+    the table gives the shape (thesis case 13).  Yaw outside the table is held at its ends."""
+
+    name: ClassVar[str] = "aero_drag_table"
+    defaults: ClassVar[Mapping[str, float]] = {"CD0": 0.4}
+    equation: ClassVar[str] = "2.26 with a tabulated C_D(psi)"
+    yaw_deg: tuple[float, ...] = tuple(config.THESIS_TUNNEL_TABLE["yaw_deg"])
+    cd: tuple[float, ...] = tuple(config.THESIS_TUNNEL_TABLE["cd"])
+
+    def __post_init__(self):
+        if len(self.yaw_deg) != len(self.cd) or len(self.yaw_deg) < 2:
+            raise ValueError("tunnel table needs matching yaw_deg and cd lists of length >= 2")
+        if any(b <= a for a, b in zip(self.yaw_deg, self.yaw_deg[1:])):
+            raise ValueError("tunnel table yaw_deg must be strictly increasing")
+
+    def shape(self, yaw_rad: Array) -> Array:
+        xp = jnp.deg2rad(jnp.asarray(self.yaw_deg))
+        fp = jnp.asarray(self.cd)
+        return jnp.interp(yaw_rad, xp, fp) - jnp.interp(0.0, xp, fp)
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        return c.dynamic_pressure_area_n * (p["CD0"] + self.shape(c.yaw_rad))
+
+
+@register_term
+@dataclass(frozen=True)
+class SideForceSlip(Term):
+    """Tyre slip drag from the aerodynamic side force: (q_r A |C_S(psi)|)^2 / (4 C_y),
+    C_S = K_S psi (eq. 2.41-2.46)."""
+
+    name: ClassVar[str] = "side_force_slip"
+    defaults: ClassVar[Mapping[str, float]] = {"KS": 2.4, "Cy": 25_000.0}
+    equation: ClassVar[str] = "2.41-2.46"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        side = c.dynamic_pressure_area_n * p["KS"] * c.yaw_rad
+        return side**2 / (4.0 * p["Cy"])
+
+
+@register_term
+@dataclass(frozen=True)
+class PitchAttitude(Term):
+    """Drag change with pitch: q_r A K_alpha alpha, alpha = (M l_p / k_p) dv/dt = pitch_gain
+    dv/dt (eq. 2.33-2.35)."""
+
+    name: ClassVar[str] = "pitch_attitude"
+    defaults: ClassVar[Mapping[str, float]] = {"Kalpha": 0.9, "pitch_gain": 1100.0 * 0.55 / 60e3}
+    uses_accel: ClassVar[bool] = True
+    equation: ClassVar[str] = "2.33-2.35"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        return c.dynamic_pressure_area_n * p["Kalpha"] * p["pitch_gain"] * c.accel_mps2
+
+
+@register_term
+@dataclass(frozen=True)
+class DrivelineMeasured(Term):
+    """Driveline off-load loss taken from the measured wheel torque (eq. 5.12)."""
+
+    name: ClassVar[str] = "driveline_measured"
+    defaults: ClassVar[Mapping[str, float]] = {}
+    equation: ClassVar[str] = "5.12"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        return c.driveline_force_n
+
+
+@register_term
+@dataclass(frozen=True)
+class DrivelinePolynomial(Term):
+    """Driveline off-load loss A_t + B_t v + C_t v^2 (eq. 2.14, 2.15)."""
+
+    name: ClassVar[str] = "driveline_polynomial"
+    defaults: ClassVar[Mapping[str, float]] = dict(config.THESIS_DRIVELINE)
+    equation: ClassVar[str] = "2.14, 2.15"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        v = c.speed_mps
+        return p["At"] + p["Bt"] * v + p["Ct"] * v**2
+
+
+@register_term
+@dataclass(frozen=True)
+class UndrivenWheels(Term):
+    """Undriven wheel bearing and brake loss A_u + B_u v (eq. 2.16)."""
+
+    name: ClassVar[str] = "undriven_wheels"
+    defaults: ClassVar[Mapping[str, float]] = dict(config.THESIS_UNDRIVEN)
+    equation: ClassVar[str] = "2.16"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        return p["Au"] + p["Bu"] * c.speed_mps
+
+
+@register_term
+@dataclass(frozen=True)
+class Gradient(Term):
+    """Constant track gradient: M g sin(d theta), theta the rise of the track in its +x
+    direction (rad) and d the direction of travel (eq. 2.1)."""
+
+    name: ClassVar[str] = "gradient"
+    defaults: ClassVar[Mapping[str, float]] = {"grade_rad": 0.0}
+    equation: ClassVar[str] = "2.1"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        return c.weight_n * jnp.sin(c.direction * p["grade_rad"])
+
+
+@register_term
+@dataclass(frozen=True)
+class GradientProfile(Term):
+    """Track gradient varying along the track: M g sin(d theta(x)), theta(x) linearly
+    interpolated in a profile of (position_m, grade_rad) points; ``grade_scale`` scales it
+    (1 = the profile as given)."""
+
+    name: ClassVar[str] = "gradient_profile"
+    defaults: ClassVar[Mapping[str, float]] = {"grade_scale": 1.0}
+    equation: ClassVar[str] = "2.1 with theta(x)"
+    position_m: tuple[float, ...] = (0.0, 1.0)
+    grade_rad: tuple[float, ...] = (0.0, 0.0)
+
+    def __post_init__(self):
+        if len(self.position_m) != len(self.grade_rad) or len(self.position_m) < 2:
+            raise ValueError("gradient profile needs matching position_m and grade_rad lists")
+        if any(b <= a for a, b in zip(self.position_m, self.position_m[1:])):
+            raise ValueError("gradient profile position_m must be strictly increasing")
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        theta = jnp.interp(c.position_m, jnp.asarray(self.position_m), jnp.asarray(self.grade_rad))
+        return c.weight_n * jnp.sin(c.direction * p["grade_scale"] * theta)
