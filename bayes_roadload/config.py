@@ -48,6 +48,8 @@ PARAMETER_UNITS: dict[str, str] = {
     "grade_scale": "-",
     "airspeed_factor": "-",
     "yaw_factor": "-",
+    "head_wind_mps": "m/s",
+    "cross_wind_mps": "m/s",
 }
 """Units of every named model parameter.  AD, BD, CD0, KD, At, Bt, Ct, Au, Bu are the
 contract names used in code, outputs and docs."""
@@ -73,6 +75,8 @@ PARAMETER_SCALES: dict[str, float] = {
     "grade_scale": 1.0,
     "airspeed_factor": 1.0,
     "yaw_factor": 1.0,
+    "head_wind_mps": 1.0,
+    "cross_wind_mps": 1.0,
 }
 """Typical magnitude of each parameter: optimisers and samplers work on ``value / scale`` so
 that every unknown is O(1)."""

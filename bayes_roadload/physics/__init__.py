@@ -15,6 +15,7 @@ from .integrate import quadratic_coastdown_time as quadratic_coastdown_time
 from .model import DragModel as DragModel
 from .model import MeasuredAir as MeasuredAir
 from .model import StillAir as StillAir
+from .model import WindAir as WindAir
 from .model import full_model as full_model
 from .model import model_from_names as model_from_names
 from .model import simplified_model as simplified_model

@@ -51,7 +51,22 @@ class StillAir:
         return speed_mps, jnp.zeros_like(speed_mps)
 
 
-AIR_MODELS = {"measured": MeasuredAir, "still": StillAir}
+@dataclass(frozen=True)
+class WindAir:
+    """Relative air from a steady wind given as parameters (no anemometer): head-wind
+    ``head_wind_mps`` (positive opposes the motion) and cross-wind ``cross_wind_mps``;
+    v_r^2 = (v + v_h)^2 + v_x^2, psi = atan2(v_x, v + v_h) (eq. 2.27-2.29).  Per-run values
+    (shape [R]) give Ivens' latent wind per run."""
+
+    defaults: ClassVar[Mapping[str, float]] = {"head_wind_mps": 0.0, "cross_wind_mps": 0.0}
+
+    def relative_air(self, p, speed_mps, airspeed_reading_mps, yaw_reading_rad):
+        along = speed_mps + p["head_wind_mps"]
+        cross = p["cross_wind_mps"]
+        return jnp.sqrt(along**2 + cross**2), jnp.arctan2(cross, along)
+
+
+AIR_MODELS = {"measured": MeasuredAir, "still": StillAir, "wind": WindAir}
 
 
 @dataclass(frozen=True)
@@ -63,12 +78,12 @@ class DragModel:
     terms : tuple of Term
         The effects included.  Each term's parameters are looked up by name in the parameter
         mapping passed to the methods; :attr:`defaults` gives a complete mapping.
-    air : MeasuredAir or StillAir
+    air : MeasuredAir, StillAir or WindAir
         How the relative airspeed and yaw are obtained from the logged channels.
     """
 
     terms: tuple[Term, ...]
-    air: MeasuredAir | StillAir = field(default_factory=MeasuredAir)
+    air: MeasuredAir | StillAir | WindAir = field(default_factory=MeasuredAir)
 
     def __post_init__(self):
         names = [t.name for t in self.terms]
@@ -148,7 +163,7 @@ def simplified_model(*, driveline: str = "none", undriven: bool = False, lift: b
     undriven : include A_u + B_u v.
     lift : include tyre unloading by lift (C_L known from the tunnel, as in thesis ch. 6).
     tunnel_table : C_D(psi) from the tunnel table instead of C_D0 + K_D psi^2.
-    air : {"measured", "still"}
+    air : {"measured", "still", "wind"}
     """
     terms: list[Term] = [TyreRolling()]
     if lift:
