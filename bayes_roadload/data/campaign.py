@@ -122,7 +122,8 @@ class Campaign:
 
     @property
     def run_ids(self) -> list:
-        return list(pd.unique(self.runs["run"]))
+        """Run ids in file order, as plain Python values."""
+        return [_plain(r) for r in pd.unique(self.runs["run"])]
 
     @property
     def has_anemometer(self) -> bool:
@@ -136,14 +137,14 @@ class Campaign:
         """run id -> +1/-1 (every run +1 when the column is absent)."""
         if "direction" not in self.runs:
             return {r: 1 for r in self.run_ids}
-        return {r: int(g["direction"].iloc[0]) for r, g in self.runs.groupby("run", sort=False)}
+        return {_plain(r): int(g["direction"].iloc[0]) for r, g in self.runs.groupby("run", sort=False)}
 
     def pairs(self) -> list[tuple]:
         """Opposite-direction pairs of run ids: by the ``pair`` column when present, else
         consecutive runs in file order.  A run left without a partner is dropped."""
         if "pair" in self.runs:
             groups = self.runs.groupby("pair", sort=False)["run"].unique()
-            return [tuple(g) for g in groups if len(g) == 2]
+            return [tuple(_plain(r) for r in g) for g in groups if len(g) == 2]
         ids = self.run_ids
         return [(ids[i], ids[i + 1]) for i in range(0, len(ids) - 1, 2)]
 
@@ -187,6 +188,11 @@ class Campaign:
 
 
 # --------------------------------------------------------------------------- validation
+
+def _plain(x):
+    """A numpy scalar as the Python value (run ids print and serialise cleanly)."""
+    return x.item() if hasattr(x, "item") else x
+
 
 def _fail(where: str, column: str | None, row: int | None, what: str):
     parts = [where]
@@ -249,6 +255,7 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
 
     positions = np.arange(len(df))
     for rid, idx in df.groupby("run", sort=False).indices.items():
+        rid = _plain(rid)
         rows = positions[idx]
         if len(rows) < config.MIN_RUN_SAMPLES:
             _fail(where, "run", int(rows[0]) + 1,

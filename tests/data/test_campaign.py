@@ -1,0 +1,139 @@
+"""The campaign contract: round trip, conversions, and every refusal names file/column/row."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bayes_roadload.data import Campaign, CampaignError, Vehicle, load_campaign, save_campaign
+from bayes_roadload.data.campaign import vehicle_toml
+
+VEHICLE_TOML = """[vehicle]
+mass_kg = 1100.0
+effective_mass_kg = 1130.0
+frontal_area_m2 = 1.85
+rolling_radius_m = 0.28
+"""
+
+
+def runs_frame(n=40, runs=2):
+    t = np.arange(n) * 0.25
+    return pd.DataFrame({
+        "run": np.repeat(np.arange(1, runs + 1), n),
+        "time_s": np.tile(t, runs),
+        "speed_mps": np.tile(30.0 - 0.3 * t, runs),
+        "direction": np.repeat([1 if i % 2 == 0 else -1 for i in range(runs)], n),
+    })
+
+
+def write(tmp_path, df, toml=VEHICLE_TOML):
+    d = tmp_path / "camp"
+    d.mkdir()
+    df.to_csv(d / "runs.csv", index=False)
+    (d / "vehicle.toml").write_text(toml)
+    return d
+
+
+def test_round_trip_and_batch(tmp_path):
+    c = Campaign(runs_frame(), Vehicle(1100.0, 1130.0, 1.85), truth={"AD": 0.01})
+    out = save_campaign(c, tmp_path / "c")
+    back = load_campaign(out)
+    pd.testing.assert_frame_equal(back.runs, c.runs)
+    assert back.truth == {"AD": 0.01}
+    assert back.pairs() == [(1, 2)] and back.directions() == {1: 1, 2: -1}
+    batch, ids = back.to_batch()
+    assert ids == [1, 2] and batch.time_s.shape == (2, 40)
+    assert float(batch.air_density_kgpm3[0, 0]) == pytest.approx(1.18818, rel=1e-4)
+
+
+def test_wheel_torque_and_rotating_inertia(tmp_path):
+    df = runs_frame()
+    df["wheel_torque_left_nm"] = 3.0
+    df["wheel_torque_right_nm"] = 4.0
+    toml = VEHICLE_TOML.replace("effective_mass_kg = 1130.0", "rotating_inertia_kgm2 = 2.352")
+    c = load_campaign(write(tmp_path, df, toml))
+    np.testing.assert_allclose(c.runs["driveline_force_n"], 7.0 / 0.28)
+    assert "wheel_torque_left_nm" not in c.runs
+    assert c.vehicle.effective_mass_kg == pytest.approx(1100.0 + 2.352 / 0.28**2)
+
+
+@pytest.mark.parametrize(
+    "mutate, expected",
+    [
+        (lambda d: d.drop(columns="speed_mps"), "column 'speed_mps': required column is missing"),
+        (lambda d: d.rename(columns={"speed_mps": "speed_kph"}), "column 'speed_kph'"),
+        (lambda d: d.assign(speed_mps=d["speed_mps"] * 3.6 + 20), "column 'speed_mps', row 1"),
+        (lambda d: d.assign(speed_mps=d["speed_mps"].where(d.index != 7, np.nan)), "column 'speed_mps', row 8"),
+        (lambda d: d.assign(speed_mps=d["speed_mps"].where(d.index != 3, -1.0)), "row 4"),
+        (lambda d: d.assign(time_s=d["time_s"].where(d.index != 5, 0.0)), "column 'time_s', row 6"),
+        (lambda d: d.assign(direction=d["direction"].where(d.index != 2, 2)), "column 'direction', row 3"),
+        (lambda d: d.assign(direction=d["direction"].where(d.index != 9, -1)), "direction changes within run"),
+        (lambda d: d.iloc[:45], "run 2 has 5 samples"),
+        (lambda d: d.assign(temperature_k=20.0), "column 'temperature_k', row 1"),
+        (lambda d: d.assign(pressure_pa=101.3), "column 'pressure_pa', row 1"),
+        (lambda d: d.assign(yaw_rad=5.0), "column 'yaw_rad'"),
+        (lambda d: d.assign(airspeed_mps=np.inf), "not a finite number"),
+    ],
+)
+def test_refusals_name_file_column_row(tmp_path, mutate, expected):
+    d = write(tmp_path, mutate(runs_frame()))
+    with pytest.raises(CampaignError) as e:
+        load_campaign(d)
+    assert "runs.csv" in str(e.value) and expected in str(e.value)
+
+
+@pytest.mark.parametrize(
+    "toml, expected",
+    [
+        (VEHICLE_TOML.replace("1100.0", "0.0"), "[vehicle] mass_kg"),
+        (VEHICLE_TOML.replace("1.85", "185.0"), "[vehicle] frontal_area_m2"),
+        (VEHICLE_TOML.replace("effective_mass_kg = 1130.0", ""), "[vehicle] effective_mass_kg"),
+        (VEHICLE_TOML.replace("1130.0", "1000.0"), "less than the test mass"),
+        (VEHICLE_TOML + "colour = 'red'\n", "[vehicle] colour"),
+        (VEHICLE_TOML + "[anemometer]\nairspeed_factor = 10.8\n", "[anemometer] airspeed_factor"),
+        ("[vehicle\n", "not valid TOML"),
+    ],
+)
+def test_vehicle_refusals(tmp_path, toml, expected):
+    d = write(tmp_path, runs_frame(), toml)
+    with pytest.raises(CampaignError) as e:
+        load_campaign(d)
+    assert "vehicle.toml" in str(e.value) and expected in str(e.value)
+
+
+def test_nothing_written_when_refused(tmp_path):
+    df = runs_frame()
+    c = Campaign(df, Vehicle(1100.0, 1130.0, 1.85))
+    c.runs.loc[3, "speed_mps"] = 250.0  # km/h-like value sneaks in after construction
+    with pytest.raises(CampaignError):
+        save_campaign(c, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_both_csv_and_parquet_is_ambiguous(tmp_path):
+    d = write(tmp_path, runs_frame())
+    (d / "runs.parquet").write_bytes(b"")
+    with pytest.raises(CampaignError, match="ambiguous"):
+        load_campaign(d)
+
+
+def test_subset_and_pair_column():
+    df = runs_frame(runs=4)
+    df["pair"] = np.repeat([10, 10, 11, 11], 40)
+    c = Campaign(df, Vehicle(1100.0, 1130.0, 1.85))
+    assert c.pairs() == [(1, 2), (3, 4)]
+    s = c.subset([4, 3])
+    assert s.run_ids == [4, 3] and s.pairs() == [(4, 3)]
+
+
+def test_vehicle_toml_is_valid_and_carries_tunnel():
+    import tomllib
+
+    c = Campaign(runs_frame(), Vehicle(1100.0, 1130.0, 1.85), tunnel={"KD": 0.614, "yaw_deg": [-5.0, 0.0, 5.0],
+                                                                       "cd": [0.41, 0.40, 0.41]},
+                 meta={"case": 14})
+    doc = tomllib.loads(vehicle_toml(c))
+    assert doc["tunnel"]["yaw_deg"] == [-5.0, 0.0, 5.0] and doc["meta"]["case"] == 14
+    assert json.dumps(doc)  # plain data

@@ -1,0 +1,108 @@
+"""Each drag term against its equation, the model's implicit pitch solve, the registry."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from bayes_roadload import config
+from bayes_roadload.physics import TERMS, Conditions, DragModel, air_density_kgpm3, full_model, simplified_model
+from bayes_roadload.physics import terms as T
+
+G = config.GRAVITY_MPS2
+
+
+def conditions(**kw):
+    base = dict(speed_mps=25.0, airspeed_mps=27.0, yaw_rad=0.1, driveline_force_n=40.0, position_m=300.0,
+                distance_m=300.0, time_s=12.0, accel_mps2=-0.3, direction=1.0,
+                air_density_kgpm3=1.2, temperature_k=config.REFERENCE_TEMPERATURE_K, mass_kg=1100.0,
+                frontal_area_m2=1.85)
+    base.update(kw)
+    return Conditions(**{k: jnp.asarray(v, float) for k, v in base.items()})
+
+
+P = {"AD": 0.01, "BD": 2e-4, "KT": 0.0086, "CD0": 0.4, "KD": 0.614, "CL0": 0.273, "KL": 3.64, "KS": 2.4,
+     "Cy": 25000.0, "Kalpha": 0.9, "pitch_gain": 0.01, "At": 21.0, "Bt": 2.09, "Ct": -0.02, "Au": 3.24,
+     "Bu": 0.232, "grade_rad": 0.002, "grade_scale": 1.0}
+
+
+def test_air_density_reference():
+    assert float(air_density_kgpm3()) == pytest.approx(100_000.0 / (287.05 * 293.2), rel=1e-12)
+    assert float(air_density_kgpm3(101_325.0, 288.15)) == pytest.approx(1.2250, abs=2e-4)
+
+
+def test_terms_match_their_equations():
+    c = conditions()
+    q_a = 0.5 * 1.2 * 27.0**2 * 1.85
+    tyre = 1100 * G * (0.01 + 2e-4 * 25.0)
+    expected = {
+        "tyre_rolling": tyre,
+        "lift_unloading": -q_a * (0.273 + 3.64 * 0.01) * (0.01 + 2e-4 * 25.0),
+        "aero_drag": q_a * (0.4 + 0.614 * 0.01),
+        "side_force_slip": (q_a * 2.4 * 0.1) ** 2 / (4 * 25000.0),
+        "pitch_attitude": q_a * 0.9 * 0.01 * -0.3,
+        "driveline_measured": 40.0,
+        "driveline_polynomial": 21.0 + 2.09 * 25 - 0.02 * 625,
+        "undriven_wheels": 3.24 + 0.232 * 25,
+        "gradient": 1100 * G * np.sin(0.002),
+    }
+    for name, value in expected.items():
+        assert float(TERMS[name]().force_n(P, c)) == pytest.approx(value, rel=1e-12), name
+
+
+def test_tyre_temperature_correction_eq_2_38():
+    hot = conditions(temperature_k=config.REFERENCE_TEMPERATURE_K + 10.0)
+    ratio = T.TyreRolling().force_n(P, hot) / T.TyreRolling().force_n(P, conditions())
+    assert float(ratio) == pytest.approx(1 - 0.0086 * 10.0)
+
+
+def test_gradient_reverses_with_direction_and_profile():
+    up, down = conditions(direction=1.0), conditions(direction=-1.0)
+    g = T.Gradient()
+    assert float(g.force_n(P, up)) == pytest.approx(-float(g.force_n(P, down)))
+    prof = T.GradientProfile(position_m=(0.0, 1000.0), grade_rad=(0.0, 0.004))
+    assert float(prof.force_n(P, up)) == pytest.approx(1100 * G * np.sin(0.0012), rel=1e-9)
+    with pytest.raises(ValueError):
+        T.GradientProfile(position_m=(0.0, 0.0), grade_rad=(0.0, 1.0))
+
+
+def test_tunnel_table_keeps_cd0_at_zero_yaw():
+    t = T.AeroDragTable()
+    c0 = conditions(yaw_rad=0.0)
+    assert float(t.force_n({"CD0": 0.4}, c0)) == pytest.approx(0.5 * 1.2 * 27.0**2 * 1.85 * 0.4)
+    c10 = conditions(yaw_rad=np.deg2rad(10.0))
+    cd10 = 0.4 + 0.426 - 0.401
+    assert float(t.force_n({"CD0": 0.4}, c10)) == pytest.approx(0.5 * 1.2 * 27.0**2 * 1.85 * cd10)
+
+
+def test_pitch_implicit_solve_is_exact():
+    """M_e a = -F(a) holds at the returned a, for a term depending on dv/dt."""
+    model = full_model()
+    c = conditions()
+    a = model.acceleration_mps2(P, c, 1130.0)
+    residual = 1130.0 * a + model.force_n(P, c._replace(accel_mps2=a))
+    assert abs(float(residual)) < 1e-9
+    # without the pitch term it is the explicit -F/M_e
+    plain = model.without("pitch_attitude")
+    assert float(plain.acceleration_mps2(P, c, 1130.0)) == pytest.approx(-float(plain.force_n(P, c)) / 1130.0)
+
+
+def test_model_composition():
+    m = simplified_model(driveline="polynomial", undriven=True, lift=True)
+    assert m.term_names == ("tyre_rolling", "lift_unloading", "driveline_polynomial", "undriven_wheels", "aero_drag")
+    assert {"AD", "BD", "CD0", "KD", "At", "Bt", "Ct", "Au", "Bu"} <= set(m.parameter_names)
+    # one effect in, one effect out, nothing else changes
+    m2 = m.with_terms(T.Gradient())
+    assert m2.term_names[-1] == "gradient" and m2.without("gradient").term_names == m.term_names
+    c = conditions()
+    total = m2.force_n(P, c)
+    parts = m2.force_components_n(P, c)
+    assert float(total) == pytest.approx(sum(float(v) for v in parts.values()))
+    with pytest.raises(ValueError):
+        DragModel((T.AeroDrag(), T.AeroDrag()))
+    with pytest.raises(ValueError):
+        simplified_model(driveline="belt")
+
+
+def test_register_term_refuses_duplicates():
+    with pytest.raises(ValueError):
+        T.register_term(T.AeroDrag)
