@@ -1,0 +1,51 @@
+"""The integrated-noise residual likelihood against a dense multivariate normal."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import stats
+
+from bayes_roadload.physics.residuals import local_level_loglik, local_level_smooth
+
+
+def dense_covariance(t, sigma, q):
+    # Cov(r_i, r_j) = q^2 min(t_i, t_j) + sigma^2 delta_ij with t measured from the first sample
+    tt = t - t[0]
+    return q**2 * np.minimum.outer(tt, tt) + sigma**2 * np.eye(t.size)
+
+
+@pytest.mark.parametrize("q", [0.0, 0.004, 0.03])
+def test_kalman_loglik_equals_dense_gaussian(q):
+    rng = np.random.default_rng(0)
+    t = np.cumsum(rng.uniform(0.2, 0.3, 60))
+    r = rng.normal(0, 0.05, t.size) + np.cumsum(rng.normal(0, 0.01, t.size))
+    sigma = 0.04
+    ll = float(local_level_loglik(jnp.asarray(r), jnp.asarray(t), jnp.ones(t.size, bool), sigma, q))
+    ref = stats.multivariate_normal(np.zeros(t.size), dense_covariance(t, sigma, q)).logpdf(r)
+    assert ll == pytest.approx(ref, rel=1e-10)
+
+
+def test_masked_samples_add_nothing():
+    rng = np.random.default_rng(1)
+    t = np.arange(40) * 0.25
+    r = rng.normal(0, 0.05, 40)
+    full = local_level_loglik(jnp.asarray(r[:30]), jnp.asarray(t[:30]), jnp.ones(30, bool), 0.05, 0.01)
+    tp = np.concatenate([t[:30], np.full(10, t[29])])
+    rp = np.concatenate([r[:30], rng.normal(0, 5, 10)])  # garbage in the padding
+    mask = np.arange(40) < 30
+    padded = local_level_loglik(jnp.asarray(rp), jnp.asarray(tp), jnp.asarray(mask), 0.05, 0.01)
+    assert float(padded) == pytest.approx(float(full), rel=1e-12)
+
+
+def test_smoother_matches_dense_conditional_mean():
+    rng = np.random.default_rng(2)
+    t = np.arange(50) * 0.25
+    sigma, q = 0.05, 0.02
+    r = rng.normal(0, 0.05, 50) + np.cumsum(rng.normal(0, 0.01, 50))
+    m, v = local_level_smooth(jnp.asarray(r), jnp.asarray(t), jnp.ones(50, bool), sigma, q)
+    tt = t - t[0]
+    c_dd = q**2 * np.minimum.outer(tt, tt)
+    c_rr = c_dd + sigma**2 * np.eye(50)
+    gain = c_dd @ np.linalg.inv(c_rr)
+    np.testing.assert_allclose(m, gain @ r, atol=1e-10)
+    np.testing.assert_allclose(v, np.diag(c_dd - gain @ c_dd), atol=1e-10)
