@@ -1,0 +1,17 @@
+"""Inference: model variants as data (:mod:`.spec`) and the classical least-squares baseline
+(:mod:`.lsq`).  The Bayesian models and samplers build on the same :class:`ModelSpec`."""
+
+from .lsq import DEFAULT_LSQ as DEFAULT_LSQ
+from .lsq import GroupFit as GroupFit
+from .lsq import LsqResult as LsqResult
+from .lsq import LsqSettings as LsqSettings
+from .lsq import fit_lsq as fit_lsq
+from .lsq import format_lsq_table as format_lsq_table
+from .lsq import roadload_figures as roadload_figures
+from .lsq import weighted_mean as weighted_mean
+from .lsq import write_lsq_outputs as write_lsq_outputs
+from .spec import ModelSpec as ModelSpec
+from .spec import ModelSpecError as ModelSpecError
+from .spec import Prior as Prior
+from .spec import available_models as available_models
+from .spec import load_model_spec as load_model_spec

@@ -1,0 +1,486 @@
+"""Model variants as data: ``models/*.toml`` -> which drag terms, which parameters are free,
+fixed or given a prior.
+
+A model file has a ``[model]`` table and one ``[parameters.NAME]`` table per parameter the
+analysis treats specially (``NAME`` a contract name from :data:`bayes_roadload.config.PARAMETER_UNITS`)::
+
+    [model]
+    name = "four_term"                      # optional, defaults to the file stem
+    description = "AD, BD, CD0, KD free (thesis 4-term analysis, table 6.8)"
+    terms = ["tyre_rolling", "aero_drag"]   # registered names from physics.terms.TERMS
+    driveline = "auto"   # auto | none | measured | polynomial
+    lift = "tunnel"      # tunnel | none
+    air = "auto"         # auto | measured | still | wind
+
+    [parameters.AD]
+    free = true
+    initial = 0.012                          # optional start for optimisers (SI units)
+    prior = { dist = "normal", loc = 0.01, scale = 0.01, low = 0.0 }
+
+    [parameters.KD]
+    fixed = "tunnel"                         # or a number
+    fallback = 0.614                         # used when the campaign has no [tunnel] KD
+
+Meaning of the ``[model]`` switches (resolved against a campaign by :meth:`ModelSpec.build`):
+
+``driveline``
+    ``"auto"``: the measured driveline force (eq. 5.12) when the campaign logs
+    ``driveline_force_n``, else none (the driveline loss is then lumped into the tyre terms);
+    ``"measured"`` requires the channel; ``"polynomial"`` fits A_t + B_t v + C_t v^2 (eq. 2.14,
+    2.15); ``"none"`` omits the driveline.
+``lift``
+    ``"tunnel"``: include tyre unloading by lift (eq. 2.40, thesis eq. 6.1) with C_L0 and K_L
+    fixed from the campaign's ``[tunnel]`` table when it gives ``CL0`` (K_L = 0 if absent), or
+    from ``[parameters.CL0]`` / ``[parameters.KL]`` (which take precedence); the term is left
+    out when neither gives C_L0 (a real campaign without tunnel data).  ``"none"``: no lift.
+``air``
+    ``"auto"``: measured airspeed and yaw (with the campaign's anemometer calibration factors
+    fixed) when the campaign logs both, else still air; ``"measured"``, ``"still"`` or
+    ``"wind"`` (a steady wind as parameters ``head_wind_mps``, ``cross_wind_mps``) force one.
+
+The ``aero_drag_table`` term takes its C_D(yaw) table from the campaign's ``[tunnel]``
+``yaw_deg`` / ``cd`` when present, else the thesis table (config.THESIS_TUNNEL_TABLE).
+
+Priors are in physical (SI) units; the Bayesian layer turns them into numpyro distributions
+with :meth:`Prior.to_numpyro`.  Parameters the file does not mention keep the model defaults
+(the term classes' ``defaults``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from .. import config
+from ..physics.model import AIR_MODELS, DragModel, model_from_names
+from ..physics.terms import TERMS
+
+MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+"""The repository's ``models/`` directory, where bare model names are looked up."""
+
+DRIVELINE_OPTIONS = ("auto", "none", "measured", "polynomial")
+LIFT_OPTIONS = ("tunnel", "none")
+AIR_OPTIONS = ("auto", "measured", "still", "wind")
+TUNNEL = "tunnel"
+"""The value of ``fixed`` that takes a parameter from the campaign's ``[tunnel]`` table."""
+
+# Terms the [model] switches control: listing them in ``terms`` would be ambiguous.
+_SWITCHED_TERMS = {
+    "lift_unloading": "lift",
+    "driveline_measured": "driveline",
+    "driveline_polynomial": "driveline",
+}
+_MODEL_KEYS = ("name", "description", "terms", "driveline", "lift", "air")
+_PARAMETER_KEYS = ("free", "fixed", "fallback", "initial", "prior")
+_AIR_PARAMETERS = tuple(
+    sorted({k for air in AIR_MODELS.values() for k in air.defaults})
+)
+
+
+class ModelSpecError(ValueError):
+    """A model file was refused; the message names the file and the key at fault."""
+
+
+# ----------------------------------------------------------------------------- priors
+
+_PRIOR_KEYS = {
+    # dist: (required keys, optional keys)
+    "normal": (("loc", "scale"), ("low", "high")),
+    "half_normal": (("scale",), ()),
+    "lognormal": (("loc", "scale"), ()),
+    "uniform": (("low", "high"), ()),
+}
+PRIOR_DISTRIBUTIONS = tuple(_PRIOR_KEYS)
+"""Distribution names a prior may use."""
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A prior distribution of one parameter, in physical (SI) units.
+
+    Parameters
+    ----------
+    dist : {"normal", "half_normal", "lognormal", "uniform"}
+        ``normal(loc, scale)`` optionally truncated to ``[low, high]``; ``half_normal(scale)``
+        on (0, inf); ``lognormal(loc, scale)`` of log(x); ``uniform(low, high)``.
+    loc, scale, low, high : float or None
+        The distribution's parameters (None when unused).
+    """
+
+    dist: str
+    loc: float | None = None
+    scale: float | None = None
+    low: float | None = None
+    high: float | None = None
+
+    @property
+    def center(self) -> float:
+        """A central value (SI): the location clipped into the support, the half-normal's
+        scale, the log-normal's median or the uniform's midpoint.  Used as the default start
+        of optimisers."""
+        if self.dist == "normal":
+            x = self.loc
+            if self.low is not None:
+                x = max(x, self.low)
+            if self.high is not None:
+                x = min(x, self.high)
+            return float(x)
+        if self.dist == "half_normal":
+            return float(self.scale)
+        if self.dist == "lognormal":
+            return float(math.exp(self.loc))
+        return 0.5 * (self.low + self.high)
+
+    def to_numpyro(self):
+        """The numpyro distribution (imported lazily: only the Bayesian layer needs it)."""
+        import numpyro.distributions as dist
+
+        if self.dist == "normal":
+            if self.low is None and self.high is None:
+                return dist.Normal(self.loc, self.scale)
+            return dist.TruncatedNormal(self.loc, self.scale, low=self.low, high=self.high)
+        if self.dist == "half_normal":
+            return dist.HalfNormal(self.scale)
+        if self.dist == "lognormal":
+            return dist.LogNormal(self.loc, self.scale)
+        return dist.Uniform(self.low, self.high)
+
+
+def parse_prior(table: Any, where: str) -> Prior:
+    """Validate a ``prior = {dist = ..., ...}`` table; ``where`` names the file and key."""
+    if not isinstance(table, Mapping):
+        raise ModelSpecError(f"{where}: a prior must be a table like "
+                             "{{ dist = \"normal\", loc = 0.01, scale = 0.01 }}")
+    name = table.get("dist")
+    if name not in _PRIOR_KEYS:
+        raise ModelSpecError(f"{where}.dist: unknown distribution {name!r}; known: "
+                             f"{', '.join(PRIOR_DISTRIBUTIONS)}")
+    required, optional = _PRIOR_KEYS[name]
+    values: dict[str, float] = {}
+    for k, v in table.items():
+        if k == "dist":
+            continue
+        if k not in required + optional:
+            raise ModelSpecError(f"{where}.{k}: not a parameter of a {name} prior "
+                                 f"(it takes {', '.join(required + optional)})")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ModelSpecError(f"{where}.{k}: {v!r} is not a finite number")
+        values[k] = float(v)
+    for k in required:
+        if k not in values:
+            raise ModelSpecError(f"{where}.{k}: required by a {name} prior")
+    if "scale" in values and values["scale"] <= 0:
+        raise ModelSpecError(f"{where}.scale: must be positive, not {values['scale']:g}")
+    low, high = values.get("low"), values.get("high")
+    if low is not None and high is not None and not low < high:
+        raise ModelSpecError(f"{where}: low ({low:g}) must be below high ({high:g})")
+    return Prior(name, values.get("loc"), values.get("scale"), low, high)
+
+
+# ----------------------------------------------------------------------------- the spec
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """A model variant read from ``models/*.toml``.
+
+    Attributes
+    ----------
+    name, description : str
+    terms : registered drag-term names (without the lift and driveline terms, which
+        ``lift`` and ``driveline`` control).
+    driveline : {"auto", "none", "measured", "polynomial"}
+    lift : {"tunnel", "none"}
+    air : {"auto", "measured", "still", "wind"}
+    free : the parameters estimated, in file order.
+    fixed : parameter -> value (SI) or ``"tunnel"`` (taken from the campaign's ``[tunnel]``).
+    priors : free parameter -> :class:`Prior` (SI units); free parameters without a prior are
+        absent.
+    initial : free parameter -> starting value for optimisers (SI): the file's ``initial``,
+        else the prior's :attr:`Prior.center`; absent when neither is given (the model
+        default is used then).
+    fallback : parameter -> value used when ``fixed = "tunnel"`` and the campaign's tunnel
+        table lacks it.
+    source : the file the spec was read from (None when built in code).
+    """
+
+    name: str
+    description: str
+    terms: tuple[str, ...]
+    driveline: str = "auto"
+    lift: str = "none"
+    air: str = "auto"
+    free: tuple[str, ...] = ()
+    fixed: dict[str, float | str] = field(default_factory=dict)
+    priors: dict[str, Prior] = field(default_factory=dict)
+    initial: dict[str, float] = field(default_factory=dict)
+    fallback: dict[str, float] = field(default_factory=dict)
+    source: str | None = None
+
+    def __post_init__(self):
+        _validate(self, self.source or f"model {self.name!r}")
+
+    # -- resolution against a campaign ------------------------------------------------
+    def resolve_driveline(self, campaign) -> str:
+        """The driveline option after resolving ``"auto"`` against ``campaign``."""
+        if self.driveline == "auto":
+            return "measured" if campaign.has_driveline else "none"
+        if self.driveline == "measured" and not campaign.has_driveline:
+            raise ModelSpecError(f"{self._where}: [model] driveline = \"measured\" but the campaign "
+                                 "does not log driveline_force_n (use \"auto\" or \"polynomial\")")
+        return self.driveline
+
+    def resolve_air(self, campaign) -> str:
+        """The air model after resolving ``"auto"`` against ``campaign``."""
+        if self.air == "auto":
+            return "measured" if campaign.has_anemometer else "still"
+        if self.air == "measured" and not campaign.has_anemometer:
+            raise ModelSpecError(f"{self._where}: [model] air = \"measured\" but the campaign logs no "
+                                 "airspeed_mps / yaw_rad")
+        return self.air
+
+    def build(self, campaign) -> tuple[DragModel, dict[str, float], tuple[str, ...]]:
+        """Resolve the spec against a campaign.
+
+        Parameters
+        ----------
+        campaign : :class:`~bayes_roadload.data.Campaign`
+            Supplies the logged channels (driveline, anemometer), the anemometer calibration
+            factors and the optional ``[tunnel]`` table.
+
+        Returns
+        -------
+        model : DragModel
+        fixed_values : dict
+            Every model parameter that is not free, with its value (SI): the spec's fixed
+            values (``"tunnel"`` resolved), C_L0 / K_L from the tunnel for lift, the anemometer
+            factors for measured air, and the model defaults for the rest.
+        free : tuple of str
+            The free parameters, in file order.
+        """
+        tunnel = dict(campaign.tunnel or {})
+        names = list(self.terms)
+        options: dict[str, dict] = {}
+        lift_values: dict[str, float] = {}
+        cl0_given = "CL0" in self.free or isinstance(self.fixed.get("CL0"), float)
+        if self.lift == "tunnel" and ("CL0" in tunnel or cl0_given):
+            names.insert(names.index("tyre_rolling") + 1 if "tyre_rolling" in names else 0,
+                         "lift_unloading")
+            if "CL0" in tunnel:
+                lift_values = {"CL0": float(tunnel["CL0"]), "KL": float(tunnel.get("KL", 0.0))}
+        driveline = self.resolve_driveline(campaign)
+        if driveline != "none":
+            names.append(f"driveline_{driveline}")
+        if "aero_drag_table" in names and "yaw_deg" in tunnel and "cd" in tunnel:
+            options["aero_drag_table"] = {"yaw_deg": tuple(float(x) for x in tunnel["yaw_deg"]),
+                                          "cd": tuple(float(x) for x in tunnel["cd"])}
+        air = self.resolve_air(campaign)
+        model = model_from_names(names, air=air, **options)
+
+        used = set(model.parameter_names)
+        for p in self.free:
+            if p not in used:
+                raise ModelSpecError(f"{self._where}: [parameters.{p}] is free but not used by the "
+                                     f"resolved model (terms {', '.join(model.term_names)})")
+        values = dict(model.defaults)
+        values.update(lift_values)
+        if air == "measured":
+            values["airspeed_factor"] = float(campaign.anemometer.airspeed_factor)
+            values["yaw_factor"] = float(campaign.anemometer.yaw_factor)
+        for p, v in self.fixed.items():
+            if p not in used:
+                continue  # e.g. CL0 when the campaign has no tunnel lift: nothing to fix
+            if v == TUNNEL:
+                if p in tunnel:
+                    v = tunnel[p]
+                elif p in self.fallback:
+                    v = self.fallback[p]
+                else:
+                    raise ModelSpecError(f"{self._where}: [parameters.{p}] fixed = \"tunnel\" but the "
+                                         f"campaign's [tunnel] has no {p} and no fallback is given")
+            values[p] = float(v)
+        fixed_values = {k: v for k, v in values.items() if k not in self.free}
+        return model, fixed_values, self.free
+
+    @property
+    def _where(self) -> str:
+        return self.source or f"model {self.name!r}"
+
+
+def _used_parameters(spec: ModelSpec) -> set[str]:
+    """Parameters the spec's model can use, whatever the campaign."""
+    used: set[str] = set(_AIR_PARAMETERS)
+    for t in spec.terms:
+        used |= set(TERMS[t].defaults)
+    if spec.lift == "tunnel":
+        used |= set(TERMS["lift_unloading"].defaults) | {"AD", "BD"}
+    if spec.driveline == "polynomial":
+        used |= set(TERMS["driveline_polynomial"].defaults)
+    return used
+
+
+def _validate(spec: ModelSpec, where: str) -> None:
+    if not spec.terms:
+        raise ModelSpecError(f"{where}: [model] terms is empty")
+    for t in spec.terms:
+        if t in _SWITCHED_TERMS:
+            raise ModelSpecError(f"{where}: [model] terms: {t!r} is controlled by "
+                                 f"[model] {_SWITCHED_TERMS[t]}, do not list it")
+        if t not in TERMS:
+            raise ModelSpecError(f"{where}: [model] terms: unknown drag term {t!r}; "
+                                 f"known: {', '.join(sorted(TERMS))}")
+    if len(set(spec.terms)) != len(spec.terms):
+        raise ModelSpecError(f"{where}: [model] terms: a term is listed twice")
+    for key, value, options in (("driveline", spec.driveline, DRIVELINE_OPTIONS),
+                                ("lift", spec.lift, LIFT_OPTIONS), ("air", spec.air, AIR_OPTIONS)):
+        if value not in options:
+            raise ModelSpecError(f"{where}: [model] {key} = {value!r}; choose one of "
+                                 f"{', '.join(options)}")
+    used = _used_parameters(spec)
+    if len(set(spec.free)) != len(spec.free):
+        raise ModelSpecError(f"{where}: a parameter is listed as free twice")
+    for p in set(spec.free) | set(spec.fixed) | set(spec.priors) | set(spec.initial):
+        if p not in config.PARAMETER_UNITS:
+            raise ModelSpecError(f"{where}: [parameters.{p}]: unknown parameter; known: "
+                                 f"{', '.join(config.PARAMETER_UNITS)}")
+        if p not in used:
+            raise ModelSpecError(f"{where}: [parameters.{p}]: not used by the model's terms "
+                                 f"({', '.join(spec.terms)}, lift={spec.lift}, "
+                                 f"driveline={spec.driveline})")
+    for p in spec.free:
+        if p in spec.fixed:
+            raise ModelSpecError(f"{where}: [parameters.{p}]: both free and fixed")
+    for p in set(spec.priors) | set(spec.initial):
+        if p not in spec.free:
+            raise ModelSpecError(f"{where}: [parameters.{p}]: a prior or initial value needs "
+                                 "free = true")
+    for p, v in spec.fixed.items():
+        if v != TUNNEL and (isinstance(v, bool) or not isinstance(v, (int, float))
+                            or not math.isfinite(v)):
+            raise ModelSpecError(f"{where}: [parameters.{p}].fixed: {v!r} is neither a finite "
+                                 "number nor \"tunnel\"")
+    for p in spec.fallback:
+        if spec.fixed.get(p) != TUNNEL:
+            raise ModelSpecError(f"{where}: [parameters.{p}].fallback: only meaningful with "
+                                 "fixed = \"tunnel\"")
+
+
+# ----------------------------------------------------------------------------- loading
+
+def _number(v: Any, where: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ModelSpecError(f"{where}: {v!r} is not a finite number")
+    return float(v)
+
+
+def parse_model_spec(doc: Mapping[str, Any], where: str, default_name: str = "model") -> ModelSpec:
+    """Build a :class:`ModelSpec` from a parsed TOML document; ``where`` names the source."""
+    for k in doc:
+        if k not in ("model", "parameters"):
+            raise ModelSpecError(f"{where}: [{k}]: unknown table; a model file has [model] and "
+                                 "[parameters.NAME]")
+    if "model" not in doc:
+        raise ModelSpecError(f"{where}: [model]: table is missing")
+    m = doc["model"]
+    for k in m:
+        if k not in _MODEL_KEYS:
+            raise ModelSpecError(f"{where}: [model] {k}: unknown key; known: {', '.join(_MODEL_KEYS)}")
+    if "terms" not in m:
+        raise ModelSpecError(f"{where}: [model] terms: required key is missing")
+    terms = m["terms"]
+    if not isinstance(terms, list) or not all(isinstance(t, str) for t in terms):
+        raise ModelSpecError(f"{where}: [model] terms: must be a list of term names")
+    free: list[str] = []
+    fixed: dict[str, float | str] = {}
+    priors: dict[str, Prior] = {}
+    initial: dict[str, float] = {}
+    fallback: dict[str, float] = {}
+    params = doc.get("parameters", {})
+    if not isinstance(params, Mapping):
+        raise ModelSpecError(f"{where}: [parameters] must be a table of [parameters.NAME] tables")
+    for p, table in params.items():
+        key = f"[parameters.{p}]"
+        if not isinstance(table, Mapping):
+            raise ModelSpecError(f"{where}: {key}: must be a table (free = true, fixed = ...)")
+        for k in table:
+            if k not in _PARAMETER_KEYS:
+                raise ModelSpecError(f"{where}: {key} {k}: unknown key; known: "
+                                     f"{', '.join(_PARAMETER_KEYS)}")
+        is_free = table.get("free", False)
+        if not isinstance(is_free, bool):
+            raise ModelSpecError(f"{where}: {key} free: must be true or false")
+        if is_free and "fixed" in table:
+            raise ModelSpecError(f"{where}: {key}: both free and fixed")
+        if not is_free and "fixed" not in table:
+            raise ModelSpecError(f"{where}: {key}: say free = true or fixed = <value | \"tunnel\">")
+        if is_free:
+            free.append(p)
+        else:
+            v = table["fixed"]
+            if v != TUNNEL and (isinstance(v, bool) or not isinstance(v, (int, float))
+                                or not math.isfinite(v)):
+                raise ModelSpecError(f"{where}: {key} fixed: {v!r} is neither a finite number "
+                                     "nor \"tunnel\"")
+            fixed[p] = v if v == TUNNEL else float(v)
+        if "fallback" in table:
+            fallback[p] = _number(table["fallback"], f"{where}: {key} fallback")
+        if "initial" in table:
+            initial[p] = _number(table["initial"], f"{where}: {key} initial")
+        if "prior" in table:
+            priors[p] = parse_prior(table["prior"], f"{where}: {key} prior")
+    for p, prior in priors.items():
+        initial.setdefault(p, prior.center)
+    name = m.get("name", default_name)
+    if not isinstance(name, str) or not name:
+        raise ModelSpecError(f"{where}: [model] name: must be a non-empty string")
+    return ModelSpec(
+        name=name,
+        description=str(m.get("description", "")),
+        terms=tuple(terms),
+        driveline=m.get("driveline", "auto"),
+        lift=m.get("lift", "none"),
+        air=m.get("air", "auto"),
+        free=tuple(free),
+        fixed=fixed,
+        priors=priors,
+        initial=initial,
+        fallback=fallback,
+        source=where,
+    )
+
+
+def load_model_spec(name_or_path: str | os.PathLike) -> ModelSpec:
+    """Load a model variant.
+
+    Parameters
+    ----------
+    name_or_path : str or path
+        A bare name (``"four_term"``) is looked up as ``models/<name>.toml`` in the repository
+        (:data:`MODELS_DIR`); anything with a directory part or a ``.toml`` suffix is a path.
+
+    Raises
+    ------
+    ModelSpecError
+        When the file is missing, not TOML, or refused; the message names the file and key.
+    """
+    s = str(name_or_path)
+    looks_like_path = isinstance(name_or_path, os.PathLike) or s.endswith(".toml") or os.sep in s or "/" in s
+    path = Path(s) if looks_like_path else MODELS_DIR / f"{s}.toml"
+    if not path.is_file():
+        known = ", ".join(available_models()) or "none"
+        raise ModelSpecError(f"{path}: model file not found (models available: {known})")
+    try:
+        doc = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise ModelSpecError(f"{path}: not valid TOML ({e})") from e
+    return parse_model_spec(doc, str(path), default_name=path.stem)
+
+
+def available_models() -> list[str]:
+    """Names of the model files in the repository's ``models/`` directory, sorted."""
+    if not MODELS_DIR.is_dir():
+        return []
+    return sorted(p.stem for p in MODELS_DIR.glob("*.toml"))

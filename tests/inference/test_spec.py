@@ -1,0 +1,189 @@
+"""Tests of the model-variant files (``models/*.toml``) and their resolution against campaigns."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bayes_roadload import config
+from bayes_roadload.data import Anemometer, Campaign, Vehicle
+from bayes_roadload.inference import ModelSpecError, available_models, load_model_spec
+from bayes_roadload.inference.spec import MODELS_DIR, Prior
+from bayes_roadload.physics import MeasuredAir, StillAir
+
+REQUIRED = ("four_term", "four_term_driveline", "three_term", "tunnel_table", "two_term_tyres")
+TUNNEL = {"KD": 0.58, "CL0": 0.273, "KL": 3.64,
+          "yaw_deg": [-20.0, 0.0, 20.0], "cd": [0.47, 0.40, 0.47]}
+
+
+def make_campaign(*, anemometer=True, driveline=False, tunnel=TUNNEL, factors=(1.08, 0.87)):
+    """Two 20-sample runs (no integration needed: specs only look at the channels)."""
+    t = np.arange(20) * 0.25
+    frames = []
+    for run, d in ((1, 1.0), (2, -1.0)):
+        df = pd.DataFrame({"run": run, "direction": d, "time_s": t, "speed_mps": 30.0 - 0.5 * t})
+        if anemometer:
+            df["airspeed_mps"], df["yaw_rad"] = 31.0 - 0.5 * t, 0.05 * d
+        if driveline:
+            df["driveline_force_n"] = 40.0
+        frames.append(df)
+    return Campaign(pd.concat(frames, ignore_index=True), Vehicle(1100.0, 1130.0, 1.85),
+                    anemometer=Anemometer(*factors), tunnel=None if tunnel is None else dict(tunnel))
+
+
+def test_required_model_files_exist_and_load():
+    assert set(REQUIRED) <= set(available_models())
+    for name in REQUIRED:
+        spec = load_model_spec(name)
+        assert spec.name == name
+        assert spec.description
+        # every free parameter has a weakly informative prior and a start value
+        assert set(spec.priors) == set(spec.free) == set(spec.initial)
+        for p, prior in spec.priors.items():
+            d = prior.to_numpyro()
+            assert math.isfinite(float(d.log_prob(prior.center))), (name, p)
+            # weakly informative: the thesis' value is within 2 prior scales of the centre
+            thesis = {**config.THESIS_COEFFICIENTS, **config.THESIS_DRIVELINE}[p]
+            assert abs(thesis - prior.loc) <= 2 * prior.scale, (name, p)
+
+
+def test_free_and_fixed_parameters_of_each_variant():
+    assert load_model_spec("four_term").free == ("AD", "BD", "CD0", "KD")
+    assert load_model_spec("four_term_driveline").free == ("AD", "BD", "CD0", "KD", "At", "Bt", "Ct")
+    assert load_model_spec("four_term_driveline").driveline == "polynomial"
+    three = load_model_spec("three_term")
+    assert three.free == ("AD", "BD", "CD0") and three.fixed == {"KD": "tunnel"}
+    assert three.fallback == {"KD": 0.614}
+    two = load_model_spec("two_term_tyres")
+    assert two.free == ("AD", "BD") and two.fixed == {"CD0": "tunnel", "KD": "tunnel"}
+    assert two.fallback == {"CD0": 0.39, "KD": 0.614}
+    table = load_model_spec("tunnel_table")
+    assert "aero_drag_table" in table.terms and table.free == ("AD", "BD", "CD0")
+
+
+def test_explicit_path_and_missing_name(tmp_path):
+    spec = load_model_spec(MODELS_DIR / "four_term.toml")
+    assert spec.name == "four_term"
+    with pytest.raises(ModelSpecError, match="not found.*four_term"):
+        load_model_spec("five_term")
+
+
+@pytest.mark.parametrize("name", REQUIRED)
+def test_every_variant_builds_against_a_campaign(name):
+    spec = load_model_spec(name)
+    model, fixed, free = spec.build(make_campaign())
+    assert free == spec.free
+    assert set(free).isdisjoint(fixed)
+    assert set(free) | set(fixed) == set(model.parameter_names)
+    assert isinstance(model.air, MeasuredAir)
+    assert (fixed["airspeed_factor"], fixed["yaw_factor"]) == (1.08, 0.87)
+    # lift unloading (thesis eq. 6.1) with C_L0 / K_L from the campaign's tunnel table
+    assert "lift_unloading" in model.term_names
+    assert (fixed["CL0"], fixed["KL"]) == (0.273, 3.64)
+
+
+def test_tunnel_values_fallbacks_and_tables():
+    _, fixed, _ = load_model_spec("three_term").build(make_campaign())
+    assert fixed["KD"] == 0.58  # from the campaign's [tunnel]
+    model, fixed, _ = load_model_spec("three_term").build(make_campaign(tunnel=None))
+    assert fixed["KD"] == 0.614  # the fallback
+    assert "lift_unloading" not in model.term_names  # no tunnel C_L: no lift term
+    _, fixed, _ = load_model_spec("two_term_tyres").build(make_campaign())
+    assert fixed["CD0"] == 0.39  # the tunnel table gives no CD0 here
+    _, fixed, _ = load_model_spec("two_term_tyres").build(make_campaign(tunnel={**TUNNEL, "CD0": 0.401}))
+    assert fixed["CD0"] == 0.401
+    model, _, _ = load_model_spec("tunnel_table").build(make_campaign())
+    (term,) = [t for t in model.terms if t.name == "aero_drag_table"]
+    assert term.yaw_deg == (-20.0, 0.0, 20.0) and term.cd == (0.47, 0.40, 0.47)
+    model, _, _ = load_model_spec("tunnel_table").build(make_campaign(tunnel=None))
+    (term,) = [t for t in model.terms if t.name == "aero_drag_table"]
+    assert list(term.cd) == config.THESIS_TUNNEL_TABLE["cd"]
+
+
+def test_auto_driveline_and_air():
+    spec = load_model_spec("four_term")
+    model, fixed, _ = spec.build(make_campaign(driveline=True))
+    assert "driveline_measured" in model.term_names
+    model, fixed, _ = spec.build(make_campaign(anemometer=False))
+    assert isinstance(model.air, StillAir) and "airspeed_factor" not in fixed
+    assert not any(t.startswith("driveline") for t in model.term_names)
+    model, _, _ = load_model_spec("four_term_driveline").build(make_campaign(driveline=True))
+    assert "driveline_polynomial" in model.term_names and "driveline_measured" not in model.term_names
+
+
+# ----------------------------------------------------------------------------- refusals
+
+GOOD = """
+[model]
+terms = ["tyre_rolling", "aero_drag"]
+lift = "none"
+[parameters.AD]
+free = true
+prior = { dist = "normal", loc = 0.01, scale = 0.01 }
+[parameters.KD]
+fixed = 0.614
+"""
+
+
+def _write(tmp_path, text, name="bad.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_a_good_file_loads(tmp_path):
+    spec = load_model_spec(_write(tmp_path, GOOD, "mine.toml"))
+    assert spec.name == "mine" and spec.free == ("AD",) and spec.fixed == {"KD": 0.614}
+    assert spec.priors["AD"] == Prior("normal", 0.01, 0.01) and spec.initial == {"AD": 0.01}
+
+
+@pytest.mark.parametrize("edit, key, message", [
+    (('"aero_drag"]', '"aero_drag", "aero_drift"]'), "[model] terms", "unknown drag term 'aero_drift'"),
+    (('"aero_drag"]', '"aero_drag", "lift_unloading"]'), "[model] terms", "controlled by [model] lift"),
+    (("[parameters.KD]", "[parameters.XD]"), "[parameters.XD]", "unknown parameter"),
+    (("fixed = 0.614", "fixed = 0.614\nfree = true"), "[parameters.KD]", "both free and fixed"),
+    (('dist = "normal"', 'dist = "cauchy"'), "[parameters.AD] prior.dist", "unknown distribution 'cauchy'"),
+    (("scale = 0.01 }", "scale = -0.01 }"), "[parameters.AD] prior.scale", "must be positive"),
+    ((", scale = 0.01 }", " }"), "[parameters.AD] prior.scale", "required by a normal prior"),
+    (("scale = 0.01 }", "scale = 0.01, df = 3 }"), "[parameters.AD] prior.df", "not a parameter of a normal prior"),
+    (("[parameters.KD]", "[parameters.At]\nfree = true\n[parameters.KD]"), "[parameters.At]", "not used by the model's terms"),
+    (('lift = "none"', 'lift = "wing"'), "[model] lift", "choose one of tunnel, none"),
+    (('lift = "none"', 'lift = "none"\ndriveline = "gearbox"'), "[model] driveline", "choose one of"),
+    (('lift = "none"', 'lift = "none"\ncolour = "red"'), "[model] colour", "unknown key"),
+    (("fixed = 0.614", 'fixed = "wind tunnel"'), "[parameters.KD]", "neither a finite number nor \"tunnel\""),
+    (("fixed = 0.614", "fixed = 0.614\nprior = { dist = \"half_normal\", scale = 1.0 }"), "[parameters.KD]", "needs free = true"),
+    (("fixed = 0.614", "free = false"), "[parameters.KD]", "say free = true or fixed"),
+    (("[model]", "[modle]\n[model]"), "[modle]", "unknown table"),
+])
+def test_bad_specs_are_refused_naming_file_and_key(tmp_path, edit, key, message):
+    old, new = edit
+    assert old in GOOD
+    path = _write(tmp_path, GOOD.replace(old, new, 1))
+    with pytest.raises(ModelSpecError) as err:
+        load_model_spec(path)
+    text = str(err.value)
+    assert str(path) in text, text
+    assert key in text, text
+    assert message in text, text
+
+
+def test_refusals_at_build_time_name_the_key(tmp_path):
+    measured = _write(tmp_path, GOOD.replace('lift = "none"', 'lift = "none"\ndriveline = "measured"'))
+    with pytest.raises(ModelSpecError, match=r"bad\.toml.*driveline = \"measured\".*driveline_force_n"):
+        load_model_spec(measured).build(make_campaign())
+    tunnel = _write(tmp_path, GOOD.replace("fixed = 0.614", 'fixed = "tunnel"'), "tunnel.toml")
+    spec = load_model_spec(tunnel)
+    assert spec.build(make_campaign())[1]["KD"] == 0.58
+    with pytest.raises(ModelSpecError, match=r"tunnel\.toml.*\[parameters\.KD\].*no fallback"):
+        spec.build(make_campaign(tunnel=None))
+    air = _write(tmp_path, GOOD.replace('lift = "none"', 'lift = "none"\nair = "measured"'), "air.toml")
+    with pytest.raises(ModelSpecError, match=r"air\.toml.*air = \"measured\""):
+        load_model_spec(air).build(make_campaign(anemometer=False))
+
+
+def test_not_toml(tmp_path):
+    with pytest.raises(ModelSpecError, match=r"bad\.toml: not valid TOML"):
+        load_model_spec(_write(tmp_path, "[model\nterms = 3"))
