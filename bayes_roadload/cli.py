@@ -34,7 +34,9 @@ def _cmd_fit(args) -> int:
         return 2
     campaign = load_campaign(args.campaign)
     spec = load_model_spec(args.model)
-    result = fit_lsq(campaign, spec, grouping=args.grouping)
+    from .inference.lsq import LsqSettings
+
+    result = fit_lsq(campaign, spec, grouping=args.grouping, settings=LsqSettings(initial_speed=args.initial_speed))
     write_lsq_outputs(result, args.out)
     print(format_lsq_table(result, campaign.truth))
     print(f"\nwrote {Path(args.out) / 'summary.csv'}, per_group.csv, fit.json")
@@ -118,6 +120,9 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--method", choices=("lsq", "nuts"), default="lsq")
     f.add_argument("--grouping", choices=("pair", "run", "all"), default="pair",
                    help="lsq: fit each pair, each run, or all runs jointly")
+    f.add_argument("--initial-speed", choices=("fitted", "measured"), default="fitted",
+                   help="lsq: estimate each run's initial speed (honest standard errors), or start "
+                        "from the first measured speed as the thesis did")
     f.add_argument("--out", required=True)
     f.set_defaults(func=_cmd_fit)
 

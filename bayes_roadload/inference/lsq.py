@@ -10,10 +10,11 @@ the first measured speed, using the measured relative airspeed, yaw and drivelin
 standard errors come from the Jacobian at the optimum, ``cov = s^2 (J^T J)^-1`` with
 ``s^2 = S / (n - p)``; groups are combined by the inverse-variance weighted mean (eq. 5.15,
 5.16) and the between-group spread is reported as the thesis did (% standard deviation over
-pairs).  Two departures, both optional or diagnostic: ``LsqSettings(initial_speed="fitted")``
-also estimates each run's initial speed, which makes the standard errors honest under speed
-noise (the thesis' measured v0 makes them ~10x too small); and quantities the data do not
-identify (a singular Jacobian direction) are reported with SE = inf instead of a number.
+pairs).  Two departures from the thesis: by default (``LsqSettings(initial_speed="fitted")``)
+each run's initial speed is estimated too, which makes the standard errors honest under speed
+noise (the thesis' measured v0, ``initial_speed="measured"``, makes them ~10x too small and is
+kept to reproduce its tables); and quantities the data do not identify (a singular Jacobian
+direction) are reported with SE = inf instead of a number.
 
 Implementation notes: the optimiser works on scaled parameters ``x / config.PARAMETER_SCALES``
 so every unknown is O(1); the residual and its exact Jacobian (``jax.jacfwd``) are jitted once
@@ -94,6 +95,7 @@ class LsqSettings:
     integrator : IntegratorConfig
         RK4 substeps per sample interval.
     initial_speed : {"measured", "fitted"}
+        ``"fitted"`` (default): the initial speed of each run is estimated too (see below).
         ``"measured"`` (the thesis' method): every run is integrated from its first measured
         speed.  With speed noise that sample's error shifts the whole calculated trace, the
         residuals are correlated along the run, and the covariance-based standard errors are
@@ -114,7 +116,7 @@ class LsqSettings:
     reference_speed_mps: float = config.SPEED_50MPH_MPS
     roadload_speeds_kph: tuple[float, ...] = tuple(float(v) for v in range(15, 120, 5))
     integrator: config.IntegratorConfig = config.DEFAULT_INTEGRATOR
-    initial_speed: str = "measured"
+    initial_speed: str = "fitted"
     rank_rcond: float = 1e-8
 
     def __post_init__(self):

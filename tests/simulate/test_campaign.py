@@ -238,3 +238,34 @@ def test_ground_frame_convention_and_band_limit():
                 assert 0.85 < np.std(r["wind_cross_mps"]) / np.std(wc) < 1.0
                 assert np.mean(r["wind_cross_mps"]) == pytest.approx(np.mean(wc), abs=0.05)
         assert runs[0]["position_m"][0] == 0.0 and runs[1]["position_m"][0] == settings.track_length_m
+
+
+def test_band_limited_system_noise_spectrum():
+    """Unit variance, nothing above the band limit (DC-1 Hz), flat inside it."""
+    from bayes_roadload.simulate.campaign import band_limited_noise
+
+    x = band_limited_noise(8192, 0.05, 1.0, np.random.default_rng(0))
+    assert np.mean(x**2) == pytest.approx(1.0, rel=1e-12)
+    power = np.abs(np.fft.rfft(x)) ** 2
+    f = np.fft.rfftfreq(x.size, 0.05)
+    assert power[f > 1.0].max() < 1e-20 * power.max()
+    low, high = power[(f > 0) & (f <= 0.5)].mean(), power[(f > 0.5) & (f <= 1.0)].mean()
+    assert low / high == pytest.approx(1.0, abs=0.15)  # 2 x 2048 chi-square(2) draws: ~3 % sd
+
+
+def test_system_noise_modes():
+    """Per-run mode: constant offsets of the table 6.6 size; band-limited mode: the run mean
+    of the coefficients stays near nominal (1 Hz noise averaged over ~100 s)."""
+    from bayes_roadload.simulate import SimulationSettings
+
+    per_run = simulate_campaign(10, pairs=3, seed=4, settings=SimulationSettings(system_noise_mode="per_run"))
+    band = simulate_campaign(10, pairs=3, seed=4)
+    cd_run = np.array([r["CD0"] for r in per_run.truth["per_run"].values()])
+    cd_band = np.array([r["CD0"] for r in band.truth["per_run"].values()])
+    # 6 draws of sd 5e-3: at least one is beyond 1e-3 with probability 1 - 0.16^6
+    assert np.max(np.abs(cd_run - 0.4)) > 1e-3
+    # band-limited: the run mean has sd ~ 5e-3 / sqrt(2 x 1 Hz x 100 s) ~ 3.5e-4
+    assert np.max(np.abs(cd_band - 0.4)) < 1.5e-3
+    assert not np.allclose(per_run.runs["speed_mps"].to_numpy()[:50], band.runs["speed_mps"].to_numpy()[:50])
+    with pytest.raises(ValueError):
+        SimulationSettings(system_noise_mode="hourly")
