@@ -109,6 +109,16 @@ THESIS_TUNNEL_TABLE = {
     "cl": [0.654, 0.629, 0.515, 0.407, 0.317, 0.273, 0.297, 0.383, 0.530, 0.667, 0.662],
 }
 
+# --- the thesis simulation study (tables 6.4-6.6; reconstructions marked in the simulator) ---
+THESIS_WIND = {"scale_length_m": 30.0, "turbulence_ratio": 0.4, "bandwidth_hz": 1.0}
+"""Dryden scale length of head and cross wind, sigma / mean wind, noise band DC-1 Hz (table 6.4)."""
+THESIS_SENSORS = {"cup_distance_constant_m": 1.5, "vane_damping_ratio": 0.4, "vane_damped_wavelength_m": 5.0}
+"""Cup anemometer and yaw vane characteristics (table 6.5, section 3 of the reference)."""
+THESIS_MEASUREMENT_NOISE = {"speed_mps": 0.05, "airspeed_mps": 0.05, "yaw_rad": 0.01, "driveline_force_n": 1.0}
+"""Standard deviations of the measurement noise (table 6.6; driveline: this project's choice)."""
+THESIS_SYSTEM_NOISE = {"AD": 1.0e-4, "BD": 1.0e-5, "CD0": 5.0e-3}
+"""Standard deviations of the system noise on the coefficients (table 6.6)."""
+
 # --- data validation limits -----------------------------------------------------------------
 MAX_SPEED_MPS = 100.0
 MIN_RUN_SAMPLES = 10
@@ -119,6 +129,8 @@ AREA_RANGE_M2 = (0.001, 15.0)
 MPH_TO_MPS = 0.44704
 KPH_TO_MPS = 1.0 / 3.6
 SPEED_50MPH_MPS = 50.0 * MPH_TO_MPS
+ROADLOAD_FIT_SPEEDS_KPH = tuple(float(v) for v in range(15, 120, 5))
+"""Speeds (km/h) at which F = F0 + F1 v + F2 v^2 is fitted through the still-air road load."""
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,7 @@ from .. import config
 from ..physics.atmosphere import REFERENCE_AIR_DENSITY_KGPM3
 from ..physics.integrate import RunBatch, integrate_batch
 from ..physics.model import DragModel
-from ..physics.terms import Conditions
+from ..physics.roadload import road_load_summary
 from .spec import ModelSpec, load_model_spec
 
 GROUPINGS = ("run", "pair", "all")
@@ -56,22 +56,6 @@ F50_PARTS = ("F50_tyre_N", "F50_aero_N", "F50_driveline_N", "F50_undriven_N")
 """The parts of F50_N by effect (reported in per_group.csv and fit.json)."""
 Z95 = 1.959963984540054
 """Two-sided 95 % point of the standard normal."""
-
-# Which part of the road load each drag term belongs to; gradient terms are not road load.
-_TERM_PART = {
-    "tyre_rolling": "tyre",
-    "lift_unloading": "tyre",
-    "aero_drag": "aero",
-    "aero_drag_table": "aero",
-    "side_force_slip": "aero",
-    "pitch_attitude": "aero",
-    "driveline_measured": "driveline",
-    "driveline_polynomial": "driveline",
-    "undriven_wheels": "undriven",
-    "gradient": None,
-    "gradient_profile": None,
-}
-
 
 @dataclass(frozen=True)
 class LsqSettings:
@@ -114,7 +98,7 @@ class LsqSettings:
     gtol: float = 1e-12
     max_nfev: int = 200
     reference_speed_mps: float = config.SPEED_50MPH_MPS
-    roadload_speeds_kph: tuple[float, ...] = tuple(float(v) for v in range(15, 120, 5))
+    roadload_speeds_kph: tuple[float, ...] = config.ROADLOAD_FIT_SPEEDS_KPH
     integrator: config.IntegratorConfig = config.DEFAULT_INTEGRATOR
     initial_speed: str = "fitted"
     rank_rcond: float = 1e-8
@@ -353,27 +337,10 @@ def roadload_figures(model: DragModel, params: Mapping[str, Any], *, mass_kg: fl
         F50_driveline_N, F50_undriven_N]``; F = F0 + F1 v + F2 v^2 with v in km/h is the
         least-squares quadratic through the total on ``settings.roadload_speeds_kph``.
     """
-    grid_kph = jnp.asarray(settings.roadload_speeds_kph, float)
-    v = jnp.concatenate([jnp.asarray([settings.reference_speed_mps], float), grid_kph / 3.6])
-    zero = jnp.zeros_like(v)
-    c2, c1, c0 = (jnp.asarray(c, float) for c in driveline_curve)
-    cond = Conditions(
-        speed_mps=v, airspeed_mps=v, yaw_rad=zero, driveline_force_n=c0 + c1 * v + c2 * v**2,
-        position_m=zero, distance_m=zero, time_s=zero, accel_mps2=zero, direction=zero + 1.0,
-        air_density_kgpm3=zero + REFERENCE_AIR_DENSITY_KGPM3,
-        temperature_k=zero + config.REFERENCE_TEMPERATURE_K,
-        mass_kg=jnp.asarray(mass_kg, float), frontal_area_m2=jnp.asarray(frontal_area_m2, float))
-    comps = model.force_components_n(params, cond)
-    parts = {k: zero for k in ("tyre", "aero", "driveline", "undriven", "other")}
-    for name, f in comps.items():
-        part = _TERM_PART.get(name, "other")
-        if part is not None:
-            parts[part] = parts[part] + f
-    total = sum(parts.values())
-    vander = jnp.stack([jnp.ones_like(grid_kph), grid_kph, grid_kph**2], axis=1)
-    coef = jnp.linalg.pinv(vander) @ total[1:]
-    return jnp.concatenate([total[:1], coef, jnp.stack([parts[k][0] for k in
-                                                        ("tyre", "aero", "driveline", "undriven")])])
+    figures = road_load_summary(model, params, mass_kg, frontal_area_m2, driveline_curve=driveline_curve,
+                                reference_speed_mps=settings.reference_speed_mps,
+                                fit_speeds_kph=settings.roadload_speeds_kph)
+    return jnp.stack([figures[k] for k in DERIVED + F50_PARTS])
 
 
 @dataclass(frozen=True)

@@ -23,20 +23,20 @@ Array = jnp.ndarray
 PART_OF_TERM = {
     "tyre_rolling": "tyre",
     "lift_unloading": "tyre",
-    "tyre_temperature": "tyre",
     "aero_drag": "aero",
     "aero_drag_table": "aero",
-    "side_force_slip": "tyre",
+    "side_force_slip": "aero",
     "pitch_attitude": "aero",
     "driveline_polynomial": "driveline",
     "driveline_measured": "driveline",
     "undriven_wheels": "undriven",
+    "gradient": None,
+    "gradient_profile": None,
 }
-"""Which part of the 50 mph breakdown each term belongs to (other terms: "other")."""
+"""Which part of the 50 mph breakdown each term belongs to.  ``None``: not road load (the
+track's gradient); a term not listed counts in the total as "other"."""
 
 PARTS = ("tyre", "aero", "driveline", "undriven")
-FIT_SPEED_RANGE_MPS = (5.0, 31.3)
-"""Speeds over which F0, F1, F2 are fitted: the coastdown range of the thesis."""
 
 
 def reference_conditions(speed_mps: Array, mass_kg: float, frontal_area_m2: float,
@@ -54,46 +54,47 @@ def reference_conditions(speed_mps: Array, mass_kg: float, frontal_area_m2: floa
 
 def road_load_parts_n(model: DragModel, params: Mapping[str, Array], speed_mps: Array, mass_kg: float,
                       frontal_area_m2: float, driveline_force_n: Array | float = 0.0) -> dict[str, Array]:
-    """Road load at reference conditions split into tyre / aero / driveline / undriven (N).
-
-    ``driveline_force_n`` is used by a model whose driveline is measured rather than fitted
-    (the caller passes the measured loss at those speeds).  Terms outside the breakdown
-    (e.g. gradient) are not part of the road load and are left out.
-    """
+    """Road load at reference conditions split into tyre / aero / driveline / undriven /
+    other (N).  ``driveline_force_n`` feeds a model whose driveline is measured rather than
+    fitted (the measured loss at those speeds)."""
     c = reference_conditions(speed_mps, mass_kg, frontal_area_m2, driveline_force_n)
     comps = model.force_components_n(params, c)
-    out = {part: jnp.zeros_like(c.speed_mps) for part in PARTS}
+    out = {part: jnp.zeros_like(c.speed_mps) for part in PARTS + ("other",)}
     for name, force in comps.items():
-        part = PART_OF_TERM.get(name)
+        part = PART_OF_TERM.get(name, "other")
         if part is not None:
             out[part] = out[part] + force
     return out
 
 
 def road_load_summary(model: DragModel, params: Mapping[str, Array], mass_kg: float, frontal_area_m2: float,
-                      driveline_force_n=None) -> dict[str, Array]:
-    """F50_N and its parts, and F0_N, F1_N_per_kph, F2_N_per_kph2.
+                      *, driveline_curve=(0.0, 0.0, 0.0),
+                      reference_speed_mps: float = config.SPEED_50MPH_MPS,
+                      fit_speeds_kph=config.ROADLOAD_FIT_SPEEDS_KPH) -> dict[str, Array]:
+    """F50_N and its parts, and F0_N, F1_N_per_kph, F2_N_per_kph2 (pure JAX, differentiable).
 
     Parameters
     ----------
-    driveline_force_n : callable or None
-        For a measured driveline: a function of speed (m/s) giving the measured loss (N).
+    model, params : the drag model and its parameters (SI; missing ones take defaults).
+    mass_kg, frontal_area_m2 : the vehicle.
+    driveline_curve : (c2, c1, c0) of a measured driveline loss c0 + c1 v + c2 v^2 (N, v in
+        m/s), used by the ``driveline_measured`` term.
+    reference_speed_mps : the speed of the breakdown (50 mph).
+    fit_speeds_kph : speeds at which the total is evaluated for the least-squares quadratic
+        F = F0 + F1 v + F2 v^2 (v in km/h); exact when the model is quadratic in v.
 
     Returns
     -------
-    dict with ``F50_N``, ``F50_tyre_N``, ``F50_aero_N``, ``F50_driveline_N``,
-    ``F50_undriven_N``, ``F0_N``, ``F1_N_per_kph``, ``F2_N_per_kph2``.
+    dict with ``F50_N``, ``F0_N``, ``F1_N_per_kph``, ``F2_N_per_kph2``, ``F50_tyre_N``,
+    ``F50_aero_N``, ``F50_driveline_N``, ``F50_undriven_N``.
     """
-    v50 = jnp.asarray([config.SPEED_50MPH_MPS])
-    grid = jnp.linspace(*FIT_SPEED_RANGE_MPS, 64)
-    dl50 = 0.0 if driveline_force_n is None else driveline_force_n(v50)
-    dlg = 0.0 if driveline_force_n is None else driveline_force_n(grid)
-    parts50 = road_load_parts_n(model, params, v50, mass_kg, frontal_area_m2, dl50)
-    out = {f"F50_{p}_N": parts50[p][0] for p in PARTS}
-    out["F50_N"] = sum(parts50[p][0] for p in PARTS)
-    total = sum(road_load_parts_n(model, params, grid, mass_kg, frontal_area_m2, dlg).values())
-    v_kph = grid / config.KPH_TO_MPS
-    design = jnp.stack([jnp.ones_like(v_kph), v_kph, v_kph**2], axis=1)
-    coef, *_ = jnp.linalg.lstsq(design, total)
-    out["F0_N"], out["F1_N_per_kph"], out["F2_N_per_kph2"] = coef[0], coef[1], coef[2]
+    grid_kph = jnp.asarray(fit_speeds_kph, float)
+    v = jnp.concatenate([jnp.asarray([reference_speed_mps], float), grid_kph * config.KPH_TO_MPS])
+    c2, c1, c0 = (jnp.asarray(c, float) for c in driveline_curve)
+    parts = road_load_parts_n(model, params, v, mass_kg, frontal_area_m2, c0 + c1 * v + c2 * v**2)
+    total = sum(parts.values())
+    design = jnp.stack([jnp.ones_like(grid_kph), grid_kph, grid_kph**2], axis=1)
+    coef = jnp.linalg.pinv(design) @ total[1:]
+    out = {"F50_N": total[0], "F0_N": coef[0], "F1_N_per_kph": coef[1], "F2_N_per_kph2": coef[2]}
+    out.update({f"F50_{p}_N": parts[p][0] for p in PARTS})
     return out

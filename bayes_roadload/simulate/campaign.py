@@ -142,15 +142,14 @@ class SimulationSettings:
     scale_length_cross_m: float = wind_mod.SCALE_LENGTH_M
     turbulence_ratio: float = wind_mod.TURBULENCE_RATIO
     turbulence_reference: Literal["component", "total"] = "component"
-    wind_bandwidth_hz: float | None = 1.0
-    speed_noise_mps: float = 0.05
-    airspeed_noise_mps: float = 0.05
-    yaw_noise_rad: float = 0.01
-    driveline_noise_n: float = 1.0
-    system_noise_std: Mapping[str, float] = field(
-        default_factory=lambda: {"AD": 1.0e-4, "BD": 1.0e-5, "CD0": 5.0e-3})
+    wind_bandwidth_hz: float | None = config.THESIS_WIND["bandwidth_hz"]
+    speed_noise_mps: float = config.THESIS_MEASUREMENT_NOISE["speed_mps"]
+    airspeed_noise_mps: float = config.THESIS_MEASUREMENT_NOISE["airspeed_mps"]
+    yaw_noise_rad: float = config.THESIS_MEASUREMENT_NOISE["yaw_rad"]
+    driveline_noise_n: float = config.THESIS_MEASUREMENT_NOISE["driveline_force_n"]
+    system_noise_std: Mapping[str, float] = field(default_factory=lambda: dict(config.THESIS_SYSTEM_NOISE))
     system_noise_mode: Literal["band_limited", "per_run"] = "band_limited"
-    system_noise_bandwidth_hz: float = 1.0
+    system_noise_bandwidth_hz: float = config.THESIS_WIND["bandwidth_hz"]
     speed_decimals: int = 5
     max_yaw_rad: float = 1.5
     coefficients: Mapping[str, float] = field(default_factory=lambda: dict(config.THESIS_COEFFICIENTS))

@@ -56,9 +56,9 @@ class SensorConfig:
     (:attr:`bayes_roadload.data.Vehicle.length_m`), passed separately to :func:`sensor_rates`.
     """
 
-    cup_distance_constant_m: float = 1.5
-    vane_damping_ratio: float = 0.4
-    vane_damped_wavelength_m: float = 5.0
+    cup_distance_constant_m: float = config.THESIS_SENSORS["cup_distance_constant_m"]
+    vane_damping_ratio: float = config.THESIS_SENSORS["vane_damping_ratio"]
+    vane_damped_wavelength_m: float = config.THESIS_SENSORS["vane_damped_wavelength_m"]
 
     def __post_init__(self):
         if not 0.0 < self.vane_damping_ratio < 1.0:

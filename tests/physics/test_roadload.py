@@ -36,5 +36,5 @@ def test_thesis_breakdown_at_50mph_is_of_the_published_order():
 
 def test_measured_driveline_uses_the_callable():
     m = simplified_model(driveline="measured")
-    s = road_load_summary(m, P, 1125.0, 1.85, driveline_force_n=lambda v: 10.0 + 0.0 * v)
+    s = road_load_summary(m, P, 1125.0, 1.85, driveline_curve=(0.0, 0.0, 10.0))
     assert float(s["F50_driveline_N"]) == pytest.approx(10.0)
