@@ -64,9 +64,9 @@ def _cmd_demo(args) -> int:
 
 
 def _cmd_sensitivity(args) -> int:
-    from .analysis.sensitivity import format_sensitivity_table, sensitivity_table
+    from .analysis.sensitivity import coefficient_sensitivity, format_sensitivity_table
 
-    table = sensitivity_table(cross_winds_mps=tuple(args.cross_wind))
+    table = coefficient_sensitivity(cross_winds_mps=tuple(args.cross_wind))
     print(format_sensitivity_table(table))
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)

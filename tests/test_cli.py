@@ -1,0 +1,76 @@
+"""The command line, end to end on small campaigns."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bayes_roadload.cli import main
+from bayes_roadload.data import load_campaign
+
+SUMMARY_COLUMNS = ["parameter", "mean", "sd", "q2.5", "q50", "q97.5", "r_hat", "ess_bulk", "ess_tail"]
+
+
+@pytest.fixture(scope="module")
+def campaign_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "c14"
+    assert main(["simulate", "--case", "14", "--pairs", "2", "--seed", "1", "--out", str(out)]) == 0
+    return out
+
+
+def test_simulate_writes_the_contract(campaign_dir):
+    c = load_campaign(campaign_dir)
+    assert c.run_ids == [1, 2, 3, 4] and c.directions() == {1: 1, 2: -1, 3: 1, 4: -1}
+    truth = json.loads((campaign_dir / "truth.json").read_text())
+    assert {"AD", "BD", "CD0", "KD"} <= set(truth) and truth["case"] == 14
+
+
+def test_fit_lsq_writes_summary(campaign_dir, tmp_path, capsys):
+    out = tmp_path / "fit"
+    assert main(["fit", str(campaign_dir), "--method", "lsq", "--model", "three_term", "--out", str(out)]) == 0
+    summary = pd.read_csv(out / "summary.csv")
+    assert list(summary.columns) == SUMMARY_COLUMNS
+    assert {"AD", "BD", "CD0", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2"} <= set(summary["parameter"])
+    cd0 = summary.set_index("parameter").loc["CD0"]
+    # two pairs of case 14: CD0 within 5 % of the truth (pair spread ~0.8 %, pitch bias ~1 %)
+    assert abs(cd0["mean"] - 0.4) < 0.02 and cd0["q2.5"] < cd0["mean"] < cd0["q97.5"]
+    assert (out / "per_group.csv").exists() and json.loads((out / "fit.json").read_text())["method"] == "lsq"
+    assert "CD0" in capsys.readouterr().out
+
+
+def test_fit_refuses_bad_campaign_and_writes_nothing(tmp_path, capsys):
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    t = np.arange(20) * 0.25
+    pd.DataFrame({"run": 1, "time_s": t, "speed_kph": 100.0 - t}).to_csv(bad / "runs.csv", index=False)
+    (bad / "vehicle.toml").write_text("[vehicle]\nmass_kg = 1100.0\neffective_mass_kg = 1130.0\nfrontal_area_m2 = 1.85\n")
+    out = tmp_path / "out"
+    assert main(["fit", str(bad), "--method", "lsq", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "runs.csv" in err and "speed_kph" in err and "speed_mps" in err
+    assert not out.exists()
+
+
+def test_unknown_model_is_refused(campaign_dir, tmp_path, capsys):
+    assert main(["fit", str(campaign_dir), "--model", "five_term", "--out", str(tmp_path / "o")]) == 2
+    assert "five_term" in capsys.readouterr().err
+
+
+def test_sensitivity_cases_models(tmp_path, capsys):
+    csv = tmp_path / "sens.csv"
+    assert main(["sensitivity", "--cross-wind", "0", "2", "--out", str(csv)]) == 0
+    table = pd.read_csv(csv)
+    assert set(table["parameter"]) == {"AD", "BD", "CD0", "KD"}
+    assert main(["cases"]) == 0
+    assert main(["models"]) == 0
+    out = capsys.readouterr().out
+    assert "combined" in out and "three_term" in out and "four_term_driveline" in out
+
+
+def test_demo_runs_and_prints_truth_beside_estimates(tmp_path, capsys):
+    assert main(["demo", "--pairs", "1", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "truth" in out and "four_term" in out and "three_term" in out
+    assert (tmp_path / "campaign" / "runs.csv").exists()
+    assert (tmp_path / "fit_lsq_four_term" / "summary.csv").exists()
