@@ -164,7 +164,7 @@ class GroupFit:
         rows and columns of unidentified parameters are NaN.
     ssr_m2ps2 : sum of squared speed residuals (m^2/s^2).
     rms_residual_mps : sqrt(ssr / n_samples).
-    n_samples : residuals counted (real samples minus each run's initial point).
+    n_samples : residuals counted (real samples; minus each run's initial point when it is not fitted).
     success, nfev, message : from the optimiser.
     condition_number : of the scaled Jacobian at the optimum (large: poorly identified).
     fit_time_s : wall time of this group's optimisation.
