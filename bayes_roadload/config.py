@@ -8,9 +8,15 @@ from here rather than writing literals of their own.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
-import jax
+# Chains run in parallel on the CPU cores: XLA must be told before its backend starts.
+if "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
+                               + f" --xla_force_host_platform_device_count={max(os.cpu_count() or 1, 1)}").strip()
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
@@ -148,3 +154,72 @@ class IntegratorConfig:
 
 
 DEFAULT_INTEGRATOR = IntegratorConfig()
+
+
+@dataclass(frozen=True)
+class SamplerConfig:
+    """Settings of the NUTS fit (:func:`bayes_roadload.inference.nuts.fit_nuts`).
+
+    Parameters
+    ----------
+    num_warmup, num_samples, num_chains : draws per chain and number of chains (run in
+        parallel on the CPU cores when there are enough).
+    target_accept : NUTS target acceptance probability.
+    max_tree_depth : NUTS tree-depth limit (2^depth - 1 leapfrog steps).
+    precondition : "laplace" starts every chain near the MAP and uses the Laplace covariance
+        as a dense inverse mass matrix (the default); "none" is numpyro's default NUTS
+        (diagonal mass adaptation from a random start), kept for the benchmark.
+    adapt_mass_matrix : re-estimate the mass matrix during warm-up instead of keeping the Laplace
+        covariance (off by default: with a short warm-up the estimate is worse than the Laplace one).
+    seed : PRNG seed.
+    progress_bar : show numpyro's progress bar.
+    """
+
+    num_warmup: int = 500
+    num_samples: int = 1000
+    num_chains: int = 2
+    target_accept: float = 0.85
+    max_tree_depth: int = 10
+    precondition: str = "laplace"
+    adapt_mass_matrix: bool = False
+    seed: int = 0
+    progress_bar: bool = False
+    posterior_predictive_draws: int = 200
+
+    def __post_init__(self):
+        if self.precondition not in ("laplace", "none"):
+            raise ValueError("precondition must be 'laplace' or 'none'")
+        if min(self.num_warmup, self.num_samples, self.num_chains) < 1:
+            raise ValueError("num_warmup, num_samples and num_chains must be positive")
+
+
+@dataclass(frozen=True)
+class Gates:
+    """Pass/fail thresholds every NUTS fit is checked against (reported in diagnostics.json).
+
+    Defaults follow Vehtari et al. (2021): split R-hat <= 1.01, bulk and tail ESS >= 100 per
+    chain, no divergent transitions, E-BFMI >= 0.3, and (a sign of a badly scaled posterior)
+    at most 1 % of draws hitting the tree-depth limit.
+    """
+
+    max_r_hat: float = 1.01
+    min_ess_bulk_per_chain: float = 100.0
+    min_ess_tail_per_chain: float = 100.0
+    max_divergences: int = 0
+    min_bfmi: float = 0.3
+    max_tree_depth_hits_fraction: float = 0.01
+
+
+DEFAULT_SAMPLER = SamplerConfig()
+DEFAULT_GATES = Gates()
+
+# Priors of the nuisance parameters of the Bayesian models (physical units).
+NOISE_PRIORS = {
+    "sigma_mps": 0.1,          # half-normal scale of the speed measurement noise, per run
+    "q_mps_per_sqrt_s": 0.01,  # half-normal scale of the integrated (process) noise
+    "v0_scale_mps": 0.5,       # normal scale of each run's initial speed around its first sample
+    "student_df_rate": 0.1,    # Gamma(2, rate) prior of the Student-t degrees of freedom
+}
+TAU_PRIOR_SCALES = {"AD": 1.0e-3, "BD": 5.0e-5, "CD0": 0.02}
+"""Half-normal scales of the run-to-run spreads tau of the hierarchical model (10 %, 25 %,
+5 % of typical values: the thesis' track spreads were 4.3 %, 23.1 %, 4.3 %)."""

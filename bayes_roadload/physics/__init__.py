@@ -9,6 +9,7 @@ from .integrate import RunBatch as RunBatch
 from .integrate import make_run as make_run
 from .integrate import stack_runs as stack_runs
 from .integrate import integrate_batch as integrate_batch
+from .integrate import integrate_batch_forward_sensitivity as integrate_batch_forward_sensitivity
 from .integrate import integrate_run as integrate_run
 from .integrate import quadratic_coastdown_speed as quadratic_coastdown_speed
 from .integrate import quadratic_coastdown_time as quadratic_coastdown_time

@@ -229,3 +229,65 @@ def stack_runs(runs: list[RunBatch]) -> RunBatch:
 
     padded = [RunBatch(*(pad(f, int(r.time_s.shape[0])) for f in r)) for r in runs]
     return RunBatch(*(jnp.stack(fields) for fields in zip(*padded)))
+
+
+def integrate_batch_forward_sensitivity(
+    model: DragModel,
+    fixed: Mapping[str, Array],
+    free: Mapping[str, Array],
+    batch: RunBatch,
+    v0_mps: Array,
+    integrator: config.IntegratorConfig = config.DEFAULT_INTEGRATOR,
+) -> Array:
+    """[R, N] speeds like :func:`integrate_batch`, differentiated by forward sensitivities.
+
+    Reverse-mode autodiff through the RK4 scan stores every step and runs a second scan of
+    about ten times the forward cost.  Each run depends only on the few free parameters and
+    its own initial speed, so the Jacobian of its speed trace with respect to them (k
+    tangents, k = number of free parameters + 1) is computed in forward mode alongside the
+    solution and contracted with the incoming cotangent (a ``jax.custom_vjp``): about 3x the
+    forward cost on a campaign of 36 runs.  Values are identical to :func:`integrate_batch`.
+
+    Parameters
+    ----------
+    fixed : parameter values not differentiated (closed over).
+    free : parameter values to differentiate, each a scalar (shared) or [R] (per run).
+    batch : the runs (not differentiated; closed over).
+    v0_mps : [R] initial speeds (differentiated).
+
+    Notes
+    -----
+    Supports reverse mode (``jax.grad``), which is what NUTS uses.  Forward mode over it is
+    not defined (a ``custom_vjp``); use :func:`integrate_batch` for Hessians.
+    """
+    names = tuple(free)
+    r = batch.n_runs
+    base = model.complete(fixed)
+
+    def speeds_of_x(x, run):
+        p = dict(base)
+        p.update({n: x[i] for i, n in enumerate(names)})
+        return integrate_run(model, p, run, x[-1], integrator)[0]
+
+    @jax.custom_vjp
+    def speeds(x):
+        return jax.vmap(speeds_of_x)(x, batch)
+
+    def speeds_fwd(x):
+        def one(xr, run):
+            def f(z):
+                y = speeds_of_x(z, run)
+                return y, y
+
+            return jax.jacfwd(f, has_aux=True)(xr)
+
+        jac, y = jax.vmap(one)(x, batch)
+        return y, jac
+
+    def speeds_bwd(jac, ct):
+        return (jnp.einsum("rn,rnk->rk", ct, jac),)
+
+    speeds.defvjp(speeds_fwd, speeds_bwd)
+    cols = [jnp.broadcast_to(jnp.asarray(free[n], float), (r,)) for n in names]
+    x = jnp.stack(cols + [jnp.broadcast_to(jnp.asarray(v0_mps, float), (r,))], axis=1)
+    return speeds(x)

@@ -22,7 +22,8 @@ Array = jnp.ndarray
 _LOG_2PI = jnp.log(2.0 * jnp.pi)
 
 
-def local_level_loglik(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array) -> Array:
+def local_level_loglik(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array,
+                       df: Array | None = None) -> Array:
     """Log-likelihood of one run's residuals under white noise plus integrated noise.
 
     Parameters
@@ -32,6 +33,9 @@ def local_level_loglik(residual: Array, time_s: Array, mask: Array, sigma: Array
     mask : [N] True on real samples; others add nothing.
     sigma : speed measurement noise standard deviation (m/s).
     q : process noise intensity (m/s per sqrt(s)): the speed error wanders by q sqrt(t).
+    df : optional Student-t degrees of freedom for outlier-robust fits: each innovation is
+        scored by a Student-t of scale sqrt(S) instead of a normal (the filter update stays
+        the Gaussian one: an approximation that is exact when q = 0).
 
     Returns
     -------
@@ -47,7 +51,10 @@ def local_level_loglik(residual: Array, time_s: Array, mask: Array, sigma: Array
         s = p_pred + var_e
         innov = r - m
         k = p_pred / s
-        ll_k = -0.5 * (_LOG_2PI + jnp.log(s) + innov**2 / s)
+        if df is None:
+            ll_k = -0.5 * (_LOG_2PI + jnp.log(s) + innov**2 / s)
+        else:
+            ll_k = _student_t_logpdf(innov, jnp.sqrt(s), df)
         m_new = jnp.where(ok, m + k * innov, m)
         p_new = jnp.where(ok, (1.0 - k) * p_pred, p)
         return (m_new, p_new, ll + jnp.where(ok, ll_k, 0.0)), None
@@ -55,6 +62,12 @@ def local_level_loglik(residual: Array, time_s: Array, mask: Array, sigma: Array
     zero = jnp.zeros((), dtype=residual.dtype)
     (_, _, ll), _ = jax.lax.scan(step, (zero, zero, zero), (residual, dt, mask))
     return ll
+
+
+def _student_t_logpdf(x, scale, df):
+    z = x / scale
+    return (jax.scipy.special.gammaln(0.5 * (df + 1.0)) - jax.scipy.special.gammaln(0.5 * df)
+            - 0.5 * jnp.log(df * jnp.pi) - jnp.log(scale) - 0.5 * (df + 1.0) * jnp.log1p(z**2 / df))
 
 
 def local_level_smooth(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array) -> tuple[Array, Array]:

@@ -49,3 +49,18 @@ def test_smoother_matches_dense_conditional_mean():
     gain = c_dd @ np.linalg.inv(c_rr)
     np.testing.assert_allclose(m, gain @ r, atol=1e-10)
     np.testing.assert_allclose(v, np.diag(c_dd - gain @ c_dd), atol=1e-10)
+
+
+def test_student_t_reduces_to_independent_t_without_process_noise():
+    rng = np.random.default_rng(4)
+    t = np.arange(30) * 0.25
+    r = rng.standard_t(4, 30) * 0.05
+    ll = local_level_loglik(jnp.asarray(r), jnp.asarray(t), jnp.ones(30, bool), 0.05, 0.0, df=4.0)
+    assert float(ll) == pytest.approx(stats.t(4, scale=0.05).logpdf(r).sum(), rel=1e-10)
+    # an outlier costs far less under the t than under the normal
+    r_out = r.copy()
+    r_out[10] = 1.0
+    drop_t = float(ll) - float(local_level_loglik(jnp.asarray(r_out), jnp.asarray(t), jnp.ones(30, bool), 0.05, 0.0, df=4.0))
+    drop_n = float(local_level_loglik(jnp.asarray(r), jnp.asarray(t), jnp.ones(30, bool), 0.05, 0.0)) - float(
+        local_level_loglik(jnp.asarray(r_out), jnp.asarray(t), jnp.ones(30, bool), 0.05, 0.0))
+    assert drop_t < 0.1 * drop_n

@@ -1,0 +1,230 @@
+"""Fast, diagnosed NUTS: MAP -> Laplace preconditioning -> parallel chains -> gates.
+
+1. **Start.** The classical joint least-squares fit (:func:`.lsq.fit_lsq`, all runs, initial
+   speeds fitted) gives the coefficients, each run's initial speed and noise level.
+2. **MAP.** The negative log posterior of the numpyro model, in numpyro's unconstrained
+   space and divided by a diagonal scale so every unknown is O(1), is minimised by a
+   trust-region Newton method with the exact Hessian (``scipy.optimize.minimize``,
+   ``trust-exact``; gradients and Hessians from JAX).
+3. **Laplace.** The inverse Hessian at the MAP is the dense inverse mass matrix of NUTS
+   (equivalently: NUTS runs on whitened coordinates), and the chains start from independent
+   draws of that normal approximation.  On this posterior (AD, BD, CD0 correlated beyond 0.99)
+   that turns 1023-step trees into trees of a few steps.
+4. **NUTS** (numpyro), chains in parallel on the CPU cores, warm-up adapting the step size
+   (and, by default, refining the mass matrix).
+5. **Gates** (:class:`bayes_roadload.config.Gates`): split R-hat, bulk and tail ESS,
+   divergences, E-BFMI, tree-depth saturation.  A fit that fails them says so
+   (:mod:`.results`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+from numpyro.infer import MCMC, NUTS, init_to_value
+from numpyro.infer.util import initialize_model
+from scipy.optimize import minimize
+
+from .. import config
+from ..data.campaign import Campaign
+from .bayes import FitProblem, build_problem, coastdown_model
+from .lsq import fit_lsq
+from .spec import ModelSpec
+
+
+@dataclass
+class MapResult:
+    """The MAP and its Laplace approximation in numpyro's unconstrained space.
+
+    Attributes
+    ----------
+    z : unconstrained values of the sample sites at the MAP.
+    constrained : the same in the model's (physical) units.
+    cov : [n, n] Laplace covariance of the flattened unconstrained vector (ravel order of
+        ``z``), the inverse of the Hessian of the negative log posterior.
+    success, n_iter, message : from the optimiser.
+    neg_log_posterior : at the MAP.
+    time_s : wall time of the optimisation (including compilation).
+    min_eigenvalue : smallest eigenvalue of the Hessian in scaled coordinates (before any
+        clipping); <= 0 means the MAP is not a strict local optimum.
+    """
+
+    z: dict[str, Any]
+    constrained: dict[str, Any]
+    cov: np.ndarray
+    success: bool
+    n_iter: int
+    message: str
+    neg_log_posterior: float
+    time_s: float
+    min_eigenvalue: float
+
+
+@dataclass
+class NutsFit:
+    """A finished NUTS fit: draws, sampler statistics, timings and the MAP it started from.
+
+    ``samples`` maps every sample and deterministic site to an array [chain, draw, ...];
+    ``stats`` holds ``diverging``, ``num_steps``, ``energy``, ``accept_prob``, ``tree_depth``
+    ([chain, draw]).
+    """
+
+    problem: FitProblem
+    samples: dict[str, np.ndarray]
+    stats: dict[str, np.ndarray]
+    map: MapResult | None
+    sampler: config.SamplerConfig
+    timings: dict[str, float] = field(default_factory=dict)
+    truth: dict | None = None
+
+
+def _site_scales(problem: FitProblem, z: dict[str, Any]) -> dict[str, Any]:
+    """O(1) scaling of each unconstrained site: real-valued coefficients by their typical
+    magnitude (config.PARAMETER_SCALES), initial speeds by 0.05 m/s, log-transformed
+    positive sites by 1."""
+    scales = {}
+    for name, value in z.items():
+        s = 1.0
+        prior = problem.priors.get(name)
+        if name in problem.free and prior is not None and prior.dist == "normal" and prior.low is None and prior.high is None:
+            s = config.PARAMETER_SCALES.get(name, 1.0)
+        elif name == "v0_mps":
+            s = 0.05
+        scales[name] = jnp.full(jnp.shape(value), s, dtype=float)
+    return scales
+
+
+def initial_values(problem: FitProblem, campaign: Campaign) -> dict[str, Any]:
+    """Constrained starting values from the classical joint least-squares fit."""
+    init: dict[str, Any] = dict(problem.initial)
+    r = problem.n_runs
+    first = np.asarray(problem.batch.speed_mps[:, 0])
+    v0, sigma = first.copy(), np.full(r, 0.05)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            lsq = fit_lsq(campaign, problem.spec, grouping="all")
+        g = lsq.groups[0]
+        for k in problem.free:
+            val = g.estimate.get(k, math.nan)
+            if math.isfinite(val) and math.isfinite(g.se.get(k, math.nan)):
+                init[k] = float(val)
+        if g.v0_offset_mps:
+            v0 = first + np.asarray(g.v0_offset_mps)
+        if math.isfinite(g.rms_residual_mps):
+            sigma = np.full(r, max(g.rms_residual_mps, 1e-3))
+    except Exception:  # noqa: BLE001 - the prior centres are a valid fallback start
+        pass
+    for k in problem.free:
+        prior = problem.priors[k]
+        if prior.low is not None:
+            init[k] = max(init[k], prior.low + 1e-6 * config.PARAMETER_SCALES.get(k, 1.0))
+    init["v0_mps"] = jnp.asarray(v0)
+    init["sigma_mps"] = jnp.asarray(sigma)
+    if problem.noise == "integrated":
+        init["q_mps_per_sqrt_s"] = 0.002
+    if problem.robust:
+        init["student_df"] = 10.0
+    for name in problem.varying:
+        init[f"tau_{name}"] = 0.5 * config.TAU_PRIOR_SCALES[name]
+        init[f"{name}_z"] = jnp.zeros(r)
+    return init
+
+
+def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200) -> MapResult:
+    """MAP by trust-region Newton on the O(1)-scaled unconstrained parameters, and the
+    Laplace covariance from the exact Hessian there."""
+    t0 = time.perf_counter()
+    problem = dataclasses.replace(problem, gradients="reverse")  # Hessians need forward-over-reverse
+    info, potential_fn, postprocess_fn, _ = initialize_model(
+        jax.random.PRNGKey(0), coastdown_model, model_args=(problem,),
+        init_strategy=init_to_value(values=init))
+    z0 = info.z
+    flat0, unravel = ravel_pytree(z0)
+    scale, _ = ravel_pytree(_site_scales(problem, z0))
+
+    def objective(y):
+        return potential_fn(unravel(y * scale))
+
+    f = jax.jit(objective)
+    g = jax.jit(jax.grad(objective))
+    h = jax.jit(jax.hessian(objective))
+    y0 = np.asarray(flat0 / scale)
+    res = minimize(lambda y: float(f(y)), y0, jac=lambda y: np.asarray(g(y)), hess=lambda y: np.asarray(h(y)),
+                   method="trust-exact", options={"maxiter": max_iter, "gtol": 1e-6})
+    hess = np.asarray(h(res.x))
+    hess = 0.5 * (hess + hess.T)
+    eigval, eigvec = np.linalg.eigh(hess)
+    clipped = np.maximum(eigval, 1e-8 * max(eigval.max(), 1.0))
+    cov_y = (eigvec / clipped) @ eigvec.T
+    s = np.asarray(scale)
+    cov = cov_y * np.outer(s, s)
+    z_map = unravel(jnp.asarray(res.x) * scale)
+    constrained = postprocess_fn(z_map)
+    return MapResult(z=z_map, constrained=constrained, cov=cov, success=bool(res.success), n_iter=int(res.nit),
+                     message=str(res.message), neg_log_posterior=float(res.fun),
+                     time_s=time.perf_counter() - t0, min_eigenvalue=float(eigval.min()))
+
+
+def _chain_method(num_chains: int) -> str:
+    return "parallel" if jax.local_device_count() >= num_chains > 1 else "sequential"
+
+
+def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
+             map_result: MapResult | None = None) -> NutsFit:
+    """Sample the posterior of ``problem`` with NUTS (preconditioned by ``map_result`` when
+    ``sampler.precondition == "laplace"``)."""
+    key = jax.random.PRNGKey(sampler.seed)
+    if sampler.precondition == "laplace":
+        if map_result is None:
+            raise ValueError("precondition='laplace' needs the MAP result")
+        kernel = NUTS(coastdown_model, dense_mass=True, inverse_mass_matrix=jnp.asarray(map_result.cov),
+                      adapt_mass_matrix=sampler.adapt_mass_matrix, target_accept_prob=sampler.target_accept,
+                      max_tree_depth=sampler.max_tree_depth,
+                      init_strategy=init_to_value(values=map_result.constrained))
+        flat, unravel = ravel_pytree(map_result.z)
+        chol = np.linalg.cholesky(map_result.cov + 1e-12 * np.eye(flat.size) * np.abs(np.diag(map_result.cov)).max())
+        eps = np.random.default_rng(sampler.seed).standard_normal((sampler.num_chains, flat.size))
+        starts = [unravel(jnp.asarray(np.asarray(flat) + chol @ e)) for e in eps]
+        init_params = jax.tree.map(lambda *xs: jnp.stack(xs), *starts)
+    else:
+        kernel = NUTS(coastdown_model, target_accept_prob=sampler.target_accept, max_tree_depth=sampler.max_tree_depth)
+        init_params = None
+    mcmc = MCMC(kernel, num_warmup=sampler.num_warmup, num_samples=sampler.num_samples,
+                num_chains=sampler.num_chains, chain_method=_chain_method(sampler.num_chains),
+                progress_bar=sampler.progress_bar)
+    fields = ("diverging", "num_steps", "energy", "accept_prob")
+    t0 = time.perf_counter()
+    mcmc.warmup(key, problem, init_params=init_params, extra_fields=fields, collect_warmup=False)
+    t1 = time.perf_counter()
+    mcmc.run(mcmc.post_warmup_state.rng_key, problem, extra_fields=fields)
+    t2 = time.perf_counter()
+    samples = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items()}
+    extra = {k: np.asarray(v) for k, v in mcmc.get_extra_fields(group_by_chain=True).items()}
+    extra["tree_depth"] = np.ceil(np.log2(extra["num_steps"] + 1.0)).astype(int)
+    return NutsFit(problem=problem, samples=samples, stats=extra, map=map_result, sampler=sampler,
+                   timings={"warmup_s": t1 - t0, "sampling_s": t2 - t1})
+
+
+def fit_nuts(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling: str = "pooled",
+             noise: str = "integrated", robust: bool = False,
+             sampler: config.SamplerConfig = config.DEFAULT_SAMPLER) -> NutsFit:
+    """Fit every run of a campaign jointly with NUTS (see the module docstring)."""
+    problem = build_problem(campaign, spec, pooling=pooling, noise=noise, robust=robust)
+    map_result = None
+    if sampler.precondition == "laplace":
+        map_result = find_map(problem, initial_values(problem, campaign))
+    fit = run_nuts(problem, sampler=sampler, map_result=map_result)
+    if map_result is not None:
+        fit.timings["map_s"] = map_result.time_s
+    fit.truth = campaign.truth
+    return fit

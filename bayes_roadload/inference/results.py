@@ -1,0 +1,290 @@
+"""From NUTS draws to what a test engineer reads: ArviZ data, summary, diagnostics, gates.
+
+Outputs of ``bayes-roadload fit --method nuts --out DIR``:
+
+``posterior.nc``
+    ArviZ InferenceData: ``posterior`` (contract names, per-run sites on a ``run``
+    coordinate, derived road-load quantities), ``posterior_predictive`` (replicated speed
+    traces: integrated speed + integrated noise + measurement noise, for a thinned subset of
+    draws), ``log_likelihood`` (summed per run), ``observed_data`` and ``constant_data``
+    (padded samples are NaN), ``sample_stats`` (divergences, tree depth, energy, ...).
+``summary.csv``
+    ``parameter, mean, sd, q2.5, q50, q97.5, r_hat, ess_bulk, ess_tail``: the free
+    parameters, the noise parameters, ``tau_*`` (hierarchical), and ``F50_N`` with its tyre /
+    aero / driveline / undriven parts and ``F0_N, F1_N_per_kph, F2_N_per_kph2`` at reference
+    conditions.
+``diagnostics.json``
+    divergences, max R-hat, min bulk / tail ESS, mean and max tree depth, E-BFMI per chain,
+    timings, MAP status, each gate and ``pass``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import arviz as az
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+
+from .. import config
+from ..physics.roadload import road_load_summary
+from .bayes import FitProblem, integrated_speed, run_log_likelihood
+from .nuts import NutsFit
+
+SUMMARY_COLUMNS = ("parameter", "mean", "sd", "q2.5", "q50", "q97.5", "r_hat", "ess_bulk", "ess_tail")
+DERIVED = ("F50_N", "F50_tyre_N", "F50_aero_N", "F50_driveline_N", "F50_undriven_N",
+           "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
+NOISE_SITES = ("q_mps_per_sqrt_s", "student_df")
+
+
+def _flat(x: np.ndarray) -> np.ndarray:
+    return x.reshape((-1,) + x.shape[2:])
+
+
+def _unflat(x: np.ndarray, chains: int) -> np.ndarray:
+    return x.reshape((chains, -1) + x.shape[1:])
+
+
+def derived_quantities(fit: NutsFit) -> dict[str, np.ndarray]:
+    """Road load at reference conditions for every draw ([chain, draw] arrays).  For the
+    hierarchical model the population-mean coefficients are used."""
+    p = fit.problem
+    chains = fit.samples[p.free[0]].shape[0] if p.free else 1
+    free = {k: jnp.asarray(_flat(fit.samples[k])) for k in p.free}
+
+    def one(values):
+        params = dict(p.fixed, **values)
+        return road_load_summary(p.model, params, p.mass_kg, p.frontal_area_m2, driveline_curve=p.driveline_curve)
+
+    out = jax.jit(jax.vmap(one))(free)
+    return {k: _unflat(np.asarray(out[k]), chains) for k in DERIVED}
+
+
+def _draw_dicts(fit: NutsFit, idx: np.ndarray) -> dict[str, jnp.ndarray]:
+    return {k: jnp.asarray(_flat(v)[idx]) for k, v in fit.samples.items()}
+
+
+def posterior_predictive(fit: NutsFit, n_draws: int | None = None, seed: int = 1) -> dict[str, np.ndarray]:
+    """Replicated speed traces [chain, draw, run, sample] for a thinned set of draws, and the
+    integrated speed (noise-free) for the same draws."""
+    p = fit.problem
+    chains, draws = next(iter(fit.samples.values())).shape[:2]
+    n_draws = n_draws or fit.sampler.posterior_predictive_draws
+    per_chain = max(1, min(draws, n_draws // chains))
+    keep = np.linspace(0, draws - 1, per_chain).astype(int)
+    idx = (np.arange(chains)[:, None] * draws + keep[None, :]).ravel()
+    batch = p.batch
+    dt = jnp.diff(batch.time_s, axis=1, prepend=batch.time_s[:, :1])
+    key = jax.random.PRNGKey(seed)
+
+    def one(sample, k):
+        v = integrated_speed(p, sample)
+        k1, k2 = jax.random.split(k)
+        q = sample.get("q_mps_per_sqrt_s", jnp.zeros(()))
+        walk = jnp.cumsum(q * jnp.sqrt(dt) * jax.random.normal(k1, v.shape), axis=1)
+        noise = sample["sigma_mps"][:, None] * jax.random.normal(k2, v.shape)
+        return v, v + walk + noise
+
+    draws_dict = _draw_dicts(fit, idx)
+    keys = jax.random.split(key, idx.size)
+    v, rep = jax.jit(jax.vmap(one))(draws_dict, keys)
+    mask = np.asarray(batch.mask)
+    v = np.where(mask, np.asarray(v), np.nan)
+    rep = np.where(mask, np.asarray(rep), np.nan)
+    return {"speed_mps": _unflat(rep, chains), "speed_integrated_mps": _unflat(v, chains)}
+
+
+def log_likelihood_per_run(fit: NutsFit) -> np.ndarray:
+    """[chain, draw, run] log-likelihood of each run's speed trace."""
+    p = fit.problem
+    chains = next(iter(fit.samples.values())).shape[0]
+    flat = {k: jnp.asarray(_flat(v)) for k, v in fit.samples.items()}
+    ll = jax.jit(jax.vmap(lambda s: run_log_likelihood(p, s)))(flat)
+    return _unflat(np.asarray(ll), chains)
+
+
+def to_inference_data(fit: NutsFit, *, predictive: bool = True) -> az.InferenceData:
+    """The fit as ArviZ InferenceData (see the module docstring)."""
+    p = fit.problem
+    runs = [str(r) for r in p.run_ids]
+    n = p.batch.time_s.shape[1]
+    posterior = {}
+    dims = {}
+    for k, v in fit.samples.items():
+        if k.endswith("_z"):
+            continue  # non-centred auxiliaries: their transforms are in the posterior
+        posterior[k] = v
+        if v.ndim == 3 and v.shape[2] == p.n_runs:
+            dims[k] = ["run"]
+    posterior.update(derived_quantities(fit))
+    mask = np.asarray(p.batch.mask)
+    observed = {"speed_mps": np.where(mask, np.asarray(p.batch.speed_mps), np.nan)}
+    constant = {
+        "time_s": np.where(mask, np.asarray(p.batch.time_s), np.nan),
+        "airspeed_mps": np.where(mask, np.asarray(p.batch.airspeed_mps), np.nan),
+        "yaw_rad": np.where(mask, np.asarray(p.batch.yaw_rad), np.nan),
+        "driveline_force_n": np.where(mask, np.asarray(p.batch.driveline_force_n), np.nan),
+        "direction": np.asarray(p.batch.direction),
+    }
+    trace_dims = ["run", "sample"]
+    all_dims = dict(dims, speed_mps=trace_dims, speed_integrated_mps=trace_dims, time_s=trace_dims,
+                    airspeed_mps=trace_dims, yaw_rad=trace_dims, driveline_force_n=trace_dims, direction=["run"])
+    stats = {
+        "diverging": fit.stats["diverging"].astype(bool),
+        "tree_depth": fit.stats["tree_depth"],
+        "n_steps": fit.stats["num_steps"],
+        "energy": fit.stats["energy"],
+        "acceptance_rate": fit.stats["accept_prob"],
+    }
+    groups = dict(
+        posterior=posterior,
+        log_likelihood={"speed_mps": log_likelihood_per_run(fit)},
+        observed_data=observed,
+        constant_data=constant,
+        sample_stats=stats,
+        coords={"run": runs, "sample": np.arange(n)},
+        dims=dict(all_dims, **{"speed_mps": trace_dims}),
+    )
+    if predictive:
+        groups["posterior_predictive"] = posterior_predictive(fit)
+    idata = az.from_dict(**groups)
+    idata.log_likelihood["speed_mps"] = idata.log_likelihood["speed_mps"].rename({"speed_mps_dim_0": "run"}) \
+        if "speed_mps_dim_0" in idata.log_likelihood.dims else idata.log_likelihood["speed_mps"]
+    return idata
+
+
+def _rows(idata: az.InferenceData, names: list[str]) -> pd.DataFrame:
+    post = idata.posterior
+    rows = []
+    for name in names:
+        da = post[name]
+        extra = [d for d in da.dims if d not in ("chain", "draw")]
+        labels = [(name, {})] if not extra else [
+            (f"{name}[{r}]", {extra[0]: r}) for r in da.coords[extra[0]].values]
+        for label, sel in labels:
+            x = da.sel(sel) if sel else da
+            arr = np.asarray(x)
+            ess_bulk = float(az.ess(arr, method="bulk")) if arr.shape[1] > 3 else math.nan
+            ess_tail = float(az.ess(arr, method="tail")) if arr.shape[1] > 3 else math.nan
+            r_hat = float(az.rhat(arr)) if arr.shape[0] > 1 and arr.shape[1] > 3 else math.nan
+            q = np.percentile(arr, [2.5, 50.0, 97.5])
+            rows.append({"parameter": label, "mean": float(arr.mean()), "sd": float(arr.std(ddof=1)),
+                         "q2.5": q[0], "q50": q[1], "q97.5": q[2], "r_hat": r_hat,
+                         "ess_bulk": ess_bulk, "ess_tail": ess_tail})
+    return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))
+
+
+def summary_table(fit: NutsFit, idata: az.InferenceData) -> pd.DataFrame:
+    """The rows of ``summary.csv``: free parameters, noise parameters, tau_* and derived."""
+    p = fit.problem
+    names = list(p.free) + [f"tau_{k}" for k in p.varying]
+    names += [k for k in NOISE_SITES if k in idata.posterior]
+    names += list(DERIVED)
+    return _rows(idata, names)
+
+
+def run_table(fit: NutsFit, idata: az.InferenceData) -> pd.DataFrame:
+    """Per-run rows (initial speed, noise level, run-level coefficients), ``runs_summary.csv``."""
+    names = ["v0_mps", "sigma_mps"] + [f"{k}_run" for k in fit.problem.varying]
+    return _rows(idata, names)
+
+
+def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
+                gates: config.Gates = config.DEFAULT_GATES) -> dict:
+    """Sampler diagnostics and the pass/fail of every gate."""
+    chains = int(idata.posterior.sizes["chain"])
+    div = int(fit.stats["diverging"].sum())
+    depth = fit.stats["tree_depth"]
+    hits = float(np.mean(depth >= fit.sampler.max_tree_depth))
+    # every sampled quantity counts (per-run ones too), not only the summary rows
+    every = pd.concat([summary, run_table(fit, idata)], ignore_index=True)
+    max_rhat = float(np.nanmax(every["r_hat"])) if every["r_hat"].notna().any() else math.nan
+    min_bulk = float(np.nanmin(every["ess_bulk"]))
+    min_tail = float(np.nanmin(every["ess_tail"]))
+    bfmi = [float(x) for x in np.atleast_1d(az.bfmi(idata))]
+    checks = {
+        "divergences": div <= gates.max_divergences,
+        "r_hat": (chains < 2) or (math.isfinite(max_rhat) and max_rhat <= gates.max_r_hat),
+        "ess_bulk": min_bulk >= gates.min_ess_bulk_per_chain * chains,
+        "ess_tail": min_tail >= gates.min_ess_tail_per_chain * chains,
+        "bfmi": min(bfmi) >= gates.min_bfmi,
+        "tree_depth": hits <= gates.max_tree_depth_hits_fraction,
+    }
+    out = {
+        "method": "nuts",
+        "model": fit.problem.spec.name,
+        "pooling": fit.problem.pooling,
+        "noise": fit.problem.noise,
+        "robust": fit.problem.robust,
+        "chains": chains,
+        "draws_per_chain": int(idata.posterior.sizes["draw"]),
+        "divergences": div,
+        "max_r_hat": max_rhat,
+        "min_ess_bulk": min_bulk,
+        "min_ess_tail": min_tail,
+        "mean_tree_depth": float(depth.mean()),
+        "max_tree_depth": int(depth.max()),
+        "tree_depth_limit_hits_fraction": hits,
+        "mean_leapfrog_steps": float(fit.stats["num_steps"].mean()),
+        "bfmi": bfmi,
+        "timings_s": {k: round(v, 3) for k, v in fit.timings.items()},
+        "precondition": fit.sampler.precondition,
+        "map": None if fit.map is None else {
+            "success": fit.map.success, "iterations": fit.map.n_iter, "message": fit.map.message,
+            "hessian_min_eigenvalue_scaled": fit.map.min_eigenvalue},
+        "gates": {k: bool(v) for k, v in checks.items()},
+        "thresholds": {
+            "max_r_hat": gates.max_r_hat, "min_ess_bulk": gates.min_ess_bulk_per_chain * chains,
+            "min_ess_tail": gates.min_ess_tail_per_chain * chains, "max_divergences": gates.max_divergences,
+            "min_bfmi": gates.min_bfmi, "max_tree_depth_hits_fraction": gates.max_tree_depth_hits_fraction},
+        "pass": bool(all(checks.values())),
+    }
+    out["failed"] = [k for k, v in checks.items() if not v]
+    return out
+
+
+def format_posterior_table(summary: pd.DataFrame, diag: dict, truth: dict | None = None) -> str:
+    """A table for the terminal, headed by a loud line when the fit failed its gates."""
+    lines = []
+    if not diag["pass"]:
+        lines.append("!! NUTS FIT FAILED ITS DIAGNOSTIC GATES: " + ", ".join(diag["failed"])
+                     + " -- the posterior below is NOT reliable !!")
+    lines.append(f"NUTS, model {diag['model']}, {diag['pooling']}: {diag['chains']} chains x "
+                 f"{diag['draws_per_chain']} draws, divergences {diag['divergences']}, max R-hat "
+                 f"{diag['max_r_hat']:.3f}, min ESS bulk {diag['min_ess_bulk']:.0f} / tail "
+                 f"{diag['min_ess_tail']:.0f}, mean tree depth {diag['mean_tree_depth']:.1f}, "
+                 f"E-BFMI {min(diag['bfmi']):.2f}: {'PASS' if diag['pass'] else 'FAIL'}")
+    header = f"{'quantity':<16}{'mean':>12}{'sd':>11}{'q2.5':>12}{'q97.5':>12}{'r_hat':>7}{'ess_bulk':>9}"
+    if truth:
+        header += f"{'truth':>10}{'in 95%':>8}"
+    lines.append(header)
+    lines.append("-" * len(header))
+    for _, r in summary.iterrows():
+        line = (f"{r['parameter']:<16}{r['mean']:>12.5g}{r['sd']:>11.3g}{r['q2.5']:>12.5g}{r['q97.5']:>12.5g}"
+                f"{r['r_hat']:>7.3f}{r['ess_bulk']:>9.0f}")
+        if truth:
+            t = truth.get(r["parameter"])
+            if isinstance(t, (int, float)):
+                line += f"{t:>10.5g}{'yes' if r['q2.5'] <= t <= r['q97.5'] else 'NO':>8}"
+        lines.append(line)
+    return "\n".join(lines)
+
+
+def write_nuts_outputs(fit: NutsFit, out_dir: str | os.PathLike, *,
+                       gates: config.Gates = config.DEFAULT_GATES) -> tuple[pd.DataFrame, dict]:
+    """Write posterior.nc, summary.csv, runs_summary.csv and diagnostics.json."""
+    out = Path(out_dir)
+    idata = to_inference_data(fit)
+    summary = summary_table(fit, idata)
+    diag = diagnostics(fit, idata, summary, gates)
+    out.mkdir(parents=True, exist_ok=True)
+    idata.to_netcdf(str(out / "posterior.nc"))
+    summary.to_csv(out / "summary.csv", index=False)
+    run_table(fit, idata).to_csv(out / "runs_summary.csv", index=False)
+    (out / "diagnostics.json").write_text(json.dumps(diag, indent=2) + "\n")
+    return summary, diag
