@@ -2,15 +2,21 @@
 
 Subcommands: ``demo``, ``simulate``, ``fit``, ``sensitivity``, ``cases``, ``models``.
 Every command that writes a directory validates its input first and writes nothing when the
-input is refused; errors are printed as one line naming the file, column and row.
+input is refused; errors are printed as one line naming the file, column and row.  Exit codes:
+0 success, 2 input refused, 3 a NUTS fit that failed its diagnostic gates (outputs written and
+flagged).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import tempfile
 from pathlib import Path
+
+EXIT_REFUSED = 2
+EXIT_GATES_FAILED = 3
 
 
 def _cmd_simulate(args) -> int:
@@ -24,43 +30,83 @@ def _cmd_simulate(args) -> int:
     return 0
 
 
+def _sampler(args):
+    from . import config
+
+    return config.SamplerConfig(num_warmup=args.warmup, num_samples=args.draws, num_chains=args.chains,
+                                seed=args.seed, progress_bar=not args.no_progress,
+                                precondition="none" if args.no_precondition else "laplace")
+
+
+def _fit_nuts(campaign, args, out: Path):
+    from .inference.nuts import fit_nuts
+    from .inference.results import format_posterior_table, write_nuts_outputs
+
+    from .inference.results import truth_derived
+
+    fit = fit_nuts(campaign, args.model, pooling=args.pooling, noise=args.noise, robust=args.robust,
+                   sampler=_sampler(args))
+    summary, diag = write_nuts_outputs(fit, out)
+    truth = dict(campaign.truth or {}, **truth_derived(fit.problem, campaign.truth))
+    return summary, diag, format_posterior_table(summary, diag, truth or None), truth
+
+
 def _cmd_fit(args) -> int:
     from .data import load_campaign
-    from .inference.lsq import fit_lsq, format_lsq_table, write_lsq_outputs
+    from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table, write_lsq_outputs
     from .inference.spec import load_model_spec
 
-    if args.method != "lsq":
-        print("bayes-roadload fit: --method nuts is not available yet; use --method lsq", file=sys.stderr)
-        return 2
     campaign = load_campaign(args.campaign)
     spec = load_model_spec(args.model)
-    from .inference.lsq import LsqSettings
-
-    result = fit_lsq(campaign, spec, grouping=args.grouping, settings=LsqSettings(initial_speed=args.initial_speed))
-    write_lsq_outputs(result, args.out)
-    print(format_lsq_table(result, campaign.truth))
-    print(f"\nwrote {Path(args.out) / 'summary.csv'}, per_group.csv, fit.json")
-    return 0
+    out = Path(args.out)
+    if args.method == "lsq":
+        result = fit_lsq(campaign, spec, grouping=args.grouping,
+                         settings=LsqSettings(initial_speed=args.initial_speed))
+        write_lsq_outputs(result, out)
+        print(format_lsq_table(result, campaign.truth))
+        print(f"\nwrote {out / 'summary.csv'}, per_group.csv, fit.json")
+        return 0
+    args.model = spec
+    summary, diag, table, _ = _fit_nuts(campaign, args, out)
+    print(table)
+    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, diagnostics.json")
+    return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
 def _cmd_demo(args) -> int:
     from .data import save_campaign
-    from .inference.lsq import fit_lsq, format_lsq_table, write_lsq_outputs
-    from .inference.spec import load_model_spec
-    from .simulate import simulate_campaign
+    from .inference.lsq import fit_lsq, write_lsq_outputs
+    from .simulate import get_case, simulate_campaign
 
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bayes-roadload-demo-"))
-    print(f"Simulating thesis case {args.case} ({args.pairs} pairs of opposite-direction coastdowns, "
-          f"seed {args.seed}) ...")
-    campaign = simulate_campaign(args.case, pairs=args.pairs, seed=args.seed)
+    case = get_case(args.case)
+    if args.truth_model == "basic":
+        case = dataclasses.replace(case, model="basic")
+    on = lambda b: "on" if b else "off"  # noqa: E731
+    print(f"Simulating {args.pairs} pairs of opposite-direction coastdowns at thesis case {args.case} "
+          f"conditions: head wind {case.head_wind_mps:g} m/s, cross wind {case.cross_wind_mps:g} m/s, "
+          f"instrument dynamics {on(case.dynamics)}, measurement noise {on(case.measurement_noise)}, "
+          f"system noise {on(case.system_noise)}, {case.model} drag model; seed {args.seed}.")
+    campaign = simulate_campaign(case, pairs=args.pairs, seed=args.seed)
     save_campaign(campaign, out / "campaign")
-    for model in ("four_term", "three_term"):
-        print(f"\nClassical per-pair least squares, model {model} (thesis section 5):")
-        result = fit_lsq(campaign, load_model_spec(model), grouping="pair")
-        write_lsq_outputs(result, out / f"fit_lsq_{model}")
-        print(format_lsq_table(result, campaign.truth))
-    print(f"\nCampaign and fits written under {out}")
-    return 0
+    print(f"Fitting model {args.model}: classical per-pair least squares, then NUTS over all runs jointly ...")
+    lsq = fit_lsq(campaign, args.model, grouping="pair")
+    write_lsq_outputs(lsq, out / "fit_lsq")
+    summary, diag, table, truth = _fit_nuts(campaign, args, out / "fit_nuts")
+    post = summary.set_index("parameter")
+    print()
+    print(f"{'quantity':<15}{'truth':>10}   {'least squares: mean +- SE':<27}{'posterior: mean [95 % interval]'}")
+    print("-" * 90)
+    for name in list(lsq.free) + ["F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2"]:
+        t = truth.get(name)
+        t_s = f"{t:>10.5g}" if isinstance(t, (int, float)) else f"{'-':>10}"
+        m, se = lsq.weighted_mean.get(name, float("nan")), lsq.weighted_se.get(name, float("nan"))
+        r = post.loc[name]
+        print(f"{name:<15}{t_s}   {m:>11.5g} +- {se:<11.3g}  {r['mean']:>10.5g} [{r['q2.5']:.5g}, {r['q97.5']:.5g}]")
+    print()
+    print("\n".join(line for line in table.splitlines()[:2] if line.startswith(("!!", "NUTS"))))
+    print(f"\nCampaign, least-squares fit (fit_lsq/) and posterior (fit_nuts/) written under {out}")
+    return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
 def _cmd_sensitivity(args) -> int:
@@ -94,16 +140,34 @@ def _cmd_models(args) -> int:
     return 0
 
 
+def _add_nuts_options(p: argparse.ArgumentParser, seed: int) -> None:
+    from . import config
+
+    d = config.DEFAULT_SAMPLER
+    p.add_argument("--warmup", type=int, default=d.num_warmup, help="nuts: warm-up draws per chain")
+    p.add_argument("--draws", type=int, default=d.num_samples, help="nuts: draws per chain")
+    p.add_argument("--chains", type=int, default=d.num_chains, help="nuts: chains (run in parallel)")
+    p.add_argument("--seed", type=int, default=seed)
+    p.add_argument("--no-progress", action="store_true", help="nuts: no progress bar")
+    p.add_argument("--no-precondition", action="store_true",
+                   help="nuts: numpyro's default NUTS without the MAP/Laplace start (slow; for comparison)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bayes-roadload", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
 
-    d = sub.add_parser("demo", help="simulate thesis case 14 and fit it, printing truth vs estimate")
+    d = sub.add_parser("demo", help="simulate a 6-pair campaign at thesis case 14 conditions and fit it "
+                                    "by least squares and NUTS, printing truth, estimates and posterior")
     d.add_argument("--case", type=int, default=14)
     d.add_argument("--pairs", type=int, default=6)
-    d.add_argument("--seed", type=int, default=1)
+    d.add_argument("--model", default="four_term", help="model variant (see `models`)")
+    d.add_argument("--truth-model", choices=("basic", "case"), default="basic",
+                   help="simulate with the basic drag model (eq. 6.1, the physics of the analysis "
+                        "model) or with the case's own (case 14: the full model, eq. 6.2)")
     d.add_argument("--out", default=None, help="directory for the campaign and fits (default: a temp dir)")
-    d.set_defaults(func=_cmd_demo)
+    _add_nuts_options(d, seed=1)
+    d.set_defaults(func=_cmd_demo, pooling="pooled", noise="integrated", robust=False)
 
     s = sub.add_parser("simulate", help="simulate a campaign of a thesis table 6.7 case")
     s.add_argument("--case", type=int, required=True, help="1-19, thesis table 6.7 (see `cases`)")
@@ -114,16 +178,22 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True)
     s.set_defaults(func=_cmd_simulate)
 
-    f = sub.add_parser("fit", help="fit a campaign")
+    f = sub.add_parser("fit", help="fit a campaign (NUTS over all runs jointly, or classical least squares)")
     f.add_argument("campaign")
     f.add_argument("--model", default="four_term", help="a name in models/ or a TOML path (see `models`)")
-    f.add_argument("--method", choices=("lsq", "nuts"), default="lsq")
+    f.add_argument("--method", choices=("nuts", "lsq"), default="nuts")
+    f.add_argument("--pooling", choices=("pooled", "hierarchical"), default="pooled",
+                   help="nuts: one set of coefficients, or run-level AD, BD, CD0 around population means")
+    f.add_argument("--noise", choices=("integrated", "white"), default="integrated",
+                   help="nuts: residual model ('integrated': white noise plus integrated input noise)")
+    f.add_argument("--robust", action="store_true", help="nuts: Student-t innovations (outlier-robust)")
     f.add_argument("--grouping", choices=("pair", "run", "all"), default="pair",
                    help="lsq: fit each pair, each run, or all runs jointly")
     f.add_argument("--initial-speed", choices=("fitted", "measured"), default="fitted",
                    help="lsq: estimate each run's initial speed (honest standard errors), or start "
                         "from the first measured speed as the thesis did")
     f.add_argument("--out", required=True)
+    _add_nuts_options(f, seed=0)
     f.set_defaults(func=_cmd_fit)
 
     se = sub.add_parser("sensitivity", help="coefficient sensitivities (thesis tables 6.1, 6.2)")
@@ -146,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except (CampaignError, ValueError, FileNotFoundError) as e:
         print(f"bayes-roadload {args.command}: error: {e}", file=sys.stderr)
-        return 2
+        return EXIT_REFUSED
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -166,11 +166,11 @@ class SamplerConfig:
         parallel on the CPU cores when there are enough).
     target_accept : NUTS target acceptance probability.
     max_tree_depth : NUTS tree-depth limit (2^depth - 1 leapfrog steps).
-    precondition : "laplace" starts every chain near the MAP and uses the Laplace covariance
-        as a dense inverse mass matrix (the default); "none" is numpyro's default NUTS
-        (diagonal mass adaptation from a random start), kept for the benchmark.
-    adapt_mass_matrix : re-estimate the mass matrix during warm-up instead of keeping the Laplace
-        covariance (off by default: with a short warm-up the estimate is worse than the Laplace one).
+    precondition : "laplace" (default) runs NUTS on coordinates whitened by the Laplace
+        covariance at the MAP, chains starting from Laplace draws; "none" is numpyro's default
+        NUTS (diagonal mass adaptation from a random start), kept for the benchmark.
+    adapt_mass_matrix : adapt a dense mass matrix during warm-up, in the Laplace-whitened
+        coordinates (corrects what the Laplace approximation misses).
     seed : PRNG seed.
     progress_bar : show numpyro's progress bar.
     """
@@ -181,7 +181,7 @@ class SamplerConfig:
     target_accept: float = 0.85
     max_tree_depth: int = 10
     precondition: str = "laplace"
-    adapt_mass_matrix: bool = False
+    adapt_mass_matrix: bool = True
     seed: int = 0
     progress_bar: bool = False
     posterior_predictive_draws: int = 200
@@ -216,7 +216,7 @@ DEFAULT_GATES = Gates()
 # Priors of the nuisance parameters of the Bayesian models (physical units).
 NOISE_PRIORS = {
     "sigma_mps": 0.1,          # half-normal scale of the speed measurement noise, per run
-    "q_mps_per_sqrt_s": 0.01,  # half-normal scale of the integrated (process) noise
+    "q_mps_per_sqrt_s": 0.005,  # mean of the Gamma(2) prior of the integrated (process) noise
     "v0_scale_mps": 0.5,       # normal scale of each run's initial speed around its first sample
     "student_df_rate": 0.1,    # Gamma(2, rate) prior of the Student-t degrees of freedom
 }

@@ -169,9 +169,10 @@ def _rows(idata: az.InferenceData, names: list[str]) -> pd.DataFrame:
         for label, sel in labels:
             x = da.sel(sel) if sel else da
             arr = np.asarray(x)
-            ess_bulk = float(az.ess(arr, method="bulk")) if arr.shape[1] > 3 else math.nan
-            ess_tail = float(az.ess(arr, method="tail")) if arr.shape[1] > 3 else math.nan
-            r_hat = float(az.rhat(arr)) if arr.shape[0] > 1 and arr.shape[1] > 3 else math.nan
+            varies = arr.shape[1] > 3 and np.ptp(arr) > 0  # a constant (e.g. an absent part) has none
+            ess_bulk = float(az.ess(arr, method="bulk")) if varies else math.nan
+            ess_tail = float(az.ess(arr, method="tail")) if varies else math.nan
+            r_hat = float(az.rhat(arr)) if varies and arr.shape[0] > 1 else math.nan
             q = np.percentile(arr, [2.5, 50.0, 97.5])
             rows.append({"parameter": label, "mean": float(arr.mean()), "sd": float(arr.std(ddof=1)),
                          "q2.5": q[0], "q50": q[1], "q97.5": q[2], "r_hat": r_hat,
@@ -204,14 +205,14 @@ def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
     # every sampled quantity counts (per-run ones too), not only the summary rows
     every = pd.concat([summary, run_table(fit, idata)], ignore_index=True)
     max_rhat = float(np.nanmax(every["r_hat"])) if every["r_hat"].notna().any() else math.nan
-    min_bulk = float(np.nanmin(every["ess_bulk"]))
-    min_tail = float(np.nanmin(every["ess_tail"]))
+    min_bulk = float(np.nanmin(every["ess_bulk"])) if every["ess_bulk"].notna().any() else math.nan
+    min_tail = float(np.nanmin(every["ess_tail"])) if every["ess_tail"].notna().any() else math.nan
     bfmi = [float(x) for x in np.atleast_1d(az.bfmi(idata))]
     checks = {
         "divergences": div <= gates.max_divergences,
         "r_hat": (chains < 2) or (math.isfinite(max_rhat) and max_rhat <= gates.max_r_hat),
-        "ess_bulk": min_bulk >= gates.min_ess_bulk_per_chain * chains,
-        "ess_tail": min_tail >= gates.min_ess_tail_per_chain * chains,
+        "ess_bulk": bool(min_bulk >= gates.min_ess_bulk_per_chain * chains),
+        "ess_tail": bool(min_tail >= gates.min_ess_tail_per_chain * chains),
         "bfmi": min(bfmi) >= gates.min_bfmi,
         "tree_depth": hits <= gates.max_tree_depth_hits_fraction,
     }
@@ -236,7 +237,9 @@ def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
         "precondition": fit.sampler.precondition,
         "map": None if fit.map is None else {
             "success": fit.map.success, "iterations": fit.map.n_iter, "message": fit.map.message,
+            "grad_max_scaled": fit.map.grad_max,
             "hessian_min_eigenvalue_scaled": fit.map.min_eigenvalue},
+        "map_converged": True if fit.map is None else bool(fit.map.success),
         "gates": {k: bool(v) for k, v in checks.items()},
         "thresholds": {
             "max_r_hat": gates.max_r_hat, "min_ess_bulk": gates.min_ess_bulk_per_chain * chains,
@@ -246,6 +249,18 @@ def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
     }
     out["failed"] = [k for k, v in checks.items() if not v]
     return out
+
+
+def truth_derived(problem: FitProblem, truth: dict | None) -> dict[str, float]:
+    """The derived road-load quantities at the true coefficients (simulated campaigns)."""
+    if not truth:
+        return {}
+    values = {k: float(truth[k]) for k in problem.free if isinstance(truth.get(k), (int, float))}
+    if len(values) != len(problem.free):
+        return {}
+    out = road_load_summary(problem.model, dict(problem.fixed, **values), problem.mass_kg, problem.frontal_area_m2,
+                            driveline_curve=problem.driveline_curve)
+    return {k: float(v) for k, v in out.items()}
 
 
 def format_posterior_table(summary: pd.DataFrame, diag: dict, truth: dict | None = None) -> str:
