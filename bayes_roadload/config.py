@@ -178,7 +178,7 @@ class SamplerConfig:
     num_warmup: int = 500
     num_samples: int = 1000
     num_chains: int = 2
-    target_accept: float = 0.85
+    target_accept: float = 0.9
     max_tree_depth: int = 10
     precondition: str = "laplace"
     adapt_mass_matrix: bool = True
@@ -221,5 +221,5 @@ NOISE_PRIORS = {
     "student_df_rate": 0.1,    # Gamma(2, rate) prior of the Student-t degrees of freedom
 }
 TAU_PRIOR_SCALES = {"AD": 1.0e-3, "BD": 5.0e-5, "CD0": 0.02}
-"""Half-normal scales of the run-to-run spreads tau of the hierarchical model (10 %, 25 %,
-5 % of typical values: the thesis' track spreads were 4.3 %, 23.1 %, 4.3 %)."""
+"""Prior means of the run-to-run spreads tau of the hierarchical model, Gamma(2) priors (10 %,
+25 %, 5 % of typical values: the thesis' track spreads were 4.3 %, 23.1 %, 4.3 %)."""

@@ -8,7 +8,7 @@ import pytest
 from bayes_roadload import config
 from bayes_roadload.simulate import get_case, simulate_campaign
 
-SMALL_SAMPLER = config.SamplerConfig(num_warmup=200, num_samples=300, num_chains=2, seed=3)
+SMALL_SAMPLER = config.SamplerConfig(num_warmup=300, num_samples=400, num_chains=2, seed=3)
 """Small draw counts for tests: enough for the gates' R-hat and ESS on this posterior."""
 
 

@@ -69,8 +69,25 @@ def test_sensitivity_cases_models(tmp_path, capsys):
 
 
 def test_demo_runs_and_prints_truth_beside_estimates(tmp_path, capsys):
-    assert main(["demo", "--pairs", "1", "--out", str(tmp_path)]) == 0
+    code = main(["demo", "--pairs", "1", "--warmup", "150", "--draws", "150", "--no-progress", "--out", str(tmp_path)])
     out = capsys.readouterr().out
-    assert "truth" in out and "four_term" in out and "three_term" in out
+    assert code in (0, 3)
+    assert "truth" in out and "least squares" in out and "posterior" in out and "NUTS" in out
     assert (tmp_path / "campaign" / "runs.csv").exists()
-    assert (tmp_path / "fit_lsq_four_term" / "summary.csv").exists()
+    assert (tmp_path / "fit_lsq" / "summary.csv").exists()
+    assert (tmp_path / "fit_nuts" / "posterior.nc").exists()
+
+
+def test_fit_nuts_writes_outputs_and_flags_gates(campaign_dir, tmp_path, capsys):
+    out = tmp_path / "nuts"
+    code = main(["fit", str(campaign_dir), "--model", "three_term", "--warmup", "100", "--draws", "100",
+                 "--no-progress", "--out", str(out)])
+    printed = capsys.readouterr().out
+    diag = json.loads((out / "diagnostics.json").read_text())
+    assert code == (0 if diag["pass"] else 3)
+    # a failed fit is announced before anything else is printed
+    assert printed.startswith("!! NUTS FIT FAILED") == (not diag["pass"])
+    summary = pd.read_csv(out / "summary.csv")
+    assert list(summary.columns) == SUMMARY_COLUMNS
+    assert {"AD", "BD", "CD0", "F50_N"} <= set(summary["parameter"])
+    assert (out / "posterior.nc").exists() and (out / "runs_summary.csv").exists()

@@ -25,8 +25,8 @@ without one gets a wide normal around its default (``10 x`` its typical scale). 
 priors (:data:`bayes_roadload.config.NOISE_PRIORS`, ``TAU_PRIOR_SCALES``): ``sigma_mps`` half-
 normal(0.1 m/s); ``v0_mps`` normal(first sample, 0.5 m/s); ``q_mps_per_sqrt_s`` Gamma(2) with
 mean 0.005 m/s/sqrt(s) (vanishes at 0: inputs are never noise-free, and a boundary-avoiding
-prior removes the funnel at q -> 0, Chung et al. 2013); ``tau_*`` half-normal (10 %, 25 %, 5 %
-of typical AD, BD, CD0); ``student_df`` Gamma(2, 0.1).
+prior removes the funnel at q -> 0, Chung et al. 2013); ``tau_*`` Gamma(2) with means 10 %,
+25 %, 5 % of typical AD, BD, CD0 (likewise boundary-avoiding); ``student_df`` Gamma(2, 0.1).
 """
 
 from __future__ import annotations
@@ -182,7 +182,9 @@ def coastdown_model(problem: FitProblem) -> None:
     for name in problem.free:
         sample[name] = numpyro.sample(name, problem.priors[name].to_numpyro())
     for name in problem.varying:
-        tau = numpyro.sample(f"tau_{name}", dist.HalfNormal(config.TAU_PRIOR_SCALES[name]))
+        # Gamma(2): no mass piling at tau = 0, so the joint mode (the MAP the sampler is
+        # whitened at) is not degenerate (Chung et al. 2013)
+        tau = numpyro.sample(f"tau_{name}", dist.Gamma(2.0, 2.0 / config.TAU_PRIOR_SCALES[name]))
         with numpyro.plate("run", r):
             z = numpyro.sample(f"{name}_z", dist.Normal(0.0, 1.0))
         sample[f"{name}_run"] = numpyro.deterministic(f"{name}_run", sample[name] + tau * z)
