@@ -137,3 +137,11 @@ def test_vehicle_toml_is_valid_and_carries_tunnel():
     doc = tomllib.loads(vehicle_toml(c))
     assert doc["tunnel"]["yaw_deg"] == [-5.0, 0.0, 5.0] and doc["meta"]["case"] == 14
     assert json.dumps(doc)  # plain data
+
+
+def test_parquet_round_trip(tmp_path):
+    pytest.importorskip("pyarrow")
+    c = Campaign(runs_frame(), Vehicle(1100.0, 1130.0, 1.85))
+    out = save_campaign(c, tmp_path / "pq", fmt="parquet")
+    assert (out / "runs.parquet").exists() and not (out / "runs.csv").exists()
+    pd.testing.assert_frame_equal(load_campaign(out).runs, c.runs)
