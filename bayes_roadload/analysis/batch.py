@@ -1,0 +1,367 @@
+"""The one door for studies that fit many campaigns: campaigns in, summaries out.
+
+A study (coverage, planning, sim-to-real) describes each fit as a :class:`FitJob` -- a
+picklable recipe for a campaign plus the fit settings -- and hands the list to
+:func:`run_batch`.  Every job is run by :func:`run_fit_job`, which returns a small, flat,
+picklable record (no draws): posterior mean, sd and equal-tailed interval ends of every free
+parameter and of the road load at 50 mph, the truth and whether each interval covers it (for
+simulated campaigns), the diagnostic gates and the timings.  :func:`run_batch` maps the jobs
+sequentially by default or through any object with an ``Executor.map``-like method
+(``concurrent.futures.ProcessPoolExecutor``, or a Dask ``Client.get_executor()``), so a study
+moves to a cluster without being touched.  :func:`coverage_summary` turns the records of a
+simulation study into interval coverage with binomial errors.
+
+Example
+-------
+>>> jobs = [FitJob(f"seed{s}-{noise}", SimulatedCampaign(case, pairs=1, seed=s), model="three_term",
+...                noise=noise) for s in range(20) for noise in ("white", "integrated")]
+>>> records = run_batch(jobs)                       # doctest: +SKIP
+>>> coverage_summary(records, by=("noise",))          # doctest: +SKIP
+
+.. note::
+   Every :func:`~bayes_roadload.inference.nuts.fit_nuts` call compiles its MAP, warm-up and
+   sampling functions afresh (the campaign's data are constants of the compiled code), which is
+   about half of the wall time of a small fit.  Jobs are therefore independent and cost the
+   same wherever they run: parallelise across processes, not threads.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import traceback
+import warnings
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from .. import config
+from ..data.campaign import Campaign
+
+COVERAGE_LEVELS = (0.5, 0.9, 0.95)
+"""Central posterior interval levels recorded for every quantity (and checked for coverage)."""
+
+DERIVED_QUANTITIES = ("F50_N",)
+"""Derived road-load quantities recorded next to the free parameters (total road load at
+50 mph and reference conditions, N; :func:`bayes_roadload.inference.results.derived_quantities`)."""
+
+
+def quantile_key(q: float) -> str:
+    """Record key suffix of the ``q`` quantile (a fraction): 0.025 -> ``"q2.5"``."""
+    return f"q{100.0 * q:g}"
+
+
+def interval_key(level: float) -> str:
+    """Record key suffix of the in-interval flag of a central interval: 0.95 -> ``"in95"``."""
+    return f"in{100.0 * level:g}"
+
+
+@dataclass(frozen=True)
+class SimulatedCampaign:
+    """A picklable recipe for a simulated campaign: calling it runs
+    :func:`bayes_roadload.simulate.simulate_campaign` ``(case, pairs, seed, driveline=...,
+    settings=...)``.
+
+    Parameters
+    ----------
+    case : int or bayes_roadload.simulate.SimulationCase
+        A thesis case number (table 6.7) or a custom case.
+    pairs : int
+        Opposite-direction pairs of runs.
+    seed : int
+        Seed of every random draw of the simulation.
+    settings : bayes_roadload.simulate.SimulationSettings, optional
+        Noise levels, speeds, vehicle, ... (default: thesis chapter 6).
+    driveline : bool
+        Simulate and log the driveline force channel ``driveline_force_n``.
+    """
+
+    case: Any
+    pairs: int = 1
+    seed: int = 0
+    settings: Any = None
+    driveline: bool = False
+
+    def __call__(self) -> Campaign:
+        from ..simulate import simulate_campaign
+
+        return simulate_campaign(self.case, self.pairs, self.seed, driveline=self.driveline,
+                                 settings=self.settings)
+
+
+@dataclass(frozen=True)
+class FitJob:
+    """One fit of one campaign, described so that it can be sent to another process.
+
+    Parameters
+    ----------
+    name : str
+        Identifies the job in the records.
+    campaign_factory : callable or Campaign
+        A picklable zero-argument callable returning the :class:`~bayes_roadload.data.Campaign`
+        (e.g. :class:`SimulatedCampaign`, or ``functools.partial(load_campaign, path)``), or a
+        campaign itself.  A factory keeps the job small when it travels to a worker.
+    model : str
+        Model variant (``models/*.toml`` name) passed to
+        :func:`~bayes_roadload.inference.nuts.fit_nuts`.
+    pooling : {"pooled", "hierarchical"}
+    noise : {"integrated", "white"}
+        Likelihood of the speed residuals (:mod:`bayes_roadload.inference.bayes`).
+    robust : bool
+        Student-t innovations.
+    sampler : bayes_roadload.config.SamplerConfig
+        Draw counts, chains, target acceptance, seed.
+    levels : tuple of float
+        Central interval levels to record (fractions).
+    tags : mapping
+        Free-form scalars copied into the record (e.g. the study arm), for grouping.
+    """
+
+    name: str
+    campaign_factory: Callable[[], Campaign] | Campaign
+    model: str = "four_term"
+    pooling: str = "pooled"
+    noise: str = "integrated"
+    robust: bool = False
+    sampler: config.SamplerConfig = config.DEFAULT_SAMPLER
+    levels: tuple[float, ...] = COVERAGE_LEVELS
+    tags: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        if not all(0.0 < lv < 1.0 for lv in self.levels):
+            raise ValueError("interval levels must be fractions in (0, 1)")
+
+    def campaign(self) -> Campaign:
+        """Build (or return) the job's campaign."""
+        if isinstance(self.campaign_factory, Campaign):
+            return self.campaign_factory
+        return self.campaign_factory()
+
+
+def _job_fields(job: FitJob) -> dict[str, Any]:
+    out = {"name": job.name, "model": job.model, "pooling": job.pooling, "noise": job.noise,
+           "robust": bool(job.robust), "num_warmup": job.sampler.num_warmup,
+           "num_samples": job.sampler.num_samples, "num_chains": job.sampler.num_chains,
+           "target_accept": job.sampler.target_accept}
+    out.update({str(k): v for k, v in job.tags.items()})
+    return out
+
+
+def _interval_fields(name: str, draws: np.ndarray, truth: float | None,
+                     levels: Sequence[float]) -> dict[str, Any]:
+    """Mean, sd, median and the ends of each central interval of one quantity's draws, and
+    (with a truth) whether each interval covers it."""
+    x = np.asarray(draws, float).ravel()
+    qs = sorted({0.5} | {(1.0 - lv) / 2.0 for lv in levels} | {(1.0 + lv) / 2.0 for lv in levels})
+    values = np.quantile(x, qs)  # same (linear) definition as np.percentile in results.summary_table
+    out: dict[str, Any] = {f"{name}_mean": float(x.mean()), f"{name}_sd": float(x.std(ddof=1))}
+    out.update({f"{name}_{quantile_key(q)}": float(v) for q, v in zip(qs, values)})
+    t = math.nan if truth is None else float(truth)
+    out[f"{name}_truth"] = t
+    for lv in levels:
+        lo, hi = out[f"{name}_{quantile_key((1.0 - lv) / 2.0)}"], out[f"{name}_{quantile_key((1.0 + lv) / 2.0)}"]
+        out[f"{name}_{interval_key(lv)}"] = bool(lo <= t <= hi) if math.isfinite(t) else None
+    return out
+
+
+def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
+    from ..inference.results import (derived_quantities, diagnostics, summary_table, to_inference_data,
+                                     truth_derived)
+
+    problem = fit.problem
+    truth = campaign.truth or {}
+    idata = to_inference_data(fit, predictive=False)
+    summary = summary_table(fit, idata)
+    diag = diagnostics(fit, idata, summary)
+    rows = summary.set_index("parameter")
+    rec: dict[str, Any] = {"parameters": ",".join(problem.free)}
+    for name in problem.free:
+        t = truth.get(name)
+        rec.update(_interval_fields(name, fit.samples[name], t if isinstance(t, (int, float)) else None,
+                                    job.levels))
+        rec[f"{name}_r_hat"] = float(rows.loc[name, "r_hat"])
+        rec[f"{name}_ess_bulk"] = float(rows.loc[name, "ess_bulk"])
+    derived = derived_quantities(fit)
+    derived_truth = truth_derived(problem, truth)
+    for name in DERIVED_QUANTITIES:
+        rec.update(_interval_fields(name, derived[name], derived_truth.get(name), job.levels))
+    for name in ("q_mps_per_sqrt_s", "student_df"):
+        if name in fit.samples:
+            rec[f"{name}_mean"] = float(np.mean(fit.samples[name]))
+            rec[f"{name}_q50"] = float(np.median(fit.samples[name]))
+    rec["sigma_mps_mean"] = float(np.mean(fit.samples["sigma_mps"]))
+    rec.update({
+        "gate_pass": bool(diag["pass"]),
+        "gates_failed": ",".join(diag["failed"]),
+        "divergences": int(diag["divergences"]),
+        "max_r_hat": float(diag["max_r_hat"]),
+        "min_ess_bulk": float(diag["min_ess_bulk"]),
+        "min_ess_tail": float(diag["min_ess_tail"]),
+        "mean_tree_depth": float(diag["mean_tree_depth"]),
+        "map_converged": bool(fit.map.success) if fit.map is not None else None,
+    })
+    rec.update({f"time_{k}": float(v) for k, v in fit.timings.items()})
+    return rec
+
+
+def run_fit_job(job: FitJob) -> dict[str, Any]:
+    """Run one job: build the campaign, fit it with NUTS, summarise.
+
+    Never raises for a failure inside the job: the record then has ``error`` set to the
+    exception's type and message (and ``traceback``), with the job fields and the timings
+    up to the failure.
+
+    Parameters
+    ----------
+    job : FitJob
+
+    Returns
+    -------
+    dict
+        A flat record of plain Python scalars and strings (picklable, one DataFrame row):
+
+        * job fields: ``name, model, pooling, noise, robust, num_warmup, num_samples,
+          num_chains, target_accept`` and the ``tags``;
+        * campaign: ``n_runs, n_samples`` (real samples), and ``case, seed, pairs`` from the
+          campaign's meta when it has them; ``parameters`` (the free ones, comma-separated);
+        * for every free parameter ``P`` and for ``F50_N``: ``P_mean, P_sd``, quantiles
+          ``P_q50`` and ``P_q{lower}``, ``P_q{upper}`` of every level (``P_q2.5``,
+          ``P_q97.5`` for 95 %), ``P_truth`` (NaN when unknown) and ``P_in{level}`` (True /
+          False / None); ``P_r_hat, P_ess_bulk`` for the free parameters;
+        * noise: ``sigma_mps_mean`` and, when sampled, ``q_mps_per_sqrt_s_mean`` / ``_q50``;
+        * gates: ``gate_pass, gates_failed, divergences, max_r_hat, min_ess_bulk,
+          min_ess_tail, mean_tree_depth, map_converged``;
+        * timings (s): ``time_simulate_s``, ``time_map_s``, ``time_warmup_s``,
+          ``time_sampling_s`` (from the fit), ``time_fit_s`` (the whole ``fit_nuts`` call),
+          ``time_summary_s`` and ``time_total_s``;
+        * ``warnings`` (distinct messages, ``"; "``-joined) and ``error`` (None on success).
+    """
+    from ..inference.nuts import fit_nuts
+
+    rec = _job_fields(job)
+    rec["error"] = None
+    t_start = time.perf_counter()
+    caught: list[warnings.WarningMessage] = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            t0 = time.perf_counter()
+            campaign = job.campaign()
+            rec["time_simulate_s"] = time.perf_counter() - t0
+            rec["n_runs"] = len(campaign.run_ids)
+            rec["n_samples"] = int(len(campaign.runs))
+            for key in ("case", "seed", "pairs"):
+                if key in campaign.meta and key not in rec:
+                    rec[key] = campaign.meta[key]
+            t0 = time.perf_counter()
+            fit = fit_nuts(campaign, job.model, pooling=job.pooling, noise=job.noise, robust=job.robust,
+                           sampler=job.sampler)
+            rec["time_fit_s"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            rec.update(_fit_record(job, campaign, fit))
+            rec["time_summary_s"] = time.perf_counter() - t0
+    except Exception as exc:  # noqa: BLE001 - one failed job must not end the batch
+        rec["error"] = f"{type(exc).__name__}: {exc}"
+        rec["traceback"] = traceback.format_exc(limit=8)
+    rec["warnings"] = "; ".join(dict.fromkeys(
+        f"{w.category.__name__}: {w.message}" for w in caught
+        if not issubclass(w.category, DeprecationWarning)))[:2000]
+    rec["time_total_s"] = time.perf_counter() - t_start
+    return rec
+
+
+def run_batch(jobs: Iterable[FitJob], executor: Any | None = None, *,
+              on_record: Callable[[dict[str, Any]], None] | None = None) -> pd.DataFrame:
+    """Run many fit jobs and collect their records, one row per job, in job order.
+
+    Parameters
+    ----------
+    jobs : iterable of FitJob
+    executor : object with ``map(fn, iterable)``, optional
+        ``None`` runs the jobs one after the other in this process.  Anything with an
+        ``Executor.map``-like method is used as is: ``concurrent.futures.ProcessPoolExecutor``
+        (prefer the ``"spawn"`` or ``"forkserver"`` context: JAX is multithreaded and does not
+        survive ``fork``), a Dask ``Client.get_executor()``.  Jobs and records must then
+        pickle; :class:`FitJob` with a :class:`SimulatedCampaign` does.
+    on_record : callable, optional
+        Called with every record as it arrives (progress, partial results).
+
+    Returns
+    -------
+    pandas.DataFrame
+        The records of :func:`run_fit_job`.  A job that failed has ``error`` set; failures of
+        the executor itself (a worker process killed) propagate.
+    """
+    jobs = list(jobs)
+    mapped = map(run_fit_job, jobs) if executor is None else executor.map(run_fit_job, jobs)
+    records = []
+    for rec in mapped:
+        records.append(rec)
+        if on_record is not None:
+            on_record(rec)
+    return pd.DataFrame.from_records(records)
+
+
+# --------------------------------------------------------------------------- coverage
+
+def _wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """Wilson score 95 % interval of a binomial proportion k / n."""
+    if n == 0:
+        return math.nan, math.nan
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return centre - half, centre + half
+
+
+def coverage_summary(records: pd.DataFrame, by: Sequence[str] = ("model", "noise"),
+                     quantities: Sequence[str] | None = None,
+                     levels: Sequence[float] = COVERAGE_LEVELS) -> pd.DataFrame:
+    """Frequentist coverage of the posterior intervals of a simulation study.
+
+    Parameters
+    ----------
+    records : DataFrame of :func:`run_batch` records with known truths.  Records with an
+        ``error`` are left out (count them separately).
+    by : record columns that define the study arms.
+    quantities : names to check (default: every ``X`` with ``X_truth`` and ``X_in{level}``
+        columns).
+    levels : interval levels (fractions).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per arm, quantity and level: ``n`` fits, ``covered``, ``coverage`` (the
+        fraction), ``se_nominal`` = sqrt(level (1 - level) / n) (the binomial standard error
+        *if* the intervals had nominal coverage: an observed coverage more than ~2 of them from
+        the level is evidence against calibration), ``wilson_low``, ``wilson_high`` (95 % score
+        interval of the observed proportion), and ``z_sd``: the standard deviation over fits of
+        ``(mean - truth) / sd``, ~1 for calibrated posteriors (its own standard error is about
+        1 / sqrt(2 n) for normal errors) and > 1 when the posterior sd is too small.
+    """
+    ok = records[records["error"].isna()] if "error" in records else records
+    if quantities is None:
+        quantities = [c[: -len("_truth")] for c in ok.columns if c.endswith("_truth")
+                      and all(f"{c[:-len('_truth')]}_{interval_key(lv)}" in ok for lv in levels)]
+    by = [b for b in by if b in ok.columns]
+    groups = ok.groupby(by, sort=True, dropna=False) if by else [((), ok)]
+    rows = []
+    for key, g in groups:
+        key = key if isinstance(key, tuple) else (key,)
+        for q in quantities:
+            truth = g[f"{q}_truth"].astype(float)
+            known = g[truth.notna()]
+            if known.empty:
+                continue
+            z = (known[f"{q}_mean"].astype(float) - known[f"{q}_truth"].astype(float)) / known[f"{q}_sd"].astype(float)
+            for lv in levels:
+                flags = known[f"{q}_{interval_key(lv)}"].astype(bool)
+                n, k = int(flags.size), int(flags.sum())
+                lo, hi = _wilson(k, n)
+                rows.append({**dict(zip(by, key)), "quantity": q, "level": lv, "n": n, "covered": k,
+                             "coverage": k / n, "se_nominal": math.sqrt(lv * (1 - lv) / n),
+                             "wilson_low": lo, "wilson_high": hi,
+                             "z_sd": float(z.std(ddof=1)) if n > 1 else math.nan})
+    return pd.DataFrame(rows)

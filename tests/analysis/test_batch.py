@@ -1,0 +1,117 @@
+"""Tests of the batch door for many fits (:mod:`bayes_roadload.analysis.batch`).
+
+One real NUTS fit (1 pair, 100 + 100 draws: about 30 s, mostly compilation); everything else
+uses jobs that fail at once or synthetic records.
+"""
+
+from __future__ import annotations
+
+import math
+import pickle
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bayes_roadload import config
+from bayes_roadload.analysis.batch import (FitJob, SimulatedCampaign, _interval_fields, coverage_summary,
+                                           run_batch, run_fit_job)
+
+from ..conftest import clean_case
+
+TINY_SAMPLER = config.SamplerConfig(num_warmup=100, num_samples=100, num_chains=2, seed=5)
+
+
+def _broken_campaign():
+    raise RuntimeError("no such campaign")
+
+
+class MapOnly:
+    """The smallest executor: ``map`` is the builtin, and the calls are counted."""
+
+    def __init__(self):
+        self.calls = 0
+
+    def map(self, fn, iterable):
+        self.calls += 1
+        return map(fn, iterable)
+
+
+def _good_job():
+    return FitJob("good", SimulatedCampaign(clean_case(), pairs=1, seed=3, driveline=True), model="three_term",
+                  noise="white", sampler=TINY_SAMPLER, tags={"arm": "a"})
+
+
+@pytest.fixture(scope="module")
+def batch():
+    executor = MapOnly()
+    jobs = [_good_job(), FitJob("broken", _broken_campaign, model="three_term", sampler=TINY_SAMPLER)]
+    return run_batch(jobs, executor=executor), executor
+
+
+def test_executor_is_used_and_order_kept(batch):
+    df, executor = batch
+    assert executor.calls == 1
+    assert list(df["name"]) == ["good", "broken"]
+
+
+def test_record_keys_and_values(batch):
+    df, _ = batch
+    good = df.iloc[0]
+    assert good["error"] is None or (isinstance(good["error"], float) and math.isnan(good["error"]))
+    assert good["arm"] == "a" and good["noise"] == "white" and good["seed"] == 3 and good["n_runs"] == 2
+    assert good["parameters"] == "AD,BD,CD0"
+    for q in ("AD", "BD", "CD0", "F50_N"):
+        ends = [good[f"{q}_{k}"] for k in ("q2.5", "q5", "q25", "q50", "q75", "q95", "q97.5")]
+        assert np.all(np.diff(ends) >= 0), q
+        assert good[f"{q}_sd"] > 0 and math.isfinite(good[f"{q}_truth"])
+        assert good[f"{q}_in95"] == (good[f"{q}_q2.5"] <= good[f"{q}_truth"] <= good[f"{q}_q97.5"])
+    # the draws are not in the record, only scalars
+    assert all(np.ndim(v) == 0 for v in good.to_dict().values())
+    for key in ("gate_pass", "gates_failed", "divergences", "max_r_hat", "min_ess_bulk", "time_map_s",
+                "time_warmup_s", "time_sampling_s", "time_fit_s", "time_total_s", "sigma_mps_mean"):
+        assert key in df.columns, key
+    # the 1-pair posterior is tight: the truth is well inside +-10 sd of the mean (a loose check
+    # that the record is about this fit, not a statistical test)
+    assert abs(good["CD0_mean"] - good["CD0_truth"]) < 10 * good["CD0_sd"]
+
+
+def test_error_is_captured(batch):
+    df, _ = batch
+    broken = df.iloc[1]
+    assert broken["error"] == "RuntimeError: no such campaign"
+    assert "no such campaign" in broken["traceback"]
+    assert math.isnan(broken["CD0_mean"])
+
+
+def test_sequential_default_and_pickling():
+    jobs = [FitJob(f"broken{i}", _broken_campaign) for i in range(2)]
+    df = run_batch(jobs)
+    assert list(df["name"]) == ["broken0", "broken1"] and df["error"].notna().all()
+    job = _good_job()
+    assert pickle.loads(pickle.dumps(job)) == job
+    rec = run_fit_job(jobs[0])
+    assert pickle.loads(pickle.dumps(rec)) == rec
+
+
+def test_interval_fields_normal_draws():
+    # 200 000 N(0, 1) draws: the sample 2.5 % quantile has a standard error of
+    # sqrt(0.025 * 0.975 / n) / phi(1.96) = 0.006, so 0.03 is a 5-sigma tolerance.
+    x = np.random.default_rng(0).standard_normal(200_000)
+    out = _interval_fields("X", x, 1.8, (0.5, 0.9, 0.95))
+    assert out["X_q2.5"] == pytest.approx(-1.96, abs=0.03)
+    assert out["X_q75"] == pytest.approx(0.674, abs=0.03)
+    assert (out["X_in50"], out["X_in90"], out["X_in95"]) == (False, False, True)
+    assert _interval_fields("X", x, None, (0.95,))["X_in95"] is None
+
+
+def test_coverage_summary_counts():
+    flags = [True] * 18 + [False] * 2
+    df = pd.DataFrame({"noise": ["white"] * 20, "error": [None] * 20, "X_truth": 0.0,
+                       "X_mean": np.linspace(-1, 1, 20), "X_sd": 1.0, "X_in95": flags})
+    out = coverage_summary(df, by=("noise",), levels=(0.95,))
+    row = out.iloc[0]
+    assert (row["n"], row["covered"], row["coverage"]) == (20, 18, 0.9)
+    assert row["se_nominal"] == pytest.approx(math.sqrt(0.95 * 0.05 / 20))
+    assert row["wilson_low"] < 0.9 < row["wilson_high"]
+    assert row["z_sd"] == pytest.approx(np.std(np.linspace(-1, 1, 20), ddof=1))
