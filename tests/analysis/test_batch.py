@@ -66,10 +66,12 @@ def test_record_keys_and_values(batch):
         assert np.all(np.diff(ends) >= 0), q
         assert good[f"{q}_sd"] > 0 and math.isfinite(good[f"{q}_truth"])
         assert good[f"{q}_in95"] == (good[f"{q}_q2.5"] <= good[f"{q}_truth"] <= good[f"{q}_q97.5"])
+    assert 0 < good["time_compile_s"] < good["time_total_s"]
     # the draws are not in the record, only scalars
     assert all(np.ndim(v) == 0 for v in good.to_dict().values())
     for key in ("gate_pass", "gates_failed", "divergences", "max_r_hat", "min_ess_bulk", "time_map_s",
-                "time_warmup_s", "time_sampling_s", "time_fit_s", "time_total_s", "sigma_mps_mean"):
+                "time_warmup_s", "time_sampling_s", "time_fit_s", "time_total_s", "time_compile_s", "rss_mb",
+                "jax_caches_cleared", "sigma_mps_mean"):
         assert key in df.columns, key
     # the 1-pair posterior is tight: the truth is well inside +-10 sd of the mean (a loose check
     # that the record is about this fit, not a statistical test)
