@@ -8,8 +8,12 @@ import pytest
 from bayes_roadload import config
 from bayes_roadload.simulate import get_case, simulate_campaign
 
-SMALL_SAMPLER = config.SamplerConfig(num_warmup=300, num_samples=400, num_chains=2, seed=3)
-"""Small draw counts for tests: enough for the gates' R-hat and ESS on this posterior."""
+SMALL_SAMPLER = config.SamplerConfig(num_warmup=300, num_samples=800, num_chains=2, seed=3, target_accept=0.95)
+"""Small draw counts for tests, and what a two-pair campaign needs to pass the gates: with
+2 x 400 draws (bulk ESS ~300) the max split R-hat over the 13 unknowns came out 1.007-1.013
+across seeds; at the default target acceptance 0.9 1-3 of 1600 draws diverge where the
+integrated-noise level q is small (two pairs barely identify q).  The CLI prints that remedy
+(--target-accept 0.95) when the divergence gate fails."""
 
 
 def clean_case():

@@ -4,15 +4,16 @@
    speeds fitted) gives the coefficients, each run's initial speed and noise level.
 2. **MAP.** The negative log posterior of the numpyro model, in numpyro's unconstrained
    space and divided by a diagonal scale so every unknown is O(1), is minimised by a
-   trust-region Newton method with the exact Hessian (``scipy.optimize.minimize``,
-   ``trust-exact``; gradients and Hessians from JAX).
+   trust-region Newton method (``scipy.optimize.minimize``, ``trust-exact``) with exact JAX
+   gradients and a Hessian by central differences of them that exploits the run structure
+   (:func:`fd_hessian`: its cost does not grow with the number of runs).
 3. **Laplace.** With L L^T the inverse Hessian at the MAP, NUTS runs on whitened coordinates
    ``x = x_MAP + L u`` in which the posterior is close to a standard normal, and the chains
    start from independent draws of that approximation.  On this posterior (AD, BD, CD0
    correlated beyond 0.9) that turns 1023-step trees into trees of a few steps.
 4. **NUTS** (numpyro), chains in parallel on the CPU cores, warm-up adapting the step size
-   and a dense mass matrix in the whitened coordinates (O(1) there, so the adaptation's
-   regularisation towards the identity is harmless).
+   and a mass matrix in the whitened coordinates (dense on small problems, diagonal on large
+   ones: :class:`bayes_roadload.config.SamplerConfig`).
 5. **Gates** (:class:`bayes_roadload.config.Gates`): split R-hat, bulk and tail ESS,
    divergences, E-BFMI, tree-depth saturation.  A fit that fails them says so
    (:mod:`.results`).
@@ -146,36 +147,121 @@ def initial_values(problem: FitProblem, campaign: Campaign) -> dict[str, Any]:
     return init
 
 
-def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200) -> MapResult:
-    """MAP by trust-region Newton on the O(1)-scaled unconstrained parameters, and the
-    Laplace covariance from the exact Hessian there."""
-    t0 = time.perf_counter()
-    problem = dataclasses.replace(problem, gradients="reverse")  # Hessians need forward-over-reverse
+@dataclass
+class Posterior:
+    """The posterior of one problem as numpyro sees it: a potential (negative log density) on
+    the flattened unconstrained vector.
+
+    Attributes
+    ----------
+    problem : the fit problem.
+    z0 : unconstrained starting values (dict of sites).
+    potential_fn : dict of unconstrained sites -> potential energy.
+    postprocess_fn : unconstrained sites -> constrained sites and deterministic sites.
+    unravel : flat vector -> dict of sites (ravel order of ``z0``).
+    scale : flat O(1) scaling of the unconstrained coordinates (:func:`_site_scales`).
+    run_index : flat vector of the run each coordinate belongs to (-1 for shared ones): the
+        sparsity the finite-difference Hessian exploits.
+    """
+
+    problem: FitProblem
+    z0: dict[str, Any]
+    potential_fn: Any
+    postprocess_fn: Any
+    unravel: Any
+    scale: np.ndarray
+    run_index: np.ndarray
+
+    @property
+    def flat0(self) -> np.ndarray:
+        return np.asarray(ravel_pytree(self.z0)[0])
+
+
+def unconstrained_posterior(problem: FitProblem, init: dict[str, Any]) -> Posterior:
+    """numpyro's potential of ``problem``, starting at the constrained values ``init``."""
     info, potential_fn, postprocess_fn, _ = initialize_model(
         jax.random.PRNGKey(0), coastdown_model, model_args=(problem,),
-        init_strategy=init_to_value(values=init))
+        init_strategy=init_to_value(values=init), validate_grad=False)
     z0 = info.z
-    flat0, unravel = ravel_pytree(z0)
-    scale, _ = ravel_pytree(_site_scales(problem, z0))
+    _, unravel = ravel_pytree(z0)
+    scale = np.asarray(ravel_pytree(_site_scales(problem, z0))[0])
+    r = problem.n_runs
+    run_of = {k: (np.arange(r) if np.shape(v) == (r,) and r > 1 else np.full(np.size(v), -1))
+              for k, v in z0.items()}
+    run_index = np.asarray(ravel_pytree({k: jnp.asarray(v) for k, v in run_of.items()})[0]).astype(int)
+    return Posterior(problem=problem, z0=z0, potential_fn=potential_fn, postprocess_fn=postprocess_fn,
+                     unravel=unravel, scale=scale, run_index=run_index)
+
+
+def fd_hessian(grad_fn, y: np.ndarray, run_index: np.ndarray, step: float = 1e-4) -> np.ndarray:
+    """Hessian by central differences of an exact gradient, exploiting that coordinates of
+    different runs do not interact (the log posterior is a sum over runs given the shared
+    parameters).
+
+    Every shared coordinate is perturbed on its own; the per-run coordinates are perturbed
+    all runs at once, one group per position within a run (Curtis, Powell and Reid 1974), so
+    the cost is 2 x (shared + per-run coordinates of one run) gradients, whatever the number
+    of runs.  ``y`` should be O(1)-scaled so that one ``step`` suits every coordinate.
+    """
+    y = np.asarray(y, float)
+    n = y.size
+    shared = np.flatnonzero(run_index < 0)
+    per_run = np.flatnonzero(run_index >= 0)
+    position = np.full(n, -1)
+    for r in np.unique(run_index[per_run]):
+        idx = np.flatnonzero(run_index == r)
+        position[idx] = np.arange(idx.size)
+    groups = [np.array([j]) for j in shared] + [np.flatnonzero(position == k) for k in range(position.max() + 1)]
+    h = np.zeros((n, n))
+    col_of_run = np.full(run_index.max() + 1 if per_run.size else 0, -1)
+    for cols in groups:
+        e = np.zeros(n)
+        e[cols] = step
+        d = (np.asarray(grad_fn(y + e)) - np.asarray(grad_fn(y - e))) / (2.0 * step)
+        if run_index[cols[0]] < 0:
+            h[:, cols[0]] = d
+        else:  # a column per run: row i of run r belongs to the column of run r
+            col_of_run[:] = -1
+            col_of_run[run_index[cols]] = cols
+            j = col_of_run[run_index[per_run]]
+            ok = j >= 0
+            h[per_run[ok], j[ok]] = d[per_run[ok]]
+    h[np.ix_(shared, per_run)] = h[np.ix_(per_run, shared)].T
+    return 0.5 * (h + h.T)
+
+
+def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200,
+             posterior: Posterior | None = None) -> MapResult:
+    """MAP by trust-region Newton on the O(1)-scaled unconstrained parameters, and the
+    Laplace covariance from the Hessian there.
+
+    Gradients are exact (JAX, forward ODE sensitivities); the Hessian is central differences of
+    them with the run structure exploited (:func:`fd_hessian`), so its cost does not grow with
+    the number of runs and no second-order derivative has to be compiled.
+    """
+    t0 = time.perf_counter()
+    post = posterior or unconstrained_posterior(problem, init)
+    scale = post.scale
 
     def objective(y):
-        return potential_fn(unravel(y * scale))
+        return post.potential_fn(post.unravel(y * scale))
 
     f = jax.jit(objective)
     g = jax.jit(jax.grad(objective))
-    h = jax.jit(jax.hessian(objective))
-    y0 = np.asarray(flat0 / scale)
-    res = minimize(lambda y: float(f(y)), y0, jac=lambda y: np.asarray(g(y)), hess=lambda y: np.asarray(h(y)),
+
+    def hess(y):
+        return fd_hessian(g, y, post.run_index)
+
+    y0 = post.flat0 / scale
+    res = minimize(lambda y: float(f(y)), y0, jac=lambda y: np.asarray(g(y)), hess=hess,
                    method="trust-exact", options={"maxiter": max_iter, "gtol": 1e-6})
-    hess = np.asarray(h(res.x))
-    hess = 0.5 * (hess + hess.T)
-    eigval, eigvec = np.linalg.eigh(hess)
+    hmat = hess(res.x)
+    eigval, eigvec = np.linalg.eigh(hmat)
     clipped = np.maximum(eigval, 1e-8 * max(eigval.max(), 1.0))
     cov_y = (eigvec / clipped) @ eigvec.T
-    s = np.asarray(scale)
-    cov = cov_y * np.outer(s, s)
-    z_map = unravel(jnp.asarray(res.x) * scale)
-    constrained = postprocess_fn(z_map)
+    cov = cov_y * np.outer(scale, scale)
+    z_map = post.unravel(jnp.asarray(res.x * scale))
+    constrained = post.postprocess_fn(z_map)
     grad_max = float(np.max(np.abs(np.asarray(g(res.x)))))
     return MapResult(z=z_map, constrained=constrained, cov=cov, success=bool(res.success) or grad_max < 1e-3,
                      n_iter=int(res.nit), grad_max=grad_max,
@@ -188,24 +274,24 @@ def _chain_method(num_chains: int) -> str:
 
 
 def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
-             map_result: MapResult | None = None) -> NutsFit:
+             map_result: MapResult | None = None, posterior: Posterior | None = None) -> NutsFit:
     """Sample the posterior of ``problem`` with NUTS.
 
     With ``sampler.precondition == "laplace"`` NUTS runs on whitened coordinates
     ``x = x_MAP + L u`` (``L L^T`` the Laplace covariance of the unconstrained vector), where
-    every direction is O(1) and nearly uncorrelated; warm-up then adapts the step size and
-    (``adapt_mass_matrix``) a dense mass matrix in ``u``, which corrects what the Laplace
-    approximation misses (the coefficients widen with the noise scales: posterior variances up to
-    ~10x the Laplace ones in some directions on small campaigns).  Chains start from independent
-    draws of the Laplace approximation.
+    every direction is O(1) and nearly uncorrelated; warm-up then adapts the step size and the
+    mass matrix in ``u`` (``sampler.mass_matrix``; it corrects the directions the Laplace
+    approximation gets wrong on small campaigns, where the coefficients widen with the noise
+    scales).  Chains start from independent draws of the
+    Laplace approximation.
     """
     key = jax.random.PRNGKey(sampler.seed)
     fields = ("diverging", "num_steps", "energy", "accept_prob")
     if sampler.precondition == "laplace":
         if map_result is None:
             raise ValueError("precondition='laplace' needs the MAP result")
-        info, potential_fn, postprocess_fn, _ = initialize_model(
-            key, coastdown_model, model_args=(problem,), init_strategy=init_to_value(values=map_result.constrained))
+        post = posterior or unconstrained_posterior(problem, map_result.constrained)
+        potential_fn, postprocess_fn = post.potential_fn, post.postprocess_fn
         flat_map, unravel = ravel_pytree(map_result.z)
         n = flat_map.size
         chol = jnp.asarray(np.linalg.cholesky(map_result.cov + 1e-14 * np.abs(np.diag(map_result.cov)).max() * np.eye(n)))
@@ -213,7 +299,11 @@ def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFA
         def whitened_potential(u):
             return potential_fn(unravel(flat_map + chol @ u))
 
-        kernel = NUTS(potential_fn=whitened_potential, dense_mass=True, adapt_mass_matrix=sampler.adapt_mass_matrix,
+        mass = sampler.mass_matrix
+        if mass == "auto":
+            mass = "dense" if n <= config.DENSE_MASS_MAX_DIM else "diag"
+        kernel = NUTS(potential_fn=whitened_potential, dense_mass=mass == "dense",
+                      adapt_mass_matrix=mass != "identity",
                       target_accept_prob=sampler.target_accept, max_tree_depth=sampler.max_tree_depth)
         init_params = jnp.asarray(np.random.default_rng(sampler.seed).standard_normal((sampler.num_chains, n)))
         if sampler.num_chains == 1:
@@ -227,10 +317,11 @@ def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFA
     args = () if sampler.precondition == "laplace" else (problem,)
     t0 = time.perf_counter()
     mcmc.warmup(key, *args, init_params=init_params, extra_fields=fields, collect_warmup=False)
+    jax.block_until_ready(mcmc.post_warmup_state)
     t1 = time.perf_counter()
     mcmc.run(mcmc.post_warmup_state.rng_key, *args, extra_fields=fields)
+    raw = jax.block_until_ready(mcmc.get_samples(group_by_chain=True))
     t2 = time.perf_counter()
-    raw = mcmc.get_samples(group_by_chain=True)
     if sampler.precondition == "laplace":
         u = jnp.asarray(raw).reshape(sampler.num_chains, sampler.num_samples, -1)
         x = flat_map + jnp.einsum("cdj,ij->cdi", u, chol)
@@ -249,10 +340,11 @@ def fit_nuts(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling
              sampler: config.SamplerConfig = config.DEFAULT_SAMPLER) -> NutsFit:
     """Fit every run of a campaign jointly with NUTS (see the module docstring)."""
     problem = build_problem(campaign, spec, pooling=pooling, noise=noise, robust=robust)
-    map_result = None
+    map_result = post = None
     if sampler.precondition == "laplace":
-        map_result = find_map(problem, initial_values(problem, campaign))
-    fit = run_nuts(problem, sampler=sampler, map_result=map_result)
+        post = unconstrained_posterior(problem, initial_values(problem, campaign))
+        map_result = find_map(problem, {}, posterior=post)
+    fit = run_nuts(problem, sampler=sampler, map_result=map_result, posterior=post)
     if map_result is not None:
         fit.timings["map_s"] = map_result.time_s
     fit.truth = campaign.truth

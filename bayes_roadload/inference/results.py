@@ -263,12 +263,25 @@ def truth_derived(problem: FitProblem, truth: dict | None) -> dict[str, float]:
     return {k: float(v) for k, v in out.items()}
 
 
+REMEDIES = {
+    "divergences": "raise --target-accept (e.g. 0.95): the sampler met curvature its step size "
+                   "cannot follow (with few runs, at small integrated-noise levels q)",
+    "r_hat": "more draws (--draws) or warm-up (--warmup); if it persists the chains found different modes",
+    "ess_bulk": "more draws (--draws)",
+    "ess_tail": "more draws (--draws)",
+    "tree_depth": "more warm-up (--warmup); check the MAP converged (diagnostics.json)",
+    "bfmi": "more warm-up (--warmup); a heavy-tailed noise scale may need a tighter prior",
+}
+"""What to try when a gate fails (printed under the failure line)."""
+
+
 def format_posterior_table(summary: pd.DataFrame, diag: dict, truth: dict | None = None) -> str:
     """A table for the terminal, headed by a loud line when the fit failed its gates."""
     lines = []
     if not diag["pass"]:
         lines.append("!! NUTS FIT FAILED ITS DIAGNOSTIC GATES: " + ", ".join(diag["failed"])
                      + " -- the posterior below is NOT reliable !!")
+        lines.extend(f"   remedy: {REMEDIES[g]}" for g in diag["failed"] if g in REMEDIES)
     lines.append(f"NUTS, model {diag['model']}, {diag['pooling']}: {diag['chains']} chains x "
                  f"{diag['draws_per_chain']} draws, divergences {diag['divergences']}, max R-hat "
                  f"{diag['max_r_hat']:.3f}, min ESS bulk {diag['min_ess_bulk']:.0f} / tail "
