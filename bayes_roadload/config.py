@@ -236,3 +236,13 @@ NOISE_PRIORS = {
 TAU_PRIOR_SCALES = {"AD": 1.0e-3, "BD": 5.0e-5, "CD0": 0.02}
 """Prior means of the run-to-run spreads tau of the hierarchical model, Gamma(2) priors (10 %,
 25 %, 5 % of typical values: the thesis' track spreads were 4.3 %, 23.1 %, 4.3 %)."""
+
+
+# Studies of many fits (bayes_roadload.analysis.batch)
+COVERAGE_LEVELS = (0.5, 0.9, 0.95)
+"""Central posterior interval levels recorded for every quantity (and checked for coverage)."""
+
+CLEAR_JAX_CACHES_ABOVE_MB = 4096.0
+"""Resident memory (MB) above which :func:`bayes_roadload.analysis.batch.run_fit_job` clears JAX's compilation caches after a
+job.  Clearing after every job would bound the memory at ~1.2 GB but costs 5-8 s per later fit
+(the shared pieces are recompiled); never clearing grows by 85-165 MB per fit."""

@@ -57,6 +57,7 @@ def report(fit, extra: dict) -> dict:
         "mean_leapfrog_steps": round(diag["mean_leapfrog_steps"], 1),
         "max_r_hat": round(diag["max_r_hat"], 4),
         "gates_pass": diag["pass"],
+        "gates_failed": diag["failed"],
     })
 
 

@@ -237,7 +237,8 @@ def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200,
 
     Gradients are exact (JAX, forward ODE sensitivities); the Hessian is central differences of
     them with the run structure exploited (:func:`fd_hessian`), so its cost does not grow with
-    the number of runs and no second-order derivative has to be compiled.
+    the number of runs and no second-order derivative has to be compiled.  ``init`` (constrained
+    starting values) is ignored when a ``posterior`` built from them is given.
     """
     t0 = time.perf_counter()
     post = posterior or unconstrained_posterior(problem, init)
