@@ -91,3 +91,13 @@ def test_fit_nuts_writes_outputs_and_flags_gates(campaign_dir, tmp_path, capsys)
     assert list(summary.columns) == SUMMARY_COLUMNS
     assert {"AD", "BD", "CD0", "F50_N"} <= set(summary["parameter"])
     assert (out / "posterior.nc").exists() and (out / "runs_summary.csv").exists()
+
+
+def test_sampler_options_reach_the_sampler():
+    from bayes_roadload.cli import _sampler, build_parser
+
+    args = build_parser().parse_args(["fit", "campaign", "--out", "o", "--target-accept", "0.95", "--draws", "50",
+                                      "--no-precondition"])
+    s = _sampler(args)
+    assert (s.target_accept, s.num_samples, s.precondition) == (0.95, 50, "none")
+    assert _sampler(build_parser().parse_args(["fit", "campaign", "--out", "o"])).target_accept == 0.9
