@@ -21,7 +21,8 @@ Example
 .. note::
    Every :func:`~bayes_roadload.inference.nuts.fit_nuts` call compiles its MAP, warm-up and
    sampling functions afresh (the campaign's data are constants of the compiled code): the
-   records' ``time_compile_s`` is 70-90 % of a one-pair fit's wall time.  The compiled code
+   records' ``time_compile_s`` was 70-90 % of a one-pair fit's wall time while the MAP compiled
+   an exact Hessian (before :func:`~bayes_roadload.inference.nuts.fd_hessian`; not re-measured since).  The compiled code
    of finished fits stays in JAX's in-process caches (about 85-165 MB per fit), so
    :func:`run_fit_job` clears those caches once the process holds more than
    :data:`CLEAR_JAX_CACHES_ABOVE_MB`.  Jobs are independent: parallelise across processes, not
@@ -203,8 +204,7 @@ def _interval_fields(name: str, draws: np.ndarray, truth: float | None,
 
 
 def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
-    from ..inference.results import (derived_quantities, diagnostics, summary_table, to_inference_data,
-                                     truth_derived)
+    from ..inference.results import diagnostics, summary_table, to_inference_data, truth_derived
 
     problem = fit.problem
     truth = campaign.truth or {}
@@ -219,10 +219,10 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
                                     job.levels))
         rec[f"{name}_r_hat"] = float(rows.loc[name, "r_hat"])
         rec[f"{name}_ess_bulk"] = float(rows.loc[name, "ess_bulk"])
-    derived = derived_quantities(fit)
+    derived = idata.posterior  # the road load of every draw, computed once by to_inference_data
     derived_truth = truth_derived(problem, truth)
     for name in DERIVED_QUANTITIES:
-        rec.update(_interval_fields(name, derived[name], derived_truth.get(name), job.levels))
+        rec.update(_interval_fields(name, derived[name].values, derived_truth.get(name), job.levels))
     for name in ("q_mps_per_sqrt_s", "student_df"):
         if name in fit.samples:
             rec[f"{name}_mean"] = float(np.mean(fit.samples[name]))

@@ -196,14 +196,15 @@ def run_table(fit: NutsFit, idata: az.InferenceData) -> pd.DataFrame:
 
 
 def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
-                gates: config.Gates = config.DEFAULT_GATES) -> dict:
-    """Sampler diagnostics and the pass/fail of every gate."""
+                gates: config.Gates = config.DEFAULT_GATES, runs: pd.DataFrame | None = None) -> dict:
+    """Sampler diagnostics and the pass/fail of every gate.  ``runs`` is :func:`run_table`'s
+    result when the caller already has it (computed here otherwise)."""
     chains = int(idata.posterior.sizes["chain"])
     div = int(fit.stats["diverging"].sum())
     depth = fit.stats["tree_depth"]
     hits = float(np.mean(depth >= fit.sampler.max_tree_depth))
     # every sampled quantity counts (per-run ones too), not only the summary rows
-    every = pd.concat([summary, run_table(fit, idata)], ignore_index=True)
+    every = pd.concat([summary, run_table(fit, idata) if runs is None else runs], ignore_index=True)
     max_rhat = float(np.nanmax(every["r_hat"])) if every["r_hat"].notna().any() else math.nan
     min_bulk = float(np.nanmin(every["ess_bulk"])) if every["ess_bulk"].notna().any() else math.nan
     min_tail = float(np.nanmin(every["ess_tail"])) if every["ess_tail"].notna().any() else math.nan
@@ -309,10 +310,11 @@ def write_nuts_outputs(fit: NutsFit, out_dir: str | os.PathLike, *,
     out = Path(out_dir)
     idata = to_inference_data(fit)
     summary = summary_table(fit, idata)
-    diag = diagnostics(fit, idata, summary, gates)
+    runs = run_table(fit, idata)
+    diag = diagnostics(fit, idata, summary, gates, runs=runs)
     out.mkdir(parents=True, exist_ok=True)
     idata.to_netcdf(str(out / "posterior.nc"))
     summary.to_csv(out / "summary.csv", index=False)
-    run_table(fit, idata).to_csv(out / "runs_summary.csv", index=False)
+    runs.to_csv(out / "runs_summary.csv", index=False)
     (out / "diagnostics.json").write_text(json.dumps(diag, indent=2) + "\n")
     return summary, diag
