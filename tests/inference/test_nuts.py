@@ -103,3 +103,14 @@ def test_mass_matrix_option_is_validated():
     assert config.SamplerConfig().mass_matrix == "auto"
     with pytest.raises(ValueError):
         config.SamplerConfig(mass_matrix="full")
+
+
+def test_nuts_and_least_squares_agree(pooled_fit, small_campaign):
+    """On a clean campaign the joint least-squares estimate and the posterior mean differ by
+    less than two posterior sd for every coefficient (priors are weak against 4 runs)."""
+    from bayes_roadload.inference.lsq import fit_lsq
+
+    g = fit_lsq(small_campaign, "four_term", grouping="all").groups[0]
+    for k in FREE:
+        x = pooled_fit.samples[k].ravel()
+        assert abs(g.estimate[k] - x.mean()) < 2.0 * x.std(), (k, g.estimate[k], x.mean(), x.std())
