@@ -44,7 +44,7 @@ from .. import config
 from ..data.campaign import Campaign
 from ..physics.integrate import RunBatch, integrate_batch, integrate_batch_forward_sensitivity
 from ..physics.model import DragModel
-from ..physics.residuals import local_level_loglik
+from ..physics.residuals import local_level_loglik, local_level_loglik_batch
 from .spec import ModelSpec, Prior, load_model_spec
 
 POOLINGS = ("pooled", "hierarchical")
@@ -172,7 +172,7 @@ def run_log_likelihood(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> j
     if problem.robust:
         df = sample["student_df"]
         return jax.vmap(lambda r, t, m, s: local_level_loglik(r, t, m, s, q, df))(resid, b.time_s, b.mask, sigma)
-    return jax.vmap(lambda r, t, m, s: local_level_loglik(r, t, m, s, q))(resid, b.time_s, b.mask, sigma)
+    return local_level_loglik_batch(resid, b.time_s, b.mask, sigma, q)
 
 
 def coastdown_model(problem: FitProblem) -> None:

@@ -13,6 +13,7 @@ from typing import Mapping, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .. import config
 from .model import DragModel
@@ -76,12 +77,69 @@ def _conditions(model: DragModel, p, run: RunBatch, v, s, t, u) -> Conditions:
     )
 
 
+def stride2_schedule(time_s, inputs) -> tuple:
+    """The data-only part of RK4 steps spanning two sample intervals (``stride = 2``).
+
+    ``time_s`` [..., N], ``inputs`` [..., N, C] (the channels of ``_CHANNELS``).  Returns
+    ``(t0, h, u0, u_mid, u1, dense)`` per step ([..., G] and [..., G, C], ``dense``
+    [..., G, 2, 3]): the step's start time and length, the inputs at its start and end, the
+    inputs its half-step stages see, and the weights of RK4's continuous extension at the
+    middle and last sample.  The half-step stages see the mean of the piecewise-linear input
+    over the middle half of the step ((u0 + 6 u_middle + u1) / 8 on a uniform grid), so a
+    force linear in the inputs integrates exactly as with one step per sample, at both
+    samples.  Computed with numpy when the data are concrete (once per trace, not per call).
+    """
+    concrete = not any(isinstance(x, jax.core.Tracer) for x in (time_s, inputs))
+    xp = np if concrete else jnp
+    t, u = xp.asarray(time_s, dtype=float), xp.asarray(inputs, dtype=float)
+    n = t.shape[-1]
+    if (n - 1) % 2:  # an odd number of intervals: one dt = 0 interval at the end
+        t = xp.concatenate([t, t[..., -1:]], axis=-1)
+        u = xp.concatenate([u, u[..., -1:, :]], axis=-2)
+    ta, tb, tc = t[..., 0:-1:2], t[..., 1::2], t[..., 2::2]
+    ua, ub, uc = u[..., 0:-1:2, :], u[..., 1::2, :], u[..., 2::2, :]
+    h = tc - ta
+
+    def safe_div(x, y):
+        ok = y > 0
+        return xp.where(ok, x / xp.where(ok, y, 1.0), 0.0)
+
+    def integral(x):  # int_{ta}^{x} of the piecewise-linear input, [..., G, C]
+        out = 0.0
+        for t0, t1, u0, u1 in ((ta, tb, ua, ub), (tb, tc, ub, uc)):
+            length = (xp.clip(x, t0, t1) - t0)[..., None]
+            out = out + u0 * length + 0.5 * safe_div(u1 - u0, (t1 - t0)[..., None]) * length**2
+        return out
+
+    lo, hi = ta + 0.25 * h, ta + 0.75 * h
+    u_mid = xp.where((h > 0)[..., None], safe_div(integral(hi) - integral(lo), (hi - lo)[..., None]), ua)
+    th = xp.stack([xp.where(h > 0, safe_div(tb - ta, h), 1.0), xp.ones_like(h)], axis=-1)  # [..., G, 2]
+    dense = xp.stack([th - 1.5 * th**2 + (2.0 / 3.0) * th**3, th**2 - (2.0 / 3.0) * th**3,
+                      -0.5 * th**2 + (2.0 / 3.0) * th**3], axis=-1)
+    return ta, h, ua, u_mid, uc, dense
+
+
+def _inputs(run: RunBatch):
+    return jnp.stack([jnp.asarray(getattr(run, ch)) for ch in _CHANNELS], axis=-1)
+
+
+def _schedule_of(batch: RunBatch, integrator: config.IntegratorConfig):
+    """The stride-2 schedule of a batch (computed once, outside any vmap), else None."""
+    if integrator.stride != 2:
+        return None
+    fields = [batch.time_s] + [getattr(batch, ch) for ch in _CHANNELS]
+    if any(isinstance(x, jax.core.Tracer) for x in fields):
+        return stride2_schedule(batch.time_s, _inputs(batch))
+    return stride2_schedule(np.asarray(batch.time_s), np.stack([np.asarray(x) for x in fields[1:]], axis=-1))
+
+
 def integrate_run(
     model: DragModel,
     params: Mapping[str, Array],
     run: RunBatch,
     v0_mps: Array | None = None,
     integrator: config.IntegratorConfig = config.DEFAULT_INTEGRATOR,
+    schedule: tuple | None = None,
 ) -> tuple[Array, Array]:
     """Integrate eq. 5.4 for one run with RK4 on its sample grid.
 
@@ -91,7 +149,9 @@ def integrate_run(
     params : parameter values (SI); missing ones take the model defaults.
     run : one run's channels ([N] arrays, scalar constants).
     v0_mps : initial speed; defaults to the first measured speed (thesis practice).
-    integrator : RK4 substeps per sample interval.
+    integrator : RK4 substeps per sample interval, or one step per two intervals
+        (:class:`~bayes_roadload.config.IntegratorConfig`).
+    schedule : for ``stride = 2``, this run's :func:`stride2_schedule` if already computed.
 
     Returns
     -------
@@ -100,7 +160,9 @@ def integrate_run(
     p = model.complete(params)
     v0 = run.speed_mps[0] if v0_mps is None else jnp.asarray(v0_mps, dtype=float)
     u = jnp.stack([getattr(run, ch) for ch in _CHANNELS], axis=-1)  # [N, C]
-    m = integrator.substeps
+    m, stride = integrator.substeps, integrator.stride
+    if stride not in (1, 2) or (stride == 2 and m != 1):
+        raise ValueError(f"stride must be 1, or 2 with substeps = 1 (got stride {stride}, substeps {m})")
 
     def rhs(y, t, uu):
         v, s = y
@@ -108,26 +170,42 @@ def integrate_run(
         a = model.acceleration_mps2(p, c, run.effective_mass_kg)
         return jnp.stack([a, v])
 
-    def step(y, xs):
-        t0, t1, u0, u1 = xs
-        h = (t1 - t0) / m
-
-        def sub(j, y):
-            ta = t0 + j * h
-            fa, fm, fb = j / m, (j + 0.5) / m, (j + 1.0) / m
-            ua, um, ub = u0 + fa * (u1 - u0), u0 + fm * (u1 - u0), u0 + fb * (u1 - u0)
-            k1 = rhs(y, ta, ua)
-            k2 = rhs(y + 0.5 * h * k1, ta + 0.5 * h, um)
-            k3 = rhs(y + 0.5 * h * k2, ta + 0.5 * h, um)
-            k4 = rhs(y + h * k3, ta + h, ub)
-            return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-        y = jax.lax.fori_loop(0, m, sub, y)
-        return y, y
+    def rk4(y, ta, h, ua, um, ub):
+        k1 = rhs(y, ta, ua)
+        k2 = rhs(y + 0.5 * h * k1, ta + 0.5 * h, um)
+        k3 = rhs(y + 0.5 * h * k2, ta + 0.5 * h, um)
+        k4 = rhs(y + h * k3, ta + h, ub)
+        return k1, k2, k3, k4
 
     y0 = jnp.stack([v0, jnp.zeros_like(v0)])
-    xs = (run.time_s[:-1], run.time_s[1:], u[:-1], u[1:])
-    _, ys = jax.lax.scan(step, y0, xs)
+    if stride == 1:
+        def step(y, xs):
+            t0, t1, u0, u1 = xs
+            h = (t1 - t0) / m
+
+            def sub(j, y):
+                fa, fm, fb = j / m, (j + 0.5) / m, (j + 1.0) / m
+                k1, k2, k3, k4 = rk4(y, t0 + j * h, h, u0 + fa * (u1 - u0), u0 + fm * (u1 - u0), u0 + fb * (u1 - u0))
+                return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+            y = jax.lax.fori_loop(0, m, sub, y)
+            return y, y
+
+        _, ys = jax.lax.scan(step, y0, (run.time_s[:-1], run.time_s[1:], u[:-1], u[1:]))
+    else:
+        n = run.time_s.shape[0]
+        if schedule is None:
+            schedule = stride2_schedule(run.time_s, u)
+
+        def step(y, xs):
+            t0, hk, u0, umk, u2, w = xs
+            k1, k2, k3, k4 = rk4(y, t0, hk, u0, umk, u2)
+            mid = y + hk * (w[0, 0] * k1 + w[0, 1] * (k2 + k3) + w[0, 2] * k4)
+            end = y + hk * (w[1, 0] * k1 + w[1, 1] * (k2 + k3) + w[1, 2] * k4)
+            return end, (mid, end)
+
+        _, (y_mid, y_end) = jax.lax.scan(step, y0, tuple(jnp.asarray(x) for x in schedule))
+        ys = jnp.stack([y_mid, y_end], axis=1).reshape(-1, 2)[: n - 1]
     ys = jnp.concatenate([y0[None, :], ys], axis=0)
     return ys[:, 0], ys[:, 1]
 
@@ -149,10 +227,12 @@ def integrate_batch(
     axes = {k: (0 if jnp.ndim(v) == 1 and jnp.shape(v)[0] == r else None) for k, v in p.items()}
     v0 = batch.speed_mps[:, 0] if v0_mps is None else jnp.broadcast_to(jnp.asarray(v0_mps, float), (r,))
 
-    def one(pp, run, v0r):
-        return integrate_run(model, pp, run, v0r, integrator)
+    schedule = _schedule_of(batch, integrator)
 
-    return jax.vmap(one, in_axes=(axes, 0, 0))(p, batch, v0)
+    def one(pp, run, v0r, sched):
+        return integrate_run(model, pp, run, v0r, integrator, sched)
+
+    return jax.vmap(one, in_axes=(axes, 0, 0, 0))(p, batch, v0, schedule)
 
 
 def quadratic_coastdown_time(v_mps, v0_mps, a_n, b_n_per_mps, c_n_per_mps2, effective_mass_kg):
@@ -264,24 +344,26 @@ def integrate_batch_forward_sensitivity(
     r = batch.n_runs
     base = model.complete(fixed)
 
-    def speeds_of_x(x, run):
+    schedule = _schedule_of(batch, integrator)
+
+    def speeds_of_x(x, run, sched):
         p = dict(base)
         p.update({n: x[i] for i, n in enumerate(names)})
-        return integrate_run(model, p, run, x[-1], integrator)[0]
+        return integrate_run(model, p, run, x[-1], integrator, sched)[0]
 
     @jax.custom_vjp
     def speeds(x):
-        return jax.vmap(speeds_of_x)(x, batch)
+        return jax.vmap(speeds_of_x)(x, batch, schedule)
 
     def speeds_fwd(x):
-        def one(xr, run):
+        def one(xr, run, sched):
             def f(z):
-                y = speeds_of_x(z, run)
+                y = speeds_of_x(z, run, sched)
                 return y, y
 
             return jax.jacfwd(f, has_aux=True)(xr)
 
-        jac, y = jax.vmap(one)(x, batch)
+        jac, y = jax.vmap(one)(x, batch, schedule)
         return y, jac
 
     def speeds_bwd(jac, ct):
