@@ -9,8 +9,19 @@ The drag model, which parameters are free, fixed or given priors, come from a mo
 ``hierarchical``
     Run-level AD, BD, CD0 (those of them that are free) around population means, with
     population spreads ``tau_AD, tau_BD, tau_CD0`` in each parameter's own units: the thesis'
-    "system noise" and its test-to-test spread (table 8.3).  Non-centred:
-    ``AD_run = AD + tau_AD * AD_z``, ``AD_z ~ N(0, 1)``.
+    "system noise" and its test-to-test spread (table 8.3).  ``AD_run = AD + delta_AD,r``
+    with ``delta_r ~ N(0, diag(tau^2))``.  The run effects are integrated out instead of
+    sampled: a run's speed trace responds to its small deviations through the sensitivities
+    ``J_r = d v_r / d(AD, BD, CD0)`` at a reference fit (first order:
+    ``v_r(theta + delta_r) = v_r(theta) + J_r delta_r``), so ``delta_r`` is Gaussian given
+    everything else and its integral is exact (:func:`~bayes_roadload.physics.residuals.
+    local_level_loglik_effects`).  NUTS then samples the population parameters and spreads
+    only, with the geometry of the pooled model: the funnel between tau and the run-level
+    coefficients that made centred and non-centred sampling of 3 x R extra unknowns
+    impractically slow is gone.  ``AD_run`` etc. are drawn afterwards from their exact
+    conditional posterior given each draw (:func:`draw_run_effects`).  The reference is the
+    joint least-squares fit (:func:`linearise_run_effects`); the first-order error is the
+    square of a few-percent deviation.
 
 Every run has its own initial speed ``v0_mps`` and speed noise ``sigma_mps``.  The residual
 between measured and integrated speed is white measurement noise plus an integrated
@@ -31,6 +42,7 @@ prior removes the funnel at q -> 0, Chung et al. 2013); ``tau_*`` Gamma(2) with 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,7 +56,12 @@ from .. import config
 from ..data.campaign import Campaign
 from ..physics.integrate import RunBatch, integrate_batch, integrate_batch_forward_sensitivity
 from ..physics.model import DragModel
-from ..physics.residuals import local_level_loglik, local_level_loglik_batch
+from ..physics.residuals import (
+    local_level_effects_posterior,
+    local_level_loglik,
+    local_level_loglik_batch,
+    local_level_loglik_effects,
+)
 from .spec import ModelSpec, Prior, load_model_spec
 
 POOLINGS = ("pooled", "hierarchical")
@@ -73,6 +90,9 @@ class FitProblem:
     gradients : "forward" differentiates the ODE by forward sensitivities (fast reverse-mode
         gradients for NUTS, :func:`~bayes_roadload.physics.integrate_batch_forward_sensitivity`);
         "reverse" by reverse mode through the scan (needed for Hessians, used by the MAP).
+    run_jacobian : hierarchical only: [R, N, k] sensitivities of each run's speed to the k
+        varying coefficients at the reference fit (:func:`linearise_run_effects`).
+    reference : the parameter values ``run_jacobian`` was evaluated at.
     """
 
     spec: ModelSpec
@@ -90,6 +110,8 @@ class FitProblem:
     driveline_curve: tuple[float, float, float] = (0.0, 0.0, 0.0)
     initial: dict[str, Any] = field(default_factory=dict)
     gradients: str = "forward"
+    run_jacobian: Any = None
+    reference: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n_runs(self) -> int:
@@ -126,6 +148,9 @@ def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, po
         raise ValueError(f"pooling must be one of {POOLINGS}, not {pooling!r}")
     if noise not in NOISE_MODELS:
         raise ValueError(f"noise must be one of {NOISE_MODELS}, not {noise!r}")
+    if pooling == "hierarchical" and robust:
+        raise ValueError("the hierarchical model integrates the run effects out with a Gaussian likelihood: "
+                         "it cannot be combined with robust (Student-t) noise; use --pooling pooled --robust")
     spec = load_model_spec(spec) if isinstance(spec, str) else spec
     model, fixed, free = spec.build(campaign)
     priors = {p: spec.priors.get(p) or default_prior(p, model) for p in free}
@@ -139,8 +164,9 @@ def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, po
 
 
 def free_parameters(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:
-    """The free drag-model parameters of one draw: shape [] (shared) or [R] (per run)."""
-    return {n: (sample[f"{n}_run"] if n in problem.varying else sample[n]) for n in problem.free}
+    """The free drag-model parameters of one draw: shape [] (shared) or [R] (per run: the
+    run-level coefficients of a hierarchical draw, when ``sample`` holds them)."""
+    return {n: sample.get(f"{n}_run", sample[n]) if n in problem.varying else sample[n] for n in problem.free}
 
 
 def run_parameters(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:
@@ -164,7 +190,10 @@ def speed_residuals(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp.
 
 
 def run_log_likelihood(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp.ndarray:
-    """[R] log-likelihood of each run's speed trace for one draw."""
+    """[R] log-likelihood of each run's speed trace for one draw (hierarchical: with the run
+    effects integrated out, at the population values)."""
+    if problem.varying:
+        sample = population_sample(problem, sample)
     resid = speed_residuals(problem, sample)
     q = sample.get("q_mps_per_sqrt_s", jnp.zeros(()))
     sigma = sample["sigma_mps"]
@@ -172,7 +201,78 @@ def run_log_likelihood(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> j
     if problem.robust:
         df = sample["student_df"]
         return jax.vmap(lambda r, t, m, s: local_level_loglik(r, t, m, s, q, df))(resid, b.time_s, b.mask, sigma)
+    if problem.varying:
+        return local_level_loglik_effects(resid, b.time_s, b.mask, sigma, q, _design(problem), _effect_var(problem, sample))
     return local_level_loglik_batch(resid, b.time_s, b.mask, sigma, q)
+
+
+def _design(problem: FitProblem) -> jnp.ndarray:
+    if problem.run_jacobian is None:
+        raise ValueError("the hierarchical model needs its run sensitivities: call linearise_run_effects(problem, "
+                         "initial_values(problem, campaign)) first (fit_nuts does)")
+    return jnp.asarray(problem.run_jacobian)
+
+
+def _effect_var(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp.ndarray:
+    return jnp.stack([sample[f"tau_{n}"] ** 2 for n in problem.varying])
+
+
+def population_sample(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:
+    """``sample`` with the run-level coefficients dropped: the speed of each run at the
+    population values (what the hierarchical likelihood linearises around)."""
+    return {k: v for k, v in sample.items() if not (k.endswith("_run") and k[:-4] in problem.varying)}
+
+
+def linearise_run_effects(problem: FitProblem, reference: dict[str, Any]) -> FitProblem:
+    """The hierarchical ``problem`` with its run sensitivities ``J_r = d v_r / d(varying)``
+    evaluated at ``reference`` (constrained values: the free coefficients and ``v0_mps``,
+    e.g. :func:`~bayes_roadload.inference.nuts.initial_values`).  A no-op for pooled fits."""
+    if not problem.varying:
+        return problem
+    base = {k: jnp.asarray(float(reference[k])) for k in problem.free}
+    v0 = jnp.asarray(reference["v0_mps"], float)
+
+    def speeds(values):
+        params = dict(problem.fixed, **values)
+        return integrate_batch(problem.model, params, problem.batch, v0)[0]
+
+    cols = []
+    for name in problem.varying:
+        tangent = {k: jnp.asarray(1.0 if k == name else 0.0) for k in base}
+        cols.append(jax.jvp(speeds, (base,), (tangent,))[1])
+    jac = np.where(np.asarray(problem.batch.mask)[..., None], np.stack([np.asarray(c) for c in cols], axis=-1), 0.0)
+    ref = {k: float(v) for k, v in base.items()}
+    ref["v0_mps"] = np.asarray(v0)
+    return dataclasses.replace(problem, run_jacobian=jac, reference=ref)
+
+
+def draw_run_effects(problem: FitProblem, samples: dict[str, np.ndarray], seed: int = 0,
+                     batch_size: int = 64) -> dict[str, np.ndarray]:
+    """Draws of the run-level coefficients ``{name}_run`` ([chain, draw, run]) from their
+    exact conditional posterior given each posterior draw of the hierarchical model (the run
+    effects are integrated out while sampling; see the module docstring)."""
+    if not problem.varying:
+        return {}
+    shape = np.shape(samples[problem.free[0]])[:2]
+    flat = {k: jnp.asarray(np.reshape(v, (-1,) + np.shape(v)[2:])) for k, v in samples.items()
+            if not (k.endswith("_run") and k[:-4] in problem.varying)}
+    b = problem.batch
+    design = _design(problem)
+    keys = jax.random.split(jax.random.PRNGKey(seed), int(np.prod(shape)))
+
+    def one(args):
+        sample, key = args
+        resid = speed_residuals(problem, sample)
+        q = sample.get("q_mps_per_sqrt_s", jnp.zeros(()))
+        mean, cov = local_level_effects_posterior(resid, b.time_s, b.mask, sample["sigma_mps"], q, design,
+                                                  _effect_var(problem, sample))
+        k = len(problem.varying)
+        chol = jnp.linalg.cholesky(cov + 1e-30 * jnp.eye(k))
+        delta = mean + jnp.einsum("rkl,rl->rk", chol, jax.random.normal(key, mean.shape))
+        return jnp.stack([sample[n] + delta[:, i] for i, n in enumerate(problem.varying)])
+
+    out = np.asarray(jax.jit(lambda xs: jax.lax.map(one, xs, batch_size=batch_size))((flat, keys)))
+    return {f"{n}_run": out[:, i].reshape(shape + (problem.n_runs,)) for i, n in enumerate(problem.varying)}
 
 
 def coastdown_model(problem: FitProblem) -> None:
@@ -183,11 +283,9 @@ def coastdown_model(problem: FitProblem) -> None:
         sample[name] = numpyro.sample(name, problem.priors[name].to_numpyro())
     for name in problem.varying:
         # Gamma(2): no mass piling at tau = 0, so the joint mode (the MAP the sampler is
-        # whitened at) is not degenerate (Chung et al. 2013)
-        tau = numpyro.sample(f"tau_{name}", dist.Gamma(2.0, 2.0 / config.TAU_PRIOR_SCALES[name]))
-        with numpyro.plate("run", r):
-            z = numpyro.sample(f"{name}_z", dist.Normal(0.0, 1.0))
-        sample[f"{name}_run"] = numpyro.deterministic(f"{name}_run", sample[name] + tau * z)
+        # whitened at) is not degenerate (Chung et al. 2013).  The run effects themselves
+        # are integrated out in the likelihood (module docstring).
+        sample[f"tau_{name}"] = numpyro.sample(f"tau_{name}", dist.Gamma(2.0, 2.0 / config.TAU_PRIOR_SCALES[name]))
     first = problem.batch.speed_mps[:, 0]
     with numpyro.plate("run", r):
         sample["v0_mps"] = numpyro.sample("v0_mps", dist.Normal(first, config.NOISE_PRIORS["v0_scale_mps"]))

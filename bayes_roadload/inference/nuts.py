@@ -37,7 +37,7 @@ from scipy.optimize import minimize
 
 from .. import config
 from ..data.campaign import Campaign
-from .bayes import FitProblem, build_problem, coastdown_model
+from .bayes import FitProblem, build_problem, coastdown_model, draw_run_effects, linearise_run_effects
 from .lsq import fit_lsq
 from .spec import ModelSpec
 
@@ -142,7 +142,6 @@ def initial_values(problem: FitProblem, campaign: Campaign) -> dict[str, Any]:
         init["student_df"] = 10.0
     for name in problem.varying:
         init[f"tau_{name}"] = 0.5 * config.TAU_PRIOR_SCALES[name]
-        init[f"{name}_z"] = jnp.zeros(r)
     return init
 
 
@@ -329,6 +328,7 @@ def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFA
         samples = {k: np.asarray(v) for k, v in constrained.items()}
     else:
         samples = {k: np.asarray(v) for k, v in raw.items()}
+    samples.update(draw_run_effects(problem, samples, seed=sampler.seed))
     extra = {k: np.asarray(v) for k, v in mcmc.get_extra_fields(group_by_chain=True).items()}
     extra["tree_depth"] = np.ceil(np.log2(extra["num_steps"] + 1.0)).astype(int)
     return NutsFit(problem=problem, samples=samples, stats=extra, map=map_result, sampler=sampler,
@@ -340,9 +340,11 @@ def fit_nuts(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling
              sampler: config.SamplerConfig = config.DEFAULT_SAMPLER) -> NutsFit:
     """Fit every run of a campaign jointly with NUTS (see the module docstring)."""
     problem = build_problem(campaign, spec, pooling=pooling, noise=noise, robust=robust)
+    init = initial_values(problem, campaign)
+    problem = linearise_run_effects(problem, init)
     map_result = post = None
     if sampler.precondition == "laplace":
-        post = unconstrained_posterior(problem, initial_values(problem, campaign))
+        post = unconstrained_posterior(problem, init)
         map_result = find_map(problem, {}, posterior=post)
     fit = run_nuts(problem, sampler=sampler, map_result=map_result, posterior=post)
     if map_result is not None:

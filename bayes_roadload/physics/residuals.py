@@ -203,3 +203,61 @@ def local_level_loglik_batch(residual: Array, time_s: Array, mask: Array, sigma:
     sigma = jnp.broadcast_to(jnp.asarray(sigma, residual.dtype), residual.shape[:1])
     q = jnp.asarray(q, residual.dtype)
     return _batch_loglik(residual, jnp.asarray(time_s, residual.dtype), jnp.asarray(mask, bool), sigma**2, q**2)
+
+
+def _effect_terms(residual, time_s, mask, sigma, q, design):
+    """G = J^T Sigma^-1 J ([R, k, k]) and b = J^T Sigma^-1 r ([R, k]) for the residual
+    covariance Sigma of each run, through the same banded form (differentiable)."""
+    sigma = jnp.broadcast_to(jnp.asarray(sigma, residual.dtype), residual.shape[:1])
+    time_s, mask = jnp.asarray(time_s, residual.dtype), jnp.asarray(mask, bool)
+    lower, diag, upper = _tridiagonal(time_s, mask, sigma**2, jnp.asarray(q, residual.dtype) ** 2)
+
+    def diff(x):  # D x along the samples, zero on padding
+        prev = jnp.concatenate([jnp.zeros_like(x[:, :1]), x[:, :-1]], axis=1)
+        m = mask.reshape(mask.shape + (1,) * (x.ndim - 2))
+        return jnp.where(m, x - prev, 0.0)
+
+    dj = diff(jnp.asarray(design, residual.dtype))                         # [R, N, k]
+    w = jax.lax.linalg.tridiagonal_solve(lower, diag, upper, dj)           # T^-1 D J
+    g = jnp.einsum("rnk,rnl->rkl", dj, w)
+    b = jnp.einsum("rnk,rn->rk", w, diff(residual))
+    return g, b
+
+
+def _effect_posterior(g, b, effect_var):
+    """Gaussian posterior of the run effects delta ~ N(0, diag(effect_var)) given
+    G and b: mean, covariance, and the log-likelihood correction of marginalising them."""
+    s = jnp.sqrt(jnp.asarray(effect_var))                                 # [k]
+    k = s.shape[0]
+    m = jnp.eye(k) + s[:, None] * g * s[None, :]                           # I + S G S
+    chol = jnp.linalg.cholesky(m)
+    sb = s * b
+    x = jax.scipy.linalg.cho_solve((chol, True), sb[..., None])[..., 0]   # M^-1 S b
+    correction = 0.5 * jnp.sum(sb * x, axis=-1) - jnp.sum(jnp.log(jnp.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
+    cov = s[:, None] * jax.scipy.linalg.cho_solve((chol, True), jnp.broadcast_to(jnp.eye(k), m.shape)) * s[None, :]
+    return s * x, cov, correction
+
+
+def local_level_loglik_effects(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array,
+                               design: Array, effect_var: Array) -> Array:
+    """[R] log-likelihoods of R runs' residuals when each run also carries its own effect
+    ``J_r delta_r`` with ``delta_r ~ N(0, diag(effect_var))`` integrated out:
+    ``r_r ~ N(0, Sigma_r + J_r diag(effect_var) J_r^T)``.
+
+    ``design`` [R, N, k] is J_r (how the run's speed trace responds to the k effects); by
+    Woodbury the likelihood is :func:`local_level_loglik_batch` plus
+    ``b^T (T^-1 + G)^-1 b / 2 - log det(I + T^1/2 G T^1/2) / 2`` with ``G = J^T Sigma^-1 J``,
+    ``b = J^T Sigma^-1 r``, ``T = diag(effect_var)``: k extra banded solves per run.
+    """
+    g, b = _effect_terms(residual, time_s, mask, sigma, q, design)
+    _, _, correction = _effect_posterior(g, b, effect_var)
+    return local_level_loglik_batch(residual, time_s, mask, sigma, q) + correction
+
+
+def local_level_effects_posterior(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array,
+                                  design: Array, effect_var: Array) -> tuple[Array, Array]:
+    """Conditional posterior mean [R, k] and covariance [R, k, k] of the run effects of
+    :func:`local_level_loglik_effects` given the residuals."""
+    g, b = _effect_terms(residual, time_s, mask, sigma, q, design)
+    mean, cov, _ = _effect_posterior(g, b, effect_var)
+    return mean, cov

@@ -6,7 +6,17 @@ import numpy as np
 import pytest
 from numpyro import handlers
 
-from bayes_roadload.inference.bayes import build_problem, coastdown_model, run_log_likelihood, speed_residuals
+from scipy import stats
+
+from bayes_roadload.inference.bayes import (
+    build_problem,
+    coastdown_model,
+    integrated_speed,
+    linearise_run_effects,
+    run_log_likelihood,
+    speed_residuals,
+)
+from bayes_roadload.inference.nuts import initial_values
 from bayes_roadload.physics.residuals import local_level_loglik
 
 
@@ -24,14 +34,47 @@ def test_pooled_sites_use_contract_names(small_campaign):
 
 def test_hierarchical_sites(small_campaign):
     p = build_problem(small_campaign, "three_term", pooling="hierarchical")
+    assert p.varying == ("AD", "BD", "CD0")
+    with pytest.raises(ValueError, match="linearise_run_effects"):
+        trace(p)  # the run sensitivities are needed first
+    p = linearise_run_effects(p, initial_values(p, small_campaign))
+    assert p.run_jacobian.shape == p.batch.time_s.shape + (3,)
     tr = trace(p)
     for k in ("AD", "BD", "CD0"):
         assert tr[f"tau_{k}"]["value"].shape == ()
-        assert tr[f"{k}_run"]["value"].shape == (4,)
-        # non-centred: run values = mean + tau * z
-        np.testing.assert_allclose(tr[f"{k}_run"]["value"],
-                                   tr[k]["value"] + tr[f"tau_{k}"]["value"] * tr[f"{k}_z"]["value"])
-    assert p.varying == ("AD", "BD", "CD0")
+        assert f"{k}_run" not in tr and f"{k}_z" not in tr  # integrated out, drawn afterwards
+    with pytest.raises(ValueError, match="robust"):
+        build_problem(small_campaign, "three_term", pooling="hierarchical", robust=True)
+
+
+def test_hierarchical_likelihood_is_the_first_order_marginal(small_campaign):
+    """Each run's hierarchical likelihood equals the dense Gaussian with the run effects
+    J diag(tau^2) J^T added to the residual covariance, J the finite-difference response of
+    the run's speed to AD, BD, CD0 (an independent check of the sensitivities too)."""
+    p = build_problem(small_campaign, "three_term", pooling="hierarchical")
+    init = initial_values(p, small_campaign)
+    p = linearise_run_effects(p, init)
+    sample = {k: jnp.asarray(init[k]) for k in ("AD", "BD", "CD0", "v0_mps", "sigma_mps", "q_mps_per_sqrt_s")}
+    sample.update(tau_AD=jnp.asarray(5e-4), tau_BD=jnp.asarray(3e-5), tau_CD0=jnp.asarray(0.01))
+    per_run = np.asarray(run_log_likelihood(p, sample))
+    b = p.batch
+    base = np.asarray(b.speed_mps - integrated_speed(p, sample))
+    for r in (0, 3):
+        n = int(np.asarray(b.mask[r]).sum())
+        cols = []
+        for k in ("AD", "BD", "CD0"):
+            h = 1e-6 * abs(float(init[k]))
+            up = np.asarray(integrated_speed(p, dict(sample, **{k: sample[k] + h})))
+            dn = np.asarray(integrated_speed(p, dict(sample, **{k: sample[k] - h})))
+            cols.append((up[r, :n] - dn[r, :n]) / (2 * h))
+        jac = np.stack(cols, axis=1)
+        np.testing.assert_allclose(jac, np.asarray(p.run_jacobian)[r, :n], rtol=1e-5, atol=1e-9)
+        t = np.asarray(b.time_s[r, :n]) - float(b.time_s[r, 0])
+        q, sig = float(sample["q_mps_per_sqrt_s"]), float(sample["sigma_mps"][r])
+        tau2 = np.array([5e-4, 3e-5, 0.01]) ** 2
+        cov = q**2 * np.minimum.outer(t, t) + sig**2 * np.eye(n) + jac @ np.diag(tau2) @ jac.T
+        ref = stats.multivariate_normal(np.zeros(n), cov).logpdf(base[r, :n])
+        assert per_run[r] == pytest.approx(ref, rel=1e-9)
 
 
 def test_factor_is_the_sum_of_run_likelihoods(small_campaign):
