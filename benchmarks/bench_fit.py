@@ -84,6 +84,7 @@ def main() -> None:
                     help="campaign sizes (pairs); the first 18-pair one is the reference")
     ap.add_argument("--warmup", type=int, default=config.DEFAULT_SAMPLER.num_warmup)
     ap.add_argument("--draws", type=int, default=config.DEFAULT_SAMPLER.num_samples)
+    ap.add_argument("--target-accept", type=float, default=config.DEFAULT_SAMPLER.target_accept)
     ap.add_argument("--naive-pairs", type=int, default=18)
     ap.add_argument("--naive-warmup", type=int, default=30)
     ap.add_argument("--naive-draws", type=int, default=30)
@@ -98,7 +99,8 @@ def main() -> None:
         problem = build_problem(campaign, "four_term")
         row = {"pairs": pairs, "samples_per_run_mean": round(float(np.asarray(problem.batch.mask).sum(axis=1).mean()), 1),
                "compile_gradient_s": round(compile_seconds(problem), 2)}
-        row.update(fit_once(campaign, config.SamplerConfig(num_warmup=args.warmup, num_samples=args.draws)))
+        row.update(fit_once(campaign, config.SamplerConfig(num_warmup=args.warmup, num_samples=args.draws,
+                                                           target_accept=args.target_accept)))
         out["preconditioned"].append(row)
         print(json.dumps(row), file=sys.stderr, flush=True)
     if not args.skip_naive:

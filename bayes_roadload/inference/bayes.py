@@ -12,16 +12,20 @@ The drag model, which parameters are free, fixed or given priors, come from a mo
     "system noise" and its test-to-test spread (table 8.3).  ``AD_run = AD + delta_AD,r``
     with ``delta_r ~ N(0, diag(tau^2))``.  The run effects are integrated out instead of
     sampled: a run's speed trace responds to its small deviations through the sensitivities
-    ``J_r = d v_r / d(AD, BD, CD0)`` at a reference fit (first order:
-    ``v_r(theta + delta_r) = v_r(theta) + J_r delta_r``), so ``delta_r`` is Gaussian given
+    ``J_r = d v_r / d(AD, BD, CD0)`` at the run's own reference coefficients ``theta + d_r``
+    (first order: ``v_r(theta + delta_r) = v_r(theta + d_r) + J_r (delta_r - d_r)``), so
+    ``delta_r`` is Gaussian given
     everything else and its integral is exact (:func:`~bayes_roadload.physics.residuals.
     local_level_loglik_effects`).  NUTS then samples the population parameters and spreads
     only, with the geometry of the pooled model: the funnel between tau and the run-level
     coefficients that made centred and non-centred sampling of 3 x R extra unknowns
     impractically slow is gone.  ``AD_run`` etc. are drawn afterwards from their exact
-    conditional posterior given each draw (:func:`draw_run_effects`).  The reference is the
-    joint least-squares fit (:func:`linearise_run_effects`); the first-order error is the
-    square of a few-percent deviation.
+    conditional posterior given each draw (:func:`draw_run_effects`).  The references are
+    found by one re-linearisation (:func:`~bayes_roadload.inference.nuts.fit_nuts`): first
+    ``d_r = 0`` around the joint least-squares fit, then ``d_r`` = the run effects'
+    conditional means at the MAP (:func:`run_effect_means`), so the expansion error is second
+    order in a run's posterior uncertainty, not in its offset from the mean (measured: with
+    8 % offsets in AD expanded about the mean, run-level AD z-scores spread with sd ~2).
 
 Every run has its own initial speed ``v0_mps`` and speed noise ``sigma_mps``.  The residual
 between measured and integrated speed is white measurement noise plus an integrated
@@ -91,8 +95,10 @@ class FitProblem:
         gradients for NUTS, :func:`~bayes_roadload.physics.integrate_batch_forward_sensitivity`);
         "reverse" by reverse mode through the scan (needed for Hessians, used by the MAP).
     run_jacobian : hierarchical only: [R, N, k] sensitivities of each run's speed to the k
-        varying coefficients at the reference fit (:func:`linearise_run_effects`).
-    reference : the parameter values ``run_jacobian`` was evaluated at.
+        varying coefficients, at each run's reference coefficients (:func:`linearise_run_effects`).
+    run_offsets : hierarchical only: [R, k] each run's reference offset from the population
+        values (zero at first, then the run effects' conditional means at the MAP).
+    reference : the population values ``run_jacobian`` was evaluated around.
     """
 
     spec: ModelSpec
@@ -111,6 +117,7 @@ class FitProblem:
     initial: dict[str, Any] = field(default_factory=dict)
     gradients: str = "forward"
     run_jacobian: Any = None
+    run_offsets: Any = None
     reference: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -192,9 +199,7 @@ def speed_residuals(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp.
 def run_log_likelihood(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp.ndarray:
     """[R] log-likelihood of each run's speed trace for one draw (hierarchical: with the run
     effects integrated out, at the population values)."""
-    if problem.varying:
-        sample = population_sample(problem, sample)
-    resid = speed_residuals(problem, sample)
+    resid = effect_residuals(problem, sample) if problem.varying else speed_residuals(problem, sample)
     q = sample.get("q_mps_per_sqrt_s", jnp.zeros(()))
     sigma = sample["sigma_mps"]
     b = problem.batch
@@ -218,18 +223,38 @@ def _effect_var(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp.ndar
 
 
 def population_sample(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:
-    """``sample`` with the run-level coefficients dropped: the speed of each run at the
-    population values (what the hierarchical likelihood linearises around)."""
+    """``sample`` with the run-level coefficients dropped."""
     return {k: v for k, v in sample.items() if not (k.endswith("_run") and k[:-4] in problem.varying)}
 
 
-def linearise_run_effects(problem: FitProblem, reference: dict[str, Any]) -> FitProblem:
+def effect_residuals(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp.ndarray:
+    """[R, N] residuals that the run effects delta_r explain linearly in the hierarchical
+    model: ``y_r - v_r(theta + d_r) + J_r d_r``, with ``d_r`` the run's reference offset
+    (:func:`linearise_run_effects`), so that ``y_r ~ v_r(theta + d_r) + J_r (delta_r - d_r)``:
+    the first-order expansion is taken at each run's own coefficients, and its error is
+    second order in the run's posterior uncertainty, not in its offset from the mean."""
+    design = _design(problem)
+    sample = population_sample(problem, sample)
+    offsets = jnp.asarray(problem.run_offsets)
+    shifted = dict(sample)
+    for i, name in enumerate(problem.varying):
+        shifted[f"{name}_run"] = sample[name] + offsets[:, i]
+    return speed_residuals(problem, shifted) + jnp.einsum("rnk,rk->rn", design, offsets)
+
+
+def linearise_run_effects(problem: FitProblem, reference: dict[str, Any], offsets: Any = None) -> FitProblem:
     """The hierarchical ``problem`` with its run sensitivities ``J_r = d v_r / d(varying)``
-    evaluated at ``reference`` (constrained values: the free coefficients and ``v0_mps``,
-    e.g. :func:`~bayes_roadload.inference.nuts.initial_values`).  A no-op for pooled fits."""
+    evaluated at each run's coefficients ``reference + offsets[r]`` (``reference``:
+    constrained values of the free coefficients and ``v0_mps``, e.g.
+    :func:`~bayes_roadload.inference.nuts.initial_values`; ``offsets`` [R, k], default zero,
+    e.g. :func:`run_effect_means` at a first MAP).  A no-op for pooled fits."""
     if not problem.varying:
         return problem
-    base = {k: jnp.asarray(float(reference[k])) for k in problem.free}
+    r, k = problem.n_runs, len(problem.varying)
+    offsets = np.zeros((r, k)) if offsets is None else np.asarray(offsets, float).reshape(r, k)
+    base = {n: jnp.full(r, float(reference[n])) for n in problem.free}
+    for i, n in enumerate(problem.varying):
+        base[n] = base[n] + offsets[:, i]
     v0 = jnp.asarray(reference["v0_mps"], float)
 
     def speeds(values):
@@ -238,12 +263,23 @@ def linearise_run_effects(problem: FitProblem, reference: dict[str, Any]) -> Fit
 
     cols = []
     for name in problem.varying:
-        tangent = {k: jnp.asarray(1.0 if k == name else 0.0) for k in base}
+        tangent = {n: jnp.full(r, 1.0 if n == name else 0.0) for n in base}
         cols.append(jax.jvp(speeds, (base,), (tangent,))[1])
     jac = np.where(np.asarray(problem.batch.mask)[..., None], np.stack([np.asarray(c) for c in cols], axis=-1), 0.0)
-    ref = {k: float(v) for k, v in base.items()}
+    ref = {n: float(reference[n]) for n in problem.free}
     ref["v0_mps"] = np.asarray(v0)
-    return dataclasses.replace(problem, run_jacobian=jac, reference=ref)
+    return dataclasses.replace(problem, run_jacobian=jac, run_offsets=offsets, reference=ref)
+
+
+def run_effect_means(problem: FitProblem, sample: dict[str, Any]) -> np.ndarray:
+    """[R, k] conditional posterior means of the run effects delta_r at one parameter point
+    (e.g. the MAP): where to re-linearise each run."""
+    sample = {k: jnp.asarray(v) for k, v in sample.items()}
+    b = problem.batch
+    mean, _ = local_level_effects_posterior(effect_residuals(problem, sample), b.time_s, b.mask, sample["sigma_mps"],
+                                            sample.get("q_mps_per_sqrt_s", jnp.zeros(())), _design(problem),
+                                            _effect_var(problem, sample))
+    return np.asarray(mean)
 
 
 def draw_run_effects(problem: FitProblem, samples: dict[str, np.ndarray], seed: int = 0,
@@ -262,7 +298,7 @@ def draw_run_effects(problem: FitProblem, samples: dict[str, np.ndarray], seed: 
 
     def one(args):
         sample, key = args
-        resid = speed_residuals(problem, sample)
+        resid = effect_residuals(problem, sample)
         q = sample.get("q_mps_per_sqrt_s", jnp.zeros(()))
         mean, cov = local_level_effects_posterior(resid, b.time_s, b.mask, sample["sigma_mps"], q, design,
                                                   _effect_var(problem, sample))

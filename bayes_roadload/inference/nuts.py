@@ -37,7 +37,14 @@ from scipy.optimize import minimize
 
 from .. import config
 from ..data.campaign import Campaign
-from .bayes import FitProblem, build_problem, coastdown_model, draw_run_effects, linearise_run_effects
+from .bayes import (
+    FitProblem,
+    build_problem,
+    coastdown_model,
+    draw_run_effects,
+    linearise_run_effects,
+    run_effect_means,
+)
 from .lsq import fit_lsq
 from .spec import ModelSpec
 
@@ -343,6 +350,10 @@ def fit_nuts(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling
     init = initial_values(problem, campaign)
     problem = linearise_run_effects(problem, init)
     map_result = post = None
+    if problem.varying:  # re-linearise each run at its own coefficients (bayes module docstring)
+        first = find_map(problem, {}, posterior=unconstrained_posterior(problem, init))
+        problem = linearise_run_effects(problem, first.constrained, run_effect_means(problem, first.constrained))
+        init = {k: v for k, v in first.constrained.items() if k in init}
     if sampler.precondition == "laplace":
         post = unconstrained_posterior(problem, init)
         map_result = find_map(problem, {}, posterior=post)
