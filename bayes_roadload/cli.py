@@ -61,6 +61,9 @@ def _cmd_fit(args) -> int:
     spec = load_model_spec(args.model)
     out = Path(args.out)
     if args.method == "lsq":
+        if args.pooling == "hierarchical":
+            raise SystemExit("error: least squares has no hierarchical model; use --method nuts --pooling "
+                             "hierarchical, or --method lsq --grouping run for one classical fit per run")
         result = fit_lsq(campaign, spec, grouping=args.grouping,
                          settings=LsqSettings(initial_speed=args.initial_speed))
         write_lsq_outputs(result, out)

@@ -101,3 +101,23 @@ def test_sampler_options_reach_the_sampler():
     s = _sampler(args)
     assert (s.target_accept, s.num_samples, s.precondition) == (0.95, 50, "none")
     assert _sampler(build_parser().parse_args(["fit", "campaign", "--out", "o"])).target_accept == 0.9
+
+
+def test_fit_hierarchical_writes_tau_rows_and_run_rows(campaign_dir, tmp_path, capsys):
+    """``--pooling hierarchical``: summary.csv gains tau_AD, tau_BD, tau_CD0 (positive, in the
+    parameters' units), runs_summary.csv the run-level coefficients of every run; least
+    squares refuses the option instead of ignoring it."""
+    out = tmp_path / "hier"
+    code = main(["fit", str(campaign_dir), "--model", "three_term", "--pooling", "hierarchical", "--warmup", "150",
+                 "--draws", "150", "--no-progress", "--out", str(out)])
+    diag = json.loads((out / "diagnostics.json").read_text())
+    assert code == (0 if diag["pass"] else 3)
+    summary = pd.read_csv(out / "summary.csv").set_index("parameter")
+    for k in ("AD", "BD", "CD0"):
+        assert summary.loc[f"tau_{k}", "q2.5"] > 0
+        assert summary.loc[f"tau_{k}", "mean"] < 0.5 * summary.loc[k, "mean"]
+    runs = set(pd.read_csv(out / "runs_summary.csv")["parameter"])
+    assert {f"{k}_run[{r}]" for k in ("AD", "BD", "CD0") for r in (1, 2, 3, 4)} <= runs
+    capsys.readouterr()
+    with pytest.raises(SystemExit, match="no hierarchical model"):
+        main(["fit", str(campaign_dir), "--method", "lsq", "--pooling", "hierarchical", "--out", str(tmp_path / "l")])
