@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 Array = jnp.ndarray
 
@@ -119,6 +120,51 @@ def local_level_logdet(time_s: Array, mask: Array, var_e: Array, q2: Array) -> A
     return logs.sum()
 
 
+def uniform_grid(time_s, mask) -> tuple | None:
+    """(step [R], samples [R]) when every run's real samples are equally spaced (to 1e-9
+    relative) and the data are concrete; else None."""
+    if any(isinstance(x, jax.core.Tracer) for x in (time_s, mask)):
+        return None
+    t, m = np.asarray(time_s, float), np.asarray(mask, bool)
+    if t.ndim != 2:
+        return None
+    n = m.sum(axis=1)
+    if np.any(n < 1) or np.any(m != (np.arange(t.shape[1])[None, :] < n[:, None])):
+        return None  # not a prefix mask
+    h = np.zeros(t.shape[0])
+    for r in range(t.shape[0]):
+        dt = np.diff(t[r, : n[r]])
+        if dt.size:
+            if np.any(np.abs(dt - dt[0]) > 1e-9 * abs(dt[0])):
+                return None
+            h[r] = dt[0]
+    return h, n
+
+
+def local_level_logdet_uniform(step_s, n_samples, var_e, q2):
+    """Closed form of :func:`local_level_logdet` on an equally spaced grid.
+
+    In units of var_e the filtered variance follows x -> (x + rho) / (x + rho + 1),
+    rho = q2 h / var_e: a Moebius map of matrix [[1, rho], [1, 1 + rho]] (determinant 1,
+    eigenvalues lambda, 1/lambda), and the innovation variances telescope to the (2, 2)
+    element of its (n - 1)-th power:  log det = n log var_e + (n - 1) log lambda
+    + log(a + lambda^(-2(n-1)) b) - log s,  s = sqrt(rho^2 + 4 rho), a = (rho + s) / 2,
+    b = 2 rho / (rho + s), lambda = 1 + a.  Small rho (n^2 rho < 1e-8): the series
+    rho (n - 1) n / 2.
+    """
+    m = jnp.asarray(n_samples, float) - 1.0
+    rho = q2 * step_s / var_e
+    small = rho * (m + 1.0) ** 2 < 1e-8
+    r = jnp.where(small, 1.0, rho)
+    s = jnp.sqrt(r * r + 4.0 * r)
+    a = 0.5 * (r + s)
+    b = 2.0 * r / (r + s)
+    log_lam = jnp.log1p(a)
+    exact = m * log_lam + jnp.log(a + jnp.exp(-2.0 * m * log_lam) * b) - jnp.log(s)
+    series = rho * m * (m + 1.0) / 2.0
+    return (m + 1.0) * jnp.log(var_e) + jnp.where(small, series, exact)
+
+
 def _logdet_and_grad(time_s, mask, var_e, q2):
     """[R] log det of each run's residual covariance and its derivatives with respect to
     var_e ([R]) and q2 (shared): the variance recursion of :func:`local_level_logdet` with its
@@ -146,11 +192,6 @@ def _logdet_and_grad(time_s, mask, var_e, q2):
     return ld, (dld_ve, dld_q2)
 
 
-@jax.custom_vjp
-def _batch_loglik(residual, time_s, mask, var_e, q2):
-    return _batch_loglik_fwd(residual, time_s, mask, var_e, q2)[0]
-
-
 def _tridiagonal(time_s, mask, var_e, q2):
     """Covariance of the differenced residuals (r_0, r_1 - r_0, ...): tridiagonal, with
     identity rows on padded samples."""
@@ -164,27 +205,38 @@ def _tridiagonal(time_s, mask, var_e, q2):
     return lower, diag, upper
 
 
-def _batch_loglik_fwd(residual, time_s, mask, var_e, q2):
-    y = jnp.where(mask, jnp.diff(residual, axis=-1, prepend=jnp.zeros_like(residual[:, :1])), 0.0)
-    lower, diag, upper = _tridiagonal(time_s, mask, var_e, q2)
-    w = jax.lax.linalg.tridiagonal_solve(lower, diag, upper, y[..., None])[..., 0]   # T^-1 D r
-    alpha = jnp.where(mask, w - jnp.concatenate([w[:, 1:], jnp.zeros_like(w[:, :1])], axis=1), 0.0)  # D^T T^-1 D r
-    logdet, (dld_ve, dld_q2) = _logdet_and_grad(time_s, mask, var_e, q2)
-    n = mask.sum(axis=1)
-    ll = -0.5 * (n * _LOG_2PI + logdet + jnp.sum(y * w, axis=1))
-    dt = jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
-    tail = jnp.cumsum(alpha[:, ::-1], axis=1)[:, ::-1]                 # sum_{j >= k} alpha_j
-    g_ve = -0.5 * dld_ve + 0.5 * jnp.sum(alpha**2, axis=1)
-    g_q2 = -0.5 * dld_q2 + 0.5 * jnp.sum(dt * tail**2, axis=1)
-    return ll, (alpha, g_ve, g_q2)
+def _batch_loglik(residual, time_s, mask, var_e, q2, grid):
+    """The custom-gradient likelihood; ``grid`` (:func:`uniform_grid`) selects the closed-form
+    log determinant, else the variance recursion."""
 
+    def logdet_and_grad(ve, qq):
+        if grid is None:
+            return _logdet_and_grad(time_s, mask, ve, qq)
+        h, n = (jnp.asarray(x, float) for x in grid)
+        f = jax.vmap(jax.value_and_grad(local_level_logdet_uniform, argnums=(2, 3)), in_axes=(0, 0, 0, None))
+        return f(h, n, ve, qq)
 
-def _batch_loglik_bwd(res, ct):
-    alpha, g_ve, g_q2 = res
-    return (-ct[:, None] * alpha, None, None, ct * g_ve, jnp.sum(ct * g_q2))
+    def fwd(residual, var_e, q2):
+        y = jnp.where(mask, jnp.diff(residual, axis=-1, prepend=jnp.zeros_like(residual[:, :1])), 0.0)
+        lower, diag, upper = _tridiagonal(time_s, mask, var_e, q2)
+        w = jax.lax.linalg.tridiagonal_solve(lower, diag, upper, y[..., None])[..., 0]   # T^-1 D r
+        alpha = jnp.where(mask, w - jnp.concatenate([w[:, 1:], jnp.zeros_like(w[:, :1])], axis=1), 0.0)  # D^T T^-1 D r
+        logdet, (dld_ve, dld_q2) = logdet_and_grad(var_e, q2)
+        n = mask.sum(axis=1)
+        ll = -0.5 * (n * _LOG_2PI + logdet + jnp.sum(y * w, axis=1))
+        dt = jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
+        tail = jnp.cumsum(alpha[:, ::-1], axis=1)[:, ::-1]                 # sum_{j >= k} alpha_j
+        g_ve = -0.5 * dld_ve + 0.5 * jnp.sum(alpha**2, axis=1)
+        g_q2 = -0.5 * dld_q2 + 0.5 * jnp.sum(dt * tail**2, axis=1)
+        return ll, (alpha, g_ve, g_q2)
 
+    def bwd(res, ct):
+        alpha, g_ve, g_q2 = res
+        return (-ct[:, None] * alpha, ct * g_ve, jnp.sum(ct * g_q2))
 
-_batch_loglik.defvjp(_batch_loglik_fwd, _batch_loglik_bwd)
+    f = jax.custom_vjp(lambda r, ve, qq: fwd(r, ve, qq)[0])
+    f.defvjp(fwd, bwd)
+    return f(residual, var_e, q2)
 
 
 def local_level_loglik_batch(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array) -> Array:
@@ -197,12 +249,14 @@ def local_level_loglik_batch(residual: Array, time_s: Array, mask: Array, sigma:
     is closed-form: d/dr = -Sigma^-1 r, d/dsigma^2 = (-tr Sigma^-1 + |Sigma^-1 r|^2) / 2,
     d/dq^2 = (-tr(Sigma^-1 K) + sum_k dt_k (sum_{j>=k} (Sigma^-1 r)_j)^2) / 2; the log
     determinant and its derivatives come from the data-free Kalman variance recursion
-    (:func:`local_level_logdet`).  ``mask`` must mark a prefix of each row (padding at the
-    end, as :func:`~bayes_roadload.physics.integrate.stack_runs` builds it).
+    (:func:`local_level_logdet`), in closed form when the grid is equally spaced
+    (:func:`local_level_logdet_uniform`).  ``mask`` must mark a prefix of each row (padding
+    at the end, as :func:`~bayes_roadload.physics.integrate.stack_runs` builds it).
     """
+    grid = uniform_grid(time_s, mask)
     sigma = jnp.broadcast_to(jnp.asarray(sigma, residual.dtype), residual.shape[:1])
     q = jnp.asarray(q, residual.dtype)
-    return _batch_loglik(residual, jnp.asarray(time_s, residual.dtype), jnp.asarray(mask, bool), sigma**2, q**2)
+    return _batch_loglik(residual, jnp.asarray(time_s, residual.dtype), jnp.asarray(mask, bool), sigma**2, q**2, grid)
 
 
 def _effect_terms(residual, time_s, mask, sigma, q, design):

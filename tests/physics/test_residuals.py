@@ -96,3 +96,33 @@ def test_batch_loglik_and_its_gradient_equal_the_kalman_filter(q):
     assert float(banded(*args)) == pytest.approx(float(kalman(*args)), rel=1e-11)
     for g_banded, g_kalman in zip(jax.grad(banded, argnums=(0, 1, 2))(*args), jax.grad(kalman, argnums=(0, 1, 2))(*args)):
         np.testing.assert_allclose(np.asarray(g_banded), np.asarray(g_kalman), rtol=1e-8, atol=1e-9)
+
+
+@pytest.mark.parametrize("q", [0.0, 1e-7, 5e-4, 0.03, 1.0])
+def test_closed_form_log_determinant_on_equally_spaced_samples(q):
+    """On an equally spaced grid the log determinant has a closed form; it equals the variance
+    recursion (value and derivatives in sigma^2 and q^2) from white noise (q = 0, the series
+    branch) to a random walk far above the noise, and the batch likelihood takes it."""
+    from bayes_roadload.physics.residuals import _logdet_and_grad, local_level_logdet_uniform, uniform_grid
+
+    n, lengths = 503, np.array([503, 450, 2, 1])
+    t = np.tile(np.arange(n) * 0.25, (4, 1))
+    mask = np.arange(n)[None, :] < lengths[:, None]
+    t = np.where(mask, t, (lengths[:, None] - 1) * 0.25)
+    grid = uniform_grid(t, mask)
+    assert grid is not None and list(grid[1]) == list(lengths)
+    ve = jnp.asarray([0.03, 0.05, 0.02, 0.04]) ** 2
+    q2 = jnp.asarray(q**2)
+    ref, (ref_ve, ref_q2) = _logdet_and_grad(jnp.asarray(t), jnp.asarray(mask), ve, q2)
+    f = jax.vmap(jax.value_and_grad(local_level_logdet_uniform, argnums=(2, 3)), in_axes=(0, 0, 0, None))
+    val, (d_ve, d_q2) = f(jnp.asarray(grid[0]), jnp.asarray(grid[1], float), ve, q2)
+    np.testing.assert_allclose(val, ref, rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(d_ve, ref_ve, rtol=1e-8)
+    np.testing.assert_allclose(d_q2, ref_q2, rtol=1e-6, atol=1e-6 * float(np.max(np.abs(ref_q2))))
+    # the batch likelihood (closed form here) equals the Kalman filter
+    r = np.random.default_rng(3).normal(0, 0.05, (4, n))
+    kal = jax.vmap(lambda a, b, c, d: local_level_loglik(a, b, c, d, q))(jnp.asarray(r), jnp.asarray(t), jnp.asarray(mask), jnp.sqrt(ve))
+    np.testing.assert_allclose(local_level_loglik_batch(jnp.asarray(r), t, mask, jnp.sqrt(ve), q), kal, rtol=1e-11)
+    # a jittered grid falls back to the recursion
+    jitter = t + np.where(mask, 1e-4 * np.random.default_rng(4).random(t.shape), 0.0)
+    assert uniform_grid(jitter, mask) is None
