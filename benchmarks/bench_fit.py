@@ -25,7 +25,7 @@ import numpy as np
 
 from bayes_roadload import config
 from bayes_roadload.inference.bayes import build_problem, coastdown_model
-from bayes_roadload.inference.nuts import find_map, initial_values, run_nuts, unconstrained_posterior
+from bayes_roadload.inference.nuts import find_map, prepare_problem, run_nuts, unconstrained_posterior
 from bayes_roadload.inference.results import diagnostics, summary_table, to_inference_data
 from bayes_roadload.simulate import get_case, simulate_campaign
 
@@ -64,8 +64,7 @@ def report(fit, extra: dict) -> dict:
 def fit_once(campaign, sampler: config.SamplerConfig) -> dict:
     """One fit the way ``fit_nuts`` does it, each stage timed (compilation included)."""
     t0 = time.perf_counter()
-    problem = build_problem(campaign, "four_term")
-    init = initial_values(problem, campaign)
+    problem, init = prepare_problem(build_problem(campaign, "four_term"), campaign)
     t1 = time.perf_counter()
     post = unconstrained_posterior(problem, init) if sampler.precondition == "laplace" else None
     m = find_map(problem, {}, posterior=post) if post is not None else None
@@ -96,7 +95,7 @@ def main() -> None:
     out = {"benchmark": "fit", "cpu_devices": jax.local_device_count(), "preconditioned": []}
     for pairs in args.pairs:
         campaign = simulate_campaign(case, pairs=pairs, seed=1)
-        problem = build_problem(campaign, "four_term")
+        problem, _ = prepare_problem(build_problem(campaign, "four_term"), campaign)
         row = {"pairs": pairs, "samples_per_run_mean": round(float(np.asarray(problem.batch.mask).sum(axis=1).mean()), 1),
                "compile_gradient_s": round(compile_seconds(problem), 2)}
         row.update(fit_once(campaign, config.SamplerConfig(num_warmup=args.warmup, num_samples=args.draws,

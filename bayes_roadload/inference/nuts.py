@@ -342,18 +342,26 @@ def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFA
                    timings={"warmup_s": t1 - t0, "sampling_s": t2 - t1})
 
 
+def prepare_problem(problem: FitProblem, campaign: Campaign) -> tuple[FitProblem, dict[str, Any]]:
+    """Starting values (:func:`initial_values`) and the run effects' sensitivities about them
+    (:func:`~bayes_roadload.inference.bayes.linearise_run_effects`, hierarchical problems):
+    re-linearised once, at each run's conditional-mean effects at a first MAP.  Returns the
+    problem ready to sample and the constrained starting values."""
+    init = initial_values(problem, campaign)
+    problem = linearise_run_effects(problem, init)
+    if problem.varying:  # re-linearise each run at its own coefficients (bayes module docstring)
+        first = find_map(problem, {}, posterior=unconstrained_posterior(problem, init))
+        problem = linearise_run_effects(problem, first.constrained, run_effect_means(problem, first.constrained))
+        init = dict(init, **{k: v for k, v in first.constrained.items() if k in init})
+    return problem, init
+
+
 def fit_nuts(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling: str = "pooled",
              noise: str = "integrated", robust: bool = False,
              sampler: config.SamplerConfig = config.DEFAULT_SAMPLER) -> NutsFit:
     """Fit every run of a campaign jointly with NUTS (see the module docstring)."""
-    problem = build_problem(campaign, spec, pooling=pooling, noise=noise, robust=robust)
-    init = initial_values(problem, campaign)
-    problem = linearise_run_effects(problem, init)
+    problem, init = prepare_problem(build_problem(campaign, spec, pooling=pooling, noise=noise, robust=robust), campaign)
     map_result = post = None
-    if problem.varying:  # re-linearise each run at its own coefficients (bayes module docstring)
-        first = find_map(problem, {}, posterior=unconstrained_posterior(problem, init))
-        problem = linearise_run_effects(problem, first.constrained, run_effect_means(problem, first.constrained))
-        init = {k: v for k, v in first.constrained.items() if k in init}
     if sampler.precondition == "laplace":
         post = unconstrained_posterior(problem, init)
         map_result = find_map(problem, {}, posterior=post)

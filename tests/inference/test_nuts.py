@@ -114,3 +114,22 @@ def test_nuts_and_least_squares_agree(pooled_fit, small_campaign):
     for k in FREE:
         x = pooled_fit.samples[k].ravel()
         assert abs(g.estimate[k] - x.mean()) < 2.0 * x.std(), (k, g.estimate[k], x.mean(), x.std())
+
+
+def test_gates_fail_on_a_deliberately_bad_configuration(small_campaign):
+    """10 warm-up draws without the Laplace preconditioning (and trees capped at depth 6 to
+    bound the test's cost): the sampler cannot adapt to the AD-BD-CD0 correlation, and the
+    gates say so (R-hat far above 1.01, trees at their limit), with the failure first in the
+    printed table."""
+    from bayes_roadload.inference.nuts import fit_nuts
+    from bayes_roadload.inference.results import format_posterior_table
+
+    bad = config.SamplerConfig(num_warmup=10, num_samples=40, num_chains=2, seed=5, precondition="none",
+                               max_tree_depth=6)
+    fit = fit_nuts(small_campaign, "four_term", sampler=bad)
+    idata = to_inference_data(fit, predictive=False)
+    summary = summary_table(fit, idata)
+    diag = diagnostics(fit, idata, summary)
+    assert not diag["pass"]
+    assert "r_hat" in diag["failed"] and diag["max_r_hat"] > 1.1
+    assert format_posterior_table(summary, diag).startswith("!! NUTS FIT FAILED ITS DIAGNOSTIC GATES")
