@@ -156,10 +156,15 @@ class IntegratorConfig:
         extension: half the sequential steps (the fit's gradient is dominated by them) for a
         change far below the speed noise (the coastdown decelerates on a time scale of
         minutes; measured in ``tests/physics/test_integrate.py``).
+    parallel : bool
+        With ``stride = 2``, solve models whose equation of motion is linear in the speed
+        (``DragModel.speed_affine``: measured air, the thesis' terms) in parallel over time
+        (a prefix scan of the RK4 steps' affine maps) instead of step by step; same result.
     """
 
     substeps: int = 1
     stride: int = 1
+    parallel: bool = True
 
     def __post_init__(self):
         if self.substeps < 1 or self.stride < 1:

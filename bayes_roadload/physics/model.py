@@ -105,6 +105,12 @@ class DragModel:
         return out
 
     @property
+    def speed_affine(self) -> bool:
+        """The equation of motion is linear in the speed: measured relative air and every term
+        ``speed_affine`` (:class:`~bayes_roadload.physics.terms.Term`)."""
+        return isinstance(self.air, MeasuredAir) and all(t.speed_affine for t in self.terms)
+
+    @property
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(self.defaults)
 

@@ -84,11 +84,17 @@ class Term:
     Subclasses set ``name`` (the registry key), ``defaults`` (parameter name -> default value
     in SI units) and implement :meth:`force_n`.  ``uses_accel`` marks terms that depend on
     dv/dt; the model then solves the (affine) implicit equation for the deceleration exactly.
+    ``speed_affine`` marks terms whose force is affine in the vehicle speed once the relative
+    air (airspeed, yaw) and the logged channels are given, and does not depend on the
+    position or distance: with measured air, a model of such terms has a linear equation of
+    motion, which the integrator solves in parallel over time
+    (:func:`~bayes_roadload.physics.integrate.integrate_run`).  Conservative default: False.
     """
 
     name: ClassVar[str] = ""
     defaults: ClassVar[Mapping[str, float]] = {}
     uses_accel: ClassVar[bool] = False
+    speed_affine: ClassVar[bool] = False
     equation: ClassVar[str] = ""
 
     def force_n(self, p: Params, c: Conditions) -> Array:  # pragma: no cover - abstract
@@ -111,6 +117,7 @@ class TyreRolling(Term):
         "BD": 2.0e-4,
         "KT": config.TYRE_TEMPERATURE_COEFF_PER_K,
     }
+    speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "2.38-2.40"
 
     def force_n(self, p: Params, c: Conditions) -> Array:
@@ -125,6 +132,7 @@ class LiftUnloading(Term):
 
     name: ClassVar[str] = "lift_unloading"
     defaults: ClassVar[Mapping[str, float]] = {"CL0": 0.273, "KL": 3.64}
+    speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "2.40, 2.48"
 
     def force_n(self, p: Params, c: Conditions) -> Array:
@@ -140,6 +148,7 @@ class AeroDrag(Term):
 
     name: ClassVar[str] = "aero_drag"
     defaults: ClassVar[Mapping[str, float]] = {"CD0": 0.4, "KD": 0.614}
+    speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "2.26, 2.31"
 
     def force_n(self, p: Params, c: Conditions) -> Array:
@@ -155,6 +164,7 @@ class AeroDragTable(Term):
 
     name: ClassVar[str] = "aero_drag_table"
     defaults: ClassVar[Mapping[str, float]] = {"CD0": 0.4}
+    speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "2.26 with a tabulated C_D(psi)"
     yaw_deg: tuple[float, ...] = tuple(config.THESIS_TUNNEL_TABLE["yaw_deg"])
     cd: tuple[float, ...] = tuple(config.THESIS_TUNNEL_TABLE["cd"])
@@ -182,6 +192,7 @@ class SideForceSlip(Term):
 
     name: ClassVar[str] = "side_force_slip"
     defaults: ClassVar[Mapping[str, float]] = {"KS": 2.4, "Cy": 25_000.0}
+    speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "2.41-2.46"
 
     def force_n(self, p: Params, c: Conditions) -> Array:
@@ -198,6 +209,7 @@ class PitchAttitude(Term):
     name: ClassVar[str] = "pitch_attitude"
     defaults: ClassVar[Mapping[str, float]] = {"Kalpha": 0.9, "pitch_gain": 1100.0 * 0.55 / 60e3}
     uses_accel: ClassVar[bool] = True
+    speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "2.33-2.35"
 
     def force_n(self, p: Params, c: Conditions) -> Array:
@@ -211,6 +223,7 @@ class DrivelineMeasured(Term):
 
     name: ClassVar[str] = "driveline_measured"
     defaults: ClassVar[Mapping[str, float]] = {}
+    speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "5.12"
 
     def force_n(self, p: Params, c: Conditions) -> Array:
@@ -238,6 +251,7 @@ class UndrivenWheels(Term):
 
     name: ClassVar[str] = "undriven_wheels"
     defaults: ClassVar[Mapping[str, float]] = dict(config.THESIS_UNDRIVEN)
+    speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "2.16"
 
     def force_n(self, p: Params, c: Conditions) -> Array:
@@ -252,6 +266,7 @@ class Gradient(Term):
 
     name: ClassVar[str] = "gradient"
     defaults: ClassVar[Mapping[str, float]] = {"grade_rad": 0.0}
+    speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "2.1"
 
     def force_n(self, p: Params, c: Conditions) -> Array:

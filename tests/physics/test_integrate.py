@@ -198,3 +198,35 @@ def test_two_interval_steps_keep_every_input(n_samples):
     two = np.asarray(integrate_run(model, COEF, run, integrator=config.IntegratorConfig(stride=2))[0])
     assert two.shape == one.shape
     assert np.max(np.abs(two - one)) < 5e-5, np.max(np.abs(two - one))
+
+
+def test_linear_equation_of_motion_is_solved_in_parallel_with_the_same_result():
+    """With measured air the thesis' terms (tyres, lift unloading, aero with yaw, side-force
+    slip, pitch attitude, measured driveline, undriven wheels) make the deceleration affine in
+    the speed; the parallel solution (cumulative sums of the RK4 steps' affine maps) equals the
+    step-by-step scan to rounding, for speed and distance, odd and even sample counts, and
+    its gradient too.  A quadratic driveline polynomial is not affine and keeps the scan."""
+    rng = np.random.default_rng(6)
+    model = full_model(driveline="measured", undriven=True)
+    assert model.speed_affine
+    assert not full_model(driveline="polynomial").speed_affine
+    assert not simplified_model(air="still").speed_affine
+    runs = []
+    for n in (301, 300):
+        t = np.arange(n) * 0.25
+        air = 30.0 - 0.08 * t + rng.normal(0, 0.3, n)
+        runs.append(make_run(t, 31.0 - 0.08 * t, airspeed_mps=air, yaw_rad=rng.normal(0.05, 0.05, n),
+                             driveline_force_n=40 + rng.normal(0, 20, n)))
+    batch = stack_runs(runs)
+    seq = config.IntegratorConfig(stride=2, parallel=False)
+    par = config.IntegratorConfig(stride=2, parallel=True)
+    p = dict(COEF, Au=5.0, Bu=0.5)
+    v_seq, s_seq = integrate_batch(model, p, batch, integrator=seq)
+    v_par, s_par = integrate_batch(model, p, batch, integrator=par)
+    np.testing.assert_allclose(v_par, v_seq, rtol=1e-12, atol=1e-11)
+    np.testing.assert_allclose(s_par, s_seq, rtol=1e-11, atol=1e-9)
+
+    def loss(cfg):
+        return lambda c: jnp.sum(integrate_batch(model, dict(p, CD0=c), batch, integrator=cfg)[0] ** 2)
+
+    assert float(jax.grad(loss(par))(0.4)) == pytest.approx(float(jax.grad(loss(seq))(0.4)), rel=1e-10)
