@@ -181,8 +181,16 @@ class SamplerConfig:
     Parameters
     ----------
     num_warmup, num_samples, num_chains : draws per chain and number of chains (run in
-        parallel on the CPU cores when there are enough).
-    target_accept : NUTS target acceptance probability.
+        parallel on the CPU cores when there are enough).  300 warm-up draws suffice after
+        the Laplace preconditioning (measured on 18 pairs: max R-hat 1.009, min bulk ESS 2682
+        against 1.008 / 2142 with 500); 1000 draws per chain keep the max split R-hat over
+        ~80 quantities below 1.01 (with 500 it reached 1.017-1.02 on the same fit).
+    target_accept : NUTS target acceptance probability.  0.8 (numpyro's and Stan's default):
+        on 18 pairs 10.5 leapfrog steps per draw against 14.8 at 0.9, both without
+        divergences; the demo (6 pairs) passes every gate with 0 divergences.  Campaigns of one
+        or two pairs barely identify the integrated noise q and may diverge where q is small:
+        the divergence gate then fails and the CLI prints the remedy (``--target-accept
+        0.95``, what the tests use for two pairs).
     max_tree_depth : NUTS tree-depth limit (2^depth - 1 leapfrog steps).
     precondition : "laplace" (default) runs NUTS on coordinates whitened by the Laplace
         covariance at the MAP, chains starting from Laplace draws; "none" is numpyro's default
@@ -199,10 +207,10 @@ class SamplerConfig:
     progress_bar : show numpyro's progress bar.
     """
 
-    num_warmup: int = 500
+    num_warmup: int = 300
     num_samples: int = 1000
     num_chains: int = 2
-    target_accept: float = 0.9
+    target_accept: float = 0.8
     max_tree_depth: int = 10
     precondition: str = "laplace"
     mass_matrix: str = "auto"

@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from bayes_roadload import config
 from bayes_roadload.cli import main
 from bayes_roadload.data import load_campaign
 
@@ -100,7 +101,8 @@ def test_sampler_options_reach_the_sampler():
                                       "--no-precondition"])
     s = _sampler(args)
     assert (s.target_accept, s.num_samples, s.precondition) == (0.95, 50, "none")
-    assert _sampler(build_parser().parse_args(["fit", "campaign", "--out", "o"])).target_accept == 0.9
+    assert _sampler(build_parser().parse_args(["fit", "campaign", "--out", "o"])).target_accept == \
+        config.DEFAULT_SAMPLER.target_accept
 
 
 def test_fit_hierarchical_writes_tau_rows_and_run_rows(campaign_dir, tmp_path, capsys):
