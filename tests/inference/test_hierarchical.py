@@ -10,7 +10,6 @@ import warnings
 import numpy as np
 import pytest
 
-from bayes_roadload import config
 from bayes_roadload.inference.nuts import fit_nuts
 from bayes_roadload.inference.results import diagnostics, run_table, summary_table, to_inference_data
 from bayes_roadload.simulate import SimulationSettings, simulate_campaign
