@@ -21,7 +21,7 @@ The drag model, which parameters are free, fixed or given priors, come from a mo
     coefficients that made centred and non-centred sampling of 3 x R extra unknowns
     impractically slow is gone.  ``AD_run`` etc. are drawn afterwards from their exact
     conditional posterior given each draw (:func:`draw_run_effects`).  The references are
-    found by one re-linearisation (:func:`~bayes_roadload.inference.nuts.fit_nuts`): first
+    found by one re-linearisation (:func:`~bayes_roadload.inference.nuts.prepare_problem`): first
     ``d_r = 0`` around the joint least-squares fit, then ``d_r`` = the run effects'
     conditional means at the MAP (:func:`run_effect_means`), so the expansion error is second
     order in a run's posterior uncertainty, not in its offset from the mean (measured: with
@@ -98,7 +98,6 @@ class FitProblem:
         varying coefficients, at each run's reference coefficients (:func:`linearise_run_effects`).
     run_offsets : hierarchical only: [R, k] each run's reference offset from the population
         values (zero at first, then the run effects' conditional means at the MAP).
-    reference : the population values ``run_jacobian`` was evaluated around.
     """
 
     spec: ModelSpec
@@ -118,7 +117,6 @@ class FitProblem:
     gradients: str = "forward"
     run_jacobian: Any = None
     run_offsets: Any = None
-    reference: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n_runs(self) -> int:
@@ -266,20 +264,21 @@ def linearise_run_effects(problem: FitProblem, reference: dict[str, Any], offset
         tangent = {n: jnp.full(r, 1.0 if n == name else 0.0) for n in base}
         cols.append(jax.jvp(speeds, (base,), (tangent,))[1])
     jac = np.where(np.asarray(problem.batch.mask)[..., None], np.stack([np.asarray(c) for c in cols], axis=-1), 0.0)
-    ref = {n: float(reference[n]) for n in problem.free}
-    ref["v0_mps"] = np.asarray(v0)
-    return dataclasses.replace(problem, run_jacobian=jac, run_offsets=offsets, reference=ref)
+    return dataclasses.replace(problem, run_jacobian=jac, run_offsets=offsets)
+
+
+def _effects_posterior(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Conditional posterior mean [R, k] and covariance [R, k, k] of the run effects at one draw."""
+    b = problem.batch
+    return local_level_effects_posterior(effect_residuals(problem, sample), b.time_s, b.mask, sample["sigma_mps"],
+                                         sample.get("q_mps_per_sqrt_s", jnp.zeros(())), _design(problem),
+                                         _effect_var(problem, sample))
 
 
 def run_effect_means(problem: FitProblem, sample: dict[str, Any]) -> np.ndarray:
     """[R, k] conditional posterior means of the run effects delta_r at one parameter point
     (e.g. the MAP): where to re-linearise each run."""
-    sample = {k: jnp.asarray(v) for k, v in sample.items()}
-    b = problem.batch
-    mean, _ = local_level_effects_posterior(effect_residuals(problem, sample), b.time_s, b.mask, sample["sigma_mps"],
-                                            sample.get("q_mps_per_sqrt_s", jnp.zeros(())), _design(problem),
-                                            _effect_var(problem, sample))
-    return np.asarray(mean)
+    return np.asarray(_effects_posterior(problem, {k: jnp.asarray(v) for k, v in sample.items()})[0])
 
 
 def draw_run_effects(problem: FitProblem, samples: dict[str, np.ndarray], seed: int = 0,
@@ -290,18 +289,12 @@ def draw_run_effects(problem: FitProblem, samples: dict[str, np.ndarray], seed: 
     if not problem.varying:
         return {}
     shape = np.shape(samples[problem.free[0]])[:2]
-    flat = {k: jnp.asarray(np.reshape(v, (-1,) + np.shape(v)[2:])) for k, v in samples.items()
-            if not (k.endswith("_run") and k[:-4] in problem.varying)}
-    b = problem.batch
-    design = _design(problem)
+    flat = {k: jnp.asarray(np.reshape(v, (-1,) + np.shape(v)[2:])) for k, v in population_sample(problem, samples).items()}
     keys = jax.random.split(jax.random.PRNGKey(seed), int(np.prod(shape)))
 
     def one(args):
         sample, key = args
-        resid = effect_residuals(problem, sample)
-        q = sample.get("q_mps_per_sqrt_s", jnp.zeros(()))
-        mean, cov = local_level_effects_posterior(resid, b.time_s, b.mask, sample["sigma_mps"], q, design,
-                                                  _effect_var(problem, sample))
+        mean, cov = _effects_posterior(problem, sample)
         k = len(problem.varying)
         chol = jnp.linalg.cholesky(cov + 1e-30 * jnp.eye(k))
         delta = mean + jnp.einsum("rkl,rl->rk", chol, jax.random.normal(key, mean.shape))

@@ -113,14 +113,8 @@ def to_inference_data(fit: NutsFit, *, predictive: bool = True) -> az.InferenceD
     p = fit.problem
     runs = [str(r) for r in p.run_ids]
     n = p.batch.time_s.shape[1]
-    posterior = {}
-    dims = {}
-    for k, v in fit.samples.items():
-        if k.endswith("_z"):
-            continue  # non-centred auxiliaries: their transforms are in the posterior
-        posterior[k] = v
-        if v.ndim == 3 and v.shape[2] == p.n_runs:
-            dims[k] = ["run"]
+    posterior = dict(fit.samples)
+    dims = {k: ["run"] for k, v in posterior.items() if v.ndim == 3 and v.shape[2] == p.n_runs}
     posterior.update(derived_quantities(fit))
     mask = np.asarray(p.batch.mask)
     observed = {"speed_mps": np.where(mask, np.asarray(p.batch.speed_mps), np.nan)}
