@@ -120,17 +120,17 @@ def stride2_schedule(time_s, inputs) -> tuple:
 
 
 def _inputs(run: RunBatch):
-    return jnp.stack([jnp.asarray(getattr(run, ch)) for ch in _CHANNELS], axis=-1)
+    """The input channels stacked on a last axis ([..., N, C]); with numpy when they are
+    concrete, so that data-only work on them is done once per trace."""
+    channels = [getattr(run, ch) for ch in _CHANNELS]
+    if any(isinstance(x, jax.core.Tracer) for x in channels):
+        return jnp.stack([jnp.asarray(x) for x in channels], axis=-1)
+    return np.stack([np.asarray(x) for x in channels], axis=-1)
 
 
 def _schedule_of(batch: RunBatch, integrator: config.IntegratorConfig):
     """The stride-2 schedule of a batch (computed once, outside any vmap), else None."""
-    if integrator.stride != 2:
-        return None
-    fields = [batch.time_s] + [getattr(batch, ch) for ch in _CHANNELS]
-    if any(isinstance(x, jax.core.Tracer) for x in fields):
-        return stride2_schedule(batch.time_s, _inputs(batch))
-    return stride2_schedule(np.asarray(batch.time_s), np.stack([np.asarray(x) for x in fields[1:]], axis=-1))
+    return stride2_schedule(batch.time_s, _inputs(batch)) if integrator.stride == 2 else None
 
 
 def integrate_run(
@@ -159,7 +159,7 @@ def integrate_run(
     """
     p = model.complete(params)
     v0 = run.speed_mps[0] if v0_mps is None else jnp.asarray(v0_mps, dtype=float)
-    u = jnp.stack([getattr(run, ch) for ch in _CHANNELS], axis=-1)  # [N, C]
+    u = _inputs(run)  # [N, C]
     m, stride = integrator.substeps, integrator.stride
     if stride not in (1, 2) or (stride == 2 and m != 1):
         raise ValueError(f"stride must be 1, or 2 with substeps = 1 (got stride {stride}, substeps {m})")

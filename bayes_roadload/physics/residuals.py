@@ -103,23 +103,6 @@ def local_level_smooth(residual: Array, time_s: Array, mask: Array, sigma: Array
     return jnp.concatenate([ms, mf[-1:]]), jnp.concatenate([ps, pf[-1:]])
 
 
-def local_level_logdet(time_s: Array, mask: Array, var_e: Array, q2: Array) -> Array:
-    """log det of one run's residual covariance ``var_e I + q2 K`` (K the integrated-noise
-    kernel), from the innovation variances of the Kalman filter (they do not depend on the
-    data).  Masked samples add nothing."""
-    dt = jnp.diff(time_s, prepend=time_s[:1])
-
-    def step(p, xs):
-        h, ok = xs
-        p_pred = p + q2 * h
-        s = p_pred + var_e
-        p_new = jnp.where(ok, p_pred * var_e / s, p)
-        return p_new, jnp.where(ok, jnp.log(s), 0.0)
-
-    _, logs = jax.lax.scan(step, jnp.zeros((), dtype=time_s.dtype), (dt, mask))
-    return logs.sum()
-
-
 def uniform_grid(time_s, mask) -> tuple | None:
     """(step [R], samples [R]) when every run's real samples are equally spaced (to 1e-9
     relative) and the data are concrete; else None."""
@@ -142,7 +125,8 @@ def uniform_grid(time_s, mask) -> tuple | None:
 
 
 def local_level_logdet_uniform(step_s, n_samples, var_e, q2):
-    """Closed form of :func:`local_level_logdet` on an equally spaced grid.
+    """Closed form, on an equally spaced grid, of the log determinant of a run's residual
+    covariance ``var_e I + q2 K`` (the Kalman variance recursion of :func:`_logdet_and_grad`).
 
     In units of var_e the filtered variance follows x -> (x + rho) / (x + rho + 1),
     rho = q2 h / var_e: a Moebius map of matrix [[1, rho], [1, 1 + rho]] (determinant 1,
@@ -166,9 +150,11 @@ def local_level_logdet_uniform(step_s, n_samples, var_e, q2):
 
 
 def _logdet_and_grad(time_s, mask, var_e, q2):
-    """[R] log det of each run's residual covariance and its derivatives with respect to
-    var_e ([R]) and q2 (shared): the variance recursion of :func:`local_level_logdet` with its
-    two tangents carried forward by hand, all runs at once (one pass, no backward pass)."""
+    """[R] log det of each run's residual covariance ``var_e I + q2 K`` (K the integrated-noise
+    kernel) and its derivatives with respect to var_e ([R]) and q2 (shared): the sum of the
+    log innovation variances of the Kalman filter (they do not depend on the data; masked
+    samples add nothing), with the two tangents carried forward by hand, all runs at once
+    (one pass, no backward pass)."""
     dt = jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
 
     def step(carry, xs):
@@ -225,6 +211,12 @@ def tridiagonal_solve(lower: Array, diag: Array, upper: Array, rhs: Array) -> Ar
     return jnp.swapaxes(x, 0, 1)
 
 
+def _difference(x: Array, mask: Array) -> Array:
+    """D x along the samples (axis 1: x_0, x_1 - x_0, ...), zero on padding."""
+    prev = jnp.concatenate([jnp.zeros_like(x[:, :1]), x[:, :-1]], axis=1)
+    return jnp.where(mask.reshape(mask.shape + (1,) * (x.ndim - 2)), x - prev, 0.0)
+
+
 def _tridiagonal(time_s, mask, var_e, q2):
     """Covariance of the differenced residuals (r_0, r_1 - r_0, ...): tridiagonal, with
     identity rows on padded samples."""
@@ -250,7 +242,7 @@ def _batch_loglik(residual, time_s, mask, var_e, q2, grid):
         return f(h, n, ve, qq)
 
     def fwd(residual, var_e, q2):
-        y = jnp.where(mask, jnp.diff(residual, axis=-1, prepend=jnp.zeros_like(residual[:, :1])), 0.0)
+        y = _difference(residual, mask)
         lower, diag, upper = _tridiagonal(time_s, mask, var_e, q2)
         w = tridiagonal_solve(lower, diag, upper, y[..., None])[..., 0]   # T^-1 D r
         alpha = jnp.where(mask, w - jnp.concatenate([w[:, 1:], jnp.zeros_like(w[:, :1])], axis=1), 0.0)  # D^T T^-1 D r
@@ -278,11 +270,11 @@ def local_level_loglik_batch(residual: Array, time_s: Array, mask: Array, sigma:
 
     The differenced residuals ``(r_0, r_1 - r_0, ...)`` have a tridiagonal covariance ``T``
     (white noise differenced plus the independent increments ``q^2 dt`` of the integrated
-    error), so the quadratic form is one banded solve (LAPACK), and its reverse-mode gradient
+    error), so the quadratic form is one banded solve (:func:`tridiagonal_solve`), and its reverse-mode gradient
     is closed-form: d/dr = -Sigma^-1 r, d/dsigma^2 = (-tr Sigma^-1 + |Sigma^-1 r|^2) / 2,
     d/dq^2 = (-tr(Sigma^-1 K) + sum_k dt_k (sum_{j>=k} (Sigma^-1 r)_j)^2) / 2; the log
     determinant and its derivatives come from the data-free Kalman variance recursion
-    (:func:`local_level_logdet`), in closed form when the grid is equally spaced
+    (:func:`_logdet_and_grad`), in closed form when the grid is equally spaced
     (:func:`local_level_logdet_uniform`).  ``mask`` must mark a prefix of each row (padding
     at the end, as :func:`~bayes_roadload.physics.integrate.stack_runs` builds it).
     """
@@ -299,15 +291,10 @@ def _effect_terms(residual, time_s, mask, sigma, q, design):
     time_s, mask = jnp.asarray(time_s, residual.dtype), jnp.asarray(mask, bool)
     lower, diag, upper = _tridiagonal(time_s, mask, sigma**2, jnp.asarray(q, residual.dtype) ** 2)
 
-    def diff(x):  # D x along the samples, zero on padding
-        prev = jnp.concatenate([jnp.zeros_like(x[:, :1]), x[:, :-1]], axis=1)
-        m = mask.reshape(mask.shape + (1,) * (x.ndim - 2))
-        return jnp.where(m, x - prev, 0.0)
-
-    dj = diff(jnp.asarray(design, residual.dtype))                         # [R, N, k]
-    w = tridiagonal_solve(lower, diag, upper, dj)           # T^-1 D J
+    dj = _difference(jnp.asarray(design, residual.dtype), mask)            # [R, N, k]
+    w = tridiagonal_solve(lower, diag, upper, dj)                          # T^-1 D J
     g = jnp.einsum("rnk,rnl->rkl", dj, w)
-    b = jnp.einsum("rnk,rn->rk", w, diff(residual))
+    b = jnp.einsum("rnk,rn->rk", w, _difference(residual, mask))
     return g, b
 
 
