@@ -133,3 +133,14 @@ def test_gates_fail_on_a_deliberately_bad_configuration(small_campaign):
     assert not diag["pass"]
     assert "r_hat" in diag["failed"] and diag["max_r_hat"] > 1.1
     assert format_posterior_table(summary, diag).startswith("!! NUTS FIT FAILED ITS DIAGNOSTIC GATES")
+
+
+def test_one_program_keeps_only_the_post_warmup_draws(pooled_fit):
+    """Warm-up and sampling run as one compiled program: the fit keeps exactly num_samples draws
+    per chain (the warm-up draws, collected to split the time, are dropped) and both phase
+    times are positive."""
+    s = pooled_fit.sampler
+    for k in FREE:
+        assert pooled_fit.samples[k].shape[:2] == (s.num_chains, s.num_samples)
+    assert pooled_fit.stats["num_steps"].shape == (s.num_chains, s.num_samples)
+    assert pooled_fit.timings["warmup_s"] > 0 and pooled_fit.timings["sampling_s"] > 0
