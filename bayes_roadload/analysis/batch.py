@@ -197,6 +197,8 @@ def _interval_fields(name: str, draws: np.ndarray, truth: float | None,
     out.update({f"{name}_{quantile_key(q)}": float(v) for q, v in zip(qs, values)})
     t = math.nan if truth is None else float(truth)
     out[f"{name}_truth"] = t
+    # SBC rank: how many draws fall below the truth (of out["rank_draws"] draws)
+    out[f"{name}_rank"] = int(np.count_nonzero(x < t)) if math.isfinite(t) else None
     for lv in levels:
         lo, hi = out[f"{name}_{quantile_key((1.0 - lv) / 2.0)}"], out[f"{name}_{quantile_key((1.0 + lv) / 2.0)}"]
         out[f"{name}_{interval_key(lv)}"] = bool(lo <= t <= hi) if math.isfinite(t) else None
@@ -212,7 +214,8 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
     summary = summary_table(fit, idata)
     diag = diagnostics(fit, idata, summary)
     rows = summary.set_index("parameter")
-    rec: dict[str, Any] = {"parameters": ",".join(problem.free)}
+    rec: dict[str, Any] = {"parameters": ",".join(problem.free),
+                           "rank_draws": int(np.asarray(fit.samples[problem.free[0]]).size)}
     for name in problem.free:
         t = truth.get(name)
         rec.update(_interval_fields(name, fit.samples[name], t if isinstance(t, (int, float)) else None,
@@ -260,12 +263,15 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
 
         * job fields: ``name, model, pooling, noise, robust, num_warmup, num_samples,
           num_chains, target_accept`` and the ``tags``;
-        * campaign: ``n_runs, n_samples`` (real samples), and ``case, seed, pairs`` from the
-          campaign's meta when it has them; ``parameters`` (the free ones, comma-separated);
+        * campaign: ``n_runs, n_samples`` (real samples), and ``case, seed, pairs,
+          prior_draws, effective_mass_factor`` from the campaign's meta when it has them; ``parameters`` (the free ones, comma-separated);
+        * ``mean_abs_yaw_rad``: mean |logged yaw| over all samples (when logged);
         * for every free parameter ``P`` and for ``F50_N``: ``P_mean, P_sd``, quantiles
           ``P_q50`` and ``P_q{lower}``, ``P_q{upper}`` of every level (``P_q2.5``,
-          ``P_q97.5`` for 95 %), ``P_truth`` (NaN when unknown) and ``P_in{level}`` (True /
-          False / None); ``P_r_hat, P_ess_bulk`` for the free parameters;
+          ``P_q97.5`` for 95 %), ``P_truth`` (NaN when unknown), ``P_in{level}`` (True /
+          False / None) and ``P_rank``, the number of posterior draws below the truth (None
+          when unknown; out of ``rank_draws``, all chains' draws: the rank statistic of
+          simulation-based calibration); ``P_r_hat, P_ess_bulk`` for the free parameters;
         * noise: ``sigma_mps_mean`` and, when sampled, ``q_mps_per_sqrt_s_mean`` / ``_q50``;
         * gates: ``gate_pass, gates_failed, divergences, max_r_hat, min_ess_bulk,
           min_ess_tail, mean_tree_depth, map_converged``;
@@ -292,7 +298,9 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
             rec["time_simulate_s"] = time.perf_counter() - t0
             rec["n_runs"] = len(campaign.run_ids)
             rec["n_samples"] = int(len(campaign.runs))
-            for key in ("case", "seed", "pairs"):
+            if "yaw_rad" in campaign.runs:
+                rec["mean_abs_yaw_rad"] = float(np.abs(campaign.runs["yaw_rad"].to_numpy(float)).mean())
+            for key in ("case", "seed", "pairs", "prior_draws", "effective_mass_factor"):
                 if key in campaign.meta and key not in rec:
                     rec[key] = campaign.meta[key]
             t0 = time.perf_counter()
