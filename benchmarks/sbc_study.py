@@ -25,6 +25,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import pandas as pd
+
 from bayes_roadload.analysis.batch import run_batch
 from bayes_roadload.analysis.sbc import SBC_SAMPLER, sbc_jobs, sbc_markdown, sbc_tests
 
@@ -48,9 +50,20 @@ def main(argv=None) -> int:
     jobs = (sbc_jobs(args.campaigns, seed0=args.seed0, pairs=args.pairs, sampler=sampler)
             + sbc_jobs(args.control, seed0=args.seed0 + 10_000, pairs=args.pairs, sampler=sampler,
                        control_factor=args.mass_factor))
+    if args.control:  # interleave the arms, so that a study cut short still has both
+        step = max(args.campaigns // args.control, 1)
+        cal, ctl = jobs[:args.campaigns], jobs[args.campaigns:]
+        jobs = []
+        for i in range(0, max(len(cal), step * len(ctl)), step):
+            jobs += cal[i:i + step] + ctl[i // step:i // step + 1]
     t0 = time.perf_counter()
+    args.records.parent.mkdir(parents=True, exist_ok=True)
+    partial = args.records.with_suffix(".partial.csv")
+    done: list[dict] = []
 
     def progress(rec):
+        done.append(rec)
+        pd.DataFrame.from_records(done).to_csv(partial, index=False)  # survives an interrupted study
         print(f"{rec['name']}: {rec.get('error') or 'ok'} gates={'pass' if rec.get('gate_pass') else 'FAIL'} "
               f"{rec['time_total_s']:.0f} s", file=sys.stderr, flush=True)
 
@@ -60,8 +73,8 @@ def main(argv=None) -> int:
     else:
         records = run_batch(jobs, on_record=progress)
     wall = time.perf_counter() - t0
-    args.records.parent.mkdir(parents=True, exist_ok=True)
     records.to_csv(args.records, index=False)
+    partial.unlink(missing_ok=True)
     tests = sbc_tests(records)
     print(sbc_markdown(records, tests), file=sys.stderr)
     ok = records[records["error"].isna()]

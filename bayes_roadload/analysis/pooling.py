@@ -111,10 +111,11 @@ def pooling_jobs(seeds: Sequence[int], pairs_per_case: Sequence[int] = (1, 4), m
 
 
 def per_pair_fits(seeds: Sequence[int], pairs_per_case: int = 1, model: str = "four_term",
-                  executor: Any | None = None) -> pd.DataFrame:
-    """The classical per-pair least-squares fits of the same campaigns: one row per pair with
-    its estimates and standard errors (``P``, ``P_se``), the campaign seed and the case."""
-    jobs = [(s, pairs_per_case, model) for s in seeds]
+                  executor: Any | None = None, cases: Sequence[int] = COMBINED_CASES) -> pd.DataFrame:
+    """The classical per-pair least-squares fits of the same campaigns
+    (:func:`combined_cases`): one row per pair with its estimates and standard errors (``P``,
+    ``P_se``), the campaign seed and the case."""
+    jobs = [(s, pairs_per_case, model, tuple(cases)) for s in seeds]
     frames = list(map(_per_pair_one, jobs) if executor is None else executor.map(_per_pair_one, jobs))
     return pd.concat(frames, ignore_index=True)
 
@@ -122,8 +123,8 @@ def per_pair_fits(seeds: Sequence[int], pairs_per_case: int = 1, model: str = "f
 def _per_pair_one(job: tuple) -> pd.DataFrame:
     from ..inference.lsq import fit_lsq
 
-    seed, k, model = job
-    campaign = combined_cases(seed, k)()
+    seed, k, model, cases = job
+    campaign = combined_cases(seed, k, cases)()
     res = fit_lsq(campaign, model, grouping="pair")
     pair_case = {}
     cases = campaign.meta["cases"]

@@ -76,6 +76,10 @@ def test_record_keys_and_values(batch):
     # the 1-pair posterior is tight: the truth is well inside +-10 sd of the mean (a loose check
     # that the record is about this fit, not a statistical test)
     assert abs(good["CD0_mean"] - good["CD0_truth"]) < 10 * good["CD0_sd"]
+    # SBC ranks are out of every post-warm-up draw; mean |yaw| is the logged channel's
+    assert good["rank_draws"] == TINY_SAMPLER.num_chains * TINY_SAMPLER.num_samples
+    assert 0 <= good["CD0_rank"] <= good["rank_draws"]
+    assert 0.0 < good["mean_abs_yaw_rad"] < 0.5
 
 
 def test_error_is_captured(batch):
@@ -105,6 +109,9 @@ def test_interval_fields_normal_draws():
     assert out["X_q75"] == pytest.approx(0.674, abs=0.03)
     assert (out["X_in50"], out["X_in90"], out["X_in95"]) == (False, False, True)
     assert _interval_fields("X", x, None, (0.95,))["X_in95"] is None
+    # the SBC rank: draws below the truth (Phi(1.8) = 0.964 of them, binomial sd 0.0004 n)
+    assert out["X_rank"] == pytest.approx(0.9641 * x.size, abs=0.002 * x.size)
+    assert _interval_fields("X", x, None, (0.95,))["X_rank"] is None
 
 
 def test_coverage_summary_counts():
