@@ -258,7 +258,15 @@ NOISE_PRIORS = {
     "q_mps_per_sqrt_s": 0.005,  # mean of the Gamma(2) prior of the integrated (process) noise
     "v0_scale_mps": 0.5,       # normal scale of each run's initial speed around its first sample
     "student_df_rate": 0.1,    # Gamma(2, rate) prior of the Student-t degrees of freedom
+    "airspeed_calibration_sd": 0.01,  # mean of the Gamma(2) prior of s_cal (see below)
 }
+"""``airspeed_calibration_sd`` (s_cal, dimensionless): scatter of one opposite-direction pair's
+calibration ratio r_k about the true airspeed factor, when a model file frees
+``airspeed_factor`` (:func:`bayes_roadload.inference.bayes.airspeed_pair_ratios`).  Gamma(2)
+with mean 0.01 (sd 0.007; vanishes at 0, so few pairs do not leave a funnel at s_cal -> 0):
+measured 0.0078 per pair over 100 simulated pairs at 2 m/s head and cross wind (the
+turbulence that does not average out over a run), and the thesis' track groups of 3 pairs
+scattered by 0.0063 (table 4.1), ~0.011 per pair."""
 TAU_PRIOR_SCALES = {"AD": 1.0e-3, "BD": 5.0e-5, "CD0": 0.02}
 """Prior means of the run-to-run spreads tau of the hierarchical model, Gamma(2) priors (10 %,
 25 %, 5 % of typical values: the thesis' track spreads were 4.3 %, 23.1 %, 4.3 %)."""

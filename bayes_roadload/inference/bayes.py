@@ -41,12 +41,47 @@ priors (:data:`bayes_roadload.config.NOISE_PRIORS`, ``TAU_PRIOR_SCALES``): ``sig
 normal(0.1 m/s); ``v0_mps`` normal(first sample, 0.5 m/s); ``q_mps_per_sqrt_s`` Gamma(2) with
 mean 0.005 m/s/sqrt(s) (vanishes at 0: inputs are never noise-free, and a boundary-avoiding
 prior removes the funnel at q -> 0, Chung et al. 2013); ``tau_*`` Gamma(2) with means 10 %,
-25 %, 5 % of typical AD, BD, CD0 (likewise boundary-avoiding); ``student_df`` Gamma(2, 0.1).
+25 %, 5 % of typical AD, BD, CD0 (likewise boundary-avoiding); ``student_df`` Gamma(2, 0.1);
+``airspeed_calibration_sd`` Gamma(2) with mean 0.01 (below).
+
+Anemometer calibration (thesis section 4.7.3)
+---------------------------------------------
+When a model file frees ``airspeed_factor`` (true airspeed = factor x reading,
+``models/*_calibrated.toml``) the speed traces alone hardly identify it: the aerodynamic force
+goes as C_D0 (factor x reading)^2, so C_D0 and factor^2 trade (a 1 % error in the factor is a
+2 % error in C_D0 and K_D, thesis 6.6).  The model then adds the thesis' track calibration from
+the opposite-direction pairs (the campaign's ``pair`` column; runs without a partner contribute
+nothing): for pair k the ratio :func:`airspeed_pair_ratios`
+
+    r_k = [mean_+(v) + mean_-(v)] / [mean_+(a cos(yaw_factor psi)) + mean_-(a cos(yaw_factor psi))]
+
+(``v`` ground speed, ``a`` airspeed reading, ``psi`` yaw reading, ``mean_+/-`` over each run's
+samples) is observed as ``r_k ~ Normal(airspeed_factor, airspeed_calibration_sd)``.  The along-
+track component of the relative air is v + d w_a (d the direction, w_a the along-track wind),
+so the along-track wind cancels between the directions and r_k estimates the factor; the
+turbulence that does not average out over a run makes the scatter ``airspeed_calibration_sd``,
+a nuisance with a Gamma(2) prior of mean ``config.NOISE_PRIORS["airspeed_calibration_sd"]``
+(0.01: measured 0.0078 per pair on simulated campaigns at 2 m/s head and cross wind, and the
+thesis' table 4.1 spread of 0.0063 over groups of 3 pairs is ~0.011 per pair; with few pairs the
+prior matters, and vanishing at 0 it leaves no funnel there).  Estimated with the coefficients,
+the posterior of the factor and C_D0 carries the calibration's uncertainty.  Measured over 100
+simulated pairs (25 seeds x 4 pairs, 2 m/s head and cross wind with Dryden turbulence),
+r_k / factor: 1.0004 +- 0.0008 (standard error) on the clean campaign of ``tests/conftest.py``,
+0.9987 +- 0.0008 on case 15 (cup and vane dynamics: the cup lags the decelerating airspeed and
+reads high).  Two alternatives are biased, and were not taken: the plain ratio of mean ground
+speed to mean airspeed reading (the thesis' formula, whose mean yaw cancels on the track) reads
+v_r = sqrt((v + d w_a)^2 + w_c^2) > v + d w_a under cross wind: 0.9866 (clean), 0.9850 (case
+15); and means pooled over the pair's samples weight the longer (tail-wind) run more, so the
+along-track wind no longer cancels: 1.0136, 1.0119.  When
+``yaw_factor`` is free too its draw enters the cosine.  Robust (Student-t) noise applies to
+the speed innovations only; the calibration stays Gaussian.  Hierarchical pooling keeps one
+factor for every run (it is the instrument's, not the run's).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -98,6 +133,10 @@ class FitProblem:
         varying coefficients, at each run's reference coefficients (:func:`linearise_run_effects`).
     run_offsets : hierarchical only: [R, k] each run's reference offset from the population
         values (zero at first, then the run effects' conditional means at the MAP).
+    calibration_pairs : ((i, j), ...) batch indices of the opposite-direction pairs whose
+        airspeed ratios calibrate a free ``airspeed_factor`` (:func:`airspeed_pair_ratios`);
+        empty when the factor is fixed.  ``initial`` then also holds a start for
+        ``airspeed_calibration_sd``.
     """
 
     spec: ModelSpec
@@ -117,10 +156,16 @@ class FitProblem:
     gradients: str = "forward"
     run_jacobian: Any = None
     run_offsets: Any = None
+    calibration_pairs: tuple[tuple[int, int], ...] = ()
 
     @property
     def n_runs(self) -> int:
         return len(self.run_ids)
+
+    @property
+    def calibrated(self) -> bool:
+        """The free ``airspeed_factor`` is calibrated by paired-run airspeed ratios."""
+        return "airspeed_factor" in self.free and len(self.calibration_pairs) > 0
 
     @property
     def varying(self) -> tuple[str, ...]:
@@ -146,9 +191,81 @@ def measured_driveline_curve(campaign: Campaign) -> tuple[float, float, float]:
     return (float(c2), float(c1), float(c0))
 
 
+def calibration_pairs(campaign: Campaign, run_ids=None) -> tuple[tuple[int, int], ...]:
+    """Opposite-direction pairs for the airspeed calibration, as indices into ``run_ids``.
+
+    Pairs come from the campaign's ``pair`` column (two runs sharing a pair id); without that
+    column there are none (consecutive runs are not assumed to be opposite).  When the
+    ``direction`` column is logged a pair whose two runs do not have opposite directions is
+    left out with a warning (its wind would not cancel).  A run without a partner is in no pair.
+
+    Parameters
+    ----------
+    campaign : the campaign.
+    run_ids : run ids in batch order (default: ``campaign.run_ids``, the order of
+        :meth:`~bayes_roadload.data.Campaign.to_batch`).
+
+    Returns
+    -------
+    tuple of (int, int)
+        Batch indices of the two runs of each pair.
+    """
+    if "pair" not in campaign.runs:
+        return ()
+    index = {r: i for i, r in enumerate(campaign.run_ids if run_ids is None else run_ids)}
+    directions = campaign.directions()
+    pairs = []
+    for a, b in campaign.pairs():
+        if a not in index or b not in index:
+            continue
+        if "direction" in campaign.runs and directions[a] == directions[b]:
+            warnings.warn(f"runs {a!r} and {b!r} share a pair id but not opposite directions: left out of "
+                          "the airspeed calibration", RuntimeWarning, stacklevel=2)
+            continue
+        pairs.append((index[a], index[b]))
+    return tuple(pairs)
+
+
+def airspeed_pair_ratios(batch: RunBatch, pairs, yaw_factor: Any = 1.0) -> jnp.ndarray:
+    """[K] calibration ratios of the airspeed factor, one per opposite-direction pair.
+
+    ``r_k = [mean_i(v) + mean_j(v)] / [mean_i(a cos(yaw_factor psi)) + mean_j(a cos(yaw_factor psi))]``
+    for the pair's runs i, j: ground speed ``v`` (``speed_mps``), airspeed reading ``a``
+    (``airspeed_mps``), yaw reading ``psi`` (``yaw_rad``), means over each run's real samples.
+    True airspeed times cos(true yaw) is the along-track relative air v + d w_a, so with
+    true = factor x reading the along-track wind (+ for one run, - for the other) cancels in
+    the sum and r_k estimates the factor (thesis section 4.7.3, with the cosine: see the
+    module docstring for why neither the plain airspeed ratio nor sample-pooled means).
+
+    Parameters
+    ----------
+    batch : the padded runs (:meth:`~bayes_roadload.data.Campaign.to_batch`).
+    pairs : sequence of (i, j) batch indices (:func:`calibration_pairs`).
+    yaw_factor : true yaw = yaw_factor x yaw reading (a number or a traced value).
+
+    Returns
+    -------
+    jnp.ndarray
+        [K] ratios (dimensionless); empty for no pairs.
+    """
+    idx = jnp.asarray(np.asarray(pairs, dtype=int).reshape(-1, 2))
+    mask = jnp.asarray(batch.mask, float)
+    n = mask.sum(axis=1)
+    along = jnp.asarray(batch.airspeed_mps) * jnp.cos(yaw_factor * jnp.asarray(batch.yaw_rad))
+    mean_v = (jnp.asarray(batch.speed_mps) * mask).sum(axis=1) / n
+    mean_a = (along * mask).sum(axis=1) / n
+    return mean_v[idx].sum(axis=1) / mean_a[idx].sum(axis=1)
+
+
 def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling: str = "pooled",
                   noise: str = "integrated", robust: bool = False) -> FitProblem:
-    """Resolve a model variant against a campaign."""
+    """Resolve a model variant against a campaign.
+
+    A free ``airspeed_factor`` needs the measured relative air (refused otherwise, with the
+    reason) and is calibrated by the campaign's opposite-direction pairs
+    (:func:`calibration_pairs`, module docstring); without any pair a warning says that only
+    the coastdown dynamics and the prior then inform it.
+    """
     if pooling not in POOLINGS:
         raise ValueError(f"pooling must be one of {POOLINGS}, not {pooling!r}")
     if noise not in NOISE_MODELS:
@@ -157,15 +274,30 @@ def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, po
         raise ValueError("the hierarchical model integrates the run effects out with a Gaussian likelihood: "
                          "it cannot be combined with robust (Student-t) noise; use --pooling pooled --robust")
     spec = load_model_spec(spec) if isinstance(spec, str) else spec
+    if "airspeed_factor" in spec.free and spec.resolve_air(campaign) != "measured":
+        raise ValueError(f"model {spec.name!r} frees airspeed_factor (true airspeed = factor x reading), but "
+                         f"the relative air resolves to {spec.resolve_air(campaign)!r}: the campaign must log "
+                         "airspeed_mps and yaw_rad (and the model file use air = \"auto\" or \"measured\")")
     model, fixed, free = spec.build(campaign)
     priors = {p: spec.priors.get(p) or default_prior(p, model) for p in free}
     batch, run_ids = campaign.to_batch()
     initial = {p: float(spec.initial.get(p, priors[p].center)) for p in free}
+    pairs: tuple[tuple[int, int], ...] = ()
+    if "airspeed_factor" in free:
+        pairs = calibration_pairs(campaign, run_ids)
+        if pairs:
+            initial["airspeed_calibration_sd"] = config.NOISE_PRIORS["airspeed_calibration_sd"]
+        else:
+            warnings.warn(f"model {spec.name!r} frees airspeed_factor but the campaign has no opposite-direction "
+                          "pairs (`pair` column): no calibration observations; the factor is informed only by "
+                          "its prior and the coastdown dynamics, where C_D0 and factor^2 trade", RuntimeWarning,
+                          stacklevel=2)
     return FitProblem(spec=spec, model=model, fixed={k: float(v) for k, v in fixed.items()}, free=tuple(free),
                       priors=priors, batch=batch, run_ids=tuple(run_ids), pooling=pooling, noise=noise,
                       robust=robust, mass_kg=campaign.vehicle.mass_kg,
                       frontal_area_m2=campaign.vehicle.frontal_area_m2,
-                      driveline_curve=measured_driveline_curve(campaign), initial=initial)
+                      driveline_curve=measured_driveline_curve(campaign), initial=initial,
+                      calibration_pairs=pairs)
 
 
 def free_parameters(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:
@@ -327,3 +459,11 @@ def coastdown_model(problem: FitProblem) -> None:
     if problem.robust:
         sample["student_df"] = numpyro.sample("student_df", dist.Gamma(2.0, config.NOISE_PRIORS["student_df_rate"]))
     numpyro.factor("speed_loglik", run_log_likelihood(problem, sample).sum())
+    if problem.calibrated:
+        # the paired-run airspeed calibration (module docstring); Gamma(2): no funnel at 0
+        s_cal = numpyro.sample("airspeed_calibration_sd",
+                               dist.Gamma(2.0, 2.0 / config.NOISE_PRIORS["airspeed_calibration_sd"]))
+        yaw_factor = sample.get("yaw_factor", problem.fixed.get("yaw_factor", 1.0))
+        ratios = airspeed_pair_ratios(problem.batch, problem.calibration_pairs, yaw_factor)
+        with numpyro.plate("pair", len(problem.calibration_pairs)):
+            numpyro.sample("airspeed_pair_ratio", dist.Normal(sample["airspeed_factor"], s_cal), obs=ratios)
