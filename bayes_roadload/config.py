@@ -258,6 +258,7 @@ NOISE_PRIORS = {
     "q_mps_per_sqrt_s": 0.005,  # mean of the Gamma(2) prior of the integrated (process) noise
     "v0_scale_mps": 0.5,       # normal scale of each run's initial speed around its first sample
     "student_df_rate": 0.1,    # Gamma(2, rate) prior of the Student-t degrees of freedom
+    "sigma_driveline_n": 10.0,  # half-normal scale of the logged driveline force's noise (N)
     "airspeed_calibration_sd": 0.01,  # mean of the Gamma(2) prior of s_cal (see below)
 }
 """``airspeed_calibration_sd`` (s_cal, dimensionless): scatter of one opposite-direction pair's

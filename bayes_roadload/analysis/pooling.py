@@ -14,7 +14,7 @@ measurement and system noise, the full drag model) both ways:
   (seeds) so that the scatter of the joint estimate is measured, not only its posterior sd.
 
 and measures how K_D's identifiability grows with the yaw the wind produces
-(:func:`yaw_jobs`): K_D multiplies psi^2 in C_D(psi) = C_D0 (1 + K_D psi^2), so without
+(:func:`yaw_jobs`): K_D multiplies psi^2 in C_D(psi) = C_D0 + K_D psi^2, so without
 cross-wind the data say nothing about it and its posterior is its prior.
 
 Campaigns are built by picklable recipes (:class:`CombinedCampaign` of

@@ -137,6 +137,9 @@ class FitProblem:
         airspeed ratios calibrate a free ``airspeed_factor`` (:func:`airspeed_pair_ratios`);
         empty when the factor is fixed.  ``initial`` then also holds a start for
         ``airspeed_calibration_sd``.
+    driveline_channel : the driveline loss is the polynomial A_t + B_t v + C_t v^2 and the
+        campaign logs ``driveline_force_n``: the logged force is fitted too
+        (:func:`driveline_log_likelihood`), with its noise ``sigma_driveline_n``.
     """
 
     spec: ModelSpec
@@ -157,6 +160,7 @@ class FitProblem:
     run_jacobian: Any = None
     run_offsets: Any = None
     calibration_pairs: tuple[tuple[int, int], ...] = ()
+    driveline_channel: bool = False
 
     @property
     def n_runs(self) -> int:
@@ -292,12 +296,15 @@ def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, po
                           "pairs (`pair` column): no calibration observations; the factor is informed only by "
                           "its prior and the coastdown dynamics, where C_D0 and factor^2 trade", RuntimeWarning,
                           stacklevel=2)
+    channel = "driveline_polynomial" in model.term_names and campaign.has_driveline
+    if channel:
+        initial["sigma_driveline_n"] = config.NOISE_PRIORS["sigma_driveline_n"]
     return FitProblem(spec=spec, model=model, fixed={k: float(v) for k, v in fixed.items()}, free=tuple(free),
                       priors=priors, batch=batch, run_ids=tuple(run_ids), pooling=pooling, noise=noise,
                       robust=robust, mass_kg=campaign.vehicle.mass_kg,
                       frontal_area_m2=campaign.vehicle.frontal_area_m2,
                       driveline_curve=measured_driveline_curve(campaign), initial=initial,
-                      calibration_pairs=pairs)
+                      calibration_pairs=pairs, driveline_channel=channel)
 
 
 def free_parameters(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:
@@ -436,6 +443,20 @@ def draw_run_effects(problem: FitProblem, samples: dict[str, np.ndarray], seed: 
     return {f"{n}_run": out[:, i].reshape(shape + (problem.n_runs,)) for i, n in enumerate(problem.varying)}
 
 
+def driveline_log_likelihood(problem: FitProblem, sample: dict[str, jnp.ndarray], sigma_n) -> jnp.ndarray:
+    """Log likelihood of the logged driveline force under the modelled loss: every real sample
+    ``F_i ~ Normal(A_t + B_t v_i + C_t v_i^2, sigma_driveline_n)``, v_i the logged speed (its
+    0.05 m/s noise moves the loss by ~0.1 N, far below the channel's noise).  Without it the
+    driveline polynomial would be identified by the speed trace alone, where A_t trades with
+    M g A_D and B_t with M g B_D (the least-squares baseline reports them unidentified)."""
+    p = {**problem.fixed, **sample}
+    b = problem.batch
+    v = b.speed_mps
+    loss = p["At"] + p["Bt"] * v + p["Ct"] * v**2
+    logp = dist.Normal(loss, sigma_n).log_prob(b.driveline_force_n)
+    return jnp.sum(jnp.where(b.mask, logp, 0.0))
+
+
 def coastdown_model(problem: FitProblem) -> None:
     """The numpyro model (see the module docstring).  Sample sites use the contract names."""
     r = problem.n_runs
@@ -459,6 +480,9 @@ def coastdown_model(problem: FitProblem) -> None:
     if problem.robust:
         sample["student_df"] = numpyro.sample("student_df", dist.Gamma(2.0, config.NOISE_PRIORS["student_df_rate"]))
     numpyro.factor("speed_loglik", run_log_likelihood(problem, sample).sum())
+    if problem.driveline_channel:
+        sigma_d = numpyro.sample("sigma_driveline_n", dist.HalfNormal(config.NOISE_PRIORS["sigma_driveline_n"]))
+        numpyro.factor("driveline_loglik", driveline_log_likelihood(problem, sample, sigma_d))
     if problem.calibrated:
         # the paired-run airspeed calibration (module docstring); Gamma(2): no funnel at 0
         s_cal = numpyro.sample("airspeed_calibration_sd",
