@@ -104,7 +104,8 @@ def calibration_section(args, executor) -> str:
     from bayes_roadload.analysis import calibration as cal
 
     def compute():
-        return {"calibration": cal.calibration_study(executor=executor)}
+        return {"calibration": cal.calibration_study(seeds=range(args.calibration_seeds), scale=(1.0, 1.01),
+                                                     executor=executor)}
 
     frames, _ = _cached(("calibration",), "calibration" in args.rerun, compute)
     return cal.markdown(frames["calibration"])
@@ -133,6 +134,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--spread-seeds", type=int, default=10)
     ap.add_argument("--pooling-seeds", type=int, default=5)
+    ap.add_argument("--calibration-seeds", type=int, default=5)
     ap.add_argument("--out", type=Path, default=DOC)
     args = ap.parse_args(argv)
 

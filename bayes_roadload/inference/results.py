@@ -39,7 +39,7 @@ from .nuts import NutsFit
 SUMMARY_COLUMNS = ("parameter", "mean", "sd", "q2.5", "q50", "q97.5", "r_hat", "ess_bulk", "ess_tail")
 DERIVED = ("F50_N", "F50_tyre_N", "F50_aero_N", "F50_driveline_N", "F50_undriven_N",
            "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
-NOISE_SITES = ("q_mps_per_sqrt_s", "student_df")
+NOISE_SITES = ("q_mps_per_sqrt_s", "student_df", "sigma_driveline_n", "airspeed_calibration_sd")
 
 
 def _flat(x: np.ndarray) -> np.ndarray:
