@@ -40,13 +40,13 @@ import multiprocessing
 import platform
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pandas as pd
 
 from bayes_roadload import config
-from bayes_roadload.analysis.batch import COVERAGE_LEVELS, FitJob, SimulatedCampaign, coverage_summary, run_batch
+from bayes_roadload.analysis.batch import (COVERAGE_LEVELS, FitJob, SimulatedCampaign, coverage_summary, process_pool,
+                                           run_batch)
 from bayes_roadload.simulate import SimulationSettings, get_case
 
 NOISE = {"speed_noise_mps": 0.03, "airspeed_noise_mps": 0.05, "yaw_noise_rad": 0.005, "driveline_noise_n": 1.0}
@@ -276,11 +276,8 @@ def main(argv=None) -> None:
         print(f"[{time.perf_counter() - t0:7.0f} s] {rec['name']}: {rec['time_total_s']:.0f} s, {status}",
               file=sys.stderr, flush=True)
 
-    if args.workers > 1:
-        with ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            records = run_batch(jobs, pool, on_record=progress)
-    else:
-        records = run_batch(jobs, on_record=progress)
+    with process_pool(args.workers) as executor:
+        records = run_batch(jobs, executor, on_record=progress)
     wall = time.perf_counter() - t0
     if args.records:
         records.to_csv(args.records, index=False)

@@ -19,15 +19,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import multiprocessing
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pandas as pd
 
-from bayes_roadload.analysis.batch import run_batch
+from bayes_roadload.analysis.batch import process_pool, run_batch
 from bayes_roadload.analysis.sbc import SBC_SAMPLER, sbc_jobs, sbc_markdown, sbc_tests
 
 RECORDS = Path(__file__).resolve().parents[1] / "docs" / "validation" / "sbc_records.csv"
@@ -67,11 +65,8 @@ def main(argv=None) -> int:
         print(f"{rec['name']}: {rec.get('error') or 'ok'} gates={'pass' if rec.get('gate_pass') else 'FAIL'} "
               f"{rec['time_total_s']:.0f} s", file=sys.stderr, flush=True)
 
-    if args.workers > 1:
-        with ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn")) as ex:
-            records = run_batch(jobs, ex, on_record=progress)
-    else:
-        records = run_batch(jobs, on_record=progress)
+    with process_pool(args.workers) as executor:
+        records = run_batch(jobs, executor, on_record=progress)
     wall = time.perf_counter() - t0
     records.to_csv(args.records, index=False)
     partial.unlink(missing_ok=True)

@@ -23,17 +23,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import platform
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
-from contextlib import nullcontext
 from pathlib import Path
 
 import pandas as pd
 
-from bayes_roadload.analysis.batch import run_batch
+from bayes_roadload.analysis.batch import process_pool, run_batch
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "validation.md"
@@ -138,10 +135,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=DOC)
     args = ap.parse_args(argv)
 
-    pool = (ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn"))
-            if args.workers > 1 else nullcontext(None))
     parts, timings = [INTRO], {}
-    with pool as executor:
+    with process_pool(args.workers) as executor:
         for key, (title, fn) in SECTIONS.items():
             t0 = time.perf_counter()
             body = fn(args, executor) if key in args.only else "*Not regenerated in this run.*\n"

@@ -360,6 +360,20 @@ def run_batch(jobs: Iterable[FitJob], executor: Any | None = None, *,
     return pd.DataFrame.from_records(records)
 
 
+def process_pool(workers: int):
+    """An executor for :func:`run_batch` as a context manager: ``workers`` processes started
+    with ``spawn`` (JAX is multithreaded and does not survive ``fork``), or ``None`` -- the jobs
+    run in this process -- for ``workers <= 1``."""
+    if workers <= 1:
+        from contextlib import nullcontext
+
+        return nullcontext(None)
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+
+
 # --------------------------------------------------------------------------- coverage
 
 def _wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:

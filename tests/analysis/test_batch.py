@@ -124,3 +124,15 @@ def test_coverage_summary_counts():
     assert row["se_nominal"] == pytest.approx(math.sqrt(0.95 * 0.05 / 20))
     assert row["wilson_low"] < 0.9 < row["wilson_high"]
     assert row["z_sd"] == pytest.approx(np.std(np.linspace(-1, 1, 20), ddof=1))
+
+
+def test_process_pool():
+    from concurrent.futures import ProcessPoolExecutor
+
+    from bayes_roadload.analysis.batch import process_pool
+
+    with process_pool(1) as executor:
+        assert executor is None  # run_batch then maps in this process
+    pool = process_pool(2)
+    assert isinstance(pool, ProcessPoolExecutor) and pool._mp_context.get_start_method() == "spawn"
+    pool.shutdown()
