@@ -360,6 +360,11 @@ def run_batch(jobs: Iterable[FitJob], executor: Any | None = None, *,
     return pd.DataFrame.from_records(records)
 
 
+def successful(records: pd.DataFrame) -> pd.DataFrame:
+    """The records of :func:`run_batch` whose job ended without an error."""
+    return records[records["error"].isna()] if "error" in records else records
+
+
 def process_pool(workers: int):
     """An executor for :func:`run_batch` as a context manager: ``workers`` processes started
     with ``spawn`` (JAX is multithreaded and does not survive ``fork``), or ``None`` -- the jobs
@@ -411,7 +416,7 @@ def coverage_summary(records: pd.DataFrame, by: Sequence[str] = ("model", "noise
         ``(mean - truth) / sd``, ~1 for calibrated posteriors (its own standard error is about
         1 / sqrt(2 n) for normal errors) and > 1 when the posterior sd is too small.
     """
-    ok = records[records["error"].isna()] if "error" in records else records
+    ok = successful(records)
     if quantities is None:
         quantities = [c[: -len("_truth")] for c in ok.columns if c.endswith("_truth")
                       and all(f"{c[:-len('_truth')]}_{interval_key(lv)}" in ok for lv in levels)]

@@ -43,7 +43,7 @@ from scipy import stats
 
 from .. import config
 from ..data.campaign import Anemometer, Campaign
-from .batch import FitJob, SimulatedCampaign, quantile_key, run_batch
+from .batch import FitJob, SimulatedCampaign, quantile_key, run_batch, successful
 
 LEVEL = 0.95
 """Central interval level of the study's intervals and in-interval flags."""
@@ -335,7 +335,7 @@ def markdown(df: pd.DataFrame) -> str:
     and K_D estimates per +1 % reading error is given relative to the same analysis of the same
     seed at scale 1 (the thesis 6.6 figure: -2 %).
     """
-    ok = df[df["error"].isna()] if "error" in df else df
+    ok = successful(df)
     lines = [
         "| analysis | model | reading scale | n | CD0 error % (mean +- sd) | KD error % (mean +- sd) | "
         "factor estimate (truth) | CD0 in 95 % | KD in 95 % | factor in 95 % | gates passed |",

@@ -33,7 +33,7 @@ import pandas as pd
 
 from .. import config
 from ..data.campaign import Campaign
-from .batch import FitJob, SimulatedCampaign
+from .batch import FitJob, SimulatedCampaign, successful
 
 COMBINED_CASES = (14, 15, 16, 17, 18, 19)
 POOLING_PARAMETERS = ("AD", "BD", "CD0", "KD")
@@ -162,7 +162,7 @@ def pooling_table(records: pd.DataFrame, per_pair: pd.DataFrame,
       pairs would give.
     """
     rows = []
-    ok = records[records["error"].isna()] if "error" in records else records
+    ok = successful(records)
     truth = {p: float(ok[f"{p}_truth"].iloc[0]) for p in parameters if f"{p}_truth" in ok and len(ok)}
     single = {}
     for p in parameters:
@@ -220,7 +220,7 @@ def yaw_table(records: pd.DataFrame, model: str = "four_term") -> pd.DataFrame:
     prior = load_model_spec(model).priors.get("KD")
     prior_sd = (float(np.std(np.asarray(prior.to_numpyro().sample(jax.random.PRNGKey(0), (200_000,)))))
                 if prior is not None else math.nan)
-    ok = records[records["error"].isna()] if "error" in records else records
+    ok = successful(records)
     rows = []
     for w, g in ok.groupby("cross_wind_mps", sort=True):
         rows.append({"cross_wind_mps": float(w), "fits": int(len(g)),

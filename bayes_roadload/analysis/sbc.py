@@ -45,7 +45,7 @@ import pandas as pd
 
 from .. import config
 from ..data.campaign import Campaign
-from .batch import FitJob, coverage_summary
+from .batch import FitJob, coverage_summary, successful
 
 SBC_MODEL = "four_term_driveline_informative"
 """Model that draws the truths and fits them (``models/four_term_driveline_informative.toml``)."""
@@ -180,7 +180,7 @@ def sbc_jobs(n_campaigns: int, *, seed0: int = 0, pairs: int = 1, model: str = S
 
 def _ok(records: pd.DataFrame) -> pd.DataFrame:
     """The records without errors, with an ``arm`` column ("all" when the study has none)."""
-    ok = records[records["error"].isna()] if "error" in records else records
+    ok = successful(records)
     return ok if "arm" in ok else ok.assign(arm="all")
 
 
