@@ -281,3 +281,41 @@ CLEAR_JAX_CACHES_ABOVE_MB = 4096.0
 """Resident memory (MB) above which :func:`bayes_roadload.analysis.batch.run_fit_job` clears JAX's compilation caches after a
 job.  Clearing after every job would bound the memory at ~1.2 GB but costs 5-8 s per later fit
 (the shared pieces are recompiled); never clearing grows by 85-165 MB per fit."""
+
+
+# Test planning (bayes_roadload.analysis.planning) and the regulation checks
+QUANTITY_UNITS: dict[str, str] = {**PARAMETER_UNITS, "F50_N": "N", "F50_tyre_N": "N", "F0_N": "N",
+                                  "F2_N_per_kph2": "N/(km/h)^2"}
+"""Units of the quantities a planning target may name (absolute targets are in these units)."""
+
+PLAN_CONFIDENCE = 0.95
+"""Level of the interval whose half-width a planning target bounds."""
+
+PLAN_ASSURANCE = 0.8
+"""Planning recommends the smallest number of pairs whose half-width meets the target in at
+least this fraction of the simulated future campaigns."""
+
+PLAN_TARGETS = ("AD=1%", "BD=5%", "CD0=1%", "F50_N=0.5%")
+"""Default planning targets: the thesis' (section 8.2: A_D, C_D0 within 1 %, B_D within 5 %) and
+the road load at 50 mph within 0.5 %."""
+
+PLAN_SIMULATIONS = 40
+"""Future campaigns simulated per number of pairs (the assurance's binomial sd is <= 0.08)."""
+
+EEC_PRECISION_PCT = 2.0
+"""EEC coastdown acceptance (thesis appendix A): t s / (sqrt(n) X) <= 2 % at 95 %, X the mean
+total road load at the reference speed over the n pairs and s their standard deviation."""
+
+GTR_PRECISION_PCT = 3.0
+"""GTR 15 (WLTP, Annex 4) coastdown statistical precision: p_j = h s_j / (sqrt(n) dt_j) <= 3 %
+at every reference speed v_j, dt_j the pairs' mean coastdown time from v_j + 5 to v_j - 5 km/h
+(harmonic mean of the two directions of a pair), h = t(0.975, n - 1)."""
+
+GTR_SPEED_HALF_BAND_KPH = 5.0
+"""Half width of the GTR 15 coastdown-time speed band around each reference speed (km/h)."""
+
+GTR_REFERENCE_SPEEDS_KPH = (20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0, 100.0, 110.0, 120.0, 130.0)
+"""GTR 15 reference speeds (km/h); those inside every run's speed range are checked."""
+
+MIN_REGULATION_PAIRS = 3
+"""GTR 15 needs at least three pairs."""

@@ -105,10 +105,13 @@ def test_sampler_options_reach_the_sampler():
         config.DEFAULT_SAMPLER.target_accept
 
 
+@pytest.mark.slow
 def test_fit_hierarchical_writes_tau_rows_and_run_rows(campaign_dir, tmp_path, capsys):
     """``--pooling hierarchical``: summary.csv gains tau_AD, tau_BD, tau_CD0 (positive, in the
-    parameters' units), runs_summary.csv the run-level coefficients of every run; least
-    squares refuses the option instead of ignoring it."""
+    parameters' units), runs_summary.csv the run-level coefficients of every run.  Slow (a
+    hierarchical NUTS fit, ~70 s); the same outputs of the same fit function are checked by
+    tests/inference/test_hierarchical.py, and the option's plumbing by
+    :func:`test_pooling_option_reaches_the_fit`."""
     out = tmp_path / "hier"
     code = main(["fit", str(campaign_dir), "--model", "three_term", "--pooling", "hierarchical", "--warmup", "150",
                  "--draws", "150", "--no-progress", "--out", str(out)])
@@ -120,6 +123,23 @@ def test_fit_hierarchical_writes_tau_rows_and_run_rows(campaign_dir, tmp_path, c
         assert summary.loc[f"tau_{k}", "mean"] < 0.5 * summary.loc[k, "mean"]
     runs = set(pd.read_csv(out / "runs_summary.csv")["parameter"])
     assert {f"{k}_run[{r}]" for k in ("AD", "BD", "CD0") for r in (1, 2, 3, 4)} <= runs
-    capsys.readouterr()
+
+
+def test_pooling_option_reaches_the_fit(campaign_dir, tmp_path, monkeypatch):
+    """``--pooling hierarchical`` (and the noise options) are handed to the NUTS fit; least
+    squares refuses the option instead of ignoring it."""
+    import bayes_roadload.inference.nuts as nuts
+
+    seen = {}
+
+    def fake_fit(campaign, spec, **kwargs):
+        seen.update(kwargs)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(nuts, "fit_nuts", fake_fit)
+    with pytest.raises(RuntimeError, match="stop here"):
+        main(["fit", str(campaign_dir), "--model", "three_term", "--pooling", "hierarchical", "--noise", "white",
+              "--no-progress", "--out", str(tmp_path / "h")])
+    assert seen["pooling"] == "hierarchical" and seen["noise"] == "white"
     with pytest.raises(SystemExit, match="no hierarchical model"):
         main(["fit", str(campaign_dir), "--method", "lsq", "--pooling", "hierarchical", "--out", str(tmp_path / "l")])

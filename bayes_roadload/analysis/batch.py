@@ -80,6 +80,8 @@ def _rss_mb() -> float | None:
         return None
 
 
+FIT_METHODS = ("nuts", "laplace")
+
 DERIVED_QUANTITIES = ("F50_N",)
 """Derived road-load quantities recorded next to the free parameters (total road load at
 50 mph and reference conditions, N; :func:`bayes_roadload.inference.results.derived_quantities`)."""
@@ -154,6 +156,17 @@ class FitJob:
         Central interval levels to record (fractions).
     tags : mapping
         Free-form scalars copied into the record (e.g. the study arm), for grouping.
+    method : {"nuts", "laplace"}
+        ``"nuts"``: :func:`~bayes_roadload.inference.nuts.fit_nuts` with the gates;
+        ``"laplace"``: the cheap MAP + Laplace fit
+        (:func:`~bayes_roadload.inference.laplace.fit_laplace`; same-shaped campaigns share
+        one compilation in a worker), whose gate is the MAP's convergence.
+    derived : tuple of str
+        Road-load quantities recorded besides the free parameters
+        (:data:`~bayes_roadload.inference.results.DERIVED` names).
+    start : mapping, optional
+        Laplace only: starting values of the free parameters instead of the least-squares
+        start.
     """
 
     name: str
@@ -165,10 +178,15 @@ class FitJob:
     sampler: config.SamplerConfig = config.DEFAULT_SAMPLER
     levels: tuple[float, ...] = COVERAGE_LEVELS
     tags: Mapping[str, Any] = field(default_factory=dict)
+    method: str = "nuts"
+    derived: tuple[str, ...] = DERIVED_QUANTITIES
+    start: Mapping[str, float] | None = None
 
     def __post_init__(self):
         if not all(0.0 < lv < 1.0 for lv in self.levels):
             raise ValueError("interval levels must be fractions in (0, 1)")
+        if self.method not in FIT_METHODS:
+            raise ValueError(f"method must be one of {FIT_METHODS}, not {self.method!r}")
 
     def campaign(self) -> Campaign:
         """Build (or return) the job's campaign."""
@@ -178,7 +196,7 @@ class FitJob:
 
 
 def _job_fields(job: FitJob) -> dict[str, Any]:
-    out = {"name": job.name, "model": job.model, "pooling": job.pooling, "noise": job.noise,
+    out = {"name": job.name, "method": job.method, "model": job.model, "pooling": job.pooling, "noise": job.noise,
            "robust": bool(job.robust), "num_warmup": job.sampler.num_warmup,
            "num_samples": job.sampler.num_samples, "num_chains": job.sampler.num_chains,
            "target_accept": job.sampler.target_accept}
@@ -224,7 +242,7 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
         rec[f"{name}_ess_bulk"] = float(rows.loc[name, "ess_bulk"])
     derived = idata.posterior  # the road load of every draw, computed once by to_inference_data
     derived_truth = truth_derived(problem, truth)
-    for name in DERIVED_QUANTITIES:
+    for name in job.derived:
         rec.update(_interval_fields(name, derived[name].values, derived_truth.get(name), job.levels))
     for name in ("q_mps_per_sqrt_s", "student_df"):
         if name in fit.samples:
@@ -245,8 +263,34 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
     return rec
 
 
+def _laplace_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
+    from ..inference.results import truth_derived
+
+    problem = fit.problem
+    truth = campaign.truth or {}
+    rec: dict[str, Any] = {"parameters": ",".join(problem.free),
+                           "rank_draws": int(np.asarray(fit.samples[problem.free[0]]).size)}
+    for name in problem.free:
+        t = truth.get(name)
+        rec.update(_interval_fields(name, fit.samples[name], t if isinstance(t, (int, float)) else None, job.levels))
+    derived_truth = truth_derived(problem, truth)
+    for name in job.derived:
+        rec.update(_interval_fields(name, fit.samples[name], derived_truth.get(name), job.levels))
+    for name in ("q_mps_per_sqrt_s",) + tuple(f"tau_{n}" for n in problem.varying):
+        if name in fit.samples:
+            rec[f"{name}_mean"] = float(np.mean(fit.samples[name]))
+            rec[f"{name}_q50"] = float(np.median(fit.samples[name]))
+    rec["sigma_mps_mean"] = float(np.mean(fit.samples["sigma_mps"]))
+    ok = bool(fit.map.success) and fit.map.min_eigenvalue > 0.0
+    rec.update({"gate_pass": ok, "gates_failed": "" if ok else "map",
+                "map_converged": bool(fit.map.success), "map_min_eigenvalue": float(fit.map.min_eigenvalue),
+                "map_iterations": int(fit.map.n_iter)})
+    rec.update({f"time_{k}": float(v) for k, v in fit.timings.items()})
+    return rec
+
+
 def run_fit_job(job: FitJob) -> dict[str, Any]:
-    """Run one job: build the campaign, fit it with NUTS, summarise.
+    """Run one job: build the campaign, fit it (NUTS or MAP + Laplace), summarise.
 
     Never raises for a failure inside the job: the record then has ``error`` set to the
     exception's type and message (and ``traceback``), with the job fields and the timings
@@ -274,7 +318,11 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
           simulation-based calibration); ``P_r_hat, P_ess_bulk`` for the free parameters;
         * noise: ``sigma_mps_mean`` and, when sampled, ``q_mps_per_sqrt_s_mean`` / ``_q50``;
         * gates: ``gate_pass, gates_failed, divergences, max_r_hat, min_ess_bulk,
-          min_ess_tail, mean_tree_depth, map_converged``;
+          min_ess_tail, mean_tree_depth, map_converged``; for ``method="laplace"`` only
+          ``gate_pass`` (the MAP converged and its Hessian is positive definite),
+          ``gates_failed`` ("map" or ""), ``map_converged, map_min_eigenvalue,
+          map_iterations``, and no ``P_r_hat, P_ess_bulk``; ``tau_P_mean / _q50`` of the
+          hierarchical spreads;
         * timings (s): ``time_simulate_s``, ``time_map_s``, ``time_warmup_s``,
           ``time_sampling_s`` (from the fit, compilation included), ``time_fit_s`` (the whole
           ``fit_nuts`` call), ``time_summary_s``, ``time_total_s`` and ``time_compile_s`` (JAX
@@ -283,6 +331,7 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
           :data:`CLEAR_JAX_CACHES_ABOVE_MB`);
         * ``warnings`` (distinct messages, ``"; "``-joined) and ``error`` (None on success).
     """
+    from ..inference.laplace import fit_laplace
     from ..inference.nuts import fit_nuts
 
     rec = _job_fields(job)
@@ -304,11 +353,15 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
                 if key in campaign.meta and key not in rec:
                     rec[key] = campaign.meta[key]
             t0 = time.perf_counter()
-            fit = fit_nuts(campaign, job.model, pooling=job.pooling, noise=job.noise, robust=job.robust,
-                           sampler=job.sampler)
+            if job.method == "laplace":
+                fit = fit_laplace(campaign, job.model, pooling=job.pooling, noise=job.noise, robust=job.robust,
+                                  seed=job.sampler.seed, start=None if job.start is None else dict(job.start))
+            else:
+                fit = fit_nuts(campaign, job.model, pooling=job.pooling, noise=job.noise, robust=job.robust,
+                               sampler=job.sampler)
             rec["time_fit_s"] = time.perf_counter() - t0
             t0 = time.perf_counter()
-            rec.update(_fit_record(job, campaign, fit))
+            rec.update((_laplace_record if job.method == "laplace" else _fit_record)(job, campaign, fit))
             rec["time_summary_s"] = time.perf_counter() - t0
     except Exception as exc:  # noqa: BLE001 - one failed job must not end the batch
         rec["error"] = f"{type(exc).__name__}: {exc}"

@@ -158,7 +158,9 @@ class Campaign:
 
     def to_batch(self):
         """The runs as a padded :class:`~bayes_roadload.physics.RunBatch` (time from each
-        run's first sample) and the list of run ids in batch order."""
+        run's first sample) and the list of run ids in batch order.  ``meta["pad_to_samples"]``
+        pads every run to at least that many samples (studies of many same-sized campaigns then
+        share one compiled fit)."""
         from ..physics.atmosphere import air_density_kgpm3
         from ..physics.integrate import make_run, stack_runs
 
@@ -184,7 +186,7 @@ class Campaign:
                 effective_mass_kg=v.effective_mass_kg,
                 frontal_area_m2=v.frontal_area_m2,
             ))
-        return stack_runs(runs), self.run_ids
+        return stack_runs(runs, self.meta.get("pad_to_samples")), self.run_ids
 
 
 # --------------------------------------------------------------------------- validation

@@ -116,27 +116,32 @@ def _site_scales(problem: FitProblem, z: dict[str, Any]) -> dict[str, Any]:
     return scales
 
 
-def initial_values(problem: FitProblem, campaign: Campaign) -> dict[str, Any]:
-    """Constrained starting values from the classical joint least-squares fit."""
+def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, float] | None = None) -> dict[str, Any]:
+    """Constrained starting values from the classical joint least-squares fit, or, with
+    ``start`` (free parameter -> value, e.g. a known population mean), from those values, the
+    first measured speeds and sigma 0.05 m/s without the least-squares fit."""
     init: dict[str, Any] = dict(problem.initial)
     r = problem.n_runs
     first = np.asarray(problem.batch.speed_mps[:, 0])
     v0, sigma = first.copy(), np.full(r, 0.05)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            lsq = fit_lsq(campaign, problem.spec, grouping="all")
-        g = lsq.groups[0]
-        for k in problem.free:
-            val = g.estimate.get(k, math.nan)
-            if math.isfinite(val) and math.isfinite(g.se.get(k, math.nan)):
-                init[k] = float(val)
-        if g.v0_offset_mps:
-            v0 = first + np.asarray(g.v0_offset_mps)
-        if math.isfinite(g.rms_residual_mps):
-            sigma = np.full(r, max(g.rms_residual_mps, 1e-3))
-    except Exception:  # noqa: BLE001 - the prior centres are a valid fallback start
-        pass
+    if start is not None:
+        init.update({k: float(v) for k, v in start.items() if k in problem.free})
+    else:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                lsq = fit_lsq(campaign, problem.spec, grouping="all")
+            g = lsq.groups[0]
+            for k in problem.free:
+                val = g.estimate.get(k, math.nan)
+                if math.isfinite(val) and math.isfinite(g.se.get(k, math.nan)):
+                    init[k] = float(val)
+            if g.v0_offset_mps:
+                v0 = first + np.asarray(g.v0_offset_mps)
+            if math.isfinite(g.rms_residual_mps):
+                sigma = np.full(r, max(g.rms_residual_mps, 1e-3))
+        except Exception:  # noqa: BLE001 - the prior centres are a valid fallback start
+            pass
     for k in problem.free:
         prior = problem.priors[k]
         if prior.low is not None:
@@ -235,15 +240,43 @@ def fd_hessian(grad_fn, y: np.ndarray, run_index: np.ndarray, step: float = 1e-4
     return 0.5 * (h + h.T)
 
 
+def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *,
+               max_iter: int = 200) -> dict[str, Any]:
+    """Trust-region Newton (``scipy.optimize.minimize``, ``trust-exact``) on O(1)-scaled
+    coordinates ``y`` with the exact gradient ``g`` and the Hessian by :func:`fd_hessian`.
+
+    Returns a dict: ``y`` (the optimum, scaled), ``cov`` (the Laplace covariance of the
+    unscaled vector ``y * scale``: inverse Hessian, eigenvalues clipped at ``1e-8`` of the
+    largest), ``success`` (converged, or the largest |gradient| below ``1e-3``), ``n_iter``,
+    ``message``, ``grad_max``, ``fun``, ``min_eigenvalue`` (of the scaled Hessian, before
+    clipping).
+    """
+    def hess(y):
+        return fd_hessian(g, y, run_index)
+
+    res = minimize(lambda y: float(f(y)), np.asarray(y0, float), jac=lambda y: np.asarray(g(y)), hess=hess,
+                   method="trust-exact", options={"maxiter": max_iter, "gtol": 1e-6})
+    hmat = hess(res.x)
+    eigval, eigvec = np.linalg.eigh(hmat)
+    clipped = np.maximum(eigval, 1e-8 * max(eigval.max(), 1.0))
+    cov_y = (eigvec / clipped) @ eigvec.T
+    grad_max = float(np.max(np.abs(np.asarray(g(res.x)))))
+    return {"y": res.x, "cov": cov_y * np.outer(scale, scale), "success": bool(res.success) or grad_max < 1e-3,
+            "n_iter": int(res.nit), "message": str(res.message), "grad_max": grad_max, "fun": float(res.fun),
+            "min_eigenvalue": float(eigval.min())}
+
+
 def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200,
              posterior: Posterior | None = None) -> MapResult:
     """MAP by trust-region Newton on the O(1)-scaled unconstrained parameters, and the
-    Laplace covariance from the Hessian there.
+    Laplace covariance from the Hessian there (:func:`newton_map`).
 
     Gradients are exact (JAX, forward ODE sensitivities); the Hessian is central differences of
     them with the run structure exploited (:func:`fd_hessian`), so its cost does not grow with
     the number of runs and no second-order derivative has to be compiled.  ``init`` (constrained
-    starting values) is ignored when a ``posterior`` built from them is given.
+    starting values) is ignored when a ``posterior`` built from them is given.  The campaign's
+    data are constants of the compiled code: :mod:`.laplace` compiles once for many
+    same-shaped campaigns.
     """
     t0 = time.perf_counter()
     post = posterior or unconstrained_posterior(problem, init)
@@ -252,27 +285,13 @@ def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200,
     def objective(y):
         return post.potential_fn(post.unravel(y * scale))
 
-    f = jax.jit(objective)
-    g = jax.jit(jax.grad(objective))
-
-    def hess(y):
-        return fd_hessian(g, y, post.run_index)
-
-    y0 = post.flat0 / scale
-    res = minimize(lambda y: float(f(y)), y0, jac=lambda y: np.asarray(g(y)), hess=hess,
-                   method="trust-exact", options={"maxiter": max_iter, "gtol": 1e-6})
-    hmat = hess(res.x)
-    eigval, eigvec = np.linalg.eigh(hmat)
-    clipped = np.maximum(eigval, 1e-8 * max(eigval.max(), 1.0))
-    cov_y = (eigvec / clipped) @ eigvec.T
-    cov = cov_y * np.outer(scale, scale)
-    z_map = post.unravel(jnp.asarray(res.x * scale))
-    constrained = post.postprocess_fn(z_map)
-    grad_max = float(np.max(np.abs(np.asarray(g(res.x)))))
-    return MapResult(z=z_map, constrained=constrained, cov=cov, success=bool(res.success) or grad_max < 1e-3,
-                     n_iter=int(res.nit), grad_max=grad_max,
-                     message=str(res.message), neg_log_posterior=float(res.fun),
-                     time_s=time.perf_counter() - t0, min_eigenvalue=float(eigval.min()))
+    res = newton_map(jax.jit(objective), jax.jit(jax.grad(objective)), post.flat0 / scale, post.run_index, scale,
+                     max_iter=max_iter)
+    z_map = post.unravel(jnp.asarray(res["y"] * scale))
+    return MapResult(z=z_map, constrained=post.postprocess_fn(z_map), cov=res["cov"], success=res["success"],
+                     n_iter=res["n_iter"], grad_max=res["grad_max"], message=res["message"],
+                     neg_log_posterior=res["fun"], time_s=time.perf_counter() - t0,
+                     min_eigenvalue=res["min_eigenvalue"])
 
 
 def _chain_method(num_chains: int) -> str:

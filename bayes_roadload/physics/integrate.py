@@ -350,9 +350,11 @@ def make_run(
     )
 
 
-def stack_runs(runs: list[RunBatch]) -> RunBatch:
-    """Pad single runs to a common length (repeating the last sample) and stack them."""
-    n = max(int(r.time_s.shape[0]) for r in runs)
+def stack_runs(runs: list[RunBatch], length: int | None = None) -> RunBatch:
+    """Pad single runs to a common length (repeating the last sample; ``mask`` False there)
+    and stack them.  ``length``: pad to at least this many samples (campaigns of one padded
+    shape share their compiled fits, :mod:`bayes_roadload.inference.laplace`)."""
+    n = max([int(r.time_s.shape[0]) for r in runs] + [int(length or 0)])
 
     def pad(x, length):
         x = jnp.asarray(x)

@@ -1,0 +1,423 @@
+"""Test planning: how many pairs of coastdowns until a quantity is known to a target.
+
+The question of a test engineer -- "how many more pairs until C_D0 is known to 1 % and the road
+load at 50 mph to 0.5 %, at 95 %?" -- is answered from the posterior by simulation, not by a
+normal-theory formula:
+
+1. **A population.**  From a fitted campaign (:func:`population_from_fit`): draws of the
+   population-mean coefficients, of the run-to-run spreads ``tau`` of the hierarchical model
+   and of the noise levels.  Or from a pilot given as summary numbers
+   (:func:`population_from_pilot`: means and between-pair spreads of ``n0`` pairs, the
+   thesis' table 8.3): the spreads' own uncertainty is kept (sigma^2 = (n0 - 1) s^2 / chi^2
+   with n0 - 1 degrees of freedom, the Jeffreys posterior), where the thesis took the sample
+   spread for the population's (section 8.2).
+2. **Future campaigns** of n pairs (:class:`FutureCampaign`): one population draw, each run's
+   coefficients around its means with the spreads ``tau``, the measured conditions of a pair of
+   observed runs resampled (time grid, wind reconstructed from the logged airspeed and yaw,
+   density, direction), the coastdown integrated through that wind, speed noise (white
+   ``sigma`` plus the integrated random walk ``q`` of the model) added.
+3. **Cheap refits.**  Each future campaign is fitted with MAP + Laplace
+   (:func:`~bayes_roadload.inference.laplace.fit_laplace`: one compilation per campaign size)
+   through the batch door (:func:`~bayes_roadload.analysis.batch.run_batch`, ``method=
+   "laplace"``), with the model the engineer will use (e.g. a constrained one).  The Laplace
+   intervals are checked against NUTS on the same campaigns at two sizes
+   (:func:`nuts_check_jobs`, ``benchmarks/planning_study.py``).
+4. **Assurance.**  For each target quantity and n: the distribution of the 95 % interval
+   half-width over the future campaigns, and the assurance P(half-width <= target)
+   (:func:`plan_table`); the recommendation is the smallest n with assurance >= 0.8
+   (:func:`recommend`, configurable).
+
+Half-widths are half the equal-tailed interval, in the target's units: percent of the
+posterior mean for relative targets (``CD0=1%``), SI units otherwise (``F50_N=2``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+
+from .. import config
+from ..data.campaign import Campaign
+from .batch import FitJob, interval_key, quantile_key, successful
+
+PLAN_QUANTITIES = ("AD", "BD", "CD0", "KD", "At", "Bt", "Ct", "F50_N", "F50_tyre_N", "F0_N", "F2_N_per_kph2")
+"""Quantities a target may name: coefficients (when the fitted model frees them) and road-load
+figures at reference conditions (:data:`~bayes_roadload.inference.results.DERIVED`)."""
+
+PLAN_DERIVED = ("F50_N", "F50_tyre_N", "F0_N", "F2_N_per_kph2")
+
+
+# --------------------------------------------------------------------------- targets
+
+@dataclass(frozen=True)
+class Target:
+    """A precision target: the half-width of the ``confidence`` interval of ``quantity`` at most
+    ``value`` -- percent of the posterior mean when ``relative``, else in the quantity's SI
+    unit."""
+
+    quantity: str
+    value: float
+    relative: bool = True
+
+    @classmethod
+    def parse(cls, text: str) -> "Target":
+        """``"CD0=1%"`` (relative) or ``"F50_N=2"`` (absolute, SI units)."""
+        m = re.fullmatch(r"\s*([A-Za-z0-9_]+)\s*=\s*([0-9.eE+-]+)\s*(%?)\s*", text)
+        if not m:
+            raise ValueError(f"target {text!r}: write QUANTITY=VALUE% (relative) or QUANTITY=VALUE (SI units), "
+                             "e.g. CD0=1% or F50_N=2")
+        name, value, pct = m.group(1), float(m.group(2)), bool(m.group(3))
+        if name not in PLAN_QUANTITIES:
+            raise ValueError(f"target {text!r}: unknown quantity {name!r}; one of {', '.join(PLAN_QUANTITIES)}")
+        if not value > 0:
+            raise ValueError(f"target {text!r}: the half-width must be positive")
+        return cls(name, value, pct)
+
+    @property
+    def unit(self) -> str:
+        return "%" if self.relative else config.QUANTITY_UNITS.get(self.quantity, "SI")
+
+    def __str__(self) -> str:
+        return f"{self.quantity}={self.value:g}{'%' if self.relative else ''}"
+
+
+# --------------------------------------------------------------------------- population
+
+@dataclass(frozen=True, eq=False)
+class Population:
+    """What a future campaign is drawn from.
+
+    Attributes
+    ----------
+    model : model variant (``models/*.toml`` name or path) whose drag model generates the runs;
+        its free parameters are those of ``means``.
+    means : free parameter -> [S] draws of the population mean (SI).
+    tau : coefficient -> [S] draws of its run-to-run spread (hierarchical; empty for none).
+    sigma_mps, q_mps_per_sqrt_s : [S] draws of the white speed noise and of the integrated noise.
+    conditions : the observed campaign whose pairs' conditions are resampled.
+    source : a description (for reports).
+    """
+
+    model: str
+    means: Mapping[str, np.ndarray]
+    tau: Mapping[str, np.ndarray]
+    sigma_mps: np.ndarray
+    q_mps_per_sqrt_s: np.ndarray
+    conditions: Campaign
+    source: str = ""
+
+    @property
+    def n_draws(self) -> int:
+        return int(np.size(self.sigma_mps))
+
+    def mean_values(self) -> dict[str, float]:
+        """Posterior means of the population means (a starting point for the refits)."""
+        return {k: float(np.mean(v)) for k, v in self.means.items()}
+
+    @property
+    def pooling(self) -> str:
+        """How future campaigns are refitted: hierarchical when runs vary."""
+        return "hierarchical" if self.tau else "pooled"
+
+
+def _flat(x) -> np.ndarray:
+    x = np.asarray(x, float)
+    return x.reshape((-1,) + x.shape[2:])
+
+
+def _thin(n: int, max_draws: int) -> np.ndarray:
+    return np.unique(np.linspace(0, n - 1, min(n, max_draws)).astype(int))
+
+
+def population_from_samples(samples: Mapping[str, Any], free: Sequence[str], model: str, conditions: Campaign, *,
+                            max_draws: int = 1000, source: str = "") -> Population:
+    """A population from posterior draws ([chain, draw, ...] arrays by site name): population
+    means of ``free``, spreads ``tau_*`` when present, ``sigma_mps`` averaged over runs,
+    ``q_mps_per_sqrt_s`` (zero when the fit had white noise)."""
+    n = _flat(samples[free[0]]).shape[0]
+    keep = _thin(n, max_draws)
+    means = {k: _flat(samples[k])[keep] for k in free}
+    tau = {k[4:]: _flat(v)[keep] for k, v in samples.items() if k.startswith("tau_")}
+    sigma = _flat(samples["sigma_mps"])
+    sigma = (sigma.mean(axis=1) if sigma.ndim > 1 else sigma)[keep]
+    q = _flat(samples["q_mps_per_sqrt_s"])[keep] if "q_mps_per_sqrt_s" in samples else np.zeros(keep.size)
+    return Population(model=model, means=means, tau=tau, sigma_mps=sigma, q_mps_per_sqrt_s=q,
+                      conditions=conditions, source=source)
+
+
+def population_from_fit(fit, campaign: Campaign, *, max_draws: int = 1000) -> Population:
+    """A population from a NUTS fit (:class:`~bayes_roadload.inference.nuts.NutsFit`) of
+    ``campaign``; hierarchical fits give the run-to-run spreads."""
+    p = fit.problem
+    return population_from_samples(fit.samples, p.free, p.spec.name, campaign, max_draws=max_draws,
+                                   source=f"{p.pooling} {p.spec.name} fit of {p.n_runs} runs")
+
+
+def population_from_pilot(means: Mapping[str, float], spreads_pct: Mapping[str, float], pilot_pairs: int,
+                          conditions: Campaign, model: str = "three_term", *, draws: int = 1000, seed: int = 0,
+                          noise: Mapping[str, float] | None = None) -> Population:
+    """A population from a pilot given as summary numbers.
+
+    Parameters
+    ----------
+    means : free parameter -> pilot mean (SI), e.g. table 8.3's A_D, B_D, C_D0.
+    spreads_pct : coefficient -> between-pair standard deviation in % of its mean (table 8.3:
+        4.3, 23.1, 4.3).  Coefficients of :data:`~bayes_roadload.inference.bayes.
+        HIERARCHICAL_PARAMETERS` vary from run to run; others (K_D) are not given a spread:
+        their scatter between pairs is estimation noise, which the simulation reproduces from
+        the conditions.
+    pilot_pairs : the pilot's number of pairs n0.
+    conditions : campaign whose pairs' conditions (wind, speeds, density) are resampled.
+    model : model variant generating the runs (its free parameters must be in ``means``).
+    noise : ``sigma_mps`` and ``q_mps_per_sqrt_s`` of the future speed traces; default: the
+        MAP of a pooled Laplace fit of ``conditions``.
+
+    The population standard deviation of a pair's coefficient is drawn from its posterior given
+    the pilot, sigma^2 = (n0 - 1) s^2 / chi^2_{n0 - 1} (Jeffreys prior); a run's spread is
+    sqrt(2) sigma (a pair averages two runs).  The population means are drawn around the pilot
+    means with standard deviation sigma / sqrt(n0).
+    """
+    from ..inference.bayes import HIERARCHICAL_PARAMETERS
+    from ..inference.spec import load_model_spec
+
+    spec = load_model_spec(model)
+    missing = [k for k in spec.free if k not in means]
+    if missing:
+        raise ValueError(f"model {model!r} frees {missing}: give their pilot means")
+    if pilot_pairs < 2:
+        raise ValueError("a pilot of one pair has no between-pair spread: give at least two pairs")
+    rng = np.random.default_rng(seed)
+    out_means, tau = {}, {}
+    for k in spec.free:
+        m = float(means[k])
+        s_pct = spreads_pct.get(k) if k in HIERARCHICAL_PARAMETERS else None
+        if s_pct is None:
+            out_means[k] = np.full(draws, m)
+            continue
+        sigma_pair = abs(m) * s_pct / 100.0 * np.sqrt((pilot_pairs - 1) / rng.chisquare(pilot_pairs - 1, draws))
+        out_means[k] = m + sigma_pair / math.sqrt(pilot_pairs) * rng.standard_normal(draws)
+        tau[k] = math.sqrt(2.0) * sigma_pair
+    if noise is None:
+        from ..inference.laplace import fit_laplace
+
+        ref = fit_laplace(conditions, model, pooling="pooled", draws=10).map.constrained
+        noise = {"sigma_mps": float(np.mean(ref["sigma_mps"])),
+                 "q_mps_per_sqrt_s": float(ref.get("q_mps_per_sqrt_s", 0.0))}
+    return Population(model=model, means=out_means, tau=tau, sigma_mps=np.full(draws, noise["sigma_mps"]),
+                      q_mps_per_sqrt_s=np.full(draws, noise["q_mps_per_sqrt_s"]), conditions=conditions,
+                      source=f"pilot of {pilot_pairs} pairs ({', '.join(f'{k} {v:g} %' for k, v in spreads_pct.items())})")
+
+
+# --------------------------------------------------------------------------- future campaigns
+
+def _pad_length(c: Campaign) -> int:
+    return int(c.runs.groupby("run", sort=False).size().max())
+
+
+def simulate_future(population: Population, pairs: int, seed: int) -> Campaign:
+    """One future campaign of ``pairs`` opposite-direction pairs drawn from ``population``
+    (module docstring, step 2).
+
+    Every run is integrated (:func:`~bayes_roadload.physics.integrate_batch`) on the time grid
+    of the observed run whose conditions it takes, from that run's first speed, through the
+    observed wind: along-track ``a cos(psi) - v`` and cross ``a sin(psi)`` from the logged
+    airspeed ``a``, yaw ``psi`` and speed ``v`` of the observed run; the airspeed and yaw
+    channels are recomputed from the simulated speed (two fixed-point passes).  The campaign's
+    ``truth`` is the population draw's means; ``meta["pad_to_samples"]`` is the longest observed
+    run, so that every future campaign of ``pairs`` pairs has one shape.
+    """
+    from ..inference.spec import load_model_spec
+    from ..physics import integrate_batch
+
+    if pairs < 1:
+        raise ValueError("a future campaign needs at least one pair")
+    obs = population.conditions
+    obs_pairs = obs.pairs()
+    if not obs_pairs:
+        raise ValueError("the conditions campaign has no opposite-direction pairs (`pair` column)")
+    rng = np.random.default_rng(seed)
+    s = int(rng.integers(population.n_draws))
+    chosen = rng.integers(len(obs_pairs), size=pairs)
+    frames, params = [], []
+    spec = load_model_spec(population.model)
+    model, fixed, free = spec.build(obs)
+    for k, idx in enumerate(chosen):
+        for rid in obs_pairs[idx]:
+            g = obs.runs[obs.runs["run"] == rid].copy()
+            g["run"] = f"{k + 1}{'ab'[len(frames) % 2]}"
+            g["pair"] = k + 1
+            frames.append(g)
+            p = {n: float(population.means[n][s]) for n in free}
+            for n, t in population.tau.items():
+                p[n] = p[n] + float(t[s]) * rng.standard_normal()
+            params.append(p)
+    runs = pd.concat(frames, ignore_index=True)
+    pad = _pad_length(obs)
+    future = dataclasses.replace(obs, runs=runs, truth={n: float(population.means[n][s]) for n in free},
+                                 meta={"pad_to_samples": pad, "pairs": pairs, "seed": seed, "population_draw": s})
+    batch, run_ids = future.to_batch()
+    stacked = {n: jnp.asarray([p[n] for p in params]) for n in free}
+    v_obs = np.asarray(batch.speed_mps)
+    has_air = "airspeed_mps" in runs and "yaw_rad" in runs
+    if has_air:
+        a, psi = np.asarray(batch.airspeed_mps), np.asarray(batch.yaw_rad)
+        along, cross = a * np.cos(psi) - v_obs, a * np.sin(psi)
+    v = v_obs
+    for _ in range(3 if has_air else 1):
+        if has_air:
+            rel = v + along
+            batch = batch._replace(airspeed_mps=jnp.asarray(np.hypot(rel, cross)),
+                                   yaw_rad=jnp.asarray(np.arctan2(cross, rel)))
+        v = np.asarray(integrate_batch(model, dict(fixed, **stacked), batch, jnp.asarray(v_obs[:, 0]))[0])
+    t = np.asarray(batch.time_s)
+    dt = np.diff(t, axis=1, prepend=t[:, :1])
+    walk = np.cumsum(population.q_mps_per_sqrt_s[s] * np.sqrt(dt) * rng.standard_normal(v.shape), axis=1)
+    speed = v + walk + population.sigma_mps[s] * rng.standard_normal(v.shape)
+    mask = np.asarray(batch.mask)
+    for i, rid in enumerate(run_ids):
+        rows = runs.index[runs["run"] == rid]
+        runs.loc[rows, "speed_mps"] = speed[i][mask[i]]
+        if has_air:
+            runs.loc[rows, "airspeed_mps"] = np.asarray(batch.airspeed_mps)[i][mask[i]]
+            runs.loc[rows, "yaw_rad"] = np.asarray(batch.yaw_rad)[i][mask[i]]
+    return dataclasses.replace(future, runs=runs)
+
+
+@dataclass(frozen=True)
+class FutureCampaign:
+    """Picklable recipe of a future campaign for the batch door (:func:`simulate_future`)."""
+
+    population: Population
+    pairs: int
+    seed: int
+
+    def __call__(self) -> Campaign:
+        return simulate_future(self.population, self.pairs, self.seed)
+
+
+# --------------------------------------------------------------------------- jobs and tables
+
+DEFAULT_PAIRS = (1, 2, 3, 4, 6, 8, 12, 16, 24)
+
+
+def plan_jobs(population: Population, pairs: Sequence[int] = DEFAULT_PAIRS, *, simulations: int = 40,
+              model: str | None = None, confidence: float = 0.95, seed: int = 0, method: str = "laplace",
+              tags: Mapping[str, Any] | None = None) -> list[FitJob]:
+    """One fit job per future campaign: ``simulations`` campaigns of each size in ``pairs``,
+    refitted with ``model`` (default: the population's) by ``method`` ("laplace", or "nuts" to
+    confirm the Laplace intervals).  Campaign seeds are shared between methods and models, so
+    arms compare the same campaigns."""
+    model = model or population.model
+    start = population.mean_values()
+    jobs = []
+    for n in pairs:
+        for k in range(simulations):
+            cseed = seed * 1_000_003 + 1009 * int(n) + k
+            jobs.append(FitJob(f"plan-{model}-{method}-n{n}-{k}", FutureCampaign(population, int(n), cseed),
+                               model=model, pooling=population.pooling, method=method,
+                               levels=(confidence,), derived=PLAN_DERIVED, start=start,
+                               tags={"n_pairs": int(n), "simulation": k, "fit_model": model, **(tags or {})}))
+    return jobs
+
+
+def half_widths(records: pd.DataFrame, quantity: str, confidence: float = 0.95, relative: bool = True) -> pd.Series:
+    """Half-width of each record's central ``confidence`` interval of ``quantity``: percent of the
+    posterior mean when ``relative``, else in the quantity's units."""
+    lo = records[f"{quantity}_{quantile_key((1 - confidence) / 2)}"].astype(float)
+    hi = records[f"{quantity}_{quantile_key((1 + confidence) / 2)}"].astype(float)
+    half = (hi - lo) / 2.0
+    return 100.0 * half / records[f"{quantity}_mean"].astype(float).abs() if relative else half
+
+
+def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: float = 0.95,
+               by: Sequence[str] = ()) -> pd.DataFrame:
+    """Half-width distribution and assurance against the number of pairs.
+
+    Returns one row per (``by`` groups,) target quantity and ``n_pairs``: ``quantity,
+    n_pairs, median_half_width, assurance`` (the contract columns of ``plan.csv``), then
+    ``target, unit, q10_half_width, q90_half_width, n_sims`` (successful refits), ``bias`` and
+    ``bias_pct`` (mean of posterior mean minus truth over the simulations: what a constrained
+    model costs), ``rmse_pct``."""
+    ok = successful(records)
+    rows = []
+    groups = ok.groupby(list(by) + ["n_pairs"], sort=True) if by else ok.groupby("n_pairs", sort=True)
+    for key, g in groups:
+        key = key if isinstance(key, tuple) else (key,)
+        for t in targets:
+            if f"{t.quantity}_mean" not in g:
+                continue
+            hw = half_widths(g, t.quantity, confidence, t.relative).dropna()
+            if hw.empty:
+                continue
+            err = g[f"{t.quantity}_mean"].astype(float) - g[f"{t.quantity}_truth"].astype(float)
+            truth = g[f"{t.quantity}_truth"].astype(float).abs()
+            rows.append({**dict(zip(list(by) + ["n_pairs"], key)), "quantity": t.quantity,
+                         "median_half_width": float(hw.median()), "assurance": float((hw <= t.value).mean()),
+                         "target": t.value, "unit": t.unit, "q10_half_width": float(hw.quantile(0.1)),
+                         "q90_half_width": float(hw.quantile(0.9)), "n_sims": int(hw.size),
+                         "bias": float(err.mean()), "bias_pct": float(100.0 * (err / truth).mean()),
+                         "rmse_pct": float(100.0 * np.sqrt(((err / truth) ** 2).mean())),
+                         "coverage": float(g[f"{t.quantity}_{interval_key(confidence)}"].astype(bool).mean())
+                         if f"{t.quantity}_{interval_key(confidence)}" in g else math.nan})
+    cols = list(by) + ["quantity", "n_pairs", "median_half_width", "assurance"]
+    out = pd.DataFrame(rows)
+    if out.empty:
+        return out
+    return out[cols + [c for c in out.columns if c not in cols]]
+
+
+def recommend(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE, by: Sequence[str] = ()) -> pd.DataFrame:
+    """The smallest ``n_pairs`` whose assurance reaches ``assurance``, per (group and) quantity;
+    ``n_pairs`` is None (and ``reached`` False) when no simulated size reaches it."""
+    rows = []
+    keys = list(by) + ["quantity"]
+    for key, g in table.groupby(keys, sort=False):
+        key = key if isinstance(key, tuple) else (key,)
+        g = g.sort_values("n_pairs")
+        hit = g[g["assurance"] >= assurance]
+        n = int(hit["n_pairs"].iloc[0]) if len(hit) else None
+        rows.append({**dict(zip(keys, key)), "target": float(g["target"].iloc[0]), "unit": g["unit"].iloc[0],
+                     "n_pairs": n, "reached": n is not None, "assurance_required": assurance,
+                     "max_pairs_simulated": int(g["n_pairs"].max())})
+    return pd.DataFrame(rows)
+
+
+# --------------------------------------------------------------------------- summary-number replay
+
+def pilot_summary_half_widths(spread_pct: float, pilot_pairs: int, pairs: Sequence[int], *, confidence: float = 0.95,
+                              simulations: int = 20000, seed: int = 0) -> pd.DataFrame:
+    """Predictive distribution of the half-width (percent) of the ``confidence`` interval of a
+    mean from n pair estimates, given a pilot's between-pair spread ``spread_pct`` from
+    ``pilot_pairs`` pairs -- at the level of pair estimates only (no campaign simulation).
+
+    sigma^2 is drawn from its Jeffreys posterior given the pilot, a future sample of n pair
+    estimates gives s_n, and the interval is t_{n-1} s_n / sqrt(n) (the posterior interval of
+    the mean under the Jeffreys prior).  For n = 1 there is no spread to estimate: the
+    half-width is infinite.  The thesis' figure (eq. 8.2) is z s / sqrt(n): sample spread taken
+    for the population's, normal quantile.  Returns ``n_pairs, thesis_half_width,
+    median_half_width, q10_half_width, q90_half_width`` and ``assurance_at_thesis`` (P(half-width
+    <= the thesis' figure))."""
+    from scipy import stats
+
+    rng = np.random.default_rng(seed)
+    z = stats.norm.ppf((1 + confidence) / 2)
+    sigma = spread_pct * np.sqrt((pilot_pairs - 1) / rng.chisquare(pilot_pairs - 1, simulations))
+    rows = []
+    for n in pairs:
+        thesis = z * spread_pct / math.sqrt(n)
+        if n < 2:
+            hw = np.full(simulations, np.inf)
+        else:
+            s_n = sigma * np.sqrt(rng.chisquare(n - 1, simulations) / (n - 1))
+            hw = stats.t.ppf((1 + confidence) / 2, n - 1) * s_n / math.sqrt(n)
+        rows.append({"n_pairs": int(n), "thesis_half_width": thesis, "median_half_width": float(np.median(hw)),
+                     "q10_half_width": float(np.quantile(hw, 0.1)), "q90_half_width": float(np.quantile(hw, 0.9)),
+                     "assurance_at_thesis": float((hw <= thesis).mean())})
+    return pd.DataFrame(rows)

@@ -1,0 +1,232 @@
+"""MAP + Laplace fits that share one compilation across same-shaped campaigns.
+
+:func:`~bayes_roadload.inference.nuts.find_map` compiles the potential of each campaign
+afresh: the campaign's data are constants of the compiled code.  A study that fits many
+simulated campaigns of the same size (test planning, the withheld-effect suite) would spend
+most of its time compiling.  Here the data (the padded runs, and for hierarchical fits the
+run sensitivities and offsets) are *arguments* of the compiled functions, so every campaign
+with the same model, run count and padded length reuses one compilation: the numpyro
+potential and its gradient (:func:`numpyro.infer.util.potential_energy`), the map between
+constrained and unconstrained values, the run-effect linearisation and the road load of the
+draws.
+
+:func:`fit_laplace` is the cheap fit: the same problem, starting values, re-linearisation
+and trust-region Newton as the NUTS path (:func:`~bayes_roadload.inference.nuts.
+prepare_problem`, :func:`~bayes_roadload.inference.nuts.newton_map`), then independent
+draws of the Laplace approximation (Gaussian in numpyro's unconstrained, O(1)-scaled
+coordinates) mapped to the physical parameters.  Its intervals are those of the Gaussian
+approximation at the mode: planning confirms them against NUTS
+(:mod:`bayes_roadload.analysis.planning`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+from numpyro.infer.util import constrain_fn, potential_energy, unconstrain_fn
+
+from ..data.campaign import Campaign
+from ..physics import integrate_batch
+from ..physics.roadload import road_load_summary
+from .bayes import FitProblem, _effects_posterior, build_problem, coastdown_model, population_sample
+from .nuts import MapResult, _site_scales, initial_values, newton_map
+from .spec import ModelSpec
+
+DEFAULT_LAPLACE_DRAWS = 2000
+"""Draws of the Laplace approximation summarised per fit."""
+
+_CACHE: dict[Any, "CompiledProblem"] = {}
+_CACHE_MAX = 16
+
+
+def _data(problem: FitProblem) -> tuple:
+    """The arguments that differ between same-shaped campaigns."""
+    return (problem.batch, problem.run_jacobian, problem.run_offsets)
+
+
+def _with_data(template: FitProblem, data: tuple) -> FitProblem:
+    batch, jac, offsets = data
+    return dataclasses.replace(template, batch=batch, run_jacobian=jac, run_offsets=offsets)
+
+
+def _key(problem: FitProblem) -> tuple:
+    """What the compiled functions depend on besides their arguments."""
+    shapes = tuple(np.shape(x) for x in problem.batch)
+    return (repr(problem.spec), problem.model, tuple(sorted(problem.fixed.items())), problem.free,
+            problem.pooling, problem.noise, problem.robust, problem.calibration_pairs,
+            problem.driveline_channel, problem.gradients, shapes, problem.mass_kg, problem.frontal_area_m2,
+            tuple(problem.driveline_curve))
+
+
+@dataclass
+class CompiledProblem:
+    """The jitted functions of one kind of problem, with the data as arguments.
+
+    Attributes
+    ----------
+    template : a problem of this kind (its data are not used).
+    unravel : flat unconstrained vector -> dict of sites.
+    scale : O(1) scaling of the flat unconstrained vector.
+    run_index : run of each flat coordinate (-1: shared).
+    """
+
+    template: FitProblem
+    unravel: Any
+    scale: np.ndarray
+    run_index: np.ndarray
+    _fns: dict = field(default_factory=dict)
+
+    @classmethod
+    def build(cls, problem: FitProblem, init: dict[str, Any]) -> "CompiledProblem":
+        if problem.varying and problem.run_jacobian is None:  # placeholders of the right shape
+            r, n, k = problem.n_runs, np.shape(problem.batch.time_s)[-1], len(problem.varying)
+            problem = dataclasses.replace(problem, run_jacobian=np.zeros((r, n, k)), run_offsets=np.zeros((r, k)))
+        z0 = unconstrain_fn(coastdown_model, (problem,), {}, init)
+        _, unravel = ravel_pytree(z0)
+        scale = np.asarray(ravel_pytree(_site_scales(problem, z0))[0])
+        r = problem.n_runs
+        run_of = {k: (np.arange(r) if np.shape(v) == (r,) and r > 1 else np.full(np.size(v), -1))
+                  for k, v in z0.items()}
+        run_index = np.asarray(ravel_pytree({k: jnp.asarray(v) for k, v in run_of.items()})[0]).astype(int)
+        self = cls(template=problem, unravel=unravel, scale=scale, run_index=run_index)
+        self._compile()
+        return self
+
+    def _compile(self) -> None:
+        tpl, unravel, scale = self.template, self.unravel, jnp.asarray(self.scale)
+
+        def objective(y, data):
+            return potential_energy(coastdown_model, (_with_data(tpl, data),), {}, unravel(y * scale))
+
+        def to_scaled(init, data):
+            z = unconstrain_fn(coastdown_model, (_with_data(tpl, data),), {}, init)
+            return ravel_pytree(z)[0] / scale
+
+        def constrain(y, data):
+            return constrain_fn(coastdown_model, (_with_data(tpl, data),), {}, unravel(y * scale))
+
+        def linearise(base, v0, batch):
+            def speeds(values):
+                return integrate_batch(tpl.model, dict(tpl.fixed, **values), batch, v0)[0]
+            cols = []
+            for name in tpl.varying:
+                tangent = {n: jnp.full(tpl.n_runs, 1.0 if n == name else 0.0) for n in base}
+                cols.append(jax.jvp(speeds, (base,), (tangent,))[1])
+            return jnp.where(batch.mask[..., None], jnp.stack(cols, axis=-1), 0.0)
+
+        def effect_means(sample, data):
+            return _effects_posterior(_with_data(tpl, data), sample)[0]
+
+        def derived(values):
+            return road_load_summary(tpl.model, dict(tpl.fixed, **values), tpl.mass_kg, tpl.frontal_area_m2,
+                                     driveline_curve=tpl.driveline_curve)
+
+        self._fns = {
+            "f": jax.jit(objective), "g": jax.jit(jax.grad(objective)), "to_scaled": jax.jit(to_scaled),
+            "constrain": jax.jit(constrain), "constrain_many": jax.jit(jax.vmap(constrain, in_axes=(0, None))),
+            "linearise": jax.jit(linearise), "effect_means": jax.jit(effect_means),
+            "derived": jax.jit(jax.vmap(derived)),
+        }
+
+    # ------------------------------------------------------------------ pieces
+    def linearise(self, problem: FitProblem, reference: dict[str, Any], offsets=None) -> FitProblem:
+        """:func:`~bayes_roadload.inference.bayes.linearise_run_effects`, compiled once."""
+        if not problem.varying:
+            return problem
+        r, k = problem.n_runs, len(problem.varying)
+        offsets = np.zeros((r, k)) if offsets is None else np.asarray(offsets, float).reshape(r, k)
+        base = {n: jnp.full(r, float(reference[n])) for n in problem.free}
+        for i, n in enumerate(problem.varying):
+            base[n] = base[n] + offsets[:, i]
+        jac = self._fns["linearise"](base, jnp.asarray(reference["v0_mps"], float), problem.batch)
+        return dataclasses.replace(problem, run_jacobian=np.asarray(jac), run_offsets=offsets)
+
+    def find_map(self, problem: FitProblem, init: dict[str, Any], max_iter: int = 200) -> MapResult:
+        """MAP and Laplace covariance of ``problem`` (same kind as the template) from the
+        constrained starting values ``init``."""
+        t0 = time.perf_counter()
+        data = _data(problem)
+        f, g = self._fns["f"], self._fns["g"]
+        y0 = np.asarray(self._fns["to_scaled"]({k: jnp.asarray(v) for k, v in init.items()}, data))
+        res = newton_map(lambda y: f(y, data), lambda y: g(y, data), y0, self.run_index, self.scale,
+                         max_iter=max_iter)
+        z = self.unravel(jnp.asarray(res["y"] * self.scale))
+        constrained = self._fns["constrain"](jnp.asarray(res["y"]), data)
+        return MapResult(z=z, constrained=constrained, cov=res["cov"], success=res["success"],
+                         n_iter=res["n_iter"], message=res["message"], grad_max=res["grad_max"],
+                         neg_log_posterior=res["fun"], time_s=time.perf_counter() - t0,
+                         min_eigenvalue=res["min_eigenvalue"])
+
+
+def compiled_problem(problem: FitProblem, init: dict[str, Any]) -> CompiledProblem:
+    """The :class:`CompiledProblem` of ``problem``'s kind (cached in this process)."""
+    key = _key(problem)
+    hit = _CACHE.get(key)
+    if hit is None:
+        if len(_CACHE) >= _CACHE_MAX:
+            _CACHE.pop(next(iter(_CACHE)))
+        hit = _CACHE[key] = CompiledProblem.build(problem, init)
+    return hit
+
+
+@dataclass
+class LaplaceFit:
+    """A MAP + Laplace fit: the problem, the MAP, and draws of the Gaussian approximation.
+
+    ``samples`` maps every sample site, and the road load of :data:`~bayes_roadload.inference.
+    results.DERIVED`, to arrays [1, draw, ...] (one "chain", like :class:`~bayes_roadload.
+    inference.nuts.NutsFit`)."""
+
+    problem: FitProblem
+    map: MapResult
+    samples: dict[str, np.ndarray]
+    timings: dict[str, float] = field(default_factory=dict)
+    truth: dict | None = None
+
+
+def fit_laplace(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling: str = "pooled",
+                noise: str = "integrated", robust: bool = False, draws: int = DEFAULT_LAPLACE_DRAWS,
+                seed: int = 0, start: dict[str, float] | None = None) -> LaplaceFit:
+    """MAP + Laplace fit of a campaign, compiled once per kind of campaign.
+
+    The same starting values (:func:`~bayes_roadload.inference.nuts.initial_values`) and, for
+    the hierarchical model, the same re-linearisation at the first MAP's run effects as
+    :func:`~bayes_roadload.inference.nuts.fit_nuts`; then ``draws`` independent draws of the
+    Gaussian approximation at the MAP.  ``start`` (free parameter -> value) replaces the
+    least-squares start (:func:`~bayes_roadload.inference.nuts.initial_values`).
+
+    Campaigns with the same model, number of runs and padded length share one compilation:
+    give simulated campaigns a common ``meta["pad_to_samples"]``.
+    """
+    t0 = time.perf_counter()
+    problem = build_problem(campaign, spec, pooling=pooling, noise=noise, robust=robust)
+    init = initial_values(problem, campaign, start)
+    comp = compiled_problem(problem, init)
+    problem = comp.linearise(problem, init)
+    if problem.varying:
+        first = comp.find_map(problem, init)
+        means = np.asarray(comp._fns["effect_means"](
+            {k: jnp.asarray(v) for k, v in population_sample(problem, first.constrained).items()},
+            _data(problem)))
+        problem = comp.linearise(problem, first.constrained, means)
+        init = dict(init, **{k: v for k, v in first.constrained.items() if k in init})
+    result = comp.find_map(problem, init)
+    rng = np.random.default_rng(seed)
+    y_map = np.asarray(ravel_pytree(result.z)[0]) / comp.scale
+    cov_y = result.cov / np.outer(comp.scale, comp.scale)
+    chol = np.linalg.cholesky(cov_y + 1e-12 * np.eye(y_map.size))
+    ys = y_map + rng.standard_normal((draws, y_map.size)) @ chol.T
+    constrained = comp._fns["constrain_many"](jnp.asarray(ys), _data(problem))
+    samples = {k: np.asarray(v)[None] for k, v in constrained.items()}
+    derived = comp._fns["derived"]({k: jnp.asarray(samples[k][0]) for k in problem.free})
+    samples.update({k: np.asarray(v)[None] for k, v in derived.items()})
+    fit = LaplaceFit(problem=problem, map=result, samples=samples, truth=campaign.truth)
+    fit.timings = {"map_s": result.time_s, "fit_s": time.perf_counter() - t0}
+    return fit
