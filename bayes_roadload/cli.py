@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 import tempfile
 from pathlib import Path
@@ -39,15 +40,17 @@ def _sampler(args):
                                 precondition="none" if args.no_precondition else "laplace")
 
 
-def _fit_nuts(campaign, args, out: Path):
+def _fit_nuts(campaign, args, out: Path, campaign_path=None):
     from .inference.nuts import fit_nuts
-    from .inference.results import format_posterior_table, write_nuts_outputs
-
-    from .inference.results import truth_derived
+    from .inference.results import format_posterior_table, truth_derived, write_nuts_outputs
 
     fit = fit_nuts(campaign, args.model, pooling=args.pooling, noise=args.noise, robust=args.robust,
                    sampler=_sampler(args))
     summary, diag = write_nuts_outputs(fit, out)
+    (out / "fit.json").write_text(json.dumps({
+        "model": fit.problem.spec.name, "model_file": fit.problem.spec.source,
+        "free": list(fit.problem.free), "pooling": args.pooling, "noise": args.noise, "robust": bool(args.robust),
+        "campaign": None if campaign_path is None else str(Path(campaign_path).resolve())}, indent=2) + "\n")
     truth = dict(campaign.truth or {}, **truth_derived(fit.problem, campaign.truth))
     return summary, diag, format_posterior_table(summary, diag, truth or None), truth
 
@@ -71,9 +74,9 @@ def _cmd_fit(args) -> int:
         print(f"\nwrote {out / 'summary.csv'}, per_group.csv, fit.json")
         return 0
     args.model = spec
-    summary, diag, table, _ = _fit_nuts(campaign, args, out)
+    summary, diag, table, _ = _fit_nuts(campaign, args, out, args.campaign)
     print(table)
-    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, diagnostics.json")
+    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, diagnostics.json, fit.json")
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
@@ -96,7 +99,7 @@ def _cmd_demo(args) -> int:
     print(f"Fitting model {args.model}: classical per-pair least squares, then NUTS over all runs jointly ...")
     lsq = fit_lsq(campaign, args.model, grouping="pair")
     write_lsq_outputs(lsq, out / "fit_lsq")
-    summary, diag, table, truth = _fit_nuts(campaign, args, out / "fit_nuts")
+    summary, diag, table, truth = _fit_nuts(campaign, args, out / "fit_nuts", out / "campaign")
     post = summary.set_index("parameter")
     print()
     print(f"{'quantity':<15}{'truth':>10}   {'least squares: mean +- SE':<27}{'posterior: mean [95 % interval]'}")
@@ -111,6 +114,98 @@ def _cmd_demo(args) -> int:
     print("\n".join(line for line in table.splitlines()[:2] if line.startswith(("!!", "NUTS"))))
     print(f"\nCampaign, least-squares fit (fit_lsq/) and posterior (fit_nuts/) written under {out}")
     return 0 if diag["pass"] else EXIT_GATES_FAILED
+
+
+def _plan_population(args, out: Path):
+    """The population a plan draws from: a fit directory's posterior, or a NUTS fit of a campaign."""
+    from .analysis.planning import population_from_fit, population_from_samples
+    from .data import load_campaign
+
+    src = Path(args.source)
+    if (src / "posterior.nc").is_file():
+        import arviz as az
+
+        meta_file = src / "fit.json"
+        if not meta_file.is_file():
+            raise ValueError(f"{src}: a fit directory needs the fit.json written by `bayes-roadload fit` (model, "
+                             "campaign); refit the campaign or give the campaign directory")
+        meta = json.loads(meta_file.read_text())
+        if not meta.get("campaign"):
+            raise ValueError(f"{meta_file}: no campaign path recorded; give the campaign directory instead")
+        campaign = load_campaign(meta["campaign"])
+        post = az.from_netcdf(str(src / "posterior.nc")).posterior
+        samples = {k: post[k].values for k in post.data_vars}
+        model = meta["model_file"] if meta.get("model_file") and Path(meta["model_file"]).is_file() else meta["model"]
+        return population_from_samples(samples, meta["free"], model, campaign,
+                                       source=f"{meta['pooling']} fit {src}"), campaign
+    campaign = load_campaign(src)
+    print(f"Fitting {src} ({campaign.runs['run'].nunique()} runs) with model {args.model}, {args.pooling} "
+          "pooling, to draw the future campaigns from ...")
+    from .inference.nuts import fit_nuts
+    from .inference.results import write_nuts_outputs
+
+    fit = fit_nuts(campaign, args.model, pooling=args.pooling, sampler=_sampler(args))
+    _, diag = write_nuts_outputs(fit, out / "fit")
+    if not diag["pass"]:
+        print(f"!! the source fit FAILED its gates ({', '.join(diag['failed'])}): the plan below draws from a "
+              "posterior that is not trustworthy; refit with more draws (see `fit`)")
+    return population_from_fit(fit, campaign), campaign
+
+
+def _cmd_plan(args) -> int:
+    from . import config
+    from .analysis.batch import process_pool, run_batch
+    from .analysis.planning import Target, plan_jobs, plan_table, plot_plan, recommend
+    from .analysis.regulation import regulation_checks
+
+    targets = [Target.parse(t) for t in (args.target or config.PLAN_TARGETS)]
+    if not 0 < args.confidence < 1 or not 0 < args.assurance < 1:
+        raise ValueError("--confidence and --assurance are fractions in (0, 1), e.g. 0.95 and 0.8")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    population, campaign = _plan_population(args, out)
+    fit_model = args.fit_model or population.model
+    pairs = sorted(set(args.pairs))
+    print(f"Population: {population.source}; {population.n_draws} draws; refitting {args.simulations} simulated "
+          f"campaigns of each of {pairs} pairs with {fit_model} ({population.pooling}, MAP + Laplace) ...")
+    jobs = plan_jobs(population, pairs, simulations=args.simulations, model=fit_model,
+                     confidence=args.confidence, seed=args.seed)
+    with process_pool(args.workers) as pool:
+        records = run_batch(jobs, pool)
+    records.to_csv(out / "plan_records.csv", index=False)
+    failed = int(records["error"].notna().sum()) if "error" in records else 0
+    not_converged = int((~records["gate_pass"].fillna(False).astype(bool)).sum()) if "gate_pass" in records else 0
+    table = plan_table(records, targets, args.confidence)
+    table.to_csv(out / "plan.csv", index=False)
+    rec = recommend(table, args.assurance)
+    rec.to_csv(out / "recommendation.csv", index=False)
+    plot_plan(table, targets, out / "plan.png", assurance=args.assurance)
+    print(f"\n{'quantity':<15}{'target':>10}  " + "".join(f"{n:>8}" for n in pairs) + "   pairs needed")
+    for t in targets:
+        rows = table[table["quantity"] == t.quantity].set_index("n_pairs")
+        if rows.empty:
+            print(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  not a quantity of model {fit_model}")
+            continue
+        cells = "".join(f"{rows.loc[n, 'median_half_width']:>8.3g}" if n in rows.index else f"{'-':>8}" for n in pairs)
+        r = rec[rec["quantity"] == t.quantity].iloc[0]
+        need = f"{int(r['n_pairs'])}" if r["reached"] else f"> {int(r['max_pairs_simulated'])}"
+        print(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  {cells}   {need}")
+    print(f"(median {100 * args.confidence:g} % half-width against pairs, in the target's units; pairs needed: "
+          f"smallest simulated n with P(half-width <= target) >= {args.assurance:g})")
+    if failed or not_converged:
+        print(f"!! {failed} refits raised, {not_converged} MAPs did not converge: left out of the table")
+    if "pair" in campaign.runs and campaign.runs["pair"].nunique() >= 2:
+        reg = regulation_checks(campaign, population.model if args.fit_model is None else fit_model)
+        reg.to_csv(out / "regulation.csv", index=False)
+        print("\nRegulation precision on the measured campaign (regulation.csv):")
+        for _, r in reg.iterrows():
+            verdict = "pass" if r["pass"] else f"FAIL: {r['extra_pairs']} more pairs ({r['extra_pairs_assured']} for " \
+                                               f"{100 * args.assurance:g} % assurance)"
+            print(f"  {r['criterion']:<6} {r['speed_kph']:>6.1f} km/h  n={r['n_pairs']}  precision "
+                  f"{r['precision_pct']:.2f} % (limit {r['limit_pct']:g} %)  {verdict}")
+    print(f"\nwrote {out / 'plan.csv'}, recommendation.csv, plan_records.csv, plan.png"
+          + (", regulation.csv" if (out / "regulation.csv").exists() else ""))
+    return 0
 
 
 def _cmd_sensitivity(args) -> int:
@@ -160,6 +255,8 @@ def _add_nuts_options(p: argparse.ArgumentParser, seed: int) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from . import config
+
     p = argparse.ArgumentParser(prog="bayes-roadload", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -201,6 +298,31 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--out", required=True)
     _add_nuts_options(f, seed=0)
     f.set_defaults(func=_cmd_fit)
+
+    pl = sub.add_parser("plan", help="how many pairs until each quantity is known to a target: posterior-predictive "
+                                     "campaigns refitted by MAP + Laplace")
+    pl.add_argument("source", metavar="CAMPAIGN_OR_FIT_DIR",
+                    help="a campaign (fitted first with --model, --pooling) or a `fit` output directory")
+    pl.add_argument("--target", action="append", metavar="QUANTITY=VALUE[%]",
+                    help="half-width target, repeatable: CD0=1%% (percent of the mean) or F50_N=2 (SI units); "
+                         "quantities AD BD CD0 KD At Bt Ct F50_N F50_tyre_N F0_N F2_N_per_kph2 "
+                         "(default: AD=1%% BD=5%% CD0=1%% F50_N=0.5%%)")
+    pl.add_argument("--confidence", type=float, default=config.PLAN_CONFIDENCE, help="interval level of the half-width")
+    pl.add_argument("--assurance", type=float, default=config.PLAN_ASSURANCE,
+                    help="recommend the smallest n whose half-width meets the target with this probability")
+    pl.add_argument("--pairs", type=int, nargs="+", default=list(config.PLAN_PAIRS),
+                    help="campaign sizes (pairs) to simulate")
+    pl.add_argument("--simulations", type=int, default=config.PLAN_SIMULATIONS, help="future campaigns per size")
+    pl.add_argument("--model", default="three_term", help="model of the source fit when given a campaign")
+    pl.add_argument("--pooling", choices=("pooled", "hierarchical"), default="hierarchical",
+                    help="source fit: hierarchical gives the run-to-run spreads the future runs vary by")
+    pl.add_argument("--fit-model", default=None,
+                    help="model the future campaigns are fitted with (default: the source's); e.g. a constrained "
+                         "one (three_term, two_term_tyres)")
+    pl.add_argument("--workers", type=int, default=1, help="processes for the refits")
+    pl.add_argument("--out", required=True)
+    _add_nuts_options(pl, seed=0)
+    pl.set_defaults(func=_cmd_plan, noise="integrated", robust=False)
 
     se = sub.add_parser("sensitivity", help="coefficient sensitivities (thesis tables 6.1, 6.2)")
     se.add_argument("--cross-wind", type=float, nargs="+", default=[0.0, 1.0, 2.0, 3.0])

@@ -299,6 +299,9 @@ PLAN_TARGETS = ("AD=1%", "BD=5%", "CD0=1%", "F50_N=0.5%")
 """Default planning targets: the thesis' (section 8.2: A_D, C_D0 within 1 %, B_D within 5 %) and
 the road load at 50 mph within 0.5 %."""
 
+PLAN_PAIRS = (1, 2, 3, 4, 6, 8, 12, 16, 24)
+"""Campaign sizes (pairs) a plan simulates by default."""
+
 PLAN_SIMULATIONS = 40
 """Future campaigns simulated per number of pairs (the assurance's binomial sd is <= 0.08)."""
 

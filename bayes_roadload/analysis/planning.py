@@ -304,11 +304,10 @@ class FutureCampaign:
 
 # --------------------------------------------------------------------------- jobs and tables
 
-DEFAULT_PAIRS = (1, 2, 3, 4, 6, 8, 12, 16, 24)
-
-
-def plan_jobs(population: Population, pairs: Sequence[int] = DEFAULT_PAIRS, *, simulations: int = 40,
-              model: str | None = None, confidence: float = 0.95, seed: int = 0, method: str = "laplace",
+def plan_jobs(population: Population, pairs: Sequence[int] = config.PLAN_PAIRS, *,
+              simulations: int = config.PLAN_SIMULATIONS,
+              model: str | None = None, confidence: float = config.PLAN_CONFIDENCE, seed: int = 0,
+              method: str = "laplace",
               tags: Mapping[str, Any] | None = None) -> list[FitJob]:
     """One fit job per future campaign: ``simulations`` campaigns of each size in ``pairs``,
     refitted with ``model`` (default: the population's) by ``method`` ("laplace", or "nuts" to
@@ -336,7 +335,7 @@ def half_widths(records: pd.DataFrame, quantity: str, confidence: float = 0.95, 
     return 100.0 * half / records[f"{quantity}_mean"].astype(float).abs() if relative else half
 
 
-def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: float = 0.95,
+def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: float = config.PLAN_CONFIDENCE,
                by: Sequence[str] = ()) -> pd.DataFrame:
     """Half-width distribution and assurance against the number of pairs.
 
@@ -389,7 +388,58 @@ def recommend(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE, by:
     return pd.DataFrame(rows)
 
 
+def plot_plan(table: pd.DataFrame, targets: Sequence[Target], path, *, assurance: float = config.PLAN_ASSURANCE):
+    """Two panels against the number of pairs: the median half-width with its 10-90 % band over
+    the simulated campaigns (one line per target, each divided by its target so that 1 is the
+    target), and the assurance with the required level."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    for t in targets:
+        g = table[table["quantity"] == t.quantity].sort_values("n_pairs")
+        if g.empty:
+            continue
+        line, = ax1.plot(g["n_pairs"], g["median_half_width"] / t.value, "o-", label=str(t))
+        ax1.fill_between(g["n_pairs"], g["q10_half_width"] / t.value, g["q90_half_width"] / t.value,
+                         color=line.get_color(), alpha=0.15)
+        ax2.plot(g["n_pairs"], g["assurance"], "o-", color=line.get_color(), label=str(t))
+    ax1.axhline(1.0, color="k", lw=0.8)
+    ax1.set(xscale="log", yscale="log", xlabel="pairs of runs", ylabel="half-width / target",
+            title="interval half-width (median, 10-90 %)")
+    ax2.axhline(assurance, color="k", lw=0.8, ls="--")
+    ax2.set(xscale="log", ylim=(-0.02, 1.02), xlabel="pairs of runs", ylabel="P(half-width <= target)",
+            title="assurance")
+    ticks = sorted(table["n_pairs"].unique()) if not table.empty else []
+    for ax in (ax1, ax2):
+        ax.set_xticks(ticks)
+        ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax1.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 # --------------------------------------------------------------------------- summary-number replay
+
+def predictive_half_widths(spread_pct: float, pilot_pairs: int, n: int, *, confidence: float = 0.95,
+                           simulations: int = 20000, seed: int = 0) -> np.ndarray:
+    """[simulations] draws of the half-width (percent) of the ``confidence`` interval of a mean
+    from ``n`` future pair estimates, given a pilot's between-pair spread ``spread_pct`` from
+    ``pilot_pairs`` pairs (:func:`pilot_summary_half_widths`); infinite for n = 1."""
+    from scipy import stats
+
+    rng = np.random.default_rng(seed)
+    sigma = spread_pct * np.sqrt((pilot_pairs - 1) / rng.chisquare(pilot_pairs - 1, simulations))
+    if n < 2:
+        return np.full(simulations, np.inf)
+    s_n = sigma * np.sqrt(rng.chisquare(n - 1, simulations) / (n - 1))
+    return stats.t.ppf((1 + confidence) / 2, n - 1) * s_n / math.sqrt(n)
+
 
 def pilot_summary_half_widths(spread_pct: float, pilot_pairs: int, pairs: Sequence[int], *, confidence: float = 0.95,
                               simulations: int = 20000, seed: int = 0) -> pd.DataFrame:
@@ -406,17 +456,12 @@ def pilot_summary_half_widths(spread_pct: float, pilot_pairs: int, pairs: Sequen
     <= the thesis' figure))."""
     from scipy import stats
 
-    rng = np.random.default_rng(seed)
     z = stats.norm.ppf((1 + confidence) / 2)
-    sigma = spread_pct * np.sqrt((pilot_pairs - 1) / rng.chisquare(pilot_pairs - 1, simulations))
     rows = []
     for n in pairs:
         thesis = z * spread_pct / math.sqrt(n)
-        if n < 2:
-            hw = np.full(simulations, np.inf)
-        else:
-            s_n = sigma * np.sqrt(rng.chisquare(n - 1, simulations) / (n - 1))
-            hw = stats.t.ppf((1 + confidence) / 2, n - 1) * s_n / math.sqrt(n)
+        hw = predictive_half_widths(spread_pct, pilot_pairs, int(n), confidence=confidence, simulations=simulations,
+                                    seed=seed)
         rows.append({"n_pairs": int(n), "thesis_half_width": thesis, "median_half_width": float(np.median(hw)),
                      "q10_half_width": float(np.quantile(hw, 0.1)), "q90_half_width": float(np.quantile(hw, 0.9)),
                      "assurance_at_thesis": float((hw <= thesis).mean())})

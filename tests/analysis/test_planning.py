@@ -1,0 +1,131 @@
+"""Test planning: targets, future campaigns, assurance tables, the pilot-summary replay."""
+
+import dataclasses
+import math
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from bayes_roadload.analysis.batch import run_batch
+from bayes_roadload.analysis.planning import (
+    Population,
+    Target,
+    pilot_summary_half_widths,
+    plan_jobs,
+    plan_table,
+    predictive_half_widths,
+    recommend,
+    simulate_future,
+)
+from bayes_roadload.simulate import simulate_campaign
+
+from ..conftest import clean_case
+
+
+def test_target_parsing():
+    t = Target.parse("CD0=1%")
+    assert (t.quantity, t.value, t.relative, t.unit) == ("CD0", 1.0, True, "%")
+    t = Target.parse("F50_N=2.5")
+    assert (t.relative, t.unit) == (False, "N")
+    for bad in ("CD0", "CD0=-1%", "XX=1%", "CD0=1 N"):
+        with pytest.raises(ValueError):
+            Target.parse(bad)
+
+
+@pytest.fixture(scope="module")
+def conditions():
+    """Noise-free runs through 2 m/s head and cross wind (clean case, measurement noise off)."""
+    case = dataclasses.replace(clean_case(), measurement_noise=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return simulate_campaign(case, pairs=2, seed=5)
+
+
+def _population(conditions, tau=None, sigma=0.0, q=0.0, draws=50):
+    truth = conditions.truth
+    means = {k: np.full(draws, truth[k]) for k in ("AD", "BD", "CD0")}
+    return Population(model="three_term", means=means, tau=tau or {}, sigma_mps=np.full(draws, sigma),
+                      q_mps_per_sqrt_s=np.full(draws, q), conditions=conditions)
+
+
+def test_future_runs_reproduce_the_observed_runs_with_the_same_coefficients(conditions):
+    """With the observed runs' own coefficients, no spread and no noise, a resampled run
+    integrated through the reconstructed wind is the observed run (to the integrator's and the
+    wind reconstruction's accuracy)."""
+    if abs(conditions.truth["KD"] - 0.614) > 1e-9:
+        pytest.skip("three_term fixes KD at 0.614")
+    future = simulate_future(_population(conditions), pairs=3, seed=2)
+    assert future.runs["run"].nunique() == 6 and future.runs["pair"].nunique() == 3
+    assert future.meta["pad_to_samples"] == conditions.runs.groupby("run").size().max()
+    obs = {rid: g["speed_mps"].to_numpy() for rid, g in conditions.runs.groupby("run")}
+    for rid, g in future.runs.groupby("run"):
+        v = g["speed_mps"].to_numpy()
+        best = min(np.abs(v - o).max() for o in obs.values() if o.size == v.size)
+        assert best < 0.02, (rid, best)
+
+
+def test_future_runs_vary_by_tau_and_noise(conditions):
+    tau = {"AD": np.full(50, 0.05 * conditions.truth["AD"])}
+    a = simulate_future(_population(conditions, tau=tau, sigma=0.05), pairs=2, seed=3)
+    b = simulate_future(_population(conditions), pairs=2, seed=3)
+    d = a.runs["speed_mps"].to_numpy() - b.runs["speed_mps"].to_numpy()
+    assert 0.03 < d.std() < 0.5  # 0.05 m/s noise plus the run effects
+    c = simulate_future(_population(conditions, tau=tau, sigma=0.05), pairs=2, seed=3)
+    np.testing.assert_array_equal(a.runs["speed_mps"], c.runs["speed_mps"])  # seeded
+
+
+def _records(half_widths_by_n):
+    rows = []
+    for n, hws in half_widths_by_n.items():
+        for k, hw in enumerate(hws):
+            rows.append({"n_pairs": n, "error": None, "CD0_mean": 0.4, "CD0_truth": 0.4,
+                         "CD0_q2.5": 0.4 * (1 - hw / 100), "CD0_q97.5": 0.4 * (1 + hw / 100), "CD0_in95": True})
+    return pd.DataFrame(rows)
+
+
+def test_plan_table_and_recommendation():
+    rec = _records({1: [3.0, 2.5, 2.0, 1.5], 2: [1.2, 0.9, 0.8, 0.7], 4: [0.6, 0.5, 0.5, 0.4]})
+    table = plan_table(rec, [Target.parse("CD0=1%")])
+    assert list(table.columns[:4]) == ["quantity", "n_pairs", "median_half_width", "assurance"]
+    row = table.set_index("n_pairs")
+    assert row.loc[1, "median_half_width"] == pytest.approx(2.25)
+    assert row.loc[2, "assurance"] == pytest.approx(0.75)
+    assert row.loc[4, "assurance"] == pytest.approx(1.0)
+    r = recommend(table, 0.8).iloc[0]
+    assert r["n_pairs"] == 4 and r["reached"]
+    assert recommend(table, 0.7).iloc[0]["n_pairs"] == 2
+    tight = recommend(plan_table(rec, [Target.parse("CD0=0.1%")]), 0.8).iloc[0]
+    assert tight["n_pairs"] is None and not tight["reached"]
+
+
+def test_predictive_half_widths_against_the_thesis_formula():
+    """A pilot so large that its spread is known: the median half-width is t(n-1) sigma /
+    sqrt(n) times the median of s_n / sigma; the thesis' z s / sqrt(n) is met only about half
+    the time at n = 96 and much less at n = 3 (t >> z)."""
+    hw = predictive_half_widths(4.3, 10**7, 96, simulations=40000, seed=1)
+    med = stats.t.ppf(0.975, 95) * 4.3 / math.sqrt(96) * math.sqrt(stats.chi2.median(95) / 95)
+    assert np.median(hw) == pytest.approx(med, rel=0.01)
+    table = pilot_summary_half_widths(4.3, 18, [1, 3, 96], simulations=20000).set_index("n_pairs")
+    assert math.isinf(table.loc[1, "median_half_width"])
+    assert table.loc[96, "thesis_half_width"] == pytest.approx(1.96 * 4.3 / math.sqrt(96), rel=1e-3)
+    assert table.loc[3, "assurance_at_thesis"] < 0.25 < table.loc[96, "assurance_at_thesis"] < 0.75
+
+
+def test_plan_through_the_batch_door(conditions):
+    """Laplace refits of future campaigns: half-widths shrink with the number of pairs, jobs of
+    one size share a shape (so a compilation).  (Pooled here for speed; a population with
+    spreads is refitted hierarchically.)"""
+    pop = _population(conditions, sigma=0.05, q=0.002)
+    assert _population(conditions, tau={"AD": np.ones(50)}).pooling == "hierarchical"
+    jobs = plan_jobs(pop, pairs=(1, 4), simulations=2, seed=4)
+    assert {j.pooling for j in jobs} == {"pooled"} and {j.method for j in jobs} == {"laplace"}
+    records = run_batch(jobs)
+    assert records["error"].isna().all(), records["error"].dropna().tolist()
+    assert records["gate_pass"].all()
+    table = plan_table(records, [Target.parse("AD=1%"), Target.parse("F50_N=0.5%")]).set_index(["quantity", "n_pairs"])
+    for q in ("AD", "F50_N"):
+        assert table.loc[(q, 4), "median_half_width"] < table.loc[(q, 1), "median_half_width"]
+    assert records.groupby("n_pairs")["time_compile_s"].min().max() < 0.5 * records["time_compile_s"].max()

@@ -1,0 +1,58 @@
+"""MAP + Laplace fits compiled once per campaign shape."""
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+
+from bayes_roadload.analysis.batch import _compile_clock
+from bayes_roadload.inference.bayes import build_problem
+from bayes_roadload.inference.laplace import fit_laplace
+from bayes_roadload.inference.nuts import find_map, initial_values, unconstrained_posterior
+from bayes_roadload.simulate import simulate_campaign
+
+from ..conftest import clean_case
+
+
+def _padded(campaign, n):
+    return dataclasses.replace(campaign, meta=dict(campaign.meta, pad_to_samples=n))
+
+
+@pytest.fixture(scope="module")
+def two_campaigns():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        cs = [simulate_campaign(clean_case(), pairs=1, seed=s) for s in (31, 32)]
+    n = max(int(c.runs.groupby("run").size().max()) for c in cs)
+    return [_padded(c, n) for c in cs]
+
+
+def test_same_map_and_covariance_as_find_map(two_campaigns):
+    """The data-as-argument potential is numpyro's potential: same MAP and Laplace covariance
+    as find_map (which compiles the data in)."""
+    c = two_campaigns[0]
+    lf = fit_laplace(c, "three_term", draws=4000, seed=1)
+    problem = build_problem(c, "three_term")
+    ref = find_map(problem, {}, posterior=unconstrained_posterior(problem, initial_values(problem, c)))
+    assert lf.map.success and ref.success
+    for k in ("AD", "BD", "CD0"):
+        assert float(lf.map.constrained[k]) == pytest.approx(float(ref.constrained[k]), rel=1e-6)
+    assert np.abs(lf.map.cov - ref.cov).max() <= 1e-6 * np.abs(ref.cov).max()
+    # the draws are those of the Gaussian approximation: sd of AD within Monte Carlo error of
+    # the Laplace sd of its (unconstrained, here unbounded-normal-prior-free) coordinate
+    sd = lf.samples["CD0"].std()
+    assert sd > 0 and np.isfinite(lf.samples["F50_N"]).all()
+    assert lf.samples["AD"].shape == (1, 4000)
+
+
+def test_same_shaped_campaigns_share_one_compilation(two_campaigns):
+    """The second campaign of the same shape compiles (almost) nothing: < 10 % of the first's
+    compile time."""
+    first = _compile_clock()
+    fit_laplace(two_campaigns[0], "two_term_tyres", pooling="pooled")
+    c1 = _compile_clock() - first
+    fit_laplace(two_campaigns[1], "two_term_tyres", pooling="pooled")
+    c2 = _compile_clock() - first - c1
+    assert c1 > 0
+    assert c2 < 0.1 * c1, (c1, c2)
