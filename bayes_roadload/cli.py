@@ -136,6 +136,10 @@ def _plan_population(args, out: Path):
         post = az.from_netcdf(str(src / "posterior.nc")).posterior
         samples = {k: post[k].values for k in post.data_vars}
         model = meta["model_file"] if meta.get("model_file") and Path(meta["model_file"]).is_file() else meta["model"]
+        diag_file = src / "diagnostics.json"
+        if diag_file.is_file() and not json.loads(diag_file.read_text()).get("pass", True):
+            print(f"!! the source fit {src} FAILED its diagnostic gates: the plan draws from a posterior that is "
+                  "not trustworthy; refit with more draws (see `fit`)")
         return population_from_samples(samples, meta["free"], model, campaign,
                                        source=f"{meta['pooling']} fit {src}"), campaign
     campaign = load_campaign(src)
@@ -165,6 +169,10 @@ def _cmd_plan(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     population, campaign = _plan_population(args, out)
     fit_model = args.fit_model or population.model
+    if not population.tau:
+        print("note: the source posterior has no run-to-run spreads (pooled fit): future runs are drawn without "
+              "run-to-run variation, so the plan counts measurement noise only; fit with --pooling hierarchical "
+              "for a plan that includes it")
     pairs = sorted(set(args.pairs))
     print(f"Population: {population.source}; {population.n_draws} draws; refitting {args.simulations} simulated "
           f"campaigns of each of {pairs} pairs with {fit_model} ({population.pooling}, MAP + Laplace) ...")
