@@ -201,7 +201,9 @@ def _cmd_plan(args) -> int:
     print(f"(median {100 * args.confidence:g} % half-width against pairs, in the target's units; pairs needed: "
           f"smallest simulated n with P(half-width <= target) >= {args.assurance:g})")
     if failed or not_converged:
-        print(f"!! {failed} refits raised, {not_converged} MAPs did not converge: left out of the table")
+        print(f"!! {failed} refits raised (left out of the table), {not_converged} failed their gate (MAP not "
+              "converged, or importance weights with Pareto k > 0.7: the Laplace approximation is poor there; kept, "
+              "see gate_pass_frac in plan.csv)")
     if "pair" in campaign.runs and campaign.runs["pair"].nunique() >= 2:
         reg = regulation_checks(campaign, population.model if args.fit_model is None else fit_model)
         reg.to_csv(out / "regulation.csv", index=False)

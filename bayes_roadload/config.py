@@ -283,6 +283,27 @@ job.  Clearing after every job would bound the memory at ~1.2 GB but costs 5-8 s
 (the shared pieces are recompiled); never clearing grows by 85-165 MB per fit."""
 
 
+# MAP + Laplace fits of studies (bayes_roadload.inference.laplace)
+LAPLACE_DRAWS = 2000
+"""Draws per MAP + Laplace fit (proposals of the importance-sampling correction)."""
+
+LAPLACE_PROPOSAL_DF = 5
+"""Degrees of freedom of the multivariate-t proposal around the MAP (heavier tails than the
+Gaussian, so that the importance weights of a right-skewed posterior stay bounded)."""
+
+LAPLACE_PROPOSAL_INFLATION = (1.0, 1.5, 2.0)
+"""Scale factors of the proposal's covariance tried in turn while the Pareto k is above
+``LAPLACE_GOOD_PARETO_K`` (the best proposal is kept).  Measured on one pair, pooled: k 0.81 at
+1.0, 0.63 at 2.0 (the coefficients' posterior sd there is ~2x the Laplace sd)."""
+
+LAPLACE_GOOD_PARETO_K = 0.5
+"""Pareto k below which the first proposal is accepted without trying wider ones."""
+
+LAPLACE_MAX_PARETO_K = 0.7
+"""A Laplace fit whose importance weights have a Pareto k above this fails its gate (PSIS,
+Vehtari et al. 2024: the corrected estimates are then unreliable)."""
+
+
 # Test planning (bayes_roadload.analysis.planning) and the regulation checks
 QUANTITY_UNITS: dict[str, str] = {**PARAMETER_UNITS, "F50_N": "N", "F50_tyre_N": "N", "F0_N": "N",
                                   "F2_N_per_kph2": "N/(km/h)^2"}

@@ -281,10 +281,14 @@ def _laplace_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
             rec[f"{name}_mean"] = float(np.mean(fit.samples[name]))
             rec[f"{name}_q50"] = float(np.median(fit.samples[name]))
     rec["sigma_mps_mean"] = float(np.mean(fit.samples["sigma_mps"]))
-    ok = bool(fit.map.success) and fit.map.min_eigenvalue > 0.0
-    rec.update({"gate_pass": ok, "gates_failed": "" if ok else "map",
+    k = float(fit.diagnostics.get("pareto_k", math.nan))
+    failed = [name for name, bad in (("map", not (fit.map.success and fit.map.min_eigenvalue > 0.0)),
+                                     ("pareto_k", k > config.LAPLACE_MAX_PARETO_K)) if bad]
+    rec.update({"gate_pass": not failed, "gates_failed": ",".join(failed),
                 "map_converged": bool(fit.map.success), "map_min_eigenvalue": float(fit.map.min_eigenvalue),
-                "map_iterations": int(fit.map.n_iter)})
+                "map_iterations": int(fit.map.n_iter), "pareto_k": k,
+                "is_ess": float(fit.diagnostics.get("is_ess", math.nan)),
+                "proposal_inflation": float(fit.diagnostics.get("proposal_inflation", math.nan))})
     rec.update({f"time_{k}": float(v) for k, v in fit.timings.items()})
     return rec
 
@@ -319,9 +323,10 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
         * noise: ``sigma_mps_mean`` and, when sampled, ``q_mps_per_sqrt_s_mean`` / ``_q50``;
         * gates: ``gate_pass, gates_failed, divergences, max_r_hat, min_ess_bulk,
           min_ess_tail, mean_tree_depth, map_converged``; for ``method="laplace"`` only
-          ``gate_pass`` (the MAP converged and its Hessian is positive definite),
-          ``gates_failed`` ("map" or ""), ``map_converged, map_min_eigenvalue,
-          map_iterations``, and no ``P_r_hat, P_ess_bulk``; ``tau_P_mean / _q50`` of the
+          ``gate_pass`` (the MAP converged, its Hessian is positive definite and the
+          importance weights' Pareto k is at most ``config.LAPLACE_MAX_PARETO_K``),
+          ``gates_failed`` ("map", "pareto_k"), ``map_converged, map_min_eigenvalue,
+          map_iterations, pareto_k, is_ess, proposal_inflation``, and no ``P_r_hat, P_ess_bulk``; ``tau_P_mean / _q50`` of the
           hierarchical spreads;
         * timings (s): ``time_simulate_s``, ``time_map_s``, ``time_warmup_s``,
           ``time_sampling_s`` (from the fit, compilation included), ``time_fit_s`` (the whole

@@ -341,9 +341,12 @@ def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: flo
 
     Returns one row per (``by`` groups,) target quantity and ``n_pairs``: ``quantity,
     n_pairs, median_half_width, assurance`` (the contract columns of ``plan.csv``), then
-    ``target, unit, q10_half_width, q90_half_width, n_sims`` (successful refits), ``bias`` and
-    ``bias_pct`` (mean of posterior mean minus truth over the simulations: what a constrained
-    model costs), ``rmse_pct``."""
+    ``target, unit, q10_half_width, q90_half_width, n_sims`` (refits without an error),
+    ``bias`` and ``bias_pct`` (mean of posterior mean minus truth over the simulations: what a
+    constrained model costs), ``rmse_pct``, ``gate_pass_frac`` (refits passing their gate: the
+    MAP converged and the importance weights are usable; the others are kept, their intervals
+    being the best available, and the fraction says how far to trust the row) and
+    ``coverage`` (of the truth by the intervals)."""
     ok = successful(records)
     rows = []
     groups = ok.groupby(list(by) + ["n_pairs"], sort=True) if by else ok.groupby("n_pairs", sort=True)
@@ -363,6 +366,7 @@ def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: flo
                          "q90_half_width": float(hw.quantile(0.9)), "n_sims": int(hw.size),
                          "bias": float(err.mean()), "bias_pct": float(100.0 * (err / truth).mean()),
                          "rmse_pct": float(100.0 * np.sqrt(((err / truth) ** 2).mean())),
+                         "gate_pass_frac": float(g["gate_pass"].astype(bool).mean()) if "gate_pass" in g else math.nan,
                          "coverage": float(g[f"{t.quantity}_{interval_key(confidence)}"].astype(bool).mean())
                          if f"{t.quantity}_{interval_key(confidence)}" in g else math.nan})
     cols = list(by) + ["quantity", "n_pairs", "median_half_width", "assurance"]
@@ -666,7 +670,8 @@ def planning_markdown(frames: Mapping[str, pd.DataFrame], assurance: float = con
                 "Population: table 8.11's windy 4-term result (K_D 0.977), no run-to-run spread; conditions of "
                 "thesis case 18 (no head wind, every disturbance on) with the mean cross wind varied; pooled "
                 "four_term refits.  K_D is identified only by the yaw the cross wind makes (thesis table 6.2).", "",
-                "| cross wind (m/s) | mean abs yaw (deg) | KD half-width (%) at n = 1 / 2 / 4 / 8 / 16 | pairs for KD to 20 % | to 10 % | CD0 half-width at n = 4 (%) |",
+                "| cross wind (m/s) | mean abs yaw (deg) | KD half-width (%) at n = " + " / ".join(
+                    str(n) for n in sorted(rec["n_pairs"].unique())) + " | pairs for KD to 20 % | to 10 % | CD0 half-width at n = 4 (%) |",
                 "|---|---|---|---|---|---|"]
         for w, g in rec.groupby("cross_wind_mps", sort=True):
             tab = plan_table(g, [Target("KD", 20.0), Target("CD0", 1.0)])
