@@ -56,6 +56,16 @@ PARAMETER_UNITS: dict[str, str] = {
     "yaw_factor": "-",
     "head_wind_mps": "m/s",
     "cross_wind_mps": "m/s",
+    # candidate effects of the sim-to-real diagnosis (physics/effects.py)
+    "tyre_transient": "-",
+    "tyre_time_constant_s": "s",
+    "tyre_power_coeff": "-",
+    "tyre_speed_exponent": "-",
+    "side_slip_coeff_per_n": "1/N",
+    "cup_lag_m": "m",
+    "mass_error_kg": "kg",
+    "wind_gradient_mps": "m/s",
+    "yaw_offset_rad": "rad",
 }
 """Units of every named model parameter.  AD, BD, CD0, KD, At, Bt, Ct, Au, Bu are the
 contract names used in code, outputs and docs."""
@@ -83,6 +93,15 @@ PARAMETER_SCALES: dict[str, float] = {
     "yaw_factor": 1.0,
     "head_wind_mps": 1.0,
     "cross_wind_mps": 1.0,
+    "tyre_transient": 0.1,
+    "tyre_time_constant_s": 10.0,
+    "tyre_power_coeff": 1e-3,
+    "tyre_speed_exponent": 1.0,
+    "side_slip_coeff_per_n": 1e-4,
+    "cup_lag_m": 1.0,
+    "mass_error_kg": 10.0,
+    "wind_gradient_mps": 1.0,
+    "yaw_offset_rad": 0.01,
 }
 """Typical magnitude of each parameter: optimisers and samplers work on ``value / scale`` so
 that every unknown is O(1)."""
@@ -281,3 +300,31 @@ CLEAR_JAX_CACHES_ABOVE_MB = 4096.0
 """Resident memory (MB) above which :func:`bayes_roadload.analysis.batch.run_fit_job` clears JAX's compilation caches after a
 job.  Clearing after every job would bound the memory at ~1.2 GB but costs 5-8 s per later fit
 (the shared pieces are recompiled); never clearing grows by 85-165 MB per fit."""
+
+
+# Sim-to-real diagnosis (bayes_roadload.analysis.diagnose, issue 6)
+@dataclass(frozen=True)
+class DiagnosisConfig:
+    """Thresholds of the sim-to-real diagnosis.
+
+    support_delta_elpd : a candidate is *supported* when adding it raises the estimated
+        expected log predictive density (gain in maximised log likelihood minus the parameters
+        it adds, Akaike) by at least this much (nats): odds of e^5 ~ 150 to 1.  For one added
+        parameter under no effect the gain is chi^2_1 / 2 - 1, so a single null candidate
+        passes with probability P(chi^2_1 > 12) = 5e-4; 13 candidates ~0.7 %.
+    min_information_ratio : a candidate parameter is identifiable only when at least this
+        share of its Fisher information survives re-fitting the model's own coefficients
+        (1 - R^2 of its signature on theirs; 0.05 is a multiple correlation of 0.975).
+    min_contraction : and when the data shrink its prior variance by at least this share.
+    max_refit_effects : leading supported candidates refitted together (forward selection).
+    gauss_newton_steps : re-linearisations of the combined refit (nonlinear check).
+    """
+
+    support_delta_elpd: float = 5.0
+    min_information_ratio: float = 0.05
+    min_contraction: float = 0.5
+    max_refit_effects: int = 3
+    gauss_newton_steps: int = 2
+
+
+DEFAULT_DIAGNOSIS = DiagnosisConfig()
