@@ -312,17 +312,23 @@ class DiagnosisConfig:
         it adds, Akaike) by at least this much (nats): odds of e^5 ~ 150 to 1.  For one added
         parameter under no effect the gain is chi^2_1 / 2 - 1, so a single null candidate
         passes with probability P(chi^2_1 > 12) = 5e-4; 13 candidates ~0.7 %.
-    min_information_ratio : a candidate parameter is identifiable only when at least this
-        share of its Fisher information survives re-fitting the model's own coefficients
-        (1 - R^2 of its signature on theirs; 0.05 is a multiple correlation of 0.975).
-    min_contraction : and when the data shrink its prior variance by at least this share.
+    min_contraction : a candidate is identifiable here only when the data shrink each of its
+        parameters' prior variance (a plausible size of the effect) by at least this share,
+        the user's coefficients re-fitted with it (an effect whose signature the coefficients
+        can mimic -- an effective-mass error, lift unloading against C_D0 -- is left with its
+        prior).  The share of its signature the coefficients mimic is reported too
+        (``information_ratio``).
+    ambiguity_margin : the top candidate is claimed only when its delta_elpd exceeds every
+        other candidate's (identifiable or not) by at least this much (nats: Akaike weight
+        e^2 ~ 7 to 1); otherwise the candidates within the margin explain the gap alike and
+        none is supported ("not distinguishable here").
     max_refit_effects : leading supported candidates refitted together (forward selection).
     gauss_newton_steps : re-linearisations of the combined refit (nonlinear check).
     """
 
     support_delta_elpd: float = 5.0
-    min_information_ratio: float = 0.05
     min_contraction: float = 0.5
+    ambiguity_margin: float = 2.0
     max_refit_effects: int = 3
     gauss_newton_steps: int = 2
 

@@ -88,8 +88,8 @@ def markdown(records: pd.DataFrame, args_text: str) -> str:
              "(`analysis.diagnose.withheld_campaign`), analysed with `three_term` (for `aero_lift`: `three_term` "
              "without its tunnel lift), which withholds it; null controls add nothing.  The diagnosis is one MAP fit "
              "of the model and every candidate scored about it (README, *Sim-to-real diagnosis*).  Support: "
-             f"delta_elpd >= {cfg.support_delta_elpd:g} and identifiable (information ratio >= "
-             f"{cfg.min_information_ratio:g}, prior contraction >= {cfg.min_contraction:g}).", "",
+             f"delta_elpd >= {cfg.support_delta_elpd:g}, identifiable (prior contraction >= {cfg.min_contraction:g}) "
+             f"and ahead of every other candidate by {cfg.ambiguity_margin:g}.", "",
              "## Summary", "", "| quantity | value |", "| --- | --- |"]
     lines += [f"| {k} | {v if not isinstance(v, float) else f'{v:.1f}'} |" for k, v in s.items()]
     lines += ["", "Outcomes: *correct* = the true effect ranked first and supported (nulls: nothing claimed); "

@@ -103,17 +103,45 @@ def shrink(before: Mapping[str, float], after: Mapping[str, float], n_runs: int 
     return out
 
 
+def _resolve_ambiguity(entries: list[dict], library, settings: config.DiagnosisConfig) -> None:
+    """When the best supported candidate does not beat every other candidate by
+    ``settings.ambiguity_margin``, the candidates within the margin explain the gap alike:
+    none of them is supported, and each statement names the others."""
+    scored = [c for c in entries if math.isfinite(c["delta_elpd"])]
+    supported = [c for c in scored if c["supported"]]
+    if not supported:
+        return
+    best = max(supported, key=lambda c: c["delta_elpd"])
+    rivals = [c for c in scored if c is not best and c["delta_elpd"] > best["delta_elpd"] - settings.ambiguity_margin]
+    if not rivals:
+        return
+    group = [best] + rivals
+    for c in group:
+        others = ", ".join(o["effect"] for o in group if o is not c)
+        c["supported"] = False
+        c["ambiguous_with"] = [o["effect"] for o in group if o is not c]
+        c["statement"] = (f"not distinguishable here: explains the gap as well as {others} (delta_elpd within "
+                          f"{settings.ambiguity_margin:g}); needs {library[c['effect']].needs}")
+
+
 def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> str:
+    if entry.get("ambiguous_with"):
+        return entry["statement"]
     if entry["unavailable"]:
         return f"not applicable: {entry['unavailable']}"
+    kin = entry.get("kinematics")
+    if kin and not entry["supported"]:
+        return (f"not supported: invisible in the dynamics (C_D0 absorbs an airspeed scale); the paired-run kinematics "
+                f"give airspeed_factor {kin['factor']:.4f} +- {kin['se']:.4f} from {kin['n_pairs']} pairs (z = {kin['z']:.1f})")
     if entry["supported"]:
-        how = " (from the paired-run kinematics)" if entry.get("kinematics") else ""
+        how = " (from the paired-run kinematics)" if kin else ""
         return f"supported{how}: delta_elpd {entry['delta_elpd']:.1f} >= {cfg.support_delta_elpd:g}"
     if not entry["identifiable"]:
-        worst = min(entry["identification"].items(), key=lambda kv: kv[1]["information_ratio"])
         what = ", ".join(effect.confounded_with) or "the model's coefficients"
-        return (f"not identifiable here ({worst[0]}: {100 * (1 - worst[1]['information_ratio']):.1f} % of its signature "
-                f"is that of {what}; prior contraction {worst[1]['contraction']:.2f}), needs {effect.needs}")
+        worst = min(entry["identification"].items(), key=lambda kv: kv[1]["contraction"])
+        return (f"not identifiable here ({worst[0]}: the data shrink its prior by {100 * worst[1]['contraction']:.0f} %, "
+                f"{100 * (1 - worst[1]['information_ratio']):.1f} % of its signature is that of {what}), "
+                f"needs {effect.needs}")
     return f"not supported: delta_elpd {entry['delta_elpd']:.1f} < {cfg.support_delta_elpd:g}"
 
 
@@ -198,8 +226,7 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
             k = fx.n_added_parameters(lin, (name,), library)
             delta = sol.loglik_gain - base_sol.loglik_gain - k
             ident = fx.identifiability(lin, name, library)
-            identifiable = all(v["information_ratio"] >= settings.min_information_ratio
-                               and v["contraction"] >= settings.min_contraction for v in ident.values())
+            identifiable = all(v["contraction"] >= settings.min_contraction for v in ident.values())
             entry.update(identification=ident, identifiable=identifiable,
                          estimates={p: v["estimate"] for p, v in ident.items()})
             if name == "airspeed_calibration":
@@ -216,9 +243,11 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
             after = gap_metrics(lin, fx.refit_residual(lin, sol), sol, (name,), library, groups)
             entry["gap_after"] = after
             entry["shrink_pct"] = shrink(before, after, lin.n_runs)
-        entry["statement"] = _statement(e, entry, settings)
         entry["needs"] = e.needs
         entries.append(entry)
+    _resolve_ambiguity(entries, library, settings)
+    for entry in entries:
+        entry["statement"] = _statement(library[entry["effect"]], entry, settings)
     entries.sort(key=lambda c: (not c["supported"], -(c["delta_elpd"] if math.isfinite(c["delta_elpd"]) else -1e300)))
     for i, c in enumerate(entries, 1):
         c["rank"] = i
