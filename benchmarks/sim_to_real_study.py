@@ -36,7 +36,9 @@ OUT = ROOT / "docs" / "sim_to_real"
 
 def outcome(row) -> str:
     """``correct`` (the true effect ranked first and supported), ``flagged`` (nothing claimed and
-    the true effect reported not identifiable here), ``none`` (nothing claimed), ``wrong``."""
+    the true effect reported not identifiable here), ``indistinct`` (nothing claimed and the
+    true effect among the candidates reported not distinguishable here), ``none`` (nothing
+    claimed), ``wrong`` (another effect claimed)."""
     truth, top = row["true_effect"], row["top"]
     if truth == "null":
         return "correct" if top == "none" else "wrong"
@@ -44,6 +46,8 @@ def outcome(row) -> str:
         return "correct"
     flagged = str(row.get("not_identifiable") or "").split(",")
     if top == "none":
+        if truth in str(row.get("not_distinguishable") or "").split(","):
+            return "indistinct"
         return "flagged" if truth in flagged else "none"
     return "wrong"
 
@@ -59,6 +63,7 @@ def summarise(records: pd.DataFrame) -> dict:
         "effect_campaigns": int(len(effects)),
         "true_first": int((effects["outcome"] == "correct").sum()),
         "flagged_not_identifiable": int((effects["outcome"] == "flagged").sum()),
+        "not_distinguishable": int((effects["outcome"] == "indistinct").sum()),
         "nothing_claimed": int((effects["outcome"] == "none").sum()),
         "wrong_claim": int((effects["outcome"] == "wrong").sum()),
         "null_campaigns": int(len(nulls)), "null_false_claims": int((nulls["top"] != "none").sum()),
@@ -93,7 +98,8 @@ def markdown(records: pd.DataFrame, args_text: str) -> str:
              "## Summary", "", "| quantity | value |", "| --- | --- |"]
     lines += [f"| {k} | {v if not isinstance(v, float) else f'{v:.1f}'} |" for k, v in s.items()]
     lines += ["", "Outcomes: *correct* = the true effect ranked first and supported (nulls: nothing claimed); "
-              "*flagged* = nothing claimed and the true effect reported 'not identifiable here'; *none* = nothing "
+              "*flagged* = nothing claimed and the true effect reported 'not identifiable here'; *indistinct* = nothing "
+              "claimed, the true effect among candidates reported 'not distinguishable here'; *none* = nothing "
               "claimed; *wrong* = another effect claimed.", "",
               "## Confusion matrix (rows: true effect; columns: top-ranked supported effect)", ""]
     cm = confusion(records)
@@ -141,7 +147,9 @@ def main(argv=None) -> int:
         with process_pool(args.workers) as pool:
             run_batch(jobs, pool, on_record=keep)
     records = pd.read_csv(path)
-    for col in ("supported", "not_identifiable", "refit_effects"):
+    for col in ("supported", "not_identifiable", "not_distinguishable", "refit_effects"):
+        if col not in records:
+            records[col] = ""
         records[col] = records[col].fillna("")
     confusion(records).to_csv(OUT / "confusion.csv")
     (ROOT / "docs" / "sim_to_real.md").write_text(markdown(records, args_text))

@@ -103,30 +103,57 @@ def shrink(before: Mapping[str, float], after: Mapping[str, float], n_runs: int 
     return out
 
 
-def _resolve_ambiguity(entries: list[dict], library, settings: config.DiagnosisConfig) -> None:
-    """When the best supported candidate does not beat every other candidate by
-    ``settings.ambiguity_margin``, the candidates within the margin explain the gap alike:
-    none of them is supported, and each statement names the others."""
+def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings: config.DiagnosisConfig) -> list[str]:
+    """Decide which candidates are supported (sets ``supported`` in ``entries``) and return them
+    in order.  A candidate *qualifies* when it is identifiable here and its own delta_elpd
+    reaches ``support_delta_elpd``.  The best qualifying candidate is claimed only when it
+    beats every other candidate (qualifying or not) by ``ambiguity_margin``; otherwise the
+    candidates within the margin explain the gap alike and none is supported ("not
+    distinguishable here").  After the claimed one, the other qualifying candidates join by
+    forward selection, each when it still gains ``support_delta_elpd`` given those already in
+    (at most ``max_refit_effects``).  The airspeed scale judged from the paired-run
+    kinematics adds independent data: its own delta_elpd is its gain."""
     scored = [c for c in entries if math.isfinite(c["delta_elpd"])]
-    supported = [c for c in scored if c["supported"]]
-    if not supported:
-        return
-    best = max(supported, key=lambda c: c["delta_elpd"])
-    rivals = [c for c in scored if c is not best and c["delta_elpd"] > best["delta_elpd"] - settings.ambiguity_margin]
-    if not rivals:
-        return
-    group = [best] + rivals
-    for c in group:
-        others = ", ".join(o["effect"] for o in group if o is not c)
+    qualifying = sorted((c for c in scored if c["qualifies"]), key=lambda c: -c["delta_elpd"])
+    for c in entries:
         c["supported"] = False
-        c["ambiguous_with"] = [o["effect"] for o in group if o is not c]
-        c["statement"] = (f"not distinguishable here: explains the gap as well as {others} (delta_elpd within "
-                          f"{settings.ambiguity_margin:g}); needs {library[c['effect']].needs}")
+    if not qualifying:
+        return []
+    best = qualifying[0]
+    rivals = [c for c in scored if c is not best and c["delta_elpd"] > best["delta_elpd"] - settings.ambiguity_margin]
+    if rivals:
+        group = [best] + rivals
+        for c in group:
+            c["ambiguous_with"] = [o["effect"] for o in group if o is not c]
+        return []
+    chosen = [best["effect"]]
+    best["supported"] = True
+    dynamic = [] if best.get("kinematics") else [best["effect"]]
+    current = fx.fit_effects(lin, tuple(dynamic), library).loglik_gain
+    for c in qualifying[1:]:
+        if len(chosen) >= settings.max_refit_effects:
+            break
+        if c.get("kinematics"):
+            gain_ok = c["delta_elpd"] >= settings.support_delta_elpd
+        else:
+            trial = tuple(dynamic + [c["effect"]])
+            gain = fx.fit_effects(lin, trial, library).loglik_gain
+            k = fx.n_added_parameters(lin, (c["effect"],), library)
+            c["delta_elpd_given_supported"] = float(gain - current - k)
+            gain_ok = gain - current - k >= settings.support_delta_elpd
+            if gain_ok:
+                dynamic.append(c["effect"])
+                current = gain
+        if gain_ok:
+            c["supported"] = True
+            chosen.append(c["effect"])
+    return chosen
 
 
 def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> str:
     if entry.get("ambiguous_with"):
-        return entry["statement"]
+        return (f"not distinguishable here: explains the gap as well as {', '.join(entry['ambiguous_with'])} "
+                f"(delta_elpd {entry['delta_elpd']:.1f}, within {cfg.ambiguity_margin:g}); needs {effect.needs}")
     if entry["unavailable"]:
         return f"not applicable: {entry['unavailable']}"
     kin = entry.get("kinematics")
@@ -135,7 +162,13 @@ def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> s
                 f"give airspeed_factor {kin['factor']:.4f} +- {kin['se']:.4f} from {kin['n_pairs']} pairs (z = {kin['z']:.1f})")
     if entry["supported"]:
         how = " (from the paired-run kinematics)" if kin else ""
-        return f"supported{how}: delta_elpd {entry['delta_elpd']:.1f} >= {cfg.support_delta_elpd:g}"
+        given = entry.get("delta_elpd_given_supported")
+        extra = f", {given:.1f} given the effects ranked above it" if given is not None else ""
+        return f"supported{how}: delta_elpd {entry['delta_elpd']:.1f} >= {cfg.support_delta_elpd:g}{extra}"
+    if entry.get("qualifies"):
+        given = entry.get("delta_elpd_given_supported")
+        return (f"not supported: explained by the effects ranked above it" +
+                (f" (delta_elpd {given:.1f} given them)" if given is not None else ""))
     if not entry["identifiable"]:
         what = ", ".join(effect.confounded_with) or "the model's coefficients"
         worst = min(entry["identification"].items(), key=lambda kv: kv[1]["contraction"])
@@ -217,7 +250,8 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
         e = library.get(name)
         if e is None:
             continue
-        entry: dict[str, Any] = {"effect": name, "rank": None, "supported": False, "delta_elpd": math.nan,
+        entry: dict[str, Any] = {"effect": name, "rank": None, "supported": False, "qualifies": False,
+                                 "delta_elpd": math.nan,
                                  "gap_before": before, "gap_after": {}, "shrink_pct": {},
                                  "identifiable": False, "identification": {}, "estimates": {},
                                  "unavailable": lin.available.get(name)}
@@ -239,13 +273,13 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
                     entry["identifiable"] = identifiable
                     entry["estimates"] = {"airspeed_factor": kin["factor"]}
             entry["delta_elpd"] = float(delta)
-            entry["supported"] = bool(identifiable and delta >= settings.support_delta_elpd)
+            entry["qualifies"] = bool(identifiable and delta >= settings.support_delta_elpd)
             after = gap_metrics(lin, fx.refit_residual(lin, sol), sol, (name,), library, groups)
             entry["gap_after"] = after
             entry["shrink_pct"] = shrink(before, after, lin.n_runs)
         entry["needs"] = e.needs
         entries.append(entry)
-    _resolve_ambiguity(entries, library, settings)
+    chosen = select_effects(lin, entries, library, settings)
     for entry in entries:
         entry["statement"] = _statement(library[entry["effect"]], entry, settings)
     entries.sort(key=lambda c: (not c["supported"], -(c["delta_elpd"] if math.isfinite(c["delta_elpd"]) else -1e300)))
@@ -254,7 +288,9 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
     timings["candidates_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    refit, after_resid = combined_refit(lin, entries, library, settings, groups, before)
+    kinematic = {c["effect"] for c in entries if c.get("kinematics")}
+    refit, after_resid = combined_refit(lin, [c for c in chosen if c not in kinematic], library, settings, groups,
+                                        before)
     timings["refit_s"] = time.perf_counter() - t0
     result = {"gap": before, "localisation": loc, "candidates": entries}
     spec_name = getattr(model, "name", model)
@@ -263,25 +299,13 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
                      mask=np.asarray(lin.batch.mask), run_ids=lin.run_ids, timings=timings)
 
 
-def combined_refit(lin: fx.Linearisation, entries: list[dict], library, settings: config.DiagnosisConfig, groups,
+def combined_refit(lin: fx.Linearisation, chosen: list[str], library, settings: config.DiagnosisConfig, groups,
                    before: Mapping[str, float]) -> tuple[dict, np.ndarray]:
-    """Refit the model with the leading supported candidates together: forward selection (a
-    candidate joins when it still gains ``support_delta_elpd`` given those already in), then
+    """Refit the model with the supported candidates ``chosen`` together (:func:`select_effects`;
+    the caller leaves out an airspeed scale judged from the kinematics, which the dynamics
+    cannot refit), with
     ``gauss_newton_steps`` re-linearisations about the refit (the residuals after are the
     nonlinear model's).  Returns the refit summary and the residuals after."""
-    chosen: list[str] = []
-    base_gain = fx.fit_effects(lin, (), library).loglik_gain
-    current = base_gain
-    for c in entries:
-        if not c["supported"] or len(chosen) >= settings.max_refit_effects:
-            continue
-        if c["effect"] == "airspeed_calibration" and c.get("kinematics"):
-            continue  # judged from the kinematics: the dynamics cannot refit it
-        trial = tuple(chosen + [c["effect"]])
-        gain = fx.fit_effects(lin, trial, library).loglik_gain
-        if gain - current - fx.n_added_parameters(lin, (c["effect"],), library) >= settings.support_delta_elpd:
-            chosen.append(c["effect"])
-            current = gain
     if not chosen:
         return {"effects": [], "gap_after": dict(before), "shrink_pct": shrink(before, before, lin.n_runs), "estimates": {}}, lin.residual
     effects = tuple(chosen)
@@ -495,6 +519,7 @@ def diagnosis_record(d: Diagnosis) -> dict[str, Any]:
                            "supported": ",".join(c["effect"] for c in d.candidates if c["supported"]),
                            "not_identifiable": ",".join(c["effect"] for c in d.candidates
                                                         if not c["identifiable"] and not c["unavailable"]),
+                           "not_distinguishable": ",".join(c["effect"] for c in d.candidates if c.get("ambiguous_with")),
                            "refit_effects": ",".join(d.refit["effects"])}
     for c in d.candidates:
         rec[f"delta_elpd_{c['effect']}"] = c["delta_elpd"]
