@@ -10,6 +10,7 @@ they finish: a partial run keeps what it did), ``docs/sim_to_real/confusion.csv`
 
     python benchmarks/sim_to_real_study.py --seeds 1 2 --nulls 4 --pairs 3 --workers 1
     python benchmarks/sim_to_real_study.py --report-only     # rebuild the markdown from records.csv
+    python benchmarks/sim_to_real_study.py --report-only --replay 8   # + the thesis replay (replay.csv)
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from bayes_roadload import config  # noqa: E402
 from bayes_roadload.analysis.batch import process_pool, run_batch  # noqa: E402
 from bayes_roadload.analysis.diagnose import withheld_effect_jobs  # noqa: E402
 from bayes_roadload.analysis.effects import EFFECT_NAMES  # noqa: E402
+from bayes_roadload.analysis.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
 
 OUT = ROOT / "docs" / "sim_to_real"
 
@@ -115,6 +117,27 @@ def markdown(records: pd.DataFrame, args_text: str) -> str:
         lines.append(f"| {r['name']} | {r['outcome']} | {r['top']} | {r['supported'] or '-'} | "
                      f"{r['not_identifiable'] or '-'} | {r['before_trend_rms_mps']:.4f} | {r['after_trend_rms_mps']:.4f} | "
                      f"{'-' if pd.isna(sh) else f'{sh:.0f}'} | {r['time_total_s']:.0f} |")
+    rp = OUT / "replay.csv"
+    if rp.exists():
+        rep = pd.read_csv(rp)
+        lines += ["", "## Thesis replay: which effects reproduce the track's spreads", "",
+                  f"`analysis.replay.replay`: {int(rep['pairs'].iloc[0])} pairs at the thesis' conditions (cases 14-17 in "
+                  "turn: 2-3 m/s head and cross wind, the comprehensive model, anemometer and vehicle dynamics, "
+                  "table 6.6 noise), each pair with the effect at a size drawn from the range below, each pair "
+                  "fitted by the thesis' 3-term least squares (K_D fixed); spread = std over pairs, % of the mean "
+                  f"(its standard error ~ spread / sqrt(2 (n - 1)) = {100 / np.sqrt(2 * (rep['pairs'].iloc[0] - 1)):.0f} % "
+                  "of itself).  Thesis: simulated "
+                  + " / ".join(f"{THESIS_SIMULATED_SPREAD_PCT[p]:g}" for p in ("AD", "BD", "CD0"))
+                  + " %, track 4.3 / 23.1 / 4.3 %.", "",
+                  "| effect | per-pair size (uniform) | A_D % | B_D % | C_D0 % |", "| --- | --- | --- | --- | --- |"]
+        for _, r in rep.iterrows():
+            size = REPLAY_SIZES.get(r["effect"])
+            what = f"{size[0]} {size[1]:.4g} .. {size[2]:.4g}" if size else "-"
+            if r["effect"] == "run_to_run_variation":
+                what = "table 6.6 system noise as one offset per run"
+            lines.append(f"| {r['effect']} | {what} | {r['spread_pct_AD']:.2f} | {r['spread_pct_BD']:.1f} | "
+                         f"{r['spread_pct_CD0']:.2f} |")
+        lines.append("| track (thesis table 8.3) | | 4.3 | 23.1 | 4.3 |")
     bad = records[records["error"].notna()]
     if len(bad):
         lines += ["", "Failed jobs: " + "; ".join(f"{n}: {e}" for n, e in zip(bad["name"], bad["error"]))]
@@ -129,6 +152,7 @@ def main(argv=None) -> int:
     ap.add_argument("--effects", nargs="+", default=list(EFFECT_NAMES))
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--report-only", action="store_true")
+    ap.add_argument("--replay", type=int, default=0, help="pairs per effect of the thesis replay (0: skip)")
     args = ap.parse_args(argv)
     OUT.mkdir(parents=True, exist_ok=True)
     path = OUT / "records.csv"
@@ -146,6 +170,12 @@ def main(argv=None) -> int:
 
         with process_pool(args.workers) as pool:
             run_batch(jobs, pool, on_record=keep)
+    if args.replay:
+        t0 = time.perf_counter()
+        rep = replay(pairs=args.replay, seed=0)
+        rep["time_s"] = time.perf_counter() - t0
+        rep.to_csv(OUT / "replay.csv", index=False)
+        print(rep.round(3).to_string(), flush=True)
     records = pd.read_csv(path)
     for col in ("supported", "not_identifiable", "not_distinguishable", "refit_effects"):
         if col not in records:
