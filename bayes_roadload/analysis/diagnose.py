@@ -538,15 +538,20 @@ def diagnosis_record(d: Diagnosis) -> dict[str, Any]:
 
 
 def withheld_effect_jobs(effects=fx.EFFECT_NAMES, seeds=(1,), pairs: int = 3, nulls: int = 0) -> list[DiagnoseJob]:
-    """The proof suite: one job per (effect, seed), plus ``nulls`` null controls (seeds 1000+)."""
+    """The proof suite: one job per (effect, seed) and ``nulls`` null controls (seeds 1000+),
+    ordered seed by seed with the nulls spread over the rounds, so that a suite stopped early
+    has every arm about equally often."""
     jobs = []
-    for effect in effects:
-        for seed in seeds:
+    per_round = -(-nulls // max(len(seeds), 1)) if nulls else 0
+    made = 0
+    for seed in seeds:
+        for effect in effects:
             factory, model = withheld_campaign(effect, seed, pairs)
             jobs.append(DiagnoseJob(f"{effect}-s{seed}", factory, model, tags={"true_effect": effect, "seed": seed,
                                                                              "pairs": pairs}))
-    for i in range(nulls):
-        factory, model = withheld_campaign(None, 1000 + i, pairs)
-        jobs.append(DiagnoseJob(f"null-s{1000 + i}", factory, model, tags={"true_effect": "null", "seed": 1000 + i,
-                                                                          "pairs": pairs}))
+        for _ in range(min(per_round, nulls - made)):
+            factory, model = withheld_campaign(None, 1000 + made, pairs)
+            jobs.append(DiagnoseJob(f"null-s{1000 + made}", factory, model,
+                                    tags={"true_effect": "null", "seed": 1000 + made, "pairs": pairs}))
+            made += 1
     return jobs
