@@ -39,7 +39,7 @@ import numpy as np
 from .. import config
 from ..data.campaign import Campaign
 from . import effects as fx
-from .gap import LOCALISATION_VARIABLES, localise, plot_localisation, plot_residuals, residual_structure
+from .gap import localise, plot_localisation, plot_residuals, residual_structure
 
 SHRINK_FLOORS = {"trend_rms_mps": "trend_floor_mps", "lag1_autocorr": 0.0, "spread_excess_AD": 1.0,
                  "spread_excess_BD": 1.0, "spread_excess_CD0": 1.0}

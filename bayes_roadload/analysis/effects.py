@@ -469,9 +469,8 @@ def coefficient_spread(lin: Linearisation, sol: Solution | None, library: Mappin
         return {}
     shared = sol.shared if sol is not None else lin.index(lin.base)
     beta = sol.beta if sol is not None else np.zeros(len(shared))
-    prior = np.zeros(len(shared))
     own = lin.index(["v0_mps"] + coeffs)
-    # each run's own coefficients given the shared fit: the run-level estimates
+    # each run's own coefficients (and initial speed) given the shared fit: run-level estimates
     r = lin.n_runs
     est = np.zeros((r, len(coeffs)))
     var = np.zeros((r, len(coeffs)))
@@ -490,7 +489,6 @@ def coefficient_spread(lin: Linearisation, sol: Solution | None, library: Mappin
         out[f"spread_pct_{p}"] = 100.0 * observed / abs(centre)
         out[f"spread_predicted_pct_{p}"] = 100.0 * predicted / abs(centre)
         out[f"spread_excess_{p}"] = observed / predicted if predicted > 0 else math.nan
-    del prior
     return out
 
 
