@@ -2,6 +2,7 @@
 gradient, and (slow) null controls and a non-identifiable effect through the batch door."""
 
 import json
+import math
 import warnings
 
 import pytest
@@ -82,3 +83,30 @@ def test_null_controls_and_a_confounded_effect_through_the_batch_door():
     # coefficients: neither may be claimed as another effect
     for name, effect in (("aero_lift-1", "aero_lift"), ("mass_error-1", "mass_error")):
         assert rec.loc[name, "top"] in ("none", effect)
+
+
+def test_a_claim_needs_a_margin_over_every_other_candidate():
+    from bayes_roadload import config
+    from bayes_roadload.analysis.diagnose import select_effects
+
+    margin = config.DEFAULT_DIAGNOSIS.ambiguity_margin
+    entries = [{"effect": "driveline_quadratic", "delta_elpd": 14.6, "qualifies": True},
+               {"effect": "tyre_speed_exponent", "delta_elpd": 14.6 - margin / 2, "qualifies": False},
+               {"effect": "spatial_wind", "delta_elpd": 3.0, "qualifies": False}]
+    assert select_effects(None, entries, {}, config.DEFAULT_DIAGNOSIS) == []
+    assert not any(e["supported"] for e in entries)
+    assert entries[0]["ambiguous_with"] == ["tyre_speed_exponent"]
+    assert "ambiguous_with" not in entries[2]
+
+
+def test_shrink_is_the_share_of_the_excess_over_the_floor():
+    from bayes_roadload.analysis.diagnose import shrink
+
+    before = {"trend_rms_mps": 0.05, "trend_floor_mps": 0.01, "lag1_autocorr": 0.5, "spread_excess_AD": 3.0}
+    after = {"trend_rms_mps": 0.02, "trend_floor_mps": 0.01, "lag1_autocorr": 0.5, "spread_excess_AD": 1.0}
+    s = shrink(before, after, n_runs=8)
+    assert s["trend_rms_mps"] == pytest.approx(75.0)   # (0.05 - 0.02) / (0.05 - 0.01)
+    assert s["lag1_autocorr"] == pytest.approx(0.0)
+    assert s["spread_excess_AD"] == pytest.approx(100.0)
+    # no excess to remove (within twice the floor): no percentage of noise over noise
+    assert math.isnan(shrink({**before, "trend_rms_mps": 0.015}, after, n_runs=8)["trend_rms_mps"])
