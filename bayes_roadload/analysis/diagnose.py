@@ -369,9 +369,17 @@ def write_diagnosis(diag: Diagnosis, out_dir: str | Path,
     gap = diag.result["gap"]
     lines = [f"# Sim-to-real diagnosis: model `{diag.model}`", ""]
     top = diag.top
-    lines += [f"**Verdict**: " + (f"`{top}` is the leading supported effect." if top else
-                                  "no candidate effect is supported at the stated threshold "
-                                  f"(delta_elpd >= {settings.support_delta_elpd:g} and identifiable)."), ""]
+    ambiguous = [c["effect"] for c in diag.candidates if c.get("ambiguous_with")]
+    if top:
+        verdict = f"`{top}` is the leading supported effect."
+    elif ambiguous:
+        verdict = ("the model misses something, but " + ", ".join(f"`{e}`" for e in ambiguous)
+                   + f" explain it alike (delta_elpd within {settings.ambiguity_margin:g}): not distinguishable here.")
+    else:
+        verdict = ("no candidate effect is supported at the stated threshold (delta_elpd >= "
+                   f"{settings.support_delta_elpd:g}, identifiable, ahead of the others by {settings.ambiguity_margin:g}).")
+    lines += [f"**Verdict**: {verdict} Residual trend {_fmt(gap['trend_rms_mps'])} m/s against a white-noise floor "
+              f"of {_fmt(gap['trend_floor_mps'])} m/s.", ""]
     lines += ["## 1. The gap", "", "| metric | value |", "| --- | --- |"]
     lines += [f"| {k} | {_fmt(v)} |" for k, v in gap.items()]
     lines += ["", "![residuals](residuals.png)", "", "## 2. Where", ""]
