@@ -176,7 +176,7 @@ def main(argv=None) -> int:
         rep["time_s"] = time.perf_counter() - t0
         rep.to_csv(OUT / "replay.csv", index=False)
         print(rep.round(3).to_string(), flush=True)
-    records = pd.read_csv(path)
+    records = pd.read_csv(path, keep_default_na=False, na_values=[""])  # "null" is an arm, not NaN
     for col in ("supported", "not_identifiable", "not_distinguishable", "refit_effects"):
         if col not in records:
             records[col] = ""

@@ -43,7 +43,7 @@ from bayes_roadload.analysis.effects import EFFECT_NAMES
 ROOT = Path.cwd() if (Path.cwd() / "docs").is_dir() else Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("BR_SIM_TO_REAL_DIR", ROOT / "docs" / "sim_to_real"))
 OUT = Path(os.environ.get("BR_OUT", "."))
-records = pd.read_csv(DATA / "records.csv")
+records = pd.read_csv(DATA / "records.csv", keep_default_na=False, na_values=[""])  # "null" is an arm
 records = records[records["error"].isna()]
 threshold = config.DEFAULT_DIAGNOSIS.support_delta_elpd
 print(f"{len(records)} campaigns, {records['true_effect'].nunique()} arms")
