@@ -110,3 +110,11 @@ def test_shrink_is_the_share_of_the_excess_over_the_floor():
     assert s["spread_excess_AD"] == pytest.approx(100.0)
     # no excess to remove (within twice the floor): no percentage of noise over noise
     assert math.isnan(shrink({**before, "trend_rms_mps": 0.015}, after, n_runs=8)["trend_rms_mps"])
+
+
+def test_cli_refuses_an_unknown_model_and_writes_nothing(gradient_diagnosis, tmp_path, capsys):
+    _, out = gradient_diagnosis
+    code = main(["diagnose", str(out.parent / "campaign"), "--model", "no_such_model", "--out", str(tmp_path / "x")])
+    assert code == 2
+    assert "no_such_model" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
