@@ -276,6 +276,9 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
             entry["qualifies"] = bool(identifiable and delta >= settings.support_delta_elpd)
             after = gap_metrics(lin, fx.refit_residual(lin, sol), sol, (name,), library, groups)
             entry["gap_after"] = after
+            if math.isfinite(before["lopo_lpd_per_sample"]):
+                # the same comparison out of sample: leave-one-pair-out log predictive density gain
+                entry["delta_lopo_lpd"] = (after["lopo_lpd_per_sample"] - before["lopo_lpd_per_sample"]) * lin.n_samples
             entry["shrink_pct"] = shrink(before, after, lin.n_runs)
         entry["needs"] = e.needs
         entries.append(entry)
@@ -387,10 +390,12 @@ def write_diagnosis(diag: Diagnosis, out_dir: str | Path,
     lines += ["| variable | eta2 (share of residual variance between bins) |", "| --- | --- |"]
     lines += [f"| {v} | {loc[v]['eta2']:.3f} |" for v in loc["where"]]
     lines += ["", "![localisation](localisation.png)", "", "## 3. Which effect", "",
-              "| rank | effect | supported | delta_elpd | trend shrink % | statement |", "| --- | --- | --- | --- | --- | --- |"]
+              "| rank | effect | supported | delta_elpd | delta LOPO lpd | trend shrink % | statement |",
+              "| --- | --- | --- | --- | --- | --- | --- |"]
     for c in diag.candidates:
         lines.append(f"| {c['rank']} | `{c['effect']}` | {'yes' if c['supported'] else 'no'} | {_fmt(c['delta_elpd'], 3)} | "
-                     f"{_fmt(c['shrink_pct'].get('trend_rms_mps'), 3)} | {c['statement']} |")
+                     f"{_fmt(c.get('delta_lopo_lpd'), 3)} | {_fmt(c['shrink_pct'].get('trend_rms_mps'), 3)} | "
+                     f"{c['statement']} |")
     lines += ["", "![candidates](candidates.png)", "", "## 4. How far it shrinks", ""]
     r = diag.refit
     if r["effects"]:
@@ -531,6 +536,7 @@ def diagnosis_record(d: Diagnosis) -> dict[str, Any]:
                            "refit_effects": ",".join(d.refit["effects"])}
     for c in d.candidates:
         rec[f"delta_elpd_{c['effect']}"] = c["delta_elpd"]
+        rec[f"delta_lopo_{c['effect']}"] = c.get("delta_lopo_lpd")
     for k, v in d.result["gap"].items():
         rec[f"before_{k}"] = v
     for k, v in d.refit["gap_after"].items():

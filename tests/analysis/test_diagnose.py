@@ -60,6 +60,8 @@ def test_withheld_gradient_is_ranked_first_estimated_and_shrinks_the_trend(gradi
     assert d["localisation"]["where"][0] in ("direction", "run")
     # the withheld effect is most of the trend: refitting it removes >= 80 % of the excess
     assert top["shrink_pct"]["trend_rms_mps"] > 80.0
+    # and out of sample: leaving each pair out, the gradient still predicts it better
+    assert top["delta_lopo_lpd"] > 0.0
     refit = json.loads((out / "refit.json").read_text())
     assert refit["effects"][0] == "track_gradient"
     # mass error rescales every force: never supported with AD, BD, CD0 free
