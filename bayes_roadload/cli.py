@@ -1,6 +1,6 @@
 """The ``bayes-roadload`` command line.
 
-Subcommands: ``demo``, ``simulate``, ``fit``, ``sensitivity``, ``cases``, ``models``.
+Subcommands: ``demo``, ``simulate``, ``fit``, ``diagnose``, ``sensitivity``, ``cases``, ``models``.
 Every command that writes a directory validates its input first and writes nothing when the
 input is refused; errors are printed as one line naming the file, column and row.  Exit codes:
 0 success, 2 input refused, 3 a NUTS fit that failed its diagnostic gates (outputs written and
@@ -78,6 +78,29 @@ def _cmd_fit(args) -> int:
     print(table)
     print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, diagnostics.json, fit.json")
     return 0 if diag["pass"] else EXIT_GATES_FAILED
+
+
+def _cmd_diagnose(args) -> int:
+    from .analysis.diagnose import diagnose, write_diagnosis
+    from .data import load_campaign
+    from .inference.spec import load_model_spec
+
+    campaign = load_campaign(args.campaign)
+    spec = load_model_spec(args.model)
+    diag = diagnose(campaign, spec)
+    path = write_diagnosis(diag, args.out)
+    gap = diag.result["gap"]
+    print(f"gap of {spec.name}: residual trend {gap['trend_rms_mps']:.4f} m/s (white-noise floor "
+          f"{gap['trend_floor_mps']:.4f}), lag-1 autocorrelation {gap['lag1_autocorr']:.2f}; "
+          f"residuals concentrate by {diag.result['localisation']['where'][0]}")
+    for c in diag.candidates:
+        d = c["delta_elpd"]
+        print(f"{c['rank']:3d}  {c['effect']:22s} delta_elpd {'-' if d is None else f'{d:9.1f}'}  {c['statement']}")
+    if diag.refit["effects"]:
+        print("refit with " + ", ".join(diag.refit["effects"]) + ": shrink % "
+              + ", ".join(f"{k} {v:.0f}" for k, v in diag.refit["shrink_pct"].items() if v is not None))
+    print(f"\nwrote {path}, {Path(args.out) / 'report.md'} (+ plots)")
+    return 0
 
 
 def _cmd_demo(args) -> int:
@@ -333,6 +356,13 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--out", required=True)
     _add_nuts_options(pl, seed=0)
     pl.set_defaults(func=_cmd_plan, noise="integrated", robust=False)
+
+    g = sub.add_parser("diagnose", help="sim-to-real diagnosis: the gap of a model on a campaign, where it lies, "
+                                        "which candidate effect explains it and how far it shrinks")
+    g.add_argument("campaign")
+    g.add_argument("--model", default="three_term", help="a name in models/ or a TOML path (see `models`)")
+    g.add_argument("--out", required=True, help="directory for diagnosis.json, refit.json, report.md and plots")
+    g.set_defaults(func=_cmd_diagnose)
 
     se = sub.add_parser("sensitivity", help="coefficient sensitivities (thesis tables 6.1, 6.2)")
     se.add_argument("--cross-wind", type=float, nargs="+", default=[0.0, 1.0, 2.0, 3.0])

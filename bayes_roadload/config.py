@@ -56,6 +56,16 @@ PARAMETER_UNITS: dict[str, str] = {
     "yaw_factor": "-",
     "head_wind_mps": "m/s",
     "cross_wind_mps": "m/s",
+    # candidate effects of the sim-to-real diagnosis (physics/effects.py)
+    "tyre_transient": "-",
+    "tyre_time_constant_s": "s",
+    "tyre_power_coeff": "-",
+    "tyre_speed_exponent": "-",
+    "side_slip_coeff_per_n": "1/N",
+    "cup_lag_m": "m",
+    "mass_error_kg": "kg",
+    "wind_gradient_mps": "m/s",
+    "yaw_offset_rad": "rad",
 }
 """Units of every named model parameter.  AD, BD, CD0, KD, At, Bt, Ct, Au, Bu are the
 contract names used in code, outputs and docs."""
@@ -83,6 +93,15 @@ PARAMETER_SCALES: dict[str, float] = {
     "yaw_factor": 1.0,
     "head_wind_mps": 1.0,
     "cross_wind_mps": 1.0,
+    "tyre_transient": 0.1,
+    "tyre_time_constant_s": 10.0,
+    "tyre_power_coeff": 1e-3,
+    "tyre_speed_exponent": 1.0,
+    "side_slip_coeff_per_n": 1e-4,
+    "cup_lag_m": 1.0,
+    "mass_error_kg": 10.0,
+    "wind_gradient_mps": 1.0,
+    "yaw_offset_rad": 0.01,
 }
 """Typical magnitude of each parameter: optimisers and samplers work on ``value / scale`` so
 that every unknown is O(1)."""
@@ -343,3 +362,36 @@ GTR_REFERENCE_SPEEDS_KPH = (20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0, 100.
 
 MIN_REGULATION_PAIRS = 3
 """GTR 15 needs at least three pairs."""
+
+# Sim-to-real diagnosis (bayes_roadload.analysis.diagnose, issue 6)
+@dataclass(frozen=True)
+class DiagnosisConfig:
+    """Thresholds of the sim-to-real diagnosis.
+
+    support_delta_elpd : a candidate is *supported* when adding it raises the estimated
+        expected log predictive density (gain in maximised log likelihood minus the parameters
+        it adds, Akaike) by at least this much (nats): odds of e^5 ~ 150 to 1.  For one added
+        parameter under no effect the gain is chi^2_1 / 2 - 1, so a single null candidate
+        passes with probability P(chi^2_1 > 12) = 5e-4; 13 candidates ~0.7 %.
+    min_contraction : a candidate is identifiable here only when the data shrink each of its
+        parameters' prior variance (a plausible size of the effect) by at least this share,
+        the user's coefficients re-fitted with it (an effect whose signature the coefficients
+        can mimic -- an effective-mass error, lift unloading against C_D0 -- is left with its
+        prior).  The share of its signature the coefficients mimic is reported too
+        (``information_ratio``).
+    ambiguity_margin : the top candidate is claimed only when its delta_elpd exceeds every
+        other candidate's (identifiable or not) by at least this much (nats: Akaike weight
+        e^2 ~ 7 to 1); otherwise the candidates within the margin explain the gap alike and
+        none is supported ("not distinguishable here").
+    max_refit_effects : leading supported candidates refitted together (forward selection).
+    gauss_newton_steps : re-linearisations of the combined refit (nonlinear check).
+    """
+
+    support_delta_elpd: float = 5.0
+    min_contraction: float = 0.5
+    ambiguity_margin: float = 2.0
+    max_refit_effects: int = 3
+    gauss_newton_steps: int = 2
+
+
+DEFAULT_DIAGNOSIS = DiagnosisConfig()

@@ -386,13 +386,22 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
     return rec
 
 
+def run_job(job: Any) -> dict[str, Any]:
+    """Run one job of any kind: a :class:`FitJob` through :func:`run_fit_job`, any other job
+    (e.g. :class:`~bayes_roadload.analysis.diagnose.DiagnoseJob`) by its ``run()`` method,
+    which must return a flat, picklable record and never raise for a failure inside the job."""
+    if isinstance(job, FitJob):
+        return run_fit_job(job)
+    return job.run()
+
+
 def run_batch(jobs: Iterable[FitJob], executor: Any | None = None, *,
               on_record: Callable[[dict[str, Any]], None] | None = None) -> pd.DataFrame:
     """Run many fit jobs and collect their records, one row per job, in job order.
 
     Parameters
     ----------
-    jobs : iterable of FitJob
+    jobs : iterable of FitJob, or of other jobs with a ``run()`` method (:func:`run_job`)
     executor : object with ``map(fn, iterable)``, optional
         ``None`` runs the jobs one after the other in this process.  Anything with an
         ``Executor.map``-like method is used as is: ``concurrent.futures.ProcessPoolExecutor``
@@ -409,7 +418,7 @@ def run_batch(jobs: Iterable[FitJob], executor: Any | None = None, *,
         the executor itself (a worker process killed) propagate.
     """
     jobs = list(jobs)
-    mapped = map(run_fit_job, jobs) if executor is None else executor.map(run_fit_job, jobs)
+    mapped = map(run_job, jobs) if executor is None else executor.map(run_job, jobs)
     records = []
     for rec in mapped:
         records.append(rec)

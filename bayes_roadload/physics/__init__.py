@@ -21,6 +21,8 @@ from .model import full_model as full_model
 from .model import model_from_names as model_from_names
 from .model import simplified_model as simplified_model
 from .terms import TERMS as TERMS
+from . import effects as effects  # registers the candidate-effect terms
+from .effects import OffsetAir as OffsetAir
 from .terms import Conditions as Conditions
 from .terms import Term as Term
 from .terms import register_term as register_term

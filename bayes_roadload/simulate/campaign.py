@@ -128,6 +128,13 @@ class SimulationSettings:
         Anemometer dynamics (table 6.5).
     vehicle : bayes_roadload.data.Vehicle
         Test vehicle (table 6.3); its length sets the aerodynamic admittance.
+    extra_terms : tuple of Term
+        Drag terms added to the case's truth physics (e.g. a track gradient or a tyre
+        temperature transient the analysis model withholds: the sim-to-real proof suite,
+        :mod:`bayes_roadload.analysis.diagnose`).
+    extra_params : mapping
+        Values of the extra terms' parameters (SI; missing ones take the terms' defaults);
+        recorded in the truth.
     """
 
     dt_s: float = 0.01
@@ -157,6 +164,8 @@ class SimulationSettings:
     driveline_params: Mapping[str, float] = field(default_factory=lambda: dict(config.THESIS_DRIVELINE))
     sensors: SensorConfig = DEFAULT_SENSORS
     vehicle: Vehicle = _THESIS_VEHICLE
+    extra_terms: tuple = ()
+    extra_params: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self):
         substeps = 1.0 / (self.sample_rate_hz * self.dt_s)
@@ -438,8 +447,9 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
     if int(pairs) < 1:
         raise ValueError("pairs must be at least 1")
     pairs = int(pairs)
-    model = case_model(sc, driveline=driveline)
+    model = case_model(sc, driveline=driveline).with_terms(*settings.extra_terms)
     nominal = true_parameters(sc, driveline=driveline, settings=settings)
+    nominal.update({k: float(v) for k, v in settings.extra_params.items()})
 
     run_ids = list(range(1, 2 * pairs + 1))
     directions = [1 if rid % 2 == 1 else -1 for rid in run_ids]

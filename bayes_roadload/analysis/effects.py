@@ -1,0 +1,516 @@
+"""The library of candidate effects and their linearised evaluation (sim-to-real diagnosis).
+
+Every candidate effect of issue 6 is one set of model terms or parameters with its own prior,
+declared as data in ``models/effects/library.toml`` (:func:`load_library`) and applied on top
+of the user's model.  The diagnosis evaluates all of them from **one** fit of the user's model:
+
+1. the user's model is fitted (MAP of the Bayesian model: coefficients, each run's initial
+   speed and noise ``sigma_mps``, the integrated-noise intensity ``q_mps_per_sqrt_s``);
+2. a *super-model* -- the user's terms plus every candidate's terms, each candidate parameter
+   at its null (no effect) -- reproduces the user's fit exactly; its speed traces are
+   differentiated once (forward mode) with respect to the user's free coefficients, every
+   candidate parameter and each run's initial speed (:func:`linearise`);
+3. with the residual covariance of the fit (white noise + integrated noise, the exact banded
+   form of :mod:`bayes_roadload.physics.residuals`) the log likelihood is quadratic in a small
+   step of those parameters, so the best gain of any candidate (or set of candidates) --
+   coefficients and initial speeds re-fitted with it -- is a linear solve
+   (:func:`evaluate`): the likelihood-ratio statistic of a Gauss-Newton step, i.e. Rao's score
+   test.  Priors of the candidate parameters enter as a ridge.
+
+The gain in expected log predictive density is estimated as the gain in maximised log
+likelihood minus the number of added parameters (Akaike's estimate of elpd; ``delta_elpd``).
+Leave-one-pair-out predictive densities come from the same quadratic form (:func:`lopo_lpd`).
+
+Identifiability (:func:`evaluate`): for each candidate parameter, the fraction of its
+information that survives re-fitting the user's coefficients, ``1 - R^2`` of its signature on
+theirs (``information_ratio``), and how much the data contract its prior (``contraction``).  A
+candidate whose signature the coefficients can mimic (an effective-mass error with A_D, B_D,
+C_D0 free; lift unloading against C_D0; an airspeed scale against C_D0) is reported "not
+identifiable here, needs X" (the library's ``needs``) instead of being claimed.  The airspeed
+scale is then judged from the paired runs' kinematics (thesis 4.7.3,
+:func:`airspeed_kinematics`).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import config
+from ..physics.effects import OffsetAir
+from ..physics.integrate import integrate_batch
+from ..physics.model import DragModel, MeasuredAir
+from ..physics.residuals import _effect_terms, local_level_loglik_batch
+from ..physics.terms import TERMS
+
+LIBRARY_PATH = Path(__file__).resolve().parents[2] / "models" / "effects" / "library.toml"
+"""The candidate library shipped with the package."""
+
+EFFECT_NAMES = ("track_gradient", "tyre_temperature", "airspeed_calibration", "yaw_calibration", "aero_lift",
+                "side_force_slip", "pitch_attitude", "driveline_quadratic", "tyre_speed_exponent", "spatial_wind",
+                "anemometer_dynamics", "run_to_run_variation", "mass_error")
+"""The effect names of the issue's contract, in library order."""
+
+KINDS = ("term", "air", "run")
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One candidate effect of the library.
+
+    Attributes
+    ----------
+    name : a name of :data:`EFFECT_NAMES`.
+    description : what it is.
+    terms : drag terms added on top of the user's model.
+    kind : "term", "air" (relative-air parameters) or "run" (per-run coefficients).
+    prior_sd : parameter -> prior standard deviation around its null (SI).
+    null : parameter -> value meaning no effect (a number, or "model": the user's model's value).
+    fixed : other parameters of the added terms (SI).
+    needs : what a campaign needs to identify the effect.
+    confounded_with : coefficients it is known to trade with (documentation).
+    """
+
+    name: str
+    description: str
+    terms: tuple[str, ...]
+    kind: str
+    prior_sd: dict[str, float]
+    null: dict[str, Any] = field(default_factory=dict)
+    fixed: dict[str, float] = field(default_factory=dict)
+    needs: str = ""
+    confounded_with: tuple[str, ...] = ()
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        return tuple(self.prior_sd)
+
+
+def load_library(path: str | Path = LIBRARY_PATH) -> dict[str, Effect]:
+    """Read the candidate library (``models/effects/library.toml``); refuses unknown effect
+    names, kinds, terms and parameters."""
+    doc = tomllib.loads(Path(path).read_text())
+    out: dict[str, Effect] = {}
+    for name, e in doc.get("effects", {}).items():
+        where = f"{path}: [effects.{name}]"
+        if name not in EFFECT_NAMES:
+            raise ValueError(f"{where}: not an effect of the contract ({', '.join(EFFECT_NAMES)})")
+        kind = e.get("kind", "term")
+        if kind not in KINDS:
+            raise ValueError(f"{where}: kind {kind!r} not one of {KINDS}")
+        for t in e.get("terms", []):
+            if t not in TERMS:
+                raise ValueError(f"{where}: unknown drag term {t!r}")
+        params = e.get("parameters", {})
+        if not params:
+            raise ValueError(f"{where}: an effect needs at least one parameter")
+        for p in list(params) + list(e.get("fixed", {})):
+            if p not in config.PARAMETER_UNITS:
+                raise ValueError(f"{where}: unknown parameter {p!r}")
+        out[name] = Effect(name=name, description=e.get("description", ""), terms=tuple(e.get("terms", [])),
+                           kind=kind, prior_sd={p: float(v["prior_sd"]) for p, v in params.items()},
+                           null={p: v.get("null", 0.0) for p, v in params.items()},
+                           fixed={k: float(v) for k, v in e.get("fixed", {}).items()},
+                           needs=e.get("needs", ""), confounded_with=tuple(e.get("confounded_with", [])))
+    return out
+
+
+# ----------------------------------------------------------------------------- linearisation
+
+@dataclass
+class Linearisation:
+    """The user's fit and every candidate's signature around it.
+
+    Attributes
+    ----------
+    columns : names of the parameter columns: the user's free coefficients, then every
+        candidate parameter, then ``v0_mps`` (per run).
+    base : the user's free coefficients (a prefix of ``columns``).
+    effects : effect name -> its parameter columns (run effects: the coefficients, per run).
+    available : effect name -> None, or why it cannot be evaluated on this campaign.
+    values : parameter values at the linearisation point (the user's MAP, effects at null).
+    jacobian : [R, N, k] d speed / d column, zero on padded samples.
+    residual : [R, N] measured minus fitted speed (zero on padded samples).
+    gram, score : [R, k, k] J^T Sigma^-1 J and [R, k] J^T Sigma^-1 r per run.
+    loglik : [R] log likelihood of each run at the fit.
+    sigma_mps, q : the fit's noise levels ([R] and scalar).
+    model : the super-model; ``batch`` the runs.
+    """
+
+    columns: tuple[str, ...]
+    base: tuple[str, ...]
+    effects: dict[str, tuple[str, ...]]
+    available: dict[str, str | None]
+    values: dict[str, float]
+    jacobian: np.ndarray
+    residual: np.ndarray
+    gram: np.ndarray
+    score: np.ndarray
+    loglik: np.ndarray
+    sigma_mps: np.ndarray
+    q: float
+    model: DragModel
+    batch: Any
+    run_ids: tuple
+    speed_fn: Any = None
+    x: Any = None
+
+    def index(self, names) -> list[int]:
+        return [self.columns.index(n) for n in names]
+
+    @property
+    def n_runs(self) -> int:
+        return self.residual.shape[0]
+
+    @property
+    def n_samples(self) -> int:
+        return int(np.asarray(self.batch.mask).sum())
+
+
+def super_model(base: DragModel, library: Mapping[str, Effect]) -> tuple[DragModel, dict[str, str | None]]:
+    """The user's model with every candidate's terms added (at their null they change
+    nothing), and for each effect None or the reason it is not available (e.g. anemometer
+    calibration without measured air)."""
+    names = list(base.term_names)
+    terms = list(base.terms)
+    available: dict[str, str | None] = {}
+    measured = isinstance(base.air, MeasuredAir)
+    for e in library.values():
+        available[e.name] = None
+        if e.kind == "air" and not measured:
+            available[e.name] = "needs logged airspeed_mps and yaw_rad (the model uses no measured air)"
+            continue
+        for t in e.terms:
+            if t not in names:
+                names.append(t)
+                terms.append(TERMS[t]())
+    air = OffsetAir() if measured else base.air
+    return DragModel(tuple(terms), air), available
+
+
+def _null_value(effect: Effect, param: str, model_values: Mapping[str, float], base_has_term: bool) -> float:
+    null = effect.null.get(param, 0.0)
+    if null == "model":
+        return float(model_values.get(param, 0.0)) if base_has_term else 0.0
+    return float(null)
+
+
+def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effect]) -> Linearisation:
+    """Differentiate the super-model's speed traces at the user's fit.
+
+    Parameters
+    ----------
+    problem : :class:`~bayes_roadload.inference.bayes.FitProblem` of the user's model (pooled).
+    fit_values : constrained values at the fit (the MAP): the free coefficients, ``v0_mps``,
+        ``sigma_mps`` and, with integrated noise, ``q_mps_per_sqrt_s``.
+    library : the candidates (:func:`load_library`).
+    """
+    model, available = super_model(problem.model, library)
+    values = {k: float(v) for k, v in problem.fixed.items()}
+    values.update({k: float(np.asarray(fit_values[k])) for k in problem.free})
+    base_terms = set(problem.model.term_names)
+    effects: dict[str, tuple[str, ...]] = {}
+    columns = list(problem.free)
+    for e in library.values():
+        if available[e.name] is not None:
+            continue
+        values.update(e.fixed)
+        if e.kind == "run":
+            cols = tuple(p for p in e.parameters if p in problem.free)
+            if not cols:
+                available[e.name] = "the model frees none of its coefficients"
+                continue
+            effects[e.name] = cols
+            continue
+        has = all(t in base_terms for t in e.terms) if e.terms else True
+        cols = []
+        for p in e.parameters:
+            if p in problem.free:
+                continue  # already estimated by the user's model
+            values[p] = _null_value(e, p, values, has)
+            if p not in columns:
+                columns.append(p)
+            cols.append(p)
+        if not cols:
+            available[e.name] = "its parameters are already free in the model"
+            continue
+        effects[e.name] = tuple(cols)
+    columns.append("v0_mps")
+    for p, v in model.defaults.items():
+        values.setdefault(p, float(v))
+    batch = problem.batch
+    r = batch.n_runs
+    names = tuple(columns[:-1])
+    const = {k: jnp.asarray(v) for k, v in values.items() if k not in names}
+
+    def speeds(x):
+        params = dict(const, **{n: x[:, i] for i, n in enumerate(names)})
+        return integrate_batch(model, params, batch, x[:, -1])[0]
+
+    @jax.jit
+    def speed_and_jacobian(x):
+        y, f_jvp = jax.linearize(speeds, x)
+        k = x.shape[1]
+        tangents = jnp.broadcast_to(jnp.eye(k)[:, None, :], (k, r, k))
+        return y, jnp.moveaxis(jax.vmap(f_jvp)(tangents), 0, -1)
+
+    v0 = np.asarray(fit_values["v0_mps"], float)
+    x0 = np.column_stack([np.full(r, values[n]) for n in names] + [v0])
+    mask = np.asarray(batch.mask)
+    sigma = np.broadcast_to(np.asarray(fit_values["sigma_mps"], float), (r,)).copy()
+    q = float(np.asarray(fit_values.get("q_mps_per_sqrt_s", 0.0)))
+    lin = Linearisation(columns=tuple(columns), base=tuple(problem.free), effects=effects, available=available,
+                        values=values, jacobian=np.zeros(0), residual=np.zeros(0), gram=np.zeros(0),
+                        score=np.zeros(0), loglik=np.zeros(0), sigma_mps=sigma, q=q, model=model, batch=batch,
+                        run_ids=tuple(problem.run_ids), speed_fn=speed_and_jacobian)
+    return relinearise(lin, x0)
+
+
+def relinearise(lin: Linearisation, x: np.ndarray) -> Linearisation:
+    """``lin`` re-evaluated at the column values ``x`` ([R, k]: every column per run, the
+    initial speed last) with the same noise levels (reuses the compiled function)."""
+    batch = lin.batch
+    mask = np.asarray(batch.mask)
+    y, jac = lin.speed_fn(jnp.asarray(x))
+    jac = np.where(mask[..., None], np.asarray(jac), 0.0)
+    resid = np.where(mask, np.asarray(batch.speed_mps) - np.asarray(y), 0.0)
+    g, b = _effect_terms(jnp.asarray(resid), batch.time_s, batch.mask, jnp.asarray(lin.sigma_mps), lin.q,
+                         jnp.asarray(jac))
+    ll = local_level_loglik_batch(jnp.asarray(resid), batch.time_s, batch.mask, jnp.asarray(lin.sigma_mps), lin.q)
+    out = Linearisation(**{**lin.__dict__})
+    out.jacobian, out.residual = jac, resid
+    out.gram, out.score, out.loglik = np.asarray(g), np.asarray(b), np.asarray(ll)
+    out.x = np.asarray(x, float)
+    return out
+
+
+# ----------------------------------------------------------------------------- evaluation
+
+@dataclass
+class Solution:
+    """The best step of a set of shared and per-run columns (:func:`solve`)."""
+
+    shared: list[int]
+    own: list[int]
+    beta: np.ndarray              # [S] shared step
+    gamma: np.ndarray             # [R, O] per-run steps
+    loglik_gain: float            # maximised log likelihood gain over the fit
+    cov_shared: np.ndarray        # [S, S] posterior covariance (with the prior ridge)
+    cov_own: np.ndarray           # [R, O, O] conditional covariance of each run's own step
+    run_terms: list               # per run (H_r, g_r, c_r) of the profiled quadratic
+    information: np.ndarray       # [S, S] sum of H_r (no ridge)
+
+
+def solve(lin: Linearisation, shared: list[int], own: list[int], prior_precision: np.ndarray | None = None,
+          own_precision: np.ndarray | None = None, runs: np.ndarray | None = None) -> Solution:
+    """Maximise the quadratic log likelihood over a step of the ``shared`` columns (common to
+    the runs) and the ``own`` columns (each run its own), with Gaussian ridges
+    ``prior_precision`` [S] and ``own_precision`` [O]; ``runs`` restricts the sum to those
+    runs (leave-out fits).  The own steps are profiled out run by run (Schur complements)."""
+    r = lin.n_runs
+    runs = np.arange(r) if runs is None else np.asarray(runs)
+    s, o = np.asarray(shared, int), np.asarray(own, int)
+    pp = np.zeros(len(s)) if prior_precision is None else np.asarray(prior_precision, float)
+    op = np.zeros(len(o)) if own_precision is None else np.asarray(own_precision, float)
+    terms = []
+    for i in range(r):
+        g, b = lin.gram[i], lin.score[i]
+        a, bb, d = g[np.ix_(s, s)], g[np.ix_(s, o)], g[np.ix_(o, o)] + np.diag(op)
+        bs, bo = b[s], b[o]
+        dinv = np.linalg.pinv(d)
+        terms.append((a - bb @ dinv @ bb.T, bs - bb @ dinv @ bo, 0.5 * float(bo @ dinv @ bo), dinv, bb, bo))
+    info = sum(terms[i][0] for i in runs) if len(s) else np.zeros((0, 0))
+    grad = sum(terms[i][1] for i in runs) if len(s) else np.zeros(0)
+    if len(s):
+        h = info + np.diag(pp)
+        scale = np.sqrt(np.maximum(np.diag(h), 1e-300))
+        hs = h / np.outer(scale, scale)
+        cov = np.linalg.pinv(hs, rcond=1e-12) / np.outer(scale, scale)
+        beta = cov @ grad
+        gain = float(grad @ beta - 0.5 * beta @ info @ beta)
+    else:
+        cov, beta, gain = np.zeros((0, 0)), np.zeros(0), 0.0
+    gamma = np.zeros((r, len(o)))
+    cov_own = np.zeros((r, len(o), len(o)))
+    for i in range(r):
+        _, _, c, dinv, bb, bo = terms[i]
+        gamma[i] = dinv @ (bo - bb.T @ beta)
+        cov_own[i] = dinv
+    gain += sum(terms[i][2] for i in runs)
+    return Solution(shared=list(s), own=list(o), beta=beta, gamma=gamma, loglik_gain=gain, cov_shared=cov,
+                    cov_own=cov_own, run_terms=terms, information=info)
+
+
+def run_loglik_gain(sol: Solution, i: int) -> float:
+    """Log likelihood gain of run ``i`` at the shared step ``sol.beta`` with its own step
+    profiled."""
+    h, g, c, *_ = sol.run_terms[i]
+    b = sol.beta
+    return float(c + g @ b - 0.5 * b @ h @ b) if len(b) else float(c)
+
+
+def model_columns(lin: Linearisation, effects: tuple[str, ...], library: Mapping[str, Effect]):
+    """Shared and own column indices and their ridges for the user's model plus ``effects``."""
+    shared = list(lin.base)
+    prior = [0.0] * len(shared)
+    own, own_prior = ["v0_mps"], [0.0]
+    for name in effects:
+        e = library[name]
+        for p in lin.effects[name]:
+            if e.kind == "run":
+                own.append(p)
+                own_prior.append(1.0 / e.prior_sd[p] ** 2)
+            elif p not in shared:
+                shared.append(p)
+                prior.append(1.0 / e.prior_sd[p] ** 2)
+    return lin.index(shared), np.asarray(prior), lin.index(own), np.asarray(own_prior)
+
+
+def fit_effects(lin: Linearisation, effects: tuple[str, ...], library: Mapping[str, Effect],
+                runs: np.ndarray | None = None) -> Solution:
+    """The user's model plus ``effects``, fitted in the quadratic approximation."""
+    s, sp, o, op = model_columns(lin, effects, library)
+    return solve(lin, s, o, sp, op, runs)
+
+
+def n_added_parameters(lin: Linearisation, effects: tuple[str, ...], library: Mapping[str, Effect]) -> int:
+    """Parameters the effects add (run effects: one per run and coefficient, less the shared one)."""
+    k = 0
+    for name in effects:
+        e = library[name]
+        k += len(lin.effects[name]) * (lin.n_runs - 1 if e.kind == "run" else 1)
+    return k
+
+
+def refit_residual(lin: Linearisation, sol: Solution) -> np.ndarray:
+    """[R, N] residuals after the step of ``sol`` (linear in the step)."""
+    out = lin.residual.copy()
+    for i in range(lin.n_runs):
+        step = np.zeros(len(lin.columns))
+        step[sol.shared] += sol.beta
+        step[sol.own] += sol.gamma[i]
+        out[i] = lin.residual[i] - lin.jacobian[i] @ step
+    return out
+
+
+def step_values(lin: Linearisation, sol: Solution) -> np.ndarray:
+    """[R, k] column values after the step of ``sol``."""
+    x = lin.x.copy()
+    x[:, sol.shared] += sol.beta[None, :]
+    x[:, sol.own] += sol.gamma
+    return x
+
+
+def lopo_lpd(lin: Linearisation, effects: tuple[str, ...], library: Mapping[str, Effect], groups) -> float:
+    """Leave-one-group-out log predictive density of the user's model plus ``effects``: for
+    each group (e.g. an opposite-direction pair, as run indices) the shared parameters are
+    fitted without its runs, and its runs scored at them, each with its own initial speed
+    (and, for run effects, its own coefficients) fitted: those are the run's own nuisances,
+    not predictions.  Quadratic approximation about the user's fit; the sum over groups."""
+    total = 0.0
+    everything = np.arange(lin.n_runs)
+    for grp in groups:
+        train = np.setdiff1d(everything, np.asarray(grp))
+        sol = fit_effects(lin, effects, library, runs=train)
+        total += sum(float(lin.loglik[i]) + run_loglik_gain(sol, i) for i in grp)
+    return total
+
+
+def identifiability(lin: Linearisation, effect: str, library: Mapping[str, Effect]) -> dict[str, Any]:
+    """For each shared parameter of ``effect`` added to the user's model: the fraction of its
+    Fisher information left once the user's coefficients are re-fitted
+    (``information_ratio`` = 1 - R^2 of its speed signature on theirs, through the residual
+    covariance) and the contraction of its prior (1 - posterior var / prior var).  Run effects
+    are per run and need no such check (returned empty)."""
+    e = library[effect]
+    if e.kind == "run":
+        return {}
+    sol = fit_effects(lin, (effect,), library)
+    shared_names = [lin.columns[j] for j in sol.shared]
+    out = {}
+    info = sol.information
+    for p in lin.effects[effect]:
+        j = shared_names.index(p)
+        marginal = info[j, j]
+        others = [i for i in range(len(shared_names)) if i != j]
+        if marginal <= 0:
+            ratio = 0.0
+        elif others:
+            sub = info[np.ix_(others, others)]
+            cross = info[np.ix_([j], others)][0]
+            scale = np.sqrt(np.maximum(np.diag(sub), 1e-300))
+            cond = marginal - cross / scale @ np.linalg.pinv(sub / np.outer(scale, scale), rcond=1e-12) @ (cross / scale)
+            ratio = float(max(cond, 0.0) / marginal)
+        else:
+            ratio = 1.0
+        prior_var = e.prior_sd[p] ** 2
+        out[p] = {"information_ratio": ratio, "contraction": float(1.0 - sol.cov_shared[j, j] / prior_var),
+                  "estimate": float(lin.values.get(p, 0.0) + sol.beta[j]), "sd": float(math.sqrt(max(sol.cov_shared[j, j], 0.0)))}
+    return out
+
+
+def coefficient_spread(lin: Linearisation, sol: Solution | None, library: Mapping[str, Effect]) -> dict[str, float]:
+    """Excess between-run spread of the coefficients: each run's own A_D, B_D, C_D0 (those the
+    model frees) fitted on top of the model's fit ``sol`` (None: the fit itself), against the
+    spread their conditional covariances predict for the same conditions and noise.
+
+    Returns ``spread_pct_P`` (std over runs, % of the coefficient), ``spread_predicted_pct_P``
+    (root mean conditional variance, %) and ``spread_excess_P`` (their ratio; ~1 when the runs
+    differ by noise only) for each coefficient P."""
+    coeffs = [p for p in ("AD", "BD", "CD0") if p in lin.base]
+    if not coeffs or lin.n_runs < 2:
+        return {}
+    shared = sol.shared if sol is not None else lin.index(lin.base)
+    beta = sol.beta if sol is not None else np.zeros(len(shared))
+    own = lin.index(["v0_mps"] + coeffs)
+    # each run's own coefficients (and initial speed) given the shared fit: run-level estimates
+    r = lin.n_runs
+    est = np.zeros((r, len(coeffs)))
+    var = np.zeros((r, len(coeffs)))
+    for i in range(r):
+        g, b = lin.gram[i], lin.score[i]
+        d = g[np.ix_(own, own)]
+        rhs = b[own] - g[np.ix_(own, shared)] @ beta
+        dinv = np.linalg.pinv(d)
+        est[i] = (dinv @ rhs)[1:]
+        var[i] = np.diag(dinv)[1:]
+    out = {}
+    for k, p in enumerate(coeffs):
+        centre = lin.values[p] + (beta[shared.index(lin.columns.index(p))] if lin.columns.index(p) in shared else 0.0)
+        observed = float(np.std(est[:, k], ddof=1))
+        predicted = float(np.sqrt(np.mean(var[:, k])))
+        out[f"spread_pct_{p}"] = 100.0 * observed / abs(centre)
+        out[f"spread_predicted_pct_{p}"] = 100.0 * predicted / abs(centre)
+        out[f"spread_excess_{p}"] = observed / predicted if predicted > 0 else math.nan
+    return out
+
+
+def airspeed_kinematics(problem, campaign, stated_factor: float) -> dict[str, float] | None:
+    """The airspeed scale from the paired runs' kinematics (thesis 4.7.3): each
+    opposite-direction pair's ratio of mean ground speed to mean along-track airspeed reading
+    (:func:`~bayes_roadload.inference.bayes.airspeed_pair_ratios`) estimates the true factor.
+    Returns the mean ratio, its standard error (the pairs' scatter, at least
+    ``config.NOISE_PRIORS["airspeed_calibration_sd"]`` per pair), the z-score against the
+    factor the model uses and the log likelihood gain of the ratios with the factor free
+    (z^2 / 2); None without pairs or measured air."""
+    from ..inference.bayes import airspeed_pair_ratios, calibration_pairs
+
+    if not campaign.has_anemometer:
+        return None
+    pairs = calibration_pairs(campaign, problem.run_ids)
+    if not pairs:
+        return None
+    yaw_factor = float(problem.fixed.get("yaw_factor", 1.0))
+    ratios = np.asarray(airspeed_pair_ratios(problem.batch, pairs, yaw_factor))
+    k = ratios.size
+    sd = max(float(np.std(ratios, ddof=1)) if k > 1 else 0.0, config.NOISE_PRIORS["airspeed_calibration_sd"])
+    se = sd / math.sqrt(k)
+    z = (float(ratios.mean()) - stated_factor) / se
+    return {"factor": float(ratios.mean()), "se": se, "n_pairs": k, "z": z, "loglik_gain": 0.5 * z * z}

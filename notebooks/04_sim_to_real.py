@@ -1,0 +1,104 @@
+# ---
+# jupyter:
+#   jupytext:
+#     text_representation:
+#       extension: .py
+#       format_name: percent
+#   kernelspec:
+#     display_name: Python 3
+#     name: python3
+# ---
+
+# %% [markdown]
+# # Sim-to-real: the withheld-effect proof suite
+#
+# `benchmarks/sim_to_real_study.py` simulates campaigns at thesis case 9 conditions with one
+# candidate effect present at a plausible size, analyses each with a model that withholds it
+# (`three_term`), and runs the diagnosis (`bayes-roadload diagnose`); null controls add no
+# effect.  Its records are in `docs/sim_to_real/records.csv`; this notebook plots them:
+#
+# 1. the confusion matrix, true effect against the top-ranked supported effect ("none" when
+#    nothing is claimed);
+# 2. each campaign's delta_elpd of the true effect, against the support threshold, and the
+#    largest delta_elpd of any candidate on the null controls;
+# 3. the shrink of the residual trend after the refit.
+#
+# It reads results; it fits nothing.  `BR_SIM_TO_REAL_DIR` points it at another records
+# directory, `BR_OUT` is where the figures go.
+
+# %%
+import os
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use(os.environ.get("MPLBACKEND", "Agg"))
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+
+from bayes_roadload import config
+from bayes_roadload.analysis.effects import EFFECT_NAMES
+
+ROOT = Path.cwd() if (Path.cwd() / "docs").is_dir() else Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("BR_SIM_TO_REAL_DIR", ROOT / "docs" / "sim_to_real"))
+OUT = Path(os.environ.get("BR_OUT", "."))
+records = pd.read_csv(DATA / "records.csv", keep_default_na=False, na_values=[""])  # "null" is an arm
+records = records[records["error"].isna()]
+threshold = config.DEFAULT_DIAGNOSIS.support_delta_elpd
+print(f"{len(records)} campaigns, {records['true_effect'].nunique()} arms")
+
+# %% [markdown]
+# ## 1. Confusion matrix
+
+# %%
+rows = [e for e in list(EFFECT_NAMES) + ["null"] if e in set(records["true_effect"])]
+cols = list(EFFECT_NAMES) + ["none"]
+cm = pd.crosstab(records["true_effect"], records["top"]).reindex(index=rows, columns=cols, fill_value=0)
+fig, ax = plt.subplots(figsize=(9, 6))
+ax.imshow(cm.to_numpy(), cmap="Blues")
+ax.set_xticks(range(len(cols)), cols, rotation=60, ha="right", fontsize=7)
+ax.set_yticks(range(len(rows)), rows, fontsize=7)
+for (i, j), v in np.ndenumerate(cm.to_numpy()):
+    if v:
+        ax.text(j, i, str(v), ha="center", va="center", fontsize=8)
+ax.set_xlabel("top-ranked supported effect")
+ax.set_ylabel("true (withheld) effect")
+fig.tight_layout()
+fig.savefig(OUT / "sim_to_real_confusion.png", dpi=90)
+correct = sum(cm.loc[e, e] for e in rows if e in cm.columns)
+print("true effect ranked first:", correct, "of", int(cm.drop(index="null", errors="ignore").to_numpy().sum()))
+
+# %% [markdown]
+# ## 2. Evidence for the true effect, and the null controls
+
+# %%
+effects = records[records["true_effect"] != "null"]
+true_delta = [effects.iloc[i][f"delta_elpd_{e}"] for i, e in enumerate(effects["true_effect"])]
+nulls = records[records["true_effect"] == "null"]
+null_max = nulls[[f"delta_elpd_{e}" for e in EFFECT_NAMES]].max(axis=1)
+fig, ax = plt.subplots(figsize=(8, 4))
+y = np.arange(len(effects))
+ax.barh(y, np.sign(true_delta) * np.log10(1 + np.abs(true_delta)), color="tab:blue", label="true effect")
+ax.barh(len(effects) + np.arange(len(nulls)), np.sign(null_max) * np.log10(1 + np.abs(null_max)), color="tab:gray",
+        label="nulls: largest candidate")
+ax.axvline(np.log10(1 + threshold), color="k", ls="--", lw=0.8)
+ax.set_yticks(list(y) + list(len(effects) + np.arange(len(nulls))), list(effects["name"]) + list(nulls["name"]),
+              fontsize=7)
+ax.set_xlabel("sign x log10(1 + |delta_elpd|)  (dashed: support threshold)")
+ax.legend(fontsize=7)
+fig.tight_layout()
+fig.savefig(OUT / "sim_to_real_evidence.png", dpi=90)
+
+# %% [markdown]
+# ## 3. Shrink of the residual trend after the refit
+
+# %%
+shrink = records.loc[records["refit_effects"].notna(), ["name", "shrink_trend_rms_mps"]].dropna()
+fig, ax = plt.subplots(figsize=(6, 3))
+ax.hist(shrink["shrink_trend_rms_mps"].clip(-50, 100), bins=np.linspace(-50, 100, 16), color="tab:green")
+ax.set_xlabel("shrink of the trend's excess over its floor (%)")
+ax.set_ylabel("campaigns")
+fig.tight_layout()
+fig.savefig(OUT / "sim_to_real_shrink.png", dpi=90)
+print("median shrink of the refitted campaigns:", float(shrink["shrink_trend_rms_mps"].median()) if len(shrink) else None)

@@ -1,0 +1,122 @@
+"""The sim-to-real diagnosis end to end: the CLI contract on a campaign with a withheld track
+gradient, and (slow) null controls and a non-identifiable effect through the batch door."""
+
+import json
+import math
+import warnings
+
+import pytest
+
+from bayes_roadload.analysis.diagnose import DiagnoseJob, withheld_campaign
+from bayes_roadload.analysis.effects import EFFECT_NAMES
+from bayes_roadload.cli import main
+from bayes_roadload.data import save_campaign
+
+CANDIDATE_KEYS = {"effect", "rank", "supported", "delta_elpd", "gap_before", "gap_after", "shrink_pct"}
+
+
+@pytest.fixture(scope="module")
+def gradient_diagnosis(tmp_path_factory):
+    """CLI diagnosis of 2 pairs at case 9 conditions with a 0.1 % track gradient that
+    three_term withholds."""
+    root = tmp_path_factory.mktemp("diag")
+    factory, model = withheld_campaign("track_gradient", seed=1, pairs=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        save_campaign(factory(), root / "campaign")
+        code = main(["diagnose", str(root / "campaign"), "--model", model, "--out", str(root / "out")])
+    return code, root / "out"
+
+
+def test_cli_writes_the_contract(gradient_diagnosis):
+    code, out = gradient_diagnosis
+    assert code == 0
+    d = json.loads((out / "diagnosis.json").read_text())
+    assert set(d) == {"gap", "localisation", "candidates"}
+    for k in ("trend_rms_mps", "lag1_autocorr", "lopo_lpd_per_sample", "spread_excess_AD"):
+        assert k in d["gap"]
+    for v in ("time_s", "speed_mps", "distance_m", "yaw_rad", "airspeed_mps", "direction", "run"):
+        assert 0.0 <= d["localisation"][v]["eta2"] <= 1.0
+    names = [c["effect"] for c in d["candidates"]]
+    assert sorted(names) == sorted(EFFECT_NAMES)
+    assert [c["rank"] for c in d["candidates"]] == list(range(1, len(EFFECT_NAMES) + 1))
+    for c in d["candidates"]:
+        assert CANDIDATE_KEYS <= set(c)
+        assert isinstance(c["supported"], bool)
+    report = (out / "report.md").read_text()
+    for png in ("residuals.png", "localisation.png", "candidates.png"):
+        assert png in report and (out / png).stat().st_size > 1000
+
+
+def test_withheld_gradient_is_ranked_first_estimated_and_shrinks_the_trend(gradient_diagnosis):
+    _, out = gradient_diagnosis
+    d = json.loads((out / "diagnosis.json").read_text())
+    top = d["candidates"][0]
+    assert top["effect"] == "track_gradient" and top["supported"]
+    ident = top["identification"]["grade_rad"]
+    # the simulated grade is 0.001 rad: within 4 linearised posterior sd
+    assert abs(ident["estimate"] - 0.001) < 4 * ident["sd"]
+    # a gradient is a direction offset: the residuals concentrate by direction or run
+    assert d["localisation"]["where"][0] in ("direction", "run")
+    # the withheld effect is most of the trend: refitting it removes >= 80 % of the excess
+    assert top["shrink_pct"]["trend_rms_mps"] > 80.0
+    # and out of sample: leaving each pair out, the gradient still predicts it better
+    assert top["delta_lopo_lpd"] > 0.0
+    refit = json.loads((out / "refit.json").read_text())
+    assert refit["effects"][0] == "track_gradient"
+    # mass error rescales every force: never supported with AD, BD, CD0 free
+    mass = next(c for c in d["candidates"] if c["effect"] == "mass_error")
+    assert not mass["supported"]
+
+
+@pytest.mark.slow
+def test_null_controls_and_a_confounded_effect_through_the_batch_door():
+    from bayes_roadload.analysis.batch import run_batch
+
+    jobs = []
+    for effect, seed in ((None, 1001), (None, 1002), ("aero_lift", 1), ("mass_error", 1)):
+        factory, model = withheld_campaign(effect, seed, pairs=3)
+        jobs.append(DiagnoseJob(f"{effect}-{seed}", factory, model, tags={"true_effect": str(effect)}))
+    rec = run_batch(jobs).set_index("name")
+    assert rec["error"].isna().all()
+    # nulls: nothing may be claimed at the stated threshold
+    assert (rec.loc[["None-1001", "None-1002"], "top"] == "none").all()
+    # lift unloading looks like a C_D0 change, an effective-mass error like a rescaling of the
+    # coefficients: neither may be claimed as another effect
+    for name, effect in (("aero_lift-1", "aero_lift"), ("mass_error-1", "mass_error")):
+        assert rec.loc[name, "top"] in ("none", effect)
+
+
+def test_a_claim_needs_a_margin_over_every_other_candidate():
+    from bayes_roadload import config
+    from bayes_roadload.analysis.diagnose import select_effects
+
+    margin = config.DEFAULT_DIAGNOSIS.ambiguity_margin
+    entries = [{"effect": "driveline_quadratic", "delta_elpd": 14.6, "qualifies": True},
+               {"effect": "tyre_speed_exponent", "delta_elpd": 14.6 - margin / 2, "qualifies": False},
+               {"effect": "spatial_wind", "delta_elpd": 3.0, "qualifies": False}]
+    assert select_effects(None, entries, {}, config.DEFAULT_DIAGNOSIS) == []
+    assert not any(e["supported"] for e in entries)
+    assert entries[0]["ambiguous_with"] == ["tyre_speed_exponent"]
+    assert "ambiguous_with" not in entries[2]
+
+
+def test_shrink_is_the_share_of_the_excess_over_the_floor():
+    from bayes_roadload.analysis.diagnose import shrink
+
+    before = {"trend_rms_mps": 0.05, "trend_floor_mps": 0.01, "lag1_autocorr": 0.5, "spread_excess_AD": 3.0}
+    after = {"trend_rms_mps": 0.02, "trend_floor_mps": 0.01, "lag1_autocorr": 0.5, "spread_excess_AD": 1.0}
+    s = shrink(before, after, n_runs=8)
+    assert s["trend_rms_mps"] == pytest.approx(75.0)   # (0.05 - 0.02) / (0.05 - 0.01)
+    assert s["lag1_autocorr"] == pytest.approx(0.0)
+    assert s["spread_excess_AD"] == pytest.approx(100.0)
+    # no excess to remove (within twice the floor): no percentage of noise over noise
+    assert math.isnan(shrink({**before, "trend_rms_mps": 0.015}, after, n_runs=8)["trend_rms_mps"])
+
+
+def test_cli_refuses_an_unknown_model_and_writes_nothing(gradient_diagnosis, tmp_path, capsys):
+    _, out = gradient_diagnosis
+    code = main(["diagnose", str(out.parent / "campaign"), "--model", "no_such_model", "--out", str(tmp_path / "x")])
+    assert code == 2
+    assert "no_such_model" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()

@@ -1,0 +1,69 @@
+"""The candidate library and the linear algebra of the linearised candidate scoring."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from bayes_roadload import config
+from bayes_roadload.analysis import effects as fx
+from bayes_roadload.physics import TERMS
+
+
+def test_library_has_exactly_the_contract_effects_with_known_parameters():
+    lib = fx.load_library()
+    assert tuple(lib) == fx.EFFECT_NAMES
+    for e in lib.values():
+        assert e.kind in fx.KINDS and e.needs
+        assert all(t in TERMS for t in e.terms)
+        assert all(p in config.PARAMETER_UNITS and sd > 0 for p, sd in e.prior_sd.items())
+
+
+def test_library_refuses_unknown_names(tmp_path):
+    bad = tmp_path / "lib.toml"
+    bad.write_text('[effects.tyre_pressure]\nterms = []\nkind = "term"\nparameters.AD = { prior_sd = 1.0 }\n')
+    with pytest.raises(ValueError, match="not an effect of the contract"):
+        fx.load_library(bad)
+
+
+def fake_linearisation(rng, runs=5, n=60, k_shared=3, k_own=2):
+    """White unit-variance noise: gram = J^T J, score = J^T r per run."""
+    jac = rng.standard_normal((runs, n, k_shared + k_own))
+    truth_shared = rng.standard_normal(k_shared)
+    truth_own = rng.standard_normal((runs, k_own))
+    resid = np.stack([jac[i] @ np.concatenate([truth_shared, truth_own[i]]) for i in range(runs)])
+    resid += rng.standard_normal(resid.shape)
+    gram = np.einsum("rnk,rnl->rkl", jac, jac)
+    score = np.einsum("rnk,rn->rk", jac, resid)
+    return SimpleNamespace(gram=gram, score=score, residual=resid, jacobian=jac, n_runs=runs,
+                           columns=tuple(f"c{j}" for j in range(k_shared + k_own))), resid, jac
+
+
+def test_solve_equals_the_joint_least_squares_fit():
+    rng = np.random.default_rng(4)
+    lin, resid, jac = fake_linearisation(rng)
+    runs, n, k = jac.shape
+    shared, own = [0, 1, 2], [3, 4]
+    sol = fx.solve(lin, shared, own)
+    # the same problem as one big least squares: [shared | run-block-diagonal own]
+    big = np.zeros((runs * n, 3 + 2 * runs))
+    for i in range(runs):
+        big[i * n:(i + 1) * n, :3] = jac[i][:, shared]
+        big[i * n:(i + 1) * n, 3 + 2 * i:5 + 2 * i] = jac[i][:, own]
+    coef, *_ = np.linalg.lstsq(big, resid.ravel(), rcond=None)
+    np.testing.assert_allclose(sol.beta, coef[:3], rtol=1e-9)
+    np.testing.assert_allclose(sol.gamma, coef[3:].reshape(runs, 2), rtol=1e-9)
+    # log likelihood gain of white unit noise: (|r|^2 - |r - J x|^2) / 2
+    gain = 0.5 * (resid.ravel() @ resid.ravel() - np.sum((resid.ravel() - big @ coef) ** 2))
+    assert sol.loglik_gain == pytest.approx(gain, rel=1e-9)
+    # leave-out sums: the gains of the kept runs at the shared step
+    assert sum(fx.run_loglik_gain(sol, i) for i in range(runs)) == pytest.approx(sol.loglik_gain, rel=1e-9)
+
+
+def test_ridge_pulls_a_shared_step_towards_zero():
+    rng = np.random.default_rng(5)
+    lin, _, _ = fake_linearisation(rng)
+    free = fx.solve(lin, [0, 1, 2], [3, 4])
+    tight = fx.solve(lin, [0, 1, 2], [3, 4], prior_precision=np.array([0.0, 0.0, 1e8]))
+    assert abs(tight.beta[2]) < 1e-3 * abs(free.beta[2])
+    assert tight.loglik_gain < free.loglik_gain

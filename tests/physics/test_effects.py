@@ -1,0 +1,108 @@
+"""The candidate-effect terms of physics/effects.py: null at zero, linear in their parameter,
+and the physics each one states."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from bayes_roadload import config
+from bayes_roadload.physics import TERMS, Conditions, DragModel, MeasuredAir, OffsetAir, simplified_model
+from bayes_roadload.physics import effects as fx
+from bayes_roadload.physics.terms import AeroDrag, PitchAttitude, SideForceSlip, TyreRolling
+
+RHO = 1.19
+
+
+def conditions(**kw):
+    base = dict(speed_mps=jnp.array([10.0, 20.0, 30.0]), airspeed_mps=jnp.array([12.0, 21.0, 29.0]),
+                yaw_rad=jnp.array([0.2, -0.1, 0.05]), driveline_force_n=jnp.zeros(3),
+                position_m=jnp.array([0.0, 1250.0, 2500.0]), distance_m=jnp.array([100.0, 500.0, 900.0]),
+                time_s=jnp.array([0.0, 40.0, 80.0]), accel_mps2=jnp.array([-0.2, -0.3, -0.5]),
+                direction=jnp.array(-1.0), air_density_kgpm3=jnp.array(RHO),
+                temperature_k=jnp.array(config.REFERENCE_TEMPERATURE_K), mass_kg=jnp.array(1100.0),
+                frontal_area_m2=jnp.array(1.85))
+    base.update(kw)
+    return Conditions(**base)
+
+
+EFFECT_TERMS = {  # term -> (effect parameter, a non-null value)
+    "tyre_temperature_transient": ("tyre_transient", 0.1),
+    "tyre_speed_power": ("tyre_power_coeff", 3e-4),
+    "side_slip_drag": ("side_slip_coeff_per_n", 5.76e-5),
+    "driveline_quadratic": ("Ct", 0.03),
+    "anemometer_lag": ("cup_lag_m", 1.5),
+    "mass_error": ("mass_error_kg", 30.0),
+    "spatial_wind": ("wind_gradient_mps", 2.0),
+}
+
+
+@pytest.mark.parametrize("name", sorted(EFFECT_TERMS))
+def test_effect_terms_are_registered_null_at_zero_and_linear(name):
+    term = TERMS[name]()
+    param, value = EFFECT_TERMS[name]
+    p = {"AD": 0.01, "BD": 2e-4, "KT": 0.0, "CD0": 0.4, "KD": 0.6, **term.defaults}
+    c = conditions()
+    assert np.allclose(term.force_n({**p, param: 0.0}, c), 0.0)
+    f1 = np.asarray(term.force_n({**p, param: value}, c))
+    f2 = np.asarray(term.force_n({**p, param: 2 * value}, c))
+    assert np.any(np.abs(f1) > 1e-6)
+    np.testing.assert_allclose(f2, 2 * f1, rtol=1e-12)  # linear: the diagnosis linearises about 0
+
+
+def test_side_slip_drag_equals_side_force_slip_with_folded_coefficient():
+    c = conditions()
+    ks, cy = 2.4, 25_000.0
+    expected = SideForceSlip().force_n({"KS": ks, "Cy": cy}, c)
+    got = fx.SideSlipDrag().force_n({"side_slip_coeff_per_n": ks**2 / (4 * cy)}, c)
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+
+
+def test_mass_error_is_the_equation_of_motion_with_the_true_mass():
+    """(M_e + dM) dv/dt = -F  <=>  M_e dv/dt = -(F + dM dv/dt): same deceleration."""
+    c = conditions()
+    params = {"AD": 0.01, "BD": 2e-4, "CD0": 0.4, "KD": 0.6, "mass_error_kg": 40.0}
+    base = DragModel((TyreRolling(), AeroDrag()))
+    with_error = base.with_terms(fx.EffectiveMassError())
+    np.testing.assert_allclose(with_error.acceleration_mps2(params, c, 1130.0),
+                               base.acceleration_mps2(params, c, 1170.0), rtol=1e-12)
+
+
+def test_anemometer_lag_matches_the_drag_at_the_corrected_airspeed():
+    """To first order in the lag the term is the drag at a_m + (d / a_m) dv/dt minus that at
+    the reading a_m: check against the exact difference for a small lag."""
+    c = conditions()
+    d = 0.05
+    p = {"CD0": 0.4, "KD": 0.6, "cup_lag_m": d}
+    corrected = c._replace(airspeed_mps=c.airspeed_mps + d / c.airspeed_mps * c.accel_mps2)
+    exact = AeroDrag().force_n(p, corrected) - AeroDrag().force_n(p, c)
+    lag = fx.AnemometerLag().force_n(p, c)
+    # first order: relative error ~ (d a / a_m^2) / 2, below 1e-4 here
+    np.testing.assert_allclose(lag, exact, rtol=1e-4)
+
+
+def test_tyre_transient_decays_with_its_time_constant():
+    c = conditions(time_s=jnp.array([0.0, 40.0, 80.0]), speed_mps=jnp.full(3, 20.0))
+    p = {"AD": 0.01, "BD": 2e-4, "KT": 0.0, "tyre_transient": 0.1, "tyre_time_constant_s": 40.0}
+    f = np.asarray(fx.TyreTemperatureTransient().force_n(p, c))
+    tyre = np.asarray(TyreRolling().force_n(p, c))
+    np.testing.assert_allclose(f / tyre, 0.1 * np.exp(-np.array([0.0, 1.0, 2.0])), rtol=1e-12)
+
+
+def test_spatial_wind_reverses_with_direction_and_vanishes_mid_track():
+    c = conditions()
+    p = {"CD0": 0.4, "wind_gradient_mps": 2.0}
+    f = np.asarray(fx.SpatialWind().force_n(p, c))
+    assert f[1] == pytest.approx(0.0, abs=1e-12)  # x = L/2
+    g = np.asarray(fx.SpatialWind().force_n(p, c._replace(direction=jnp.array(1.0))))
+    np.testing.assert_allclose(g, -f, rtol=1e-12)
+
+
+def test_offset_air_adds_the_vane_offset_and_keeps_the_measured_air_path():
+    air = OffsetAir()
+    assert isinstance(air, MeasuredAir)  # the integrator's parallel affine path still applies
+    v, psi = air.relative_air({"airspeed_factor": 1.08, "yaw_factor": 0.87, "yaw_offset_rad": 0.02},
+                              None, jnp.array(20.0), jnp.array(0.1))
+    assert float(v) == pytest.approx(21.6)
+    assert float(psi) == pytest.approx(0.087 + 0.02)
+    model = DragModel(simplified_model(lift=True).terms, OffsetAir()).with_terms(PitchAttitude())
+    assert model.speed_affine and "yaw_offset_rad" in model.defaults
