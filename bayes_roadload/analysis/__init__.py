@@ -1,5 +1,7 @@
 """Analyses built on the physics and inference layers: coefficient sensitivity (thesis
-section 6.3); test planning and the sim-to-real diagnosis come later."""
+section 6.3), the batch door for studies of many fits (:mod:`.batch`), the validation
+studies, test planning (:mod:`.planning`, :mod:`.regulation`) and the sim-to-real diagnosis
+(:mod:`.gap`, :mod:`.effects`, :mod:`.diagnose`, :mod:`.replay`)."""
 
 from .sensitivity import PUBLISHED_KD_SENSITIVITY_MPS as PUBLISHED_KD_SENSITIVITY_MPS
 from .sensitivity import PUBLISHED_SENSITIVITY_MPS as PUBLISHED_SENSITIVITY_MPS
