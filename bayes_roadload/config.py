@@ -138,6 +138,41 @@ SPEED_50MPH_MPS = 50.0 * MPH_TO_MPS
 ROADLOAD_FIT_SPEEDS_KPH = tuple(float(v) for v in range(15, 120, 5))
 """Speeds (km/h) at which F = F0 + F1 v + F2 v^2 is fitted through the still-air road load."""
 
+# --- speed-gate interval times (physics.intervals, data.vbox, inference.intervals) -------------
+INTERVAL_QUADRATURE_NODES = 8
+"""Gauss-Legendre nodes per speed band for t = integral M_e / F(v) dv (exact to ~1e-13 relative
+on a 5 km/h band of a quadratic road load, tested against appendix D)."""
+VBOX_DEFAULT_GATES_KPH = {
+    5: ((95.0, 90.0, 85.0, 80.0, 75.0, 70.0),),
+    3: ((50.0, 45.0, 40.0, 35.0),),
+    10: ((95.0, 90.0, 85.0, 80.0, 75.0, 70.0), (55.0, 50.0, 45.0, 40.0, 35.0, 30.0)),
+}
+"""Gate speeds (km/h, descending) assumed for a VBOX Coastdown export by its number of interval
+columns, when ``--gates`` is not given: 5 columns = the split method's high window 95 -> 70 km/h
+in 5 km/h bands, 3 = the low window 50 -> 35 km/h, 10 = interleaved high and low runs (high runs
+fill the first 5 columns; low runs the last 5, 55 -> 30 km/h).  The files do not state them;
+these are the set-ups whose band times reproduce every run's logged distance (median |error|
+0.03-0.14 % with band mid-speeds; the next candidates, 90 -> 70 in 4 km/h bands or 45 -> 35,
+are 2.8-5.8 % off) in the sample exports of docs/real_data.md.  The importer checks them
+against each run's total time and distance (:data:`VBOX_DISTANCE_TOLERANCE`)."""
+VBOX_TIME_TOLERANCE_S = 0.03
+"""Largest |sum of a run's band times - its logged total time| accepted (the export rounds each
+to 0.01 s)."""
+VBOX_DISTANCE_TOLERANCE = 0.005
+"""Largest |median over runs of (sum of band time x band mid-speed - logged distance) / logged
+distance| accepted for a set of gate speeds; a run beyond ``3 x`` this is flagged."""
+INTERVAL_NOISE_PRIORS = {
+    "sigma_gate_s": 0.05,            # mean of the Gamma(2) prior of the gate-crossing timing error (s)
+    "run_decel_sd_mps2": 0.005,      # mean of the Gamma(2) prior of a run's deceleration offset (m/s^2)
+    "band_noise_s_per_sqrt_s": 0.02,  # mean of the Gamma(2) prior of the within-run band noise
+}
+"""Nuisance priors of the interval-time likelihood (:mod:`bayes_roadload.inference.intervals`).
+Gamma(2) priors vanish at 0 (no funnel at the boundary).  ``sigma_gate_s``: timing error of one
+gate crossing (GNSS speed noise / deceleration, after the logger's smoothing); ``run_decel_sd_mps2``:
+run-to-run scatter of a constant deceleration offset (gusts, tyre temperature, driver), 0.005
+m/s^2 is 7.5 N on a 1500 kg car; ``band_noise_s_per_sqrt_s``: independent scatter of each band
+growing as the square root of its duration (force fluctuations within a run)."""
+
 
 @dataclass(frozen=True)
 class IntegratorConfig:
