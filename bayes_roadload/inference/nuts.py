@@ -182,10 +182,18 @@ class Posterior:
         return np.asarray(ravel_pytree(self.z0)[0])
 
 
+def numpyro_model_of(problem) -> Any:
+    """The numpyro model function of a problem: its ``numpyro_model`` when it has one (e.g. an
+    :class:`~bayes_roadload.inference.intervals.IntervalProblem`), else the coastdown model of
+    speed traces.  Every such problem goes through the same MAP, Laplace whitening, NUTS and
+    gates."""
+    return getattr(problem, "numpyro_model", coastdown_model)
+
+
 def unconstrained_posterior(problem: FitProblem, init: dict[str, Any]) -> Posterior:
     """numpyro's potential of ``problem``, starting at the constrained values ``init``."""
     info, potential_fn, postprocess_fn, _ = initialize_model(
-        jax.random.PRNGKey(0), coastdown_model, model_args=(problem,),
+        jax.random.PRNGKey(0), numpyro_model_of(problem), model_args=(problem,),
         init_strategy=init_to_value(values=init), validate_grad=False)
     z0 = info.z
     _, unravel = ravel_pytree(z0)
@@ -315,7 +323,7 @@ def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFA
         if sampler.num_chains == 1:
             init_params = init_params[0]
     else:
-        kernel = NUTS(coastdown_model, target_accept_prob=sampler.target_accept, max_tree_depth=sampler.max_tree_depth)
+        kernel = NUTS(numpyro_model_of(problem), target_accept_prob=sampler.target_accept, max_tree_depth=sampler.max_tree_depth)
         init_params = None
     args = () if sampler.precondition == "laplace" else (problem,)
     # Warm-up and sampling in one compiled program (``mcmc.warmup`` then ``mcmc.run`` compiles

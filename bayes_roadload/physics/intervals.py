@@ -121,3 +121,80 @@ def interval_times(model: DragModel, params: Mapping[str, Array], bands: Interva
         "distance_m": jnp.sum(weights * v / decel, axis=1),
         "dtime_dforce_s_per_n": -jnp.sum(weights / (me * decel**2), axis=1),
     }
+
+
+def band_time_loglik(residual_s: Array, mask: Array, duration_s: Array, sensitivity_s: Array,
+                     sigma_gate_s: Array, band_noise: Array, effect_sd: Array) -> Array:
+    """[R] Gaussian log-likelihood of each run's band-time residuals (observed - modelled).
+
+    The covariance of a run's K band times is
+
+        Sigma = sigma_gate^2 T + band_noise^2 diag(duration) + effect_sd^2 s s^T,
+
+    where T is tridiagonal (2 on the diagonal, -1 beside it): the band time is the difference
+    of two gate-crossing times, each with an independent timing error, so neighbouring bands
+    share one crossing with opposite signs; ``band_noise^2 x duration`` is independent scatter
+    growing with the band's duration (force fluctuations within the run); and ``s`` [K] is the
+    bands' sensitivity to one run-level effect (a constant deceleration offset of sd
+    ``effect_sd``), integrated out (Sherman-Morrison over the tridiagonal part).  The
+    tridiagonal part is factored by a pivot recursion in plain JAX (K is small, the loop is
+    unrolled; no LAPACK call).
+
+    Parameters
+    ----------
+    residual_s, mask, duration_s, sensitivity_s : [R, K] (padded bands: mask False).
+    sigma_gate_s, band_noise, effect_sd : scalars.
+    """
+    m = jnp.asarray(mask, bool)
+    diag = jnp.where(m, 2.0 * sigma_gate_s**2 + band_noise**2 * duration_s, 1.0)
+    both = m[:, 1:] & m[:, :-1]
+    off = jnp.where(both, -sigma_gate_s**2, 0.0)                  # [R, K-1]
+    r = jnp.where(m, residual_s, 0.0)
+    s = jnp.where(m, sensitivity_s, 0.0)
+    k = diag.shape[1]
+    # forward elimination (Thomas) for both right-hand sides, with the pivots for the log det
+    pivots, fr, fs = [], [], []
+    for i in range(k):
+        if i == 0:
+            piv, yr, ys = diag[:, 0], r[:, 0], s[:, 0]
+        else:
+            factor = off[:, i - 1] / pivots[-1]
+            piv = diag[:, i] - factor * off[:, i - 1]
+            yr = r[:, i] - factor * fr[-1]
+            ys = s[:, i] - factor * fs[-1]
+        pivots.append(piv)
+        fr.append(yr)
+        fs.append(ys)
+    # back substitution: x = A^-1 r, z = A^-1 s
+    xr, xs = [None] * k, [None] * k
+    for i in reversed(range(k)):
+        nr, ns = fr[i], fs[i]
+        if i < k - 1:
+            nr = nr - off[:, i] * xr[i + 1]
+            ns = ns - off[:, i] * xs[i + 1]
+        xr[i], xs[i] = nr / pivots[i], ns / pivots[i]
+    piv = jnp.stack(pivots, axis=1)
+    x_r, x_s = jnp.stack(xr, axis=1), jnp.stack(xs, axis=1)
+    quad = jnp.sum(r * x_r, axis=1)
+    sr = jnp.sum(s * x_r, axis=1)
+    ss = jnp.sum(s * x_s, axis=1)
+    v2 = effect_sd**2
+    denom = 1.0 + v2 * ss
+    quad = quad - v2 * sr**2 / denom
+    logdet = jnp.sum(jnp.log(piv), axis=1) + jnp.log(denom)
+    n = jnp.sum(m, axis=1)
+    return -0.5 * (quad + logdet + n * jnp.log(2.0 * jnp.pi))
+
+
+def band_time_covariance(mask, duration_s, sensitivity_s, sigma_gate_s, band_noise, effect_sd):
+    """[R, K, K] the covariance of :func:`band_time_loglik` (dense, for checks and for drawing
+    replicated band times; padded bands get an identity block)."""
+    m = jnp.asarray(mask, bool)
+    k = m.shape[1]
+    eye = jnp.eye(k)
+    tri = 2.0 * eye - jnp.eye(k, k=1) - jnp.eye(k, k=-1)
+    mm = m[:, :, None] & m[:, None, :]
+    s = jnp.where(m, sensitivity_s, 0.0)
+    cov = (sigma_gate_s**2 * tri[None] + band_noise**2 * duration_s[:, :, None] * eye[None]
+           + effect_sd**2 * s[:, :, None] * s[:, None, :])
+    return jnp.where(mm, cov, eye[None])
