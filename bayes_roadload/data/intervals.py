@@ -30,6 +30,8 @@ _INTERVAL_HINTS = dict(_AMBIGUOUS_HINTS, **{
     "speed_start_kph": "speed_start_mps (m/s): divide km/h by 3.6",
     "speed_end_kph": "speed_end_mps (m/s): divide km/h by 3.6",
     "interval": "interval_s (seconds)",
+    "time": "interval_s (the time to coast through the band, seconds)",
+    "t": "interval_s (the time to coast through the band, seconds)",
     "time_s": "interval_s (the time to coast through the band, seconds)",
     "speed_mps": "speed_start_mps and speed_end_mps (an interval campaign has no speed trace)",
 })

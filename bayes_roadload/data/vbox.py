@@ -316,3 +316,32 @@ def _add_weather(df, run_meta, log: pd.DataFrame, max_gap_s: float, source) -> t
     df["temperature_k"] = df["run"].map(temps)
     df["pressure_pa"] = df["run"].map(press)
     return df, f"{Path(source).name}: nearest sample to each run's start"
+
+
+def write_vbox_csv(campaign: IntervalCampaign, path: str | os.PathLike, *, test_date: str = "01/01/2026 12:00",
+                   start_clock_s: float = 43200.0, run_spacing_s: float = 120.0) -> Path:
+    """Write an interval campaign in the VBOX Coastdown export layout (module docstring), for
+    synthetic examples and tests: one window per file (refused otherwise), band times rounded to
+    0.01 s like the logger, the distance from band time x band mid-speed, no gate speeds."""
+    df = campaign.intervals
+    windows = df["window"].unique() if "window" in df else ["all"]
+    if len(windows) != 1:
+        raise ValueError(f"a VBOX export holds one window; this campaign has {len(windows)}")
+    runs = campaign.run_table()
+    k = int(runs["bands"].max())
+    lines = [f"Test Date: {test_date}", "Time zone,UTC", "Test Date,", "Trigger", "Requires Trigger,Off",
+             "Trigger Channel,", "Deceleration", "Ignore runs that exceed (g),0.20", "Smooth Level,4",
+             "Speed Quality", "Check,Off", "Speed threshold (km/h),0.10", "In (s),0.05", "",
+             ",".join(FIXED_COLUMNS + ("",) * k + ("Notes",))]
+    for n, (rid, g) in enumerate(df.groupby("run", sort=False)):
+        t = np.round(g["interval_s"].to_numpy(float), 2)
+        mid = 0.5 * (g["speed_start_mps"].to_numpy() + g["speed_end_mps"].to_numpy())
+        clock = start_clock_s + n * run_spacing_s
+        hh, mm, ss = int(clock // 3600), int(clock % 3600 // 60), clock % 60
+        valid = "On" if ("valid" not in g or g["valid"].iloc[0] == 1) else "Off"
+        heading = "+" if ("direction" not in g or g["direction"].iloc[0] > 0) else "-"
+        lines.append(",".join([valid, heading, str(n + 1), f"{t.sum():.2f}", f"{np.sum(t * mid):.2f}",
+                               f"{hh:02d}:{mm:02d}:{ss:06.3f}", "0.05"] + [f"{x:.2f}" for x in t] + [""]))
+    path = Path(path)
+    path.write_text("\ufeff" + "\n".join(lines) + "\n", encoding="utf-8")
+    return path
