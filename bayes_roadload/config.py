@@ -308,6 +308,31 @@ TAU_PRIOR_SCALES = {"AD": 1.0e-3, "BD": 5.0e-5, "CD0": 0.02}
 25 %, 5 % of typical values: the thesis' track spreads were 4.3 %, 23.1 %, 4.3 %)."""
 
 
+# Run validity (bayes_roadload.analysis.validity)
+WIND_LIMITS = {
+    "eec": {"mean_wind_mps": 3.0, "peak_wind_mps": 5.0, "mean_cross_wind_mps": 2.0},
+    "gtr_stationary": {"mean_wind_mps": 5.0, "peak_wind_mps": 8.0, "mean_cross_wind_mps": 2.0},
+    "gtr_onboard": {"mean_wind_mps": 7.0, "peak_wind_mps": 10.0, "mean_cross_wind_mps": 4.0},
+}
+"""Wind limits of a valid coastdown run.  ``eec``: Directive 70/220/EEC (as in StVZO Anlage
+XXIII 3.9.2.3): mean wind at most 3 m/s, gusts below 5 m/s, cross component below 2 m/s.
+``gtr_stationary`` / ``gtr_onboard``: UN GTR 15 (WLTP) Annex 4 for stationary and on-board
+anemometry (5 / 8 / 2 and 7 / 10 / 4 m/s: the values as this project read them; check against
+the text in force before relying on them)."""
+DEFAULT_WIND_LIMITS = "gtr_onboard"
+"""The limits applied to campaigns with on-board anemometers unless another set is chosen."""
+HAMPEL_THRESHOLD = 3.0
+"""A value further than this many scaled MADs (1.4826 MAD) from its group's median is an outlier."""
+HAMPEL_MIN_RELATIVE_SPREAD = 0.02
+"""Floor of the scaled MAD of a group of run times, as a fraction of its median: run-to-run
+scatter of ~2 % is ordinary on a track (wind, tyre temperature), and groups of 5-10 runs with a
+tight core would otherwise reject ordinary runs (measured on the Ioniq exports of
+docs/real_data.md: the MAD of 6 runs was 0.04 s on 35 s)."""
+HAMPEL_HALF_WINDOW = 5
+"""Samples on each side of the running Hampel filter over a speed trace."""
+HAMPEL_MAX_SPIKE_FRACTION = 0.01
+"""A speed trace with more than this fraction of Hampel-flagged samples is rejected."""
+
 # Studies of many fits (bayes_roadload.analysis.batch)
 COVERAGE_LEVELS = (0.5, 0.9, 0.95)
 """Central posterior interval levels recorded for every quantity (and checked for coverage)."""
