@@ -14,8 +14,9 @@ band_noise_s_per_sqrt_s^2 diag(duration) + (M_e run_decel_sd_mps2)^2 s s^T``: ga
 timing errors (neighbouring bands share a crossing), independent scatter that grows with a
 band's duration, and a run-level deceleration offset integrated out (each run meets its own
 gusts, tyre temperature and driver; ``s`` the bands' sensitivity to a constant extra force).
-Priors of the three nuisances: Gamma(2) with the means of
-:data:`bayes_roadload.config.INTERVAL_NOISE_PRIORS` (vanishing at 0: no funnel at the boundary).
+Priors of the three nuisances: Gamma with the means and shapes of
+:data:`bayes_roadload.config.INTERVAL_NOISE_PRIORS` and ``INTERVAL_NOISE_PRIOR_SHAPES`` (vanishing at 0: no
+funnel at the boundary).
 
 The coefficients and their priors come from a model variant (``models/*.toml``, air "still"
 or "wind"); ``split_f0_f2`` frees AD and CD0 (F = F0 + F2 v^2 with F0 = M g AD, the split
@@ -210,7 +211,8 @@ def interval_model(problem: IntervalProblem) -> None:
         sample[name] = numpyro.sample(name, problem.priors[name].to_numpyro())
     for name in NOISE_SITES:
         mean = config.INTERVAL_NOISE_PRIORS[name]
-        sample[name] = numpyro.sample(name, dist.Gamma(2.0, 2.0 / mean))
+        shape = config.INTERVAL_NOISE_PRIOR_SHAPES[name]
+        sample[name] = numpyro.sample(name, dist.Gamma(shape, shape / mean))
     numpyro.factor("interval_loglik", run_log_likelihood(problem, sample).sum())
 
 
