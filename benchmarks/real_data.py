@@ -180,9 +180,83 @@ def run(data: Path, skip_lopo: bool):
     return records
 
 
+GNSS_DIR = ROOT.parent / "shared" / "data" / "external" / "Finding-Rolling-Resistance-for-Electric-Car" / "Data"
+GNSS_RUNS = (("Michelin60A", 1, 1), ("Michelin60B", -1, 1), ("Michelin60A1", 1, 2), ("Michelin60B1", -1, 2))
+"""The eco-car GNSS coastdowns: (file, direction, pair); A / B read as the two directions."""
+GNSS_VEHICLE = Vehicle(mass_kg=78.0, effective_mass_kg=80.0, frontal_area_m2=0.4294)
+"""The upstream analysis' mass and frontal area; the effective mass adds an assumed 2.5 %."""
+GNSS_MIN_SPEED_MPS = 1.5
+
+
+def gnss_campaign(folder: Path = GNSS_DIR):
+    """The eco-car speed traces (1 Hz, km/h, one column) as a speed-only campaign in memory, cut
+    where the speed first falls below ``GNSS_MIN_SPEED_MPS`` (the stop)."""
+    from bayes_roadload.data import Campaign
+
+    rows = []
+    for name, direction, pair in GNSS_RUNS:
+        v = np.loadtxt(folder / f"{name}.csv", delimiter=",", usecols=0) * config.KPH_TO_MPS
+        below = np.flatnonzero(v < GNSS_MIN_SPEED_MPS)
+        last = below[0] if below.size else v.size
+        rows += [{"run": name, "time_s": float(t), "speed_mps": float(x), "direction": direction, "pair": pair}
+                 for t, x in zip(range(last), v[:last])]
+    return Campaign(pd.DataFrame(rows), GNSS_VEHICLE)
+
+
+def gnss_record(folder: Path = GNSS_DIR):
+    from bayes_roadload.inference.nuts import fit_nuts
+    from bayes_roadload.inference.results import diagnostics as trace_diagnostics
+    from bayes_roadload.inference.results import summary_table as trace_summary
+    from bayes_roadload.inference.results import to_inference_data as trace_idata
+
+    camp = gnss_campaign(folder)
+    out = {"runs": {r: int(n) for r, n in camp.runs.groupby("run").size().items()}, "models": {}}
+    for model in ("split_f0_f2", "split_f0_f2_wind"):
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fit = fit_nuts(camp, model, sampler=config.SamplerConfig(seed=1, target_accept=0.95))
+        idata = trace_idata(fit)
+        summary = trace_summary(fit, idata)
+        diag = trace_diagnostics(fit, idata, summary)
+        s = summary.set_index("parameter")
+        names = [n for n in s.index if n in ("AD", "CD0", "F0_N", "F2_N_per_kph2", "q_mps_per_sqrt_s")
+                 or n.startswith("head_wind_mps")]
+        out["models"][model] = {"pass": diag["pass"], "failed": diag["failed"], "max_r_hat": diag["max_r_hat"],
+                                "divergences": diag["divergences"], "wall_s": round(time.perf_counter() - t0, 1),
+                                "posterior": {n: {c: float(s.loc[n, c]) for c in ("mean", "sd", "q2.5", "q97.5")}
+                                              for n in names}}
+    return out
+
+
+def gnss_markdown(rec) -> list[str]:
+    lines = ["## Eco-car GNSS coastdowns (speed only)", "",
+             "`Finding-Rolling-Resistance-for-Electric-Car/Data/Michelin60{A,A1,B,B1}.csv`: speed in km/h at 1 Hz from",
+             "a GNSS logger, a very light electric car coasting from ~29 km/h to a stop (read in place; no licence).",
+             "A and B are read as the two directions, (A, B) and (A1, B1) as pairs; each trace is cut where the speed",
+             f"first falls below {GNSS_MIN_SPEED_MPS} m/s. Vehicle: the upstream analysis' 78 kg and 0.4294 m^2, effective",
+             "mass 80 kg (assumed). Fitted as speed traces (`fit_nuts`, integrated-noise residuals), in still air",
+             "(`split_f0_f2`: Crr = AD and C_D = CD0) and with a latent along-track wind per pair (`split_f0_f2_wind`).",
+             f"Samples per run: {rec['runs']}.", "",
+             "| model | Crr = AD | C_D (A = 0.4294 m^2) | along-track wind per pair (m/s) | gates | wall |",
+             "|---|---|---|---|---|---|"]
+    for model, m in rec["models"].items():
+        p = m["posterior"]
+        winds = ", ".join(_fmt(p, k, 2) for k in p if k.startswith("head_wind_mps")) or "-"
+        gate = "pass" if m["pass"] else "FAIL " + ",".join(m["failed"])
+        lines.append(f"| {model} | {_fmt(p, 'AD', 3)} | {_fmt(p, 'CD0', 3)} | {winds} | {gate} (R-hat "
+                     f"{m['max_r_hat']:.3f}, div {m['divergences']}) | {m['wall_s']} s |")
+    lines.append("")
+    return lines
+
+
 def _fmt(p, k, digits=4):
     r = p[k]
     return f"{r['mean']:.{digits}g} [{r['q2.5']:.{digits}g}, {r['q97.5']:.{digits}g}]"
+
+
+def _datasets(records):
+    return [(k, v) for k, v in records.items() if not k.startswith("_")]
 
 
 def markdown(records) -> str:
@@ -208,7 +282,7 @@ def markdown(records) -> str:
     lines += ["## Road load", "",
               "| campaign | runs (accepted) | Crr = AD | C_D A per tonne (m^2) | F0 per tonne (N) | F2 per tonne (N/(km/h)^2) | gates |",
               "|---|---|---|---|---|---|---|"]
-    for name, r in records.items():
+    for name, r in _datasets(records):
         p = r["posterior"]
         d = r["diagnostics"]
         gate = "pass" if d["pass"] else "FAIL: " + ", ".join(d["failed"])
@@ -216,26 +290,26 @@ def markdown(records) -> str:
                      f"{_fmt(p, 'F0_N')} | {_fmt(p, 'F2_N_per_kph2')} | {gate} (R-hat {d['max_r_hat']:.3f}, "
                      f"min ESS {d['min_ess_bulk']:.0f}/{d['min_ess_tail']:.0f}, div {d['divergences']}) |")
     lines += ["", "Posterior means with 95 % intervals. Noise: gate-crossing error, band noise, run deceleration sd:", ""]
-    for name, r in records.items():
+    for name, r in _datasets(records):
         p = r["posterior"]
         lines.append(f"- {name}: sigma_gate_s {_fmt(p, 'sigma_gate_s', 2)}, band noise "
                      f"{_fmt(p, 'band_noise_s_per_sqrt_s', 2)} s/sqrt(s), run decel sd "
                      f"{_fmt(p, 'run_decel_sd_mps2', 2)} m/s^2; fit {r['timings_s']}")
     lines += ["", "## Import checks and rejected runs", ""]
-    for name, r in records.items():
+    for name, r in _datasets(records):
         lines.append(f"**{name}**")
         lines.append("")
         lines += [f"- {x}" for x in r["import"]]
         lines += [f"- rejected {x}" for x in r["rejected"]] or ["- no run rejected"]
         lines.append("")
-    if any("lopo" in r for r in records.values()):
+    if any("lopo" in r for _, r in _datasets(records)):
         lines += ["## Leave-one-pair-out predictive coverage", "",
                   "Each accepted opposite-direction pair is left out in turn, the rest refitted (2 x (300 + 500)",
                   "draws), and the held-out runs' band times drawn from the posterior predictive (model time +",
                   "gate error + band noise + a new run effect). Coverage of the central intervals:", "",
                   "| campaign | pairs | bands | 50 % | 90 % | 95 % | run totals 50 / 90 / 95 % | PIT mean (sd) | LOPO fits failing gates |",
                   "|---|---|---|---|---|---|---|---|---|"]
-        for name, r in records.items():
+        for name, r in _datasets(records):
             if "lopo" not in r:
                 continue
             lo = r["lopo"]
@@ -251,14 +325,14 @@ def markdown(records) -> str:
               "rho C_D A v w x 2 per heading, so its difference grows with the speed (about 1.9 x from the low",
               "window to the high one).", "",
               "| campaign | window | + runs | - runs | F+ (N/t) | F- (N/t) | F+ - F- (N/t) |", "|---|---|---|---|---|---|---|"]
-    for name, r in records.items():
+    for name, r in _datasets(records):
         for h in r["heading_forces"]:
             lines.append(f"| {name} | {h['window']} | {h['runs_plus']} | {h['runs_minus']} | {h['force_plus_n']:.1f} | "
                          f"{h['force_minus_n']:.1f} | {h['difference_n']:+.1f} +- {h['difference_se_n']:.1f} |")
     lines += ["", "Model comparison (PSIS-LOO over runs; `elpd_diff` from the best):", "",
               "| campaign | model | elpd_loo (se) | elpd_diff (dse) | grade (mrad) | head wind for + runs (m/s) | gates |",
               "|---|---|---|---|---|---|---|"]
-    for name, r in records.items():
+    for name, r in _datasets(records):
         for model, m in r.get("heading_models", {}).items():
             grade = (f"{1e3 * m['grade_rad_mean']:.2f} [{1e3 * m['grade_rad_q2.5']:.2f}, {1e3 * m['grade_rad_q97.5']:.2f}]"
                      if "grade_rad_mean" in m else "-")
@@ -266,6 +340,8 @@ def markdown(records) -> str:
                     if "head_wind_mps_mean" in m else "-")
             lines.append(f"| {name} | {model} | {m['elpd_loo']:.1f} ({m['elpd_se']:.1f}) | {m['elpd_diff']:.1f} "
                          f"({m['dse']:.1f}) | {grade} | {wind} | {'pass' if m['pass'] else 'FAIL ' + ','.join(m['failed'])} |")
+    if "gnss" in records.get("_extra", {}):
+        lines += [""] + gnss_markdown(records["_extra"]["gnss"])
     lines += ["", "<!-- reading -->", ""]
     return "\n".join(lines)
 
@@ -276,11 +352,18 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "real_data.md")
     ap.add_argument("--json", type=Path, default=ROOT / "docs" / "real_data.json")
     ap.add_argument("--skip-lopo", action="store_true")
+    ap.add_argument("--gnss-only", action="store_true",
+                    help="add the eco-car GNSS fits to the records in --json and rewrite the markdown")
     args = ap.parse_args(argv)
-    if not (args.data / "coastdown").is_dir():
-        print(json.dumps({"skipped": f"{args.data} not found"}))
-        return 0
-    records = run(args.data, args.skip_lopo)
+    if args.gnss_only:
+        records = json.loads(args.json.read_text())
+    else:
+        if not (args.data / "coastdown").is_dir():
+            print(json.dumps({"skipped": f"{args.data} not found"}))
+            return 0
+        records = run(args.data, args.skip_lopo)
+    if GNSS_DIR.is_dir():
+        records.setdefault("_extra", {})["gnss"] = gnss_record()
     args.json.write_text(json.dumps(records, indent=2) + "\n")
     text = markdown(records)
     reading = ROOT / "docs" / "real_data_reading.md"
