@@ -68,3 +68,27 @@ def test_held_out_pair_band_times_are_covered(split_fit):
     # 10 band times of a pair the fit has seen: at 95 % nominal, at most 2 outside (P < 1 %
     # for 10 independent bands; they are correlated within a run, which widens the tail)
     assert inside[m].sum() >= 8
+
+
+def test_several_test_masses_shift_the_effective_mass():
+    """Runs at two test masses (``mass_kg`` per run): M_e moves with the load, the rolling
+    force M g AD with the mass, the drag not (seed 002's way of separating them)."""
+    from bayes_roadload.data import IntervalCampaign, Vehicle
+    from bayes_roadload.physics.integrate import quadratic_coastdown_time
+
+    gates = np.array([95.0, 90.0, 85.0]) / 3.6
+    rows = [{"run": r, "mass_kg": m, "speed_start_mps": gates[j], "speed_end_mps": gates[j + 1], "interval_s": 5.0}
+            for r, m in ((1, 1500.0), (2, 1800.0)) for j in range(2)]
+    camp = IntervalCampaign(pd.DataFrame(rows), Vehicle(1500.0, 1530.0, 2.2))
+    p = build_interval_problem(camp, "split_f0_f2")
+    np.testing.assert_allclose(np.asarray(p.effective_mass_kg), [1530.0, 1830.0])
+    from bayes_roadload.inference.intervals import model_band_times
+
+    t = np.asarray(model_band_times(p, {"AD": 0.008, "CD0": 0.3})["time_s"])
+    from bayes_roadload.physics.atmosphere import REFERENCE_AIR_DENSITY_KGPM3
+
+    c = 0.5 * REFERENCE_AIR_DENSITY_KGPM3 * 2.2 * 0.3
+    for i, (m, me) in enumerate(((1500.0, 1530.0), (1500.0, 1530.0), (1800.0, 1830.0), (1800.0, 1830.0))):
+        j = i % 2
+        ref = quadratic_coastdown_time(gates[j + 1], gates[j], m * 9.81 * 0.008, 0.0, c, me)
+        np.testing.assert_allclose(t[i], float(ref), rtol=1e-10)
