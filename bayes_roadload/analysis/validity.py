@@ -39,17 +39,27 @@ def hampel_scores(values, min_relative_spread: float = 0.0) -> np.ndarray:
 
 
 def hampel_filter(x, half_window: int = config.HAMPEL_HALF_WINDOW, k: float = config.HAMPEL_THRESHOLD):
-    """Running Hampel filter: flags samples further than ``k`` scaled MADs from the median of the
-    ``2 half_window + 1`` samples around them; returns (flags, the series with flagged samples
-    replaced by that median)."""
+    """Hampel filter of a decelerating speed trace: flags samples whose deviation from a local
+    quadratic trend (Savitzky-Golay over ``2 half_window + 1`` samples) is further than ``k``
+    scaled MADs from the median deviation in the same window.  The trend is removed first
+    because a coastdown's steady deceleration exceeds the speed noise per sample: a plain
+    running median then returns the centre sample itself, the deviations are mostly exact zeros
+    and the MAD collapses (measured: 18 % of the samples of a clean simulated run flagged).
+    Returns (flags, the series with flagged samples replaced by the trend)."""
+    from scipy.signal import savgol_filter
+
     x = np.asarray(x, float)
     n = x.size
-    pad = np.pad(x, half_window, mode="edge")
-    windows = np.lib.stride_tricks.sliding_window_view(pad, 2 * half_window + 1)[:n]
-    med = np.median(windows, axis=1)
-    mad = MAD_TO_SD * np.median(np.abs(windows - med[:, None]), axis=1)
-    flags = np.abs(x - med) > k * np.maximum(mad, 1e-12)
-    return flags, np.where(flags, med, x)
+    width = 2 * half_window + 1
+    if n < width:
+        return np.zeros(n, bool), x.copy()
+    trend = savgol_filter(x, width, 2, mode="interp")
+    dev = x - trend
+    win = np.lib.stride_tricks.sliding_window_view(np.pad(dev, half_window, mode="reflect"), width)[:n]
+    med = np.median(win, axis=1)
+    mad = MAD_TO_SD * np.median(np.abs(win - med[:, None]), axis=1)
+    flags = np.abs(dev - med) > k * np.maximum(mad, 1e-12)
+    return flags, np.where(flags, trend, x)
 
 
 def reject_with_partners(table: pd.DataFrame, pairs) -> pd.DataFrame:
