@@ -44,6 +44,16 @@ prior removes the funnel at q -> 0, Chung et al. 2013); ``tau_*`` Gamma(2) with 
 25 %, 5 % of typical AD, BD, CD0 (likewise boundary-avoiding); ``student_df`` Gamma(2, 0.1);
 ``airspeed_calibration_sd`` Gamma(2) with mean 0.01 (below).
 
+Speed only: a latent wind per pair
+----------------------------------
+Without an anemometer (GNSS or CAN speed) a model file with ``air = "wind"`` and
+``head_wind_mps`` free (``models/speed_only_wind.toml``) gets one along-track wind per
+opposite-direction pair, ``head_wind_mps[k]`` (prior from the file), met as a head wind by the
+pair's run of direction +1 and as a tail wind by the other (:func:`latent_wind_pairs`,
+:func:`free_parameters`).  The pairing identifies it: the wind's force (about rho C_D A v w)
+changes sign between the two runs while the road load does not.  A run without a partner gets a
+wind of its own, identified only through the shape of its trace and the prior.
+
 Anemometer calibration (thesis section 4.7.3)
 ---------------------------------------------
 When a model file frees ``airspeed_factor`` (true airspeed = factor x reading,
