@@ -116,13 +116,32 @@ def heading_forces(camp, runs):
     rt = camp.run_table().set_index("run").loc[runs]
     rt["force_n"] = VEHICLE.effective_mass_kg * (rt["speed_start_mps"] - rt["speed_end_mps"]) / rt["total_time_s"]
     rt["mid_kph"] = 1.8 * (rt["speed_start_mps"] + rt["speed_end_mps"])
+    rt["session"] = [str(r).rsplit("-", 1)[0] for r in rt.index]
     out = []
-    for window, g in rt.groupby("window"):
+    for (session, window), g in rt.groupby(["session", "window"]):
         plus, minus = g[g["direction"] > 0]["force_n"], g[g["direction"] < 0]["force_n"]
         se = float(np.sqrt(plus.var(ddof=1) / len(plus) + minus.var(ddof=1) / len(minus)))
-        out.append({"window": window, "mid_kph": float(g["mid_kph"].iloc[0]), "runs_plus": len(plus),
+        out.append({"session": session, "window": window, "mid_kph": float(g["mid_kph"].iloc[0]), "runs_plus": len(plus),
                     "runs_minus": len(minus), "force_plus_n": float(plus.mean()), "force_minus_n": float(minus.mean()),
                     "difference_n": float(plus.mean() - minus.mean()), "difference_se_n": se})
+    return out
+
+
+def heading_trends(camp, runs):
+    """Per window and heading: the drift of the resisting force per tonne over the session (N/t
+    per hour, least squares on the runs' start times).  A grade cannot drift; a wind can."""
+    rt = camp.run_table().set_index("run").loc[runs]
+    rt["force_n"] = VEHICLE.effective_mass_kg * (rt["speed_start_mps"] - rt["speed_end_mps"]) / rt["total_time_s"]
+    rt["session"] = [str(r).rsplit("-", 1)[0] for r in rt.index]
+    out = []
+    for (session, window, direction), g in rt.groupby(["session", "window", "direction"]):
+        if len(g) < 3:
+            continue
+        hours = (g["start_time_of_day_s"].to_numpy() - g["start_time_of_day_s"].min()) / 3600.0
+        coef, cov = np.polyfit(hours, g["force_n"].to_numpy(), 1, cov=True)
+        out.append({"session": session, "window": window, "direction": int(direction), "runs": len(g),
+                    "span_h": float(hours.max()),
+                    "slope_n_per_h": float(coef[0]), "slope_se": float(np.sqrt(cov[0, 0]))})
     return out
 
 
@@ -324,11 +343,20 @@ def markdown(records) -> str:
               "A constant grade adds the same force difference in both windows; an along-track wind adds",
               "rho C_D A v w x 2 per heading, so its difference grows with the speed (about 1.9 x from the low",
               "window to the high one).", "",
-              "| campaign | window | + runs | - runs | F+ (N/t) | F- (N/t) | F+ - F- (N/t) |", "|---|---|---|---|---|---|---|"]
+              "| campaign | file (session) | window | + runs | - runs | F+ (N/t) | F- (N/t) | F+ - F- (N/t) |",
+              "|---|---|---|---|---|---|---|---|"]
     for name, r in _datasets(records):
         for h in r["heading_forces"]:
-            lines.append(f"| {name} | {h['window']} | {h['runs_plus']} | {h['runs_minus']} | {h['force_plus_n']:.1f} | "
+            lines.append(f"| {name} | {h.get('session', '')} | {h['window']} | {h['runs_plus']} | {h['runs_minus']} | {h['force_plus_n']:.1f} | "
                          f"{h['force_minus_n']:.1f} | {h['difference_n']:+.1f} +- {h['difference_se_n']:.1f} |")
+    lines += ["", "Drift of the resisting force over each session, by window and heading (least squares on the",
+              "runs' start times; N per tonne per hour):", "",
+              "| campaign | file (session) | window | heading | runs | span (h) | drift (N/t per h) |",
+              "|---|---|---|---|---|---|---|"]
+    for name, r in _datasets(records):
+        for h in r.get("heading_trends", []):
+            lines.append(f"| {name} | {h['session']} | {h['window']} | {'+' if h['direction'] > 0 else '-'} | {h['runs']} | "
+                         f"{h['span_h']:.2f} | {h['slope_n_per_h']:+.1f} +- {h['slope_se']:.1f} |")
     lines += ["", "Model comparison (PSIS-LOO over runs; `elpd_diff` from the best):", "",
               "| campaign | model | elpd_loo (se) | elpd_diff (dse) | grade (mrad) | head wind for + runs (m/s) | gates |",
               "|---|---|---|---|---|---|---|"]
@@ -352,16 +380,23 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "real_data.md")
     ap.add_argument("--json", type=Path, default=ROOT / "docs" / "real_data.json")
     ap.add_argument("--skip-lopo", action="store_true")
-    ap.add_argument("--gnss-only", action="store_true",
-                    help="add the eco-car GNSS fits to the records in --json and rewrite the markdown")
+    ap.add_argument("--extras-only", action="store_true",
+                    help="read the records in --json, add the drift table and the eco-car GNSS fits, rewrite the markdown")
     args = ap.parse_args(argv)
-    if args.gnss_only:
+    if args.extras_only:
         records = json.loads(args.json.read_text())
     else:
         if not (args.data / "coastdown").is_dir():
             print(json.dumps({"skipped": f"{args.data} not found"}))
             return 0
         records = run(args.data, args.skip_lopo)
+    for name, (files, use_weather) in DATASETS.items():
+        if name in records:
+            camp, _ = import_vbox([args.data / "coastdown" / f for f in files], VEHICLE)
+            validity = interval_validity(camp)
+            accepted = list(validity.loc[~validity["rejected"], "run"])
+            records[name]["heading_trends"] = heading_trends(camp, accepted)
+            records[name]["heading_forces"] = heading_forces(camp, accepted)
     if GNSS_DIR.is_dir():
         records.setdefault("_extra", {})["gnss"] = gnss_record()
     args.json.write_text(json.dumps(records, indent=2) + "\n")
