@@ -34,9 +34,6 @@ goes through the same MAP -> Laplace whitening -> NUTS -> gates as the trace fit
 from __future__ import annotations
 
 import json
-import math
-import os
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
