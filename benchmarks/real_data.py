@@ -15,6 +15,8 @@ Crr (mass-free up to the assumed M_e / M), ``CD0`` reads as C_D A in m^2 per ton
 mass, and ``F0_N``, ``F2_N_per_kph2`` are per tonne (scale them by the real test mass).
 
     python benchmarks/real_data.py [--data DIR] [--out docs/real_data.md] [--skip-lopo]
+    python benchmarks/real_data.py --extras-only     # drift tables and GNSS fits onto saved records
+    python benchmarks/real_data.py --markdown-only   # rewrite docs/real_data.md from docs/real_data.json
 
 Prints a JSON record of every figure on stdout.
 """
@@ -374,6 +376,14 @@ def markdown(records) -> str:
     return "\n".join(lines)
 
 
+def _write_markdown(records, out: Path) -> None:
+    text = markdown(records)
+    reading = ROOT / "docs" / "real_data_reading.md"
+    if reading.exists():   # the hand-written reading of the figures, kept across regenerations
+        text = text.replace("<!-- reading -->", reading.read_text())
+    out.write_text(text)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
@@ -382,7 +392,11 @@ def main(argv=None):
     ap.add_argument("--skip-lopo", action="store_true")
     ap.add_argument("--extras-only", action="store_true",
                     help="read the records in --json, add the drift table and the eco-car GNSS fits, rewrite the markdown")
+    ap.add_argument("--markdown-only", action="store_true", help="rewrite the markdown from the records in --json")
     args = ap.parse_args(argv)
+    if args.markdown_only:
+        _write_markdown(json.loads(args.json.read_text()), args.out)
+        return 0
     if args.extras_only:
         records = json.loads(args.json.read_text())
     else:
@@ -400,11 +414,7 @@ def main(argv=None):
     if GNSS_DIR.is_dir():
         records.setdefault("_extra", {})["gnss"] = gnss_record()
     args.json.write_text(json.dumps(records, indent=2) + "\n")
-    text = markdown(records)
-    reading = ROOT / "docs" / "real_data_reading.md"
-    if reading.exists():   # the hand-written reading of the figures, kept across regenerations
-        text = text.replace("<!-- reading -->", reading.read_text())
-    args.out.write_text(text)
+    _write_markdown(records, args.out)
     print(json.dumps(records, indent=2))
     return 0
 
