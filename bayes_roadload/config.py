@@ -146,11 +146,13 @@ VBOX_DEFAULT_GATES_KPH = {
     5: ((95.0, 90.0, 85.0, 80.0, 75.0, 70.0),),
     3: ((50.0, 45.0, 40.0, 35.0),),
     10: ((95.0, 90.0, 85.0, 80.0, 75.0, 70.0), (55.0, 50.0, 45.0, 40.0, 35.0, 30.0)),
+    14: (tuple(float(v) for v in range(100, 25, -5)),),
 }
 """Gate speeds (km/h, descending) assumed for a VBOX Coastdown export by its number of interval
 columns, when ``--gates`` is not given: 5 columns = the split method's high window 95 -> 70 km/h
 in 5 km/h bands, 3 = the low window 50 -> 35 km/h, 10 = interleaved high and low runs (high runs
-fill the first 5 columns; low runs the last 5, 55 -> 30 km/h).  The files do not state them;
+fill the first 5 columns; low runs the last 5, 55 -> 30 km/h), 14 = the "Standard" multi-interval
+method, 100 -> 30 km/h in 5 km/h bands.  The files do not state them;
 these are the set-ups whose band times reproduce every run's logged distance (median |error|
 0.03-0.14 % with band mid-speeds; the next candidates, 90 -> 70 in 4 km/h bands or 45 -> 35,
 are 2.8-5.8 % off) in the sample exports of docs/real_data.md.  The importer checks them

@@ -100,6 +100,10 @@ def read_vbox_table(path: str | os.PathLike) -> VboxTable:
     cols = lines[header].split(",")
     if tuple(cols[:7]) != FIXED_COLUMNS:
         raise _err(path, header + 1, f"expected the columns {', '.join(FIXED_COLUMNS)} first, found {cols[:7]}")
+    named = [c for c in cols[7:] if c.strip() and c != "Notes"]
+    if named:
+        raise _err(path, header + 1, f"named columns {named} after Max Decel (g): only the unnamed band-time "
+                                     "columns of the split and standard exports are supported")
     n_bands = len(cols) - 8 if cols[-1] == "Notes" else len(cols) - 7
     if n_bands < 1:
         raise _err(path, header + 1, "no band-time columns")
@@ -122,10 +126,9 @@ def read_vbox_table(path: str | os.PathLike) -> VboxTable:
             run = int(parts[2])
         except ValueError as e:
             raise _err(path, line, f"Run, Time (s) or Distance (m) is not a number ({e})") from e
-        try:
-            clock = datetime.strptime(parts[5], "%H:%M:%S.%f")
-        except ValueError as e:
-            raise _err(path, line, f"Start Time {parts[5]!r} is not hh:mm:ss.sss") from e
+        clock_s = _clock_seconds(parts[5])
+        if clock_s is False:
+            raise _err(path, line, f"Start Time {parts[5]!r} is neither hh:mm:ss.sss nor mm:ss.s")
         for j in range(n_bands):
             cell = parts[7 + j] if 7 + j < len(parts) else ""
             if cell.strip():
@@ -134,12 +137,22 @@ def read_vbox_table(path: str | os.PathLike) -> VboxTable:
                 except ValueError as e:
                     raise _err(path, line, f"band column {j + 1}: {cell!r} is not a number") from e
         rows.append({"valid": 1 if parts[0] == "On" else 0, "direction": 1 if parts[1] == "+" else -1, "vbox_run": run,
-                     "total_time_s": total, "distance_m": dist,
-                     "start_time_of_day_s": clock.hour * 3600 + clock.minute * 60 + clock.second
-                     + clock.microsecond / 1e6})
+                     "total_time_s": total, "distance_m": dist, "start_time_of_day_s": clock_s})
     first = lines[0]
     date = first.split(":", 1)[1].strip() if first.startswith("Test Date") else ""
     return VboxTable(path, date, pd.DataFrame(rows), bands, line_of_run)
+
+
+def _clock_seconds(text: str):
+    """``hh:mm:ss.sss`` -> seconds since midnight; ``mm:ss.s`` (some exports drop the hour) ->
+    None (the time of day is unknown: not guessed); anything else -> False."""
+    for fmt, full in (("%H:%M:%S.%f", True), ("%H:%M:%S", True), ("%M:%S.%f", False)):
+        try:
+            t = datetime.strptime(text.strip(), fmt)
+        except ValueError:
+            continue
+        return t.hour * 3600 + t.minute * 60 + t.second + t.microsecond / 1e6 if full else None
+    return False
 
 
 def parse_gates(text: str) -> list[list[float]]:
@@ -254,7 +267,7 @@ def import_vbox(paths, vehicle: Vehicle, *, gates: list[str | None] | None = Non
                 rows.append({"run": rid, "window": window, "direction": int(run["direction"]),
                              "valid": int(run["valid"]), "speed_start_mps": gate[j], "speed_end_mps": gate[j + 1],
                              "interval_s": float(t[j]), "run_distance_m": float(run["distance_m"]),
-                             "start_time_of_day_s": float(run["start_time_of_day_s"])})
+                             "start_time_of_day_s": run["start_time_of_day_s"]})
         for g, errs in group_errors.items():
             med = float(np.median(errs)) if errs else math.nan
             report.distance_median_error[f"{path}#{g}"] = med
@@ -265,6 +278,12 @@ def import_vbox(paths, vehicle: Vehicle, *, gates: list[str | None] | None = Non
                                        "wrong gates, or not km/h; pass the logger's gates with --gates")
     df = pd.DataFrame(rows)
     df["pair"] = df["run"].map(_pairs(run_meta))
+    if df["start_time_of_day_s"].isna().any():
+        # a Start Time without its hour (mm:ss.s): the time of day is not known, not guessed
+        df = df.drop(columns="start_time_of_day_s")
+        report.flags.append({"run": "all", "reason": "Start Time without the hour (mm:ss.s) in some export: "
+                                                     "start_time_of_day_s left out, no weather matching"})
+        run_meta = [m[:5] + (None,) for m in run_meta]
     if weather is not None:
         df, report.weather = _add_weather(df, run_meta, read_kestrel(weather), max_weather_gap_s, weather)
     meta = dict(meta or {})
@@ -298,6 +317,9 @@ def _add_weather(df, run_meta, log: pd.DataFrame, max_gap_s: float, source) -> t
     temps, press, missing = {}, {}, []
     times = log["datetime"].to_numpy()
     for rid, _stem, _window, _d, date, clock in run_meta:
+        if clock is None:
+            missing.append(rid)
+            continue
         try:
             day = datetime.strptime(date.split()[0], "%d/%m/%Y")
         except (ValueError, IndexError):
