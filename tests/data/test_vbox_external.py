@@ -43,3 +43,11 @@ def test_braked_ford_runs_are_rejected_with_their_partners():
     assert v.loc[short, "reason"].str.contains("Hampel").all()
     assert v.loc["Ford-LowSpeed-ok-2", "reason"] == "partner of Ford-LowSpeed-ok-1"
     assert not v.loc["ford-HighSpeed-ok-1", "rejected"]
+
+
+def test_standard_exports_default_gates_and_hourless_start_times():
+    standard = SPLIT.parents[1] / "Standard"
+    camp, report = import_vbox([standard / "su2b_1388_manha_recalc.csv"], VEHICLE)
+    assert len(camp.run_ids) == 15 and camp.intervals.groupby("run").size().eq(14).all()
+    assert all(abs(e) < 0.005 for e in report.distance_median_error.values())
+    assert "start_time_of_day_s" not in camp.intervals           # mm:ss.s: the hour is not guessed
