@@ -36,6 +36,7 @@ OPTIONAL_COLUMNS = (
     "position_m",
     "temperature_k",
     "pressure_pa",
+    "mass_kg",
 )
 KNOWN_COLUMNS = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
 
@@ -65,6 +66,7 @@ _CHANNEL_LIMITS = {
     "yaw_rad": (-math.pi / 2, math.pi / 2, "degrees in a radian column"),
     "temperature_k": (200.0, 350.0, "degrees Celsius in a kelvin column"),
     "pressure_pa": (50_000.0, 120_000.0, "kPa, hPa or bar in a pascal column"),
+    "mass_kg": config.MASS_RANGE_KG + ("not a test mass in kg",),
 }
 
 
@@ -170,6 +172,9 @@ class Campaign:
             temp = g["temperature_k"].to_numpy(float) if "temperature_k" in g else config.REFERENCE_TEMPERATURE_K
             direction = float(g["direction"].iloc[0]) if "direction" in g else 1.0
             start = float(g["position_m"].iloc[0]) if "position_m" in g else 0.0
+            # a run's own test mass (several masses in one campaign): the rotating inertia, and so
+            # M_e - M, does not change with the load
+            mass = float(g["mass_kg"].iloc[0]) if "mass_kg" in g else v.mass_kg
             runs.append(make_run(
                 t - t[0],
                 g["speed_mps"].to_numpy(float),
@@ -180,8 +185,8 @@ class Campaign:
                 temperature_k=temp,
                 direction=direction,
                 start_position_m=start,
-                mass_kg=v.mass_kg,
-                effective_mass_kg=v.effective_mass_kg,
+                mass_kg=mass,
+                effective_mass_kg=v.effective_mass_kg + (mass - v.mass_kg),
                 frontal_area_m2=v.frontal_area_m2,
             ))
         return stack_runs(runs), self.run_ids
@@ -268,7 +273,7 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
         if np.any(dt <= 0):
             i = int(rows[np.flatnonzero(dt <= 0)[0] + 1])
             _fail(where, "time_s", i + 1, f"time does not increase within run {rid!r}")
-        for c in ("direction", "pair"):
+        for c in ("direction", "pair", "mass_kg"):
             if c in cols:
                 vals = df[c].to_numpy()[rows]
                 if np.any(vals != vals[0]):

@@ -94,3 +94,21 @@ def test_vbox_total_time_mismatch_is_refused(tmp_path):
     high.write_text("\n".join(lines) + "\n")
     with pytest.raises(CampaignError, match="line 16: band times add up"):
         import_vbox([high], VEHICLE)
+
+
+def test_speed_traces_at_several_test_masses(small_campaign):
+    """``mass_kg`` per run in runs.csv: each run's M and M_e in the batch (M_e - M unchanged);
+    a mass changing within a run is refused."""
+    from bayes_roadload.data import Campaign
+
+    runs = small_campaign.runs.copy()
+    heavy = runs["run"].isin(small_campaign.run_ids[2:])
+    runs["mass_kg"] = np.where(heavy, 1400.0, 1100.0)
+    camp = Campaign(runs, small_campaign.vehicle)
+    batch, _ = camp.to_batch()
+    np.testing.assert_allclose(np.asarray(batch.mass_kg), [1100.0, 1100.0, 1400.0, 1400.0])
+    np.testing.assert_allclose(np.asarray(batch.effective_mass_kg) - np.asarray(batch.mass_kg),
+                               small_campaign.vehicle.effective_mass_kg - small_campaign.vehicle.mass_kg)
+    runs.loc[1, "mass_kg"] = 1200.0
+    with pytest.raises(CampaignError, match="mass_kg changes within run"):
+        Campaign(runs, small_campaign.vehicle)
