@@ -1,6 +1,7 @@
 """The ``bayes-roadload`` command line.
 
-Subcommands: ``demo``, ``simulate``, ``fit``, ``diagnose``, ``sensitivity``, ``cases``, ``models``.
+Subcommands: ``demo``, ``simulate``, ``fit``, ``import-vbox``, ``plan``, ``diagnose``, ``sensitivity``,
+``cases``, ``models``.
 Every command that writes a directory validates its input first and writes nothing when the
 input is refused; errors are printed as one line naming the file, column and row.  Exit codes:
 0 success, 2 input refused, 3 a NUTS fit that failed its diagnostic gates (outputs written and
@@ -55,14 +56,51 @@ def _fit_nuts(campaign, args, out: Path, campaign_path=None):
     return summary, diag, format_posterior_table(summary, diag, truth or None), truth
 
 
+def _fit_intervals(campaign, args, out: Path) -> int:
+    from .analysis.validity import format_validity, interval_validity
+    from .inference.intervals import fit_intervals_nuts, write_interval_outputs
+    from .inference.results import format_posterior_table, truth_derived
+
+    if args.method != "nuts":
+        raise ValueError("an interval campaign (intervals.csv) is fitted by --method nuts only")
+    if args.pooling != "pooled" or args.robust or args.noise != "integrated":
+        raise ValueError("an interval campaign has its own likelihood (gate timing, band noise, run effect): "
+                         "--pooling, --noise and --robust do not apply")
+    model = args.model or "split_f0_f2"
+    mode = args.validity or "reject"
+    validity = interval_validity(campaign)
+    runs = list(validity["run"]) if mode == "report" else list(validity.loc[~validity["rejected"], "run"])
+    print(format_validity(validity) + (" (reported only: every run fitted)" if mode == "report" else ""))
+    fit = fit_intervals_nuts(campaign, model, sampler=_sampler(args), runs=runs)
+    summary, diag = write_interval_outputs(fit, out, validity=validity)
+    truth = dict(campaign.truth or {}, **truth_derived(fit.problem, campaign.truth))
+    print(format_posterior_table(summary, diag, truth or None))
+    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, validity.csv, diagnostics.json")
+    return 0 if diag["pass"] else EXIT_GATES_FAILED
+
+
 def _cmd_fit(args) -> int:
     from .data import load_campaign
     from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table, write_lsq_outputs
     from .inference.spec import load_model_spec
 
     campaign = load_campaign(args.campaign)
-    spec = load_model_spec(args.model)
     out = Path(args.out)
+    if getattr(campaign, "kind", "traces") == "intervals":
+        return _fit_intervals(campaign, args, out)
+    spec = load_model_spec(args.model or "four_term")
+    if args.validity:
+        from .analysis.validity import format_validity, trace_validity
+
+        validity = trace_validity(campaign, args.wind_limits)
+        print(format_validity(validity))
+        out.mkdir(parents=True, exist_ok=True)
+        validity.to_csv(out / "validity.csv", index=False)
+        if args.validity == "reject":
+            keep = [r for r, bad in zip(validity["run"], validity["rejected"]) if not bad]
+            if not keep:
+                raise ValueError("every run was rejected by the validity checks (validity.csv)")
+            campaign = campaign.subset(keep)
     if args.method == "lsq":
         if args.pooling == "hierarchical":
             raise SystemExit("error: least squares has no hierarchical model; use --method nuts --pooling "
@@ -241,6 +279,47 @@ def _cmd_plan(args) -> int:
     return 0
 
 
+
+def _cmd_import_vbox(args) -> int:
+    import json
+
+    from .data import load_campaign, save_campaign
+    from .data.vbox import import_vbox
+
+    if args.vehicle is None:
+        raise ValueError("the VBOX export does not record the vehicle: pass --vehicle vehicle.toml "
+                         "([vehicle] mass_kg, effective_mass_kg, frontal_area_m2; docs/data-format.md)")
+    vehicle, _, tunnel, meta = _read_vehicle_file(args.vehicle)
+    gates = args.gates
+    if gates is not None and len(gates) != len(args.files):
+        raise ValueError(f"{len(args.files)} files but {len(gates)} --gates entries: give one per file, "
+                         "e.g. --gates 95,90,85,80,75,70 50,45,40,35 (km/h; an interleaved file's groups joined by /)")
+    campaign, report = import_vbox(args.files, vehicle, gates=gates, weather=args.weather, meta=meta)
+    campaign.tunnel = tunnel
+    out = save_campaign(campaign, args.out)
+    (out / "import_report.json").write_text(json.dumps(report.to_dict(), indent=2) + "\n")
+    load_campaign(out)  # the written campaign reads back under the contract
+    print("\n".join(report.lines()))
+    print(f"{len(campaign.run_ids)} runs, {len(campaign.intervals)} bands, {len(campaign.pairs())} pairs -> {out} "
+          "(intervals.csv, vehicle.toml, import_report.json)")
+    return 0
+
+
+def _read_vehicle_file(path):
+    import tomllib
+
+    from .data.campaign import CampaignError, _vehicle_from_toml
+
+    p = Path(path)
+    if not p.exists():
+        raise CampaignError(f"{p}: missing")
+    try:
+        doc = tomllib.loads(p.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise CampaignError(f"{p}: not valid TOML ({e})") from e
+    return _vehicle_from_toml(doc, str(p))
+
+
 def _cmd_sensitivity(args) -> int:
     from .analysis.sensitivity import coefficient_sensitivity, format_sensitivity_table
 
@@ -316,7 +395,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     f = sub.add_parser("fit", help="fit a campaign (NUTS over all runs jointly, or classical least squares)")
     f.add_argument("campaign")
-    f.add_argument("--model", default="four_term", help="a name in models/ or a TOML path (see `models`)")
+    f.add_argument("--model", default=None, help="a name in models/ or a TOML path (see `models`); default "
+                                                "four_term (speed traces), split_f0_f2 (interval campaigns)")
     f.add_argument("--method", choices=("nuts", "lsq"), default="nuts")
     f.add_argument("--pooling", choices=("pooled", "hierarchical"), default="pooled",
                    help="nuts: one set of coefficients, or run-level AD, BD, CD0 around population means")
@@ -328,6 +408,11 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--initial-speed", choices=("fitted", "measured"), default="fitted",
                    help="lsq: estimate each run's initial speed (honest standard errors), or start "
                         "from the first measured speed as the thesis did")
+    f.add_argument("--validity", choices=("reject", "report"), default=None,
+                   help="run validity (wind limits, Hampel outliers, partner rejection): reject the flagged runs "
+                        "with their partners, or only report them (validity.csv); default: reject for interval "
+                        "campaigns, no check for speed traces")
+    f.add_argument("--wind-limits", default="gtr_onboard", help="eec | gtr_stationary | gtr_onboard (config.WIND_LIMITS)")
     f.add_argument("--out", required=True)
     _add_nuts_options(f, seed=0)
     f.set_defaults(func=_cmd_fit)
@@ -363,6 +448,19 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--model", default="three_term", help="a name in models/ or a TOML path (see `models`)")
     g.add_argument("--out", required=True, help="directory for diagnosis.json, refit.json, report.md and plots")
     g.set_defaults(func=_cmd_diagnose)
+
+    iv = sub.add_parser("import-vbox", help="import VBOX Coastdown CSV exports (speed-gate interval times) as an "
+                                            "interval campaign")
+    iv.add_argument("files", nargs="+", metavar="FILE", help="VBOX exports, e.g. the high and the low window")
+    iv.add_argument("--gates", nargs="+", default=None,
+                    help="gate speeds in km/h, descending, one comma-separated list per FILE (an interleaved file's "
+                         "groups joined by '/'); default by band count: 5 -> 95..70, 3 -> 50..35, 10 -> both "
+                         "(config.VBOX_DEFAULT_GATES_KPH); checked against each run's time and distance")
+    iv.add_argument("--vehicle", default=None, help="vehicle.toml with [vehicle] mass_kg, effective_mass_kg, "
+                                                   "frontal_area_m2 (not in the exports)")
+    iv.add_argument("--weather", default=None, help="Kestrel weather log (CSV) for temperature and pressure")
+    iv.add_argument("--out", required=True, help="campaign directory to write")
+    iv.set_defaults(func=_cmd_import_vbox)
 
     se = sub.add_parser("sensitivity", help="coefficient sensitivities (thesis tables 6.1, 6.2)")
     se.add_argument("--cross-wind", type=float, nargs="+", default=[0.0, 1.0, 2.0, 3.0])

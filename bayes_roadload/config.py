@@ -157,6 +157,47 @@ SPEED_50MPH_MPS = 50.0 * MPH_TO_MPS
 ROADLOAD_FIT_SPEEDS_KPH = tuple(float(v) for v in range(15, 120, 5))
 """Speeds (km/h) at which F = F0 + F1 v + F2 v^2 is fitted through the still-air road load."""
 
+# --- speed-gate interval times (physics.intervals, data.vbox, inference.intervals) -------------
+INTERVAL_QUADRATURE_NODES = 8
+"""Gauss-Legendre nodes per speed band for t = integral M_e / F(v) dv (exact to ~1e-13 relative
+on a 5 km/h band of a quadratic road load, tested against appendix D)."""
+VBOX_DEFAULT_GATES_KPH = {
+    5: ((95.0, 90.0, 85.0, 80.0, 75.0, 70.0),),
+    3: ((50.0, 45.0, 40.0, 35.0),),
+    10: ((95.0, 90.0, 85.0, 80.0, 75.0, 70.0), (55.0, 50.0, 45.0, 40.0, 35.0, 30.0)),
+    14: (tuple(float(v) for v in range(100, 25, -5)),),
+}
+"""Gate speeds (km/h, descending) assumed for a VBOX Coastdown export by its number of interval
+columns, when ``--gates`` is not given: 5 columns = the split method's high window 95 -> 70 km/h
+in 5 km/h bands, 3 = the low window 50 -> 35 km/h, 10 = interleaved high and low runs (high runs
+fill the first 5 columns; low runs the last 5, 55 -> 30 km/h), 14 = the "Standard" multi-interval
+method, 100 -> 30 km/h in 5 km/h bands.  The files do not state them;
+these are the set-ups whose band times reproduce every run's logged distance (median |error|
+0.03-0.14 % with band mid-speeds; the next candidates, 90 -> 70 in 4 km/h bands or 45 -> 35,
+are 2.8-5.8 % off) in the sample exports of docs/real_data.md.  The importer checks them
+against each run's total time and distance (:data:`VBOX_DISTANCE_TOLERANCE`)."""
+VBOX_TIME_TOLERANCE_S = 0.03
+"""Largest |sum of a run's band times - its logged total time| accepted (the export rounds each
+to 0.01 s)."""
+VBOX_DISTANCE_TOLERANCE = 0.005
+"""Largest |median over runs of (sum of band time x band mid-speed - logged distance) / logged
+distance| accepted for a set of gate speeds; a run beyond ``3 x`` this is flagged."""
+INTERVAL_NOISE_PRIORS = {
+    "sigma_gate_s": 0.05,            # mean of the Gamma(4) prior of the gate-crossing timing error (s)
+    "run_decel_sd_mps2": 0.005,      # mean of the Gamma(2) prior of a run's deceleration offset (m/s^2)
+    "band_noise_s_per_sqrt_s": 0.02,  # mean of the Gamma(2) prior of the within-run band noise
+}
+"""Nuisance priors of the interval-time likelihood (:mod:`bayes_roadload.inference.intervals`).
+Gamma priors (shapes below) vanish at 0 (no funnel at the boundary).  ``sigma_gate_s``: timing error of one
+gate crossing (GNSS speed noise / deceleration, after the logger's smoothing); ``run_decel_sd_mps2``:
+run-to-run scatter of a constant deceleration offset (gusts, tyre temperature, driver), 0.005
+m/s^2 is 7.5 N on a 1500 kg car; ``band_noise_s_per_sqrt_s``: independent scatter of each band
+growing as the square root of its duration (force fluctuations within a run)."""
+INTERVAL_NOISE_PRIOR_SHAPES = {"sigma_gate_s": 4.0, "run_decel_sd_mps2": 2.0, "band_noise_s_per_sqrt_s": 2.0}
+"""Gamma shapes of those priors.  ``sigma_gate_s`` has shape 4 (sd 0.025 s about the mean 0.05 s):
+on the Ioniq exports the band noise dominates and the gate error is barely identified (posterior
+0.008-0.18 s with shape 2, its upper tail mixing too slowly for the tail-ESS gate)."""
+
 
 @dataclass(frozen=True)
 class IntegratorConfig:
@@ -291,6 +332,35 @@ TAU_PRIOR_SCALES = {"AD": 1.0e-3, "BD": 5.0e-5, "CD0": 0.02}
 """Prior means of the run-to-run spreads tau of the hierarchical model, Gamma(2) priors (10 %,
 25 %, 5 % of typical values: the thesis' track spreads were 4.3 %, 23.1 %, 4.3 %)."""
 
+
+# Run validity (bayes_roadload.analysis.validity)
+WIND_LIMITS = {
+    "eec": {"mean_wind_mps": 3.0, "peak_wind_mps": 5.0, "mean_cross_wind_mps": 2.0},
+    "gtr_stationary": {"mean_wind_mps": 5.0, "peak_wind_mps": 8.0, "mean_cross_wind_mps": 2.0},
+    "gtr_onboard": {"mean_wind_mps": 7.0, "peak_wind_mps": 10.0, "mean_cross_wind_mps": 4.0},
+}
+"""Wind limits of a valid coastdown run.  ``eec``: Directive 70/220/EEC (as in StVZO Anlage
+XXIII 3.9.2.3): mean wind at most 3 m/s, gusts below 5 m/s, cross component below 2 m/s.
+``gtr_stationary`` / ``gtr_onboard``: UN GTR 15 (WLTP) Annex 4 for stationary and on-board
+anemometry (5 / 8 / 2 and 7 / 10 / 4 m/s: the values as this project read them; check against
+the text in force before relying on them)."""
+DEFAULT_WIND_LIMITS = "gtr_onboard"
+"""The limits applied to campaigns with on-board anemometers unless another set is chosen."""
+HAMPEL_THRESHOLD = 3.0
+"""A value further than this many scaled MADs (1.4826 MAD) from its group's median is an outlier."""
+HAMPEL_MIN_RELATIVE_SPREAD = 0.02
+"""Floor of the scaled MAD of a group of run times, as a fraction of its median: run-to-run
+scatter of ~2 % is ordinary on a track (wind, tyre temperature), and groups of 5-10 runs with a
+tight core would otherwise reject ordinary runs (measured on the Ioniq exports of
+docs/real_data.md: the MAD of 6 runs was 0.04 s on 35 s)."""
+HAMPEL_HALF_WINDOW = 10
+"""Samples on each side of the running Hampel filter over a speed trace (with 5 the MAD of 11
+samples was too noisy: 1-3 % of clean simulated samples flagged)."""
+HAMPEL_MAX_SPIKE_FRACTION = 0.05
+"""A speed trace with more than this fraction of Hampel-flagged samples is rejected.  On clean
+Gaussian speed noise the filter flags 1.3 % of the samples on average (at most 2.3 % over 50
+traces of 400 samples: the local MAD of 21 samples is itself noisy), on the simulated campaigns
+of the tests 0.5-2.9 %."""
 
 # Studies of many fits (bayes_roadload.analysis.batch)
 COVERAGE_LEVELS = (0.5, 0.9, 0.95)

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from bayes_roadload import config
-from bayes_roadload.cli import EXIT_REFUSED, main
+from bayes_roadload.cli import EXIT_GATES_FAILED, EXIT_REFUSED, main
 from bayes_roadload.data import load_campaign
 
 SUMMARY_COLUMNS = ["parameter", "mean", "sd", "q2.5", "q50", "q97.5", "r_hat", "ess_bulk", "ess_tail"]
@@ -189,3 +189,42 @@ def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys):
     assert {"EEC", "GTR15"} <= set(reg["criterion"])
     printed = capsys.readouterr().out
     assert "pairs needed" in printed and "Regulation precision" in printed
+
+
+def test_import_vbox_and_fit_an_interval_campaign(tmp_path, capsys):
+    """import-vbox on synthetic VBOX exports (high and low window, one run the operator turned
+    Off), then fit: the Off run and its partner are rejected and reported."""
+    from bayes_roadload.data import IntervalCampaign, Vehicle
+    from bayes_roadload.data.vbox import write_vbox_csv
+
+    rng = np.random.default_rng(4)
+    me, f0, c = 1530.0, 100.0, 0.4
+    k = np.sqrt(f0 * c)
+
+    def window(gates_kph, runs, off=()):
+        g = np.asarray(gates_kph) / 3.6
+        rows = [{"run": r + 1, "window": "w", "direction": 1 - 2 * (r % 2), "valid": 0 if r + 1 in off else 1,
+                 "speed_start_mps": g[j], "speed_end_mps": g[j + 1],
+                 "interval_s": me / k * (np.arctan(c * g[j] / k) - np.arctan(c * g[j + 1] / k)) + rng.normal(0, 0.05)}
+                for r in range(runs) for j in range(len(g) - 1)]
+        return IntervalCampaign(pd.DataFrame(rows), Vehicle(1500.0, me, 2.2))
+
+    high = write_vbox_csv(window((95, 90, 85, 80, 75, 70), 6, off=(3,)), tmp_path / "high.csv")
+    low = write_vbox_csv(window((50, 45, 40, 35), 6), tmp_path / "low.csv")
+    (tmp_path / "vehicle.toml").write_text("[vehicle]\nmass_kg = 1500.0\neffective_mass_kg = 1530.0\n"
+                                           "frontal_area_m2 = 2.2\n")
+    out = tmp_path / "camp"
+    assert main(["import-vbox", str(high), str(low), "--out", str(out)]) == EXIT_REFUSED   # no vehicle
+    assert main(["import-vbox", str(high), str(low), "--vehicle", str(tmp_path / "vehicle.toml"),
+                 "--out", str(out)]) == 0
+    assert len(load_campaign(out).run_ids) == 12 and (out / "import_report.json").exists()
+    code = main(["fit", str(out), "--out", str(tmp_path / "fit"), "--warmup", "200", "--draws", "300",
+                 "--no-progress"])
+    text = capsys.readouterr().out
+    assert code in (0, EXIT_GATES_FAILED)
+    assert "rejected run high-3: operator: Run-Use Off" in text and "rejected run high-4: partner of high-3" in text
+    summary = pd.read_csv(tmp_path / "fit" / "summary.csv").set_index("parameter")
+    # F0 = M g AD = 100 N and F2 = c / 3.6^2 within 4 posterior sd
+    assert abs(summary.loc["F0_N", "mean"] - f0) < 4 * summary.loc["F0_N", "sd"]
+    assert abs(summary.loc["F2_N_per_kph2", "mean"] - c / 3.6**2) < 4 * summary.loc["F2_N_per_kph2", "sd"]
+    assert len(pd.read_csv(tmp_path / "fit" / "runs_summary.csv")) == 10

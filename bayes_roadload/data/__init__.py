@@ -6,3 +6,4 @@ from .campaign import CampaignError as CampaignError
 from .campaign import Vehicle as Vehicle
 from .campaign import load_campaign as load_campaign
 from .campaign import save_campaign as save_campaign
+from .intervals import IntervalCampaign as IntervalCampaign

@@ -36,6 +36,7 @@ OPTIONAL_COLUMNS = (
     "position_m",
     "temperature_k",
     "pressure_pa",
+    "mass_kg",
 )
 KNOWN_COLUMNS = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
 
@@ -65,6 +66,7 @@ _CHANNEL_LIMITS = {
     "yaw_rad": (-math.pi / 2, math.pi / 2, "degrees in a radian column"),
     "temperature_k": (200.0, 350.0, "degrees Celsius in a kelvin column"),
     "pressure_pa": (50_000.0, 120_000.0, "kPa, hPa or bar in a pascal column"),
+    "mass_kg": config.MASS_RANGE_KG + ("not a test mass in kg",),
 }
 
 
@@ -172,6 +174,9 @@ class Campaign:
             temp = g["temperature_k"].to_numpy(float) if "temperature_k" in g else config.REFERENCE_TEMPERATURE_K
             direction = float(g["direction"].iloc[0]) if "direction" in g else 1.0
             start = float(g["position_m"].iloc[0]) if "position_m" in g else 0.0
+            # a run's own test mass (several masses in one campaign): the rotating inertia, and so
+            # M_e - M, does not change with the load
+            mass = float(g["mass_kg"].iloc[0]) if "mass_kg" in g else v.mass_kg
             runs.append(make_run(
                 t - t[0],
                 g["speed_mps"].to_numpy(float),
@@ -182,8 +187,8 @@ class Campaign:
                 temperature_k=temp,
                 direction=direction,
                 start_position_m=start,
-                mass_kg=v.mass_kg,
-                effective_mass_kg=v.effective_mass_kg,
+                mass_kg=mass,
+                effective_mass_kg=v.effective_mass_kg + (mass - v.mass_kg),
                 frontal_area_m2=v.frontal_area_m2,
             ))
         return stack_runs(runs, self.meta.get("pad_to_samples")), self.run_ids
@@ -270,7 +275,7 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
         if np.any(dt <= 0):
             i = int(rows[np.flatnonzero(dt <= 0)[0] + 1])
             _fail(where, "time_s", i + 1, f"time does not increase within run {rid!r}")
-        for c in ("direction", "pair"):
+        for c in ("direction", "pair", "mass_kg"):
             if c in cols:
                 vals = df[c].to_numpy()[rows]
                 if np.any(vals != vals[0]):
@@ -342,12 +347,41 @@ def _vehicle_from_toml(doc: dict, where: str) -> tuple[Vehicle, Anemometer, dict
     return vehicle, anem, tunnel, dict(doc.get("meta", {}))
 
 
+def _read_vehicle(root: Path):
+    vfile = root / "vehicle.toml"
+    if not vfile.exists():
+        raise CampaignError(f"{vfile}: missing")
+    try:
+        doc = tomllib.loads(vfile.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise CampaignError(f"{vfile}: not valid TOML ({e})") from e
+    return _vehicle_from_toml(doc, str(vfile))
+
+
+def _load_interval_campaign(root: Path, intervals: Path):
+    from .intervals import IntervalCampaign, read_intervals, validate_intervals
+
+    vehicle, anem, tunnel, meta = _read_vehicle(root)
+    df = validate_intervals(read_intervals(intervals), str(intervals))
+    tfile = root / "truth.json"
+    truth = json.loads(tfile.read_text()) if tfile.exists() else None
+    return IntervalCampaign(df, vehicle, anem, tunnel, truth, meta)
+
+
 def load_campaign(path: str | os.PathLike) -> Campaign:
-    """Load and validate a campaign directory (see ``docs/data-format.md``)."""
+    """Load and validate a campaign directory (see ``docs/data-format.md``): a
+    :class:`Campaign` of speed traces (``runs.csv`` / ``runs.parquet``), or an
+    :class:`~bayes_roadload.data.intervals.IntervalCampaign` of speed-gate interval times
+    (``intervals.csv``)."""
     root = Path(path)
     if not root.is_dir():
         raise CampaignError(f"{root}: not a campaign directory")
     csv, parquet = root / "runs.csv", root / "runs.parquet"
+    intervals = root / "intervals.csv"
+    if intervals.exists() and (csv.exists() or parquet.exists()):
+        raise CampaignError(f"{root}: both intervals.csv and runs.csv/parquet present (ambiguous campaign kind)")
+    if intervals.exists():
+        return _load_interval_campaign(root, intervals)
     if csv.exists() and parquet.exists():
         raise CampaignError(f"{root}: both runs.csv and runs.parquet present (ambiguous)")
     if csv.exists():
@@ -360,15 +394,9 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
         except ImportError as e:  # pragma: no cover - depends on optional pyarrow
             raise CampaignError(f"{parquet}: reading parquet needs pyarrow ({e})") from e
     else:
-        raise CampaignError(f"{root}: runs.csv (or runs.parquet) is missing")
-    vfile = root / "vehicle.toml"
-    if not vfile.exists():
-        raise CampaignError(f"{vfile}: missing")
-    try:
-        doc = tomllib.loads(vfile.read_text())
-    except tomllib.TOMLDecodeError as e:
-        raise CampaignError(f"{vfile}: not valid TOML ({e})") from e
-    vehicle, anem, tunnel, meta = _vehicle_from_toml(doc, str(vfile))
+        raise CampaignError(f"{root}: runs.csv (or runs.parquet, or intervals.csv for speed-gate interval "
+                            "times) is missing")
+    vehicle, anem, tunnel, meta = _read_vehicle(root)
     df = validate_runs(df, str(runs_file))
     if "wheel_torque_left_nm" in df:
         df["driveline_force_n"] = (df.pop("wheel_torque_left_nm") + df.pop("wheel_torque_right_nm")) / vehicle.rolling_radius_m
@@ -415,14 +443,24 @@ def save_campaign(c: Campaign, path: str | os.PathLike, fmt: str = "csv") -> Pat
 
     Files are written to a temporary directory beside ``path`` and moved into place.
     """
-    c.runs = validate_runs(c.runs, "runs")
+    interval_kind = getattr(c, "kind", "traces") == "intervals"
+    if interval_kind:
+        from .intervals import validate_intervals
+
+        if fmt != "csv":
+            raise ValueError("an interval campaign is written as intervals.csv (fmt='csv')")
+        c.intervals = validate_intervals(c.intervals, "intervals")
+    else:
+        c.runs = validate_runs(c.runs, "runs")
     validate_vehicle(c.vehicle, "vehicle")
     root = Path(path)
     root.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".campaign-", dir=root.parent))
     try:
-        runs = c.runs.copy()
-        if fmt == "csv":
+        runs = None if interval_kind else c.runs.copy()
+        if interval_kind:
+            c.intervals.to_csv(tmp / "intervals.csv", index=False, float_format="%.10g")
+        elif fmt == "csv":
             runs.to_csv(tmp / "runs.csv", index=False, float_format="%.10g")
         elif fmt == "parquet":
             runs.to_parquet(tmp / "runs.parquet", index=False)
@@ -432,7 +470,7 @@ def save_campaign(c: Campaign, path: str | os.PathLike, fmt: str = "csv") -> Pat
         if c.truth is not None:
             (tmp / "truth.json").write_text(json.dumps(c.truth, indent=2, sort_keys=True) + "\n")
         root.mkdir(exist_ok=True)
-        for stale in ("runs.csv", "runs.parquet", "truth.json"):
+        for stale in ("runs.csv", "runs.parquet", "intervals.csv", "truth.json"):
             (root / stale).unlink(missing_ok=True)
         for f in tmp.iterdir():
             shutil.move(str(f), root / f.name)

@@ -44,6 +44,16 @@ prior removes the funnel at q -> 0, Chung et al. 2013); ``tau_*`` Gamma(2) with 
 25 %, 5 % of typical AD, BD, CD0 (likewise boundary-avoiding); ``student_df`` Gamma(2, 0.1);
 ``airspeed_calibration_sd`` Gamma(2) with mean 0.01 (below).
 
+Speed only: a latent wind per pair
+----------------------------------
+Without an anemometer (GNSS or CAN speed) a model file with ``air = "wind"`` and
+``head_wind_mps`` free (``models/speed_only_wind.toml``) gets one along-track wind per
+opposite-direction pair, ``head_wind_mps[k]`` (prior from the file), met as a head wind by the
+pair's run of direction +1 and as a tail wind by the other (:func:`latent_wind_pairs`,
+:func:`free_parameters`).  The pairing identifies it: the wind's force (about rho C_D A v w)
+changes sign between the two runs while the road load does not.  A run without a partner gets a
+wind of its own, identified only through the shape of its trace and the prior.
+
 Anemometer calibration (thesis section 4.7.3)
 ---------------------------------------------
 When a model file frees ``airspeed_factor`` (true airspeed = factor x reading,
@@ -137,6 +147,10 @@ class FitProblem:
         airspeed ratios calibrate a free ``airspeed_factor`` (:func:`airspeed_pair_ratios`);
         empty when the factor is fixed.  ``initial`` then also holds a start for
         ``airspeed_calibration_sd``.
+    wind_pair_index : speed-only campaigns with ``air = "wind"`` and ``head_wind_mps`` free:
+        [R] index of each run's opposite-direction pair (:func:`latent_wind_pairs`); the
+        along-track wind of pair k, ``head_wind_mps[k]``, is a head wind for the pair's run of
+        direction +1 and a tail wind for the other.  None otherwise.
     driveline_channel : the driveline loss is the polynomial A_t + B_t v + C_t v^2 and the
         campaign logs ``driveline_force_n``: the logged force is fitted too
         (:func:`driveline_log_likelihood`), with its noise ``sigma_driveline_n``.
@@ -161,6 +175,13 @@ class FitProblem:
     run_offsets: Any = None
     calibration_pairs: tuple[tuple[int, int], ...] = ()
     driveline_channel: bool = False
+    wind_pair_index: Any = None
+
+    @property
+    def latent_wind(self) -> bool:
+        """Speed only, no anemometer: a latent along-track wind per opposite-direction pair
+        (``head_wind_mps`` [pairs], :func:`latent_wind_pairs`)."""
+        return self.wind_pair_index is not None
 
     @property
     def n_runs(self) -> int:
@@ -261,6 +282,22 @@ def airspeed_pair_ratios(batch: RunBatch, pairs, yaw_factor: Any = 1.0) -> jnp.n
     return mean_v[idx].sum(axis=1) / mean_a[idx].sum(axis=1)
 
 
+def latent_wind_pairs(campaign: Campaign, run_ids) -> np.ndarray:
+    """[R] pair index of each run for the latent along-track wind: the campaign's pairs
+    (:meth:`~bayes_roadload.data.Campaign.pairs`), a run without a partner on its own."""
+    index = {r: i for i, r in enumerate(run_ids)}
+    out = np.full(len(run_ids), -1)
+    k = 0
+    for pair in campaign.pairs():
+        if all(r in index for r in pair):
+            out[[index[r] for r in pair]] = k
+            k += 1
+    for i in np.flatnonzero(out < 0):
+        out[i] = k
+        k += 1
+    return out
+
+
 def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling: str = "pooled",
                   noise: str = "integrated", robust: bool = False) -> FitProblem:
     """Resolve a model variant against a campaign.
@@ -299,18 +336,29 @@ def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, po
     channel = "driveline_polynomial" in model.term_names and campaign.has_driveline
     if channel:
         initial["sigma_driveline_n"] = config.NOISE_PRIORS["sigma_driveline_n"]
+    wind_pairs = None
+    if spec.resolve_air(campaign) == "wind" and "head_wind_mps" in free:
+        if pooling != "pooled":
+            raise ValueError("a latent wind per pair is available with --pooling pooled only")
+        wind_pairs = latent_wind_pairs(campaign, run_ids)
+        initial["head_wind_mps"] = np.zeros(int(wind_pairs.max()) + 1)
     return FitProblem(spec=spec, model=model, fixed={k: float(v) for k, v in fixed.items()}, free=tuple(free),
                       priors=priors, batch=batch, run_ids=tuple(run_ids), pooling=pooling, noise=noise,
                       robust=robust, mass_kg=campaign.vehicle.mass_kg,
                       frontal_area_m2=campaign.vehicle.frontal_area_m2,
                       driveline_curve=measured_driveline_curve(campaign), initial=initial,
-                      calibration_pairs=pairs, driveline_channel=channel)
+                      calibration_pairs=pairs, driveline_channel=channel, wind_pair_index=wind_pairs)
 
 
 def free_parameters(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:
     """The free drag-model parameters of one draw: shape [] (shared) or [R] (per run: the
-    run-level coefficients of a hierarchical draw, when ``sample`` holds them)."""
-    return {n: sample.get(f"{n}_run", sample[n]) if n in problem.varying else sample[n] for n in problem.free}
+    run-level coefficients of a hierarchical draw, when ``sample`` holds them; the latent
+    along-track wind of each run's pair, signed by its direction)."""
+    out = {n: sample.get(f"{n}_run", sample[n]) if n in problem.varying else sample[n] for n in problem.free}
+    if problem.latent_wind:
+        out["head_wind_mps"] = (jnp.asarray(problem.batch.direction)
+                                * jnp.asarray(sample["head_wind_mps"])[jnp.asarray(problem.wind_pair_index)])
+    return out
 
 
 def run_parameters(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:
@@ -462,6 +510,11 @@ def coastdown_model(problem: FitProblem) -> None:
     r = problem.n_runs
     sample: dict[str, jnp.ndarray] = {}
     for name in problem.free:
+        if problem.latent_wind and name == "head_wind_mps":
+            # one along-track wind per opposite-direction pair (speed only, no anemometer)
+            with numpyro.plate("wind_pair", int(np.max(problem.wind_pair_index)) + 1):
+                sample[name] = numpyro.sample(name, problem.priors[name].to_numpyro())
+            continue
         sample[name] = numpyro.sample(name, problem.priors[name].to_numpyro())
     for name in problem.varying:
         # Gamma(2): no mass piling at tau = 0, so the joint mode (the MAP the sampler is

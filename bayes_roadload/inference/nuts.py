@@ -21,6 +21,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -116,16 +117,66 @@ def _site_scales(problem: FitProblem, z: dict[str, Any]) -> dict[str, Any]:
     return scales
 
 
+def _still_air_spec(spec: ModelSpec) -> ModelSpec:
+    """The spec without its latent wind: the start of a latent-wind fit (over a pair the wind's
+    force cancels to first order, so the still-air joint fit is close)."""
+    drop = ("head_wind_mps",)
+    return dataclasses.replace(spec, air="still", free=tuple(p for p in spec.free if p not in drop),
+                               priors={k: v for k, v in spec.priors.items() if k not in drop},
+                               initial={k: v for k, v in spec.initial.items() if k not in drop})
+
+
+def _latent_wind_start(problem: FitProblem, campaign: Campaign, init: dict, first: np.ndarray) -> dict:
+    """Start of a latent-wind fit: still-air least squares of each run alone (seed 001's
+    approach), the coefficients' medians over the runs, each run's initial speed and noise from
+    its own fit, no wind (the joint still-air fit of a head/tail-wind pair can stop in a poor
+    local minimum: measured 3 m/s off in one run's initial speed)."""
+    r = problem.n_runs
+    v0, sigma = first.copy(), np.full(r, 0.05)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            lsq = fit_lsq(campaign, _still_air_spec(problem.spec), grouping="run")
+        index = {rid: i for i, rid in enumerate(problem.run_ids)}
+        for k in problem.free:
+            vals = [g.estimate.get(k, math.nan) for g in lsq.groups]
+            vals = [x for x in vals if math.isfinite(x)]
+            if vals:
+                init[k] = float(np.median(vals))
+        for g in lsq.groups:
+            i = index.get(g.run_ids[0]) if g.run_ids else None
+            if i is not None and g.v0_offset_mps:
+                v0[i] = first[i] + float(g.v0_offset_mps[0])
+                sigma[i] = max(float(g.rms_residual_mps), 1e-3)
+    except Exception:  # noqa: BLE001 - the prior centres are a valid fallback start
+        pass
+    init["head_wind_mps"] = jnp.asarray(problem.initial["head_wind_mps"])
+    for k in problem.free:
+        prior = problem.priors[k]
+        if prior.low is not None:
+            init[k] = max(float(init[k]), prior.low + 1e-6 * config.PARAMETER_SCALES.get(k, 1.0))
+    init["v0_mps"] = jnp.asarray(v0)
+    init["sigma_mps"] = jnp.asarray(sigma)
+    if problem.noise == "integrated":
+        init["q_mps_per_sqrt_s"] = 0.002
+    if problem.robust:
+        init["student_df"] = 10.0
+    return init
+
+
 def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, float] | None = None) -> dict[str, Any]:
     """Constrained starting values from the classical joint least-squares fit, or, with
     ``start`` (free parameter -> value, e.g. a known population mean), from those values, the
-    first measured speeds and sigma 0.05 m/s without the least-squares fit."""
+    first measured speeds and sigma 0.05 m/s without the least-squares fit.  Latent-wind
+    problems start from per-run still-air fits (:func:`_latent_wind_start`)."""
     init: dict[str, Any] = dict(problem.initial)
     r = problem.n_runs
     first = np.asarray(problem.batch.speed_mps[:, 0])
     v0, sigma = first.copy(), np.full(r, 0.05)
     if start is not None:
         init.update({k: float(v) for k, v in start.items() if k in problem.free})
+    elif getattr(problem, "latent_wind", False):
+        return _latent_wind_start(problem, campaign, init, first)
     else:
         try:
             with warnings.catch_warnings():
@@ -187,10 +238,18 @@ class Posterior:
         return np.asarray(ravel_pytree(self.z0)[0])
 
 
+def numpyro_model_of(problem) -> Any:
+    """The numpyro model function of a problem: its ``numpyro_model`` when it has one (e.g. an
+    :class:`~bayes_roadload.inference.intervals.IntervalProblem`), else the coastdown model of
+    speed traces.  Every such problem goes through the same MAP, Laplace whitening, NUTS and
+    gates."""
+    return getattr(problem, "numpyro_model", coastdown_model)
+
+
 def unconstrained_posterior(problem: FitProblem, init: dict[str, Any]) -> Posterior:
     """numpyro's potential of ``problem``, starting at the constrained values ``init``."""
     info, potential_fn, postprocess_fn, _ = initialize_model(
-        jax.random.PRNGKey(0), coastdown_model, model_args=(problem,),
+        jax.random.PRNGKey(0), numpyro_model_of(problem), model_args=(problem,),
         init_strategy=init_to_value(values=init), validate_grad=False)
     z0 = info.z
     _, unravel = ravel_pytree(z0)
@@ -334,7 +393,7 @@ def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFA
         if sampler.num_chains == 1:
             init_params = init_params[0]
     else:
-        kernel = NUTS(coastdown_model, target_accept_prob=sampler.target_accept, max_tree_depth=sampler.max_tree_depth)
+        kernel = NUTS(numpyro_model_of(problem), target_accept_prob=sampler.target_accept, max_tree_depth=sampler.max_tree_depth)
         init_params = None
     args = () if sampler.precondition == "laplace" else (problem,)
     # Warm-up and sampling in one compiled program (``mcmc.warmup`` then ``mcmc.run`` compiles

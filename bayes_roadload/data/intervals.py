@@ -1,0 +1,208 @@
+"""The interval-time campaign kind: speed-gate records instead of speed traces.
+
+A speed-gate logger (Racelogic VBOX "Coastdown", the NBR / "split" method, a speed trap) keeps
+per run the time to coast through consecutive speed bands, not the speed trace.  Such a
+campaign is a directory with ``intervals.csv`` (instead of ``runs.csv``) and the same
+``vehicle.toml`` (and, simulated, ``truth.json``); :func:`~bayes_roadload.data.load_campaign`
+returns an :class:`IntervalCampaign` for it.  One row per band; the format is in
+``docs/data-format.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .. import config
+from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, validate_vehicle
+
+INTERVAL_REQUIRED = ("run", "speed_start_mps", "speed_end_mps", "interval_s")
+RUN_CONSTANT_COLUMNS = ("direction", "pair", "window", "valid", "run_distance_m", "start_time_of_day_s",
+                        "temperature_k", "pressure_pa", "mass_kg")
+INTERVAL_OPTIONAL = RUN_CONSTANT_COLUMNS
+INTERVAL_COLUMNS = INTERVAL_REQUIRED + INTERVAL_OPTIONAL
+_TEXT_COLUMNS = ("run", "pair", "window")
+
+_INTERVAL_HINTS = dict(_AMBIGUOUS_HINTS, **{
+    "speed_start_kph": "speed_start_mps (m/s): divide km/h by 3.6",
+    "speed_end_kph": "speed_end_mps (m/s): divide km/h by 3.6",
+    "interval": "interval_s (seconds)",
+    "time": "interval_s (the time to coast through the band, seconds)",
+    "t": "interval_s (the time to coast through the band, seconds)",
+    "time_s": "interval_s (the time to coast through the band, seconds)",
+    "speed_mps": "speed_start_mps and speed_end_mps (an interval campaign has no speed trace)",
+})
+
+_LIMITS = {
+    "speed_start_mps": (0.0, config.MAX_SPEED_MPS, "negative, or km/h in a m/s column"),
+    "speed_end_mps": (0.0, config.MAX_SPEED_MPS, "negative, or km/h in a m/s column"),
+    "interval_s": (0.0, 3600.0, "not a band time in seconds"),
+    "run_distance_m": (0.0, 1.0e5, "not a distance in metres"),
+    "start_time_of_day_s": (0.0, 86400.0, "seconds since midnight"),
+    "temperature_k": (200.0, 350.0, "degrees Celsius in a kelvin column"),
+    "pressure_pa": (50_000.0, 120_000.0, "kPa, hPa or bar in a pascal column"),
+    "mass_kg": config.MASS_RANGE_KG + ("not a test mass in kg",),
+}
+
+
+@dataclass
+class IntervalCampaign:
+    """A loaded, validated interval-time campaign.
+
+    Attributes
+    ----------
+    intervals : one row per speed band (columns of :data:`INTERVAL_COLUMNS`); the bands of a
+        run are contiguous rows in falling speed, each ending where the next starts.
+    vehicle, anemometer, tunnel, truth, meta : as :class:`~bayes_roadload.data.Campaign`
+        (the anemometer is unused: speed-gate records carry no air data).
+    """
+
+    intervals: pd.DataFrame
+    vehicle: Vehicle
+    anemometer: Anemometer = field(default_factory=Anemometer)
+    tunnel: dict[str, Any] | None = None
+    truth: dict[str, Any] | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    kind = "intervals"
+
+    def __post_init__(self):
+        self.intervals = validate_intervals(self.intervals, "intervals")
+        validate_vehicle(self.vehicle, "vehicle")
+
+    has_anemometer = False
+    has_driveline = False
+
+    @property
+    def run_ids(self) -> list:
+        return [_plain(r) for r in pd.unique(self.intervals["run"])]
+
+    def run_table(self) -> pd.DataFrame:
+        """One row per run: run, direction, pair, window, valid, band count, total time, and
+        the optional run constants."""
+        g = self.intervals.groupby("run", sort=False)
+        out = g.first()[[c for c in RUN_CONSTANT_COLUMNS if c in self.intervals]].copy()
+        out["bands"] = g.size()
+        out["total_time_s"] = g["interval_s"].sum()
+        out["speed_start_mps"] = g["speed_start_mps"].first()
+        out["speed_end_mps"] = g["speed_end_mps"].last()
+        out.index = [_plain(r) for r in out.index]
+        out.index.name = "run"
+        return out.reset_index()
+
+    def directions(self) -> dict:
+        if "direction" not in self.intervals:
+            return {r: 1 for r in self.run_ids}
+        return {_plain(r): int(d) for r, d in self.intervals.groupby("run", sort=False)["direction"].first().items()}
+
+    def windows(self) -> dict:
+        """run id -> window label ("all" when the column is absent)."""
+        if "window" not in self.intervals:
+            return {r: "all" for r in self.run_ids}
+        return {_plain(r): str(w) for r, w in self.intervals.groupby("run", sort=False)["window"].first().items()}
+
+    def pairs(self) -> list[tuple]:
+        """Opposite-direction pairs: by the ``pair`` column, else consecutive runs of the same
+        window with opposite directions, in file order."""
+        if "pair" in self.intervals:
+            groups = self.intervals.groupby("pair", sort=False)["run"].unique()
+            return [tuple(_plain(r) for r in g) for g in groups if len(g) == 2]
+        d, w = self.directions(), self.windows()
+        out, waiting = [], {}
+        for r in self.run_ids:
+            other = waiting.get(w[r])
+            if other is not None and d[other] != d[r]:
+                out.append((other, r))
+                waiting[w[r]] = None
+            else:
+                waiting[w[r]] = r
+        return out
+
+    def subset(self, run_ids) -> "IntervalCampaign":
+        """The campaign restricted to some runs (order as given)."""
+        keep = self.intervals[self.intervals["run"].isin(list(run_ids))]
+        order = {r: i for i, r in enumerate(run_ids)}
+        keep = keep.sort_values("run", key=lambda s: s.map(order), kind="stable")
+        return IntervalCampaign(keep.reset_index(drop=True), self.vehicle, self.anemometer, self.tunnel,
+                                self.truth, dict(self.meta))
+
+
+def validate_intervals(df: pd.DataFrame, where: str = "intervals.csv") -> pd.DataFrame:
+    """Check an interval table against the contract and return a normalised copy (rows
+    1-based over the data rows)."""
+    df = df.copy()
+    cols = list(df.columns)
+    for c in cols:
+        if c not in INTERVAL_COLUMNS:
+            hint = _INTERVAL_HINTS.get(str(c).strip().lower())
+            msg = (f"unknown column; did you mean {hint}?" if hint
+                   else f"unknown column; an interval campaign knows {', '.join(INTERVAL_COLUMNS)}")
+            _fail(where, str(c), None, msg)
+    for c in INTERVAL_REQUIRED:
+        if c not in cols:
+            _fail(where, c, None, "required column is missing")
+    if len(df) == 0:
+        _fail(where, None, None, "no intervals")
+    for c in _TEXT_COLUMNS:
+        if c in cols and df[c].isna().any():
+            _fail(where, c, int(np.flatnonzero(df[c].isna().to_numpy())[0]) + 1, f"missing {c}")
+    if "window" in cols:
+        df["window"] = df["window"].astype(str)
+    for c in cols:
+        if c in _TEXT_COLUMNS:
+            continue
+        values = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            _fail(where, c, i + 1, f"value {df[c].iloc[i]!r} is not a finite number")
+        df[c] = values
+        if c in _LIMITS:
+            lo, hi, meaning = _LIMITS[c]
+            out = (values < lo) | (values > hi)
+            if out.any():
+                i = int(np.flatnonzero(out)[0])
+                _fail(where, c, i + 1, f"value {values[i]:g} outside [{lo:g}, {hi:g}] ({meaning})")
+    if (df["interval_s"] <= 0).any():
+        i = int(np.flatnonzero(df["interval_s"].to_numpy() <= 0)[0])
+        _fail(where, "interval_s", i + 1, "a band time must be positive")
+    drop = df["speed_start_mps"].to_numpy() - df["speed_end_mps"].to_numpy()
+    if (drop <= 0).any():
+        i = int(np.flatnonzero(drop <= 0)[0])
+        _fail(where, "speed_end_mps", i + 1, "the band's end speed is not below its start speed (a coastdown "
+              "decelerates)")
+    if "direction" in cols and not np.isin(df["direction"].to_numpy(), (-1.0, 1.0)).all():
+        i = int(np.flatnonzero(~np.isin(df["direction"].to_numpy(), (-1.0, 1.0)))[0])
+        _fail(where, "direction", i + 1, f"direction code {df['direction'].iloc[i]:g} is not +1 or -1")
+    if "valid" in cols and not np.isin(df["valid"].to_numpy(), (0.0, 1.0)).all():
+        i = int(np.flatnonzero(~np.isin(df["valid"].to_numpy(), (0.0, 1.0)))[0])
+        _fail(where, "valid", i + 1, "valid must be 1 (run used) or 0 (run excluded)")
+    positions = np.arange(len(df))
+    for rid, idx in df.groupby("run", sort=False).indices.items():
+        rid = _plain(rid)
+        rows = positions[idx]
+        if np.any(np.diff(rows) != 1):
+            _fail(where, "run", int(rows[np.flatnonzero(np.diff(rows) != 1)[0] + 1]) + 1,
+                  f"the bands of run {rid!r} are not contiguous")
+        start = df["speed_start_mps"].to_numpy()[rows]
+        end = df["speed_end_mps"].to_numpy()[rows]
+        gap = np.abs(start[1:] - end[:-1]) > 1e-6
+        if gap.any():
+            i = int(rows[np.flatnonzero(gap)[0] + 1])
+            _fail(where, "speed_start_mps", i + 1, f"run {rid!r}: a band does not start where the previous one "
+                  "ended (bands must be consecutive, in falling speed)")
+        for c in RUN_CONSTANT_COLUMNS:
+            if c in cols:
+                vals = df[c].to_numpy()[rows]
+                if np.any(vals != vals[0]):
+                    i = int(rows[np.flatnonzero(vals != vals[0])[0]])
+                    _fail(where, c, i + 1, f"{c} changes within run {rid!r}")
+    return df.reset_index(drop=True)
+
+
+def read_intervals(path) -> pd.DataFrame:
+    """``intervals.csv`` as a table (window labels as text)."""
+    return pd.read_csv(path, dtype={"window": str})

@@ -1,0 +1,348 @@
+"""Bayesian fit of speed-gate interval times: every run and window of a campaign jointly.
+
+The data of an :class:`~bayes_roadload.data.intervals.IntervalCampaign` are, per run, the
+times to coast through consecutive speed bands (a VBOX "Coastdown" export, a speed trap).
+Their model time is ``integral M_e / F(v) dv`` over each band
+(:func:`~bayes_roadload.physics.intervals.interval_times`, the physics core's drag model), so
+the high (95 -> 70 km/h) and low (50 -> 35 km/h) windows of the NBR "split" method are fitted
+jointly with one set of coefficients: their different speeds separate the constant (tyre) and
+the quadratic (aerodynamic) parts of the road load.
+
+Likelihood (:func:`~bayes_roadload.physics.intervals.band_time_loglik`): the band times of a
+run are Gaussian around the model times with covariance ``sigma_gate_s^2 T +
+band_noise_s_per_sqrt_s^2 diag(duration) + (M_e run_decel_sd_mps2)^2 s s^T``: gate-crossing
+timing errors (neighbouring bands share a crossing), independent scatter that grows with a
+band's duration, and a run-level deceleration offset integrated out (each run meets its own
+gusts, tyre temperature and driver; ``s`` the bands' sensitivity to a constant extra force).
+Priors of the three nuisances: Gamma with the means and shapes of
+:data:`bayes_roadload.config.INTERVAL_NOISE_PRIORS` and ``INTERVAL_NOISE_PRIOR_SHAPES`` (vanishing at 0: no
+funnel at the boundary).
+
+The coefficients and their priors come from a model variant (``models/*.toml``, air "still"
+or "wind"); ``split_f0_f2`` frees AD and CD0 (F = F0 + F2 v^2 with F0 = M g AD, the split
+method's form).  In an interval fit ``head_wind_mps`` is a steady wind **along the track axis**:
+a head wind for the runs of direction +1, a tail wind for those of -1 (``split_f0_f2_wind``), and
+``grade_rad`` (the ``gradient`` term) the track's rise in the + direction
+(``split_f0_f2_grade``): the two explanations of a difference between the headings.
+
+Runs whose ``valid`` column is 0 (the operator's Run-Use = Off) are left out, as are runs the
+validity checks reject (:mod:`bayes_roadload.analysis.validity`), with their partners.  Sampling
+goes through the same MAP -> Laplace whitening -> NUTS -> gates as the trace fits
+(:func:`~bayes_roadload.inference.nuts.run_nuts`).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import arviz as az
+import jax
+import jax.numpy as jnp
+import numpy as np
+import numpyro
+import numpyro.distributions as dist
+import pandas as pd
+
+from .. import config
+from ..data.intervals import IntervalCampaign
+from ..physics.atmosphere import air_density_kgpm3
+from ..physics.intervals import (
+    IntervalBands,
+    band_time_covariance,
+    band_time_loglik,
+    check_speed_domain,
+    interval_times,
+)
+from ..physics.model import DragModel
+from .spec import ModelSpec, Prior, load_model_spec
+
+NOISE_SITES = ("sigma_gate_s", "band_noise_s_per_sqrt_s", "run_decel_sd_mps2")
+
+
+@dataclass(frozen=True, eq=False)
+class IntervalProblem:
+    """Everything a Bayesian fit of interval times needs, resolved once.
+
+    Attributes
+    ----------
+    spec, model, fixed, free, priors : as :class:`~bayes_roadload.inference.bayes.FitProblem`.
+    bands : the runs' speed bands, flattened ([B]).
+    observed_s : [B] observed band times.
+    band_index : [R, K] index into the flattened bands of run r's k-th band (0 on padding).
+    mask : [R, K] real bands.
+    run_ids : run ids (batch order).
+    windows : window label of each run.
+    directions : [R] +1 / -1.
+    effective_mass_kg : [R] M_e of each run (the campaign's, or shifted by a per-run test mass).
+    mass_kg, frontal_area_m2 : the vehicle (derived road load at reference conditions).
+    initial : starting values of the free parameters and nuisances.
+    """
+
+    spec: ModelSpec
+    model: DragModel
+    fixed: dict[str, float]
+    free: tuple[str, ...]
+    priors: dict[str, Prior]
+    bands: IntervalBands
+    observed_s: Any
+    band_index: Any
+    mask: Any
+    run_ids: tuple
+    windows: tuple
+    directions: Any
+    effective_mass_kg: Any
+    mass_kg: float
+    frontal_area_m2: float
+    initial: dict[str, Any] = field(default_factory=dict)
+    driveline_curve: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    pooling: str = "pooled"
+    noise: str = "interval"
+    robust: bool = False
+    varying: tuple = ()
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.run_ids)
+
+    @property
+    def numpyro_model(self):
+        return interval_model
+
+
+def build_interval_problem(campaign: IntervalCampaign, spec: ModelSpec | str = "split_f0_f2",
+                           runs=None) -> IntervalProblem:
+    """Resolve a model variant against an interval campaign.
+
+    ``runs``: the run ids to fit (default: every run whose ``valid`` is not 0).
+    """
+    spec = load_model_spec(spec) if isinstance(spec, str) else spec
+    if spec.air in ("measured",):
+        raise ValueError(f"model {spec.name!r} uses measured air; interval times carry no anemometer channels")
+    model, fixed, free = spec.build(campaign)
+    check_speed_domain(model)
+    from .bayes import default_prior
+
+    priors = {p: spec.priors.get(p) or default_prior(p, model) for p in free}
+    df = campaign.intervals
+    if runs is None:
+        valid = campaign.run_table()
+        runs = [r for r, ok in zip(valid["run"], valid["valid"] if "valid" in valid else [1] * len(valid)) if ok]
+    runs = list(runs)
+    if not runs:
+        raise ValueError("no runs to fit (every run is marked invalid)")
+    df = df[df["run"].isin(runs)]
+    order = {r: i for i, r in enumerate(runs)}
+    df = df.sort_values("run", key=lambda s: s.map(order), kind="stable").reset_index(drop=True)
+    v = campaign.vehicle
+    n = len(df)
+    temp = df["temperature_k"].to_numpy(float) if "temperature_k" in df else np.full(n, config.REFERENCE_TEMPERATURE_K)
+    press = df["pressure_pa"].to_numpy(float) if "pressure_pa" in df else np.full(n, config.REFERENCE_PRESSURE_PA)
+    mass = df["mass_kg"].to_numpy(float) if "mass_kg" in df else np.full(n, v.mass_kg)
+    me = v.effective_mass_kg + (mass - v.mass_kg)   # the rotating inertia does not change with the load
+    direction = df["direction"].to_numpy(float) if "direction" in df else np.ones(n)
+    bands = IntervalBands(
+        speed_start_mps=jnp.asarray(df["speed_start_mps"].to_numpy(float)),
+        speed_end_mps=jnp.asarray(df["speed_end_mps"].to_numpy(float)),
+        direction=jnp.asarray(direction),
+        air_density_kgpm3=jnp.asarray(np.asarray(air_density_kgpm3(press, temp))),
+        temperature_k=jnp.asarray(temp), mass_kg=jnp.asarray(mass), effective_mass_kg=jnp.asarray(me),
+        frontal_area_m2=jnp.full(n, v.frontal_area_m2))
+    groups = df.groupby("run", sort=False).indices
+    k = max(len(ix) for ix in groups.values())
+    index = np.zeros((len(runs), k), int)
+    mask = np.zeros((len(runs), k), bool)
+    for i, r in enumerate(runs):
+        ix = groups[r]
+        index[i, :len(ix)] = ix
+        mask[i, :len(ix)] = True
+    first = df.groupby("run", sort=False).first()
+    initial = {p: float(spec.initial.get(p, priors[p].center)) for p in free}
+    initial.update({name: config.INTERVAL_NOISE_PRIORS[name] for name in NOISE_SITES})
+    return IntervalProblem(
+        spec=spec, model=model, fixed={kk: float(vv) for kk, vv in fixed.items()}, free=tuple(free),
+        priors=priors, bands=bands, observed_s=jnp.asarray(df["interval_s"].to_numpy(float)),
+        band_index=jnp.asarray(index), mask=jnp.asarray(mask), run_ids=tuple(runs),
+        windows=tuple(str(first.loc[r, "window"]) if "window" in first else "all" for r in runs),
+        directions=jnp.asarray(first["direction"].to_numpy(float) if "direction" in first else np.ones(len(runs))),
+        effective_mass_kg=jnp.asarray(me[index[:, 0]]), mass_kg=float(v.mass_kg),
+        frontal_area_m2=float(v.frontal_area_m2), initial=initial)
+
+
+def band_parameters(problem: IntervalProblem, sample: dict[str, Any]) -> dict[str, Any]:
+    """The drag-model parameters of one draw, per band where they depend on the run: the
+    steady along-track wind ``head_wind_mps`` is a head wind for direction +1 and a tail wind
+    for -1."""
+    params = {k: jnp.asarray(v) for k, v in problem.fixed.items()}
+    params.update({k: sample[k] for k in problem.free})
+    if "head_wind_mps" in params:
+        params["head_wind_mps"] = params["head_wind_mps"] * problem.bands.direction
+    return params
+
+
+def model_band_times(problem: IntervalProblem, sample: dict[str, Any]) -> dict[str, Any]:
+    """[B] model time, distance and force sensitivity of every band for one draw."""
+    return interval_times(problem.model, band_parameters(problem, sample), problem.bands)
+
+
+def _per_run(problem: IntervalProblem, x):
+    return jnp.asarray(x)[problem.band_index]
+
+
+def run_log_likelihood(problem: IntervalProblem, sample: dict[str, Any]) -> jnp.ndarray:
+    """[R] log-likelihood of each run's band times for one draw (module docstring)."""
+    out = model_band_times(problem, sample)
+    t = _per_run(problem, out["time_s"])
+    resid = _per_run(problem, problem.observed_s) - t
+    sens = _per_run(problem, out["dtime_dforce_s_per_n"]) * problem.effective_mass_kg[:, None]
+    return band_time_loglik(resid, problem.mask, t, sens, sample["sigma_gate_s"],
+                            sample["band_noise_s_per_sqrt_s"], sample["run_decel_sd_mps2"])
+
+
+def interval_model(problem: IntervalProblem) -> None:
+    """The numpyro model of interval times (module docstring); contract names for the sites."""
+    sample: dict[str, Any] = {}
+    for name in problem.free:
+        sample[name] = numpyro.sample(name, problem.priors[name].to_numpyro())
+    for name in NOISE_SITES:
+        mean = config.INTERVAL_NOISE_PRIORS[name]
+        shape = config.INTERVAL_NOISE_PRIOR_SHAPES[name]
+        sample[name] = numpyro.sample(name, dist.Gamma(shape, shape / mean))
+    numpyro.factor("interval_loglik", run_log_likelihood(problem, sample).sum())
+
+
+# ----------------------------------------------------------------------------- fitting
+
+def fit_intervals_nuts(campaign: IntervalCampaign, spec: ModelSpec | str = "split_f0_f2", *,
+                       sampler: config.SamplerConfig = config.DEFAULT_SAMPLER, runs=None):
+    """MAP, Laplace whitening and NUTS (:mod:`~bayes_roadload.inference.nuts`) on the interval
+    model.  Returns a :class:`~bayes_roadload.inference.nuts.NutsFit`."""
+    from .nuts import find_map, run_nuts, unconstrained_posterior
+
+    problem = build_interval_problem(campaign, spec, runs=runs)
+    post = map_result = None
+    if sampler.precondition == "laplace":
+        post = unconstrained_posterior(problem, problem.initial)
+        map_result = find_map(problem, {}, posterior=post)
+    fit = run_nuts(problem, sampler=sampler, map_result=map_result, posterior=post)
+    if map_result is not None:
+        fit.timings["map_s"] = map_result.time_s
+    fit.truth = campaign.truth
+    return fit
+
+
+def _flat(x):
+    x = np.asarray(x)
+    return x.reshape((-1,) + x.shape[2:])
+
+
+def predictive_band_times(problem: IntervalProblem, samples: dict[str, np.ndarray], n_draws: int = 400,
+                          seed: int = 1) -> dict[str, np.ndarray]:
+    """Replicated band times [draw, R, K] (model time plus a draw of the noise, run effect
+    included) and the model times, for ``n_draws`` posterior draws spread over the chains.
+    ``problem`` may hold other runs than the fit (held-out runs: leave-one-pair-out)."""
+    flat = {k: _flat(v) for k, v in samples.items()}
+    total = next(iter(flat.values())).shape[0]
+    idx = np.linspace(0, total - 1, min(n_draws, total)).astype(int)
+
+    def one(s):
+        out = model_band_times(problem, s)
+        t = _per_run(problem, out["time_s"])
+        sens = _per_run(problem, out["dtime_dforce_s_per_n"]) * problem.effective_mass_kg[:, None]
+        cov = band_time_covariance(problem.mask, t, sens, s["sigma_gate_s"], s["band_noise_s_per_sqrt_s"],
+                                   s["run_decel_sd_mps2"])
+        return t, cov
+
+    draws = {k: jnp.asarray(v[idx]) for k, v in flat.items() if k in problem.free or k in NOISE_SITES}
+    t, cov = jax.jit(jax.vmap(one))(draws)
+    t, cov = np.asarray(t), np.asarray(cov)
+    chol = np.linalg.cholesky(cov)   # numpy, outside the sampler
+    z = np.random.default_rng(seed).standard_normal(t.shape)
+    rep = t + np.einsum("drij,drj->dri", chol, z)
+    mask = np.asarray(problem.mask)
+    return {"interval_s": np.where(mask, rep, np.nan), "model_interval_s": np.where(mask, t, np.nan)}
+
+
+def observed_band_times(problem: IntervalProblem) -> np.ndarray:
+    """[R, K] observed band times (NaN on padding)."""
+    return np.where(np.asarray(problem.mask), np.asarray(_per_run(problem, problem.observed_s)), np.nan)
+
+
+def log_likelihood_per_run(problem: IntervalProblem, samples: dict[str, np.ndarray]) -> np.ndarray:
+    chains = next(iter(samples.values())).shape[0]
+    flat = {k: jnp.asarray(_flat(v)) for k, v in samples.items() if k in problem.free or k in NOISE_SITES}
+    ll = np.asarray(jax.jit(jax.vmap(lambda s: run_log_likelihood(problem, s)))(flat))
+    return ll.reshape((chains, -1) + ll.shape[1:])
+
+
+def to_inference_data(fit) -> az.InferenceData:
+    """posterior (contract names, derived road load), log_likelihood per run, observed and
+    replicated band times."""
+    from .results import derived_quantities
+
+    p = fit.problem
+    posterior = dict(fit.samples)
+    posterior.update(derived_quantities(fit))
+    pred = predictive_band_times(p, fit.samples, n_draws=fit.sampler.posterior_predictive_draws)
+    chains = fit.sampler.num_chains
+    per_chain = pred["interval_s"].shape[0] // chains
+    rep = pred["interval_s"][:per_chain * chains].reshape((chains, per_chain) + pred["interval_s"].shape[1:])
+    runs = [str(r) for r in p.run_ids]
+    k = np.asarray(p.mask).shape[1]
+    return az.from_dict(
+        posterior=posterior,
+        posterior_predictive={"interval_s": rep},
+        log_likelihood={"interval_s": log_likelihood_per_run(p, fit.samples)},
+        observed_data={"interval_s": observed_band_times(p)},
+        sample_stats={"diverging": fit.stats["diverging"].astype(bool), "tree_depth": fit.stats["tree_depth"],
+                      "n_steps": fit.stats["num_steps"], "energy": fit.stats["energy"],
+                      "acceptance_rate": fit.stats["accept_prob"]},
+        coords={"run": runs, "band": np.arange(k)},
+        dims={"interval_s": ["run", "band"]},
+    )
+
+
+def summary_table(fit, idata) -> pd.DataFrame:
+    from .results import DERIVED, _rows
+
+    names = list(fit.problem.free) + list(NOISE_SITES) + list(DERIVED)
+    return _rows(idata, names)
+
+
+def run_predictions(fit, idata) -> pd.DataFrame:
+    """``runs_summary.csv`` of an interval fit: per run, observed total time, the posterior
+    predictive mean and 95 % interval of it, and whether it falls inside."""
+    p = fit.problem
+    obs = np.nansum(observed_band_times(p), axis=1)
+    rep = np.asarray(idata.posterior_predictive["interval_s"])
+    tot = np.nansum(rep, axis=-1).reshape(-1, p.n_runs)
+    lo, hi = np.percentile(tot, [2.5, 97.5], axis=0)
+    return pd.DataFrame({"run": list(p.run_ids), "window": list(p.windows),
+                         "direction": np.asarray(p.directions).astype(int), "observed_time_s": obs,
+                         "predicted_mean_s": tot.mean(axis=0), "predicted_q2.5": lo, "predicted_q97.5": hi,
+                         "inside_95": (obs >= lo) & (obs <= hi)})
+
+
+def write_interval_outputs(fit, out_dir, *, gates: config.Gates = config.DEFAULT_GATES,
+                           validity: pd.DataFrame | None = None) -> tuple[pd.DataFrame, dict]:
+    """posterior.nc, summary.csv, runs_summary.csv, diagnostics.json (and validity.csv) of an
+    interval fit; the diagnostics and gates are those of :func:`~bayes_roadload.inference.
+    results.diagnostics`."""
+    from .results import SUMMARY_COLUMNS, diagnostics
+
+    out = Path(out_dir)
+    idata = to_inference_data(fit)
+    summary = summary_table(fit, idata)
+    diag = diagnostics(fit, idata, summary, gates, runs=pd.DataFrame(columns=list(SUMMARY_COLUMNS)))
+    diag["kind"] = "intervals"
+    diag["runs_fitted"] = fit.problem.n_runs
+    out.mkdir(parents=True, exist_ok=True)
+    idata.to_netcdf(str(out / "posterior.nc"))
+    summary.to_csv(out / "summary.csv", index=False)
+    run_predictions(fit, idata).to_csv(out / "runs_summary.csv", index=False)
+    if validity is not None:
+        validity.to_csv(out / "validity.csv", index=False)
+    (out / "diagnostics.json").write_text(json.dumps(diag, indent=2) + "\n")
+    return summary, diag
