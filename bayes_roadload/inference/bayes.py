@@ -427,6 +427,31 @@ def effect_residuals(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp
     return speed_residuals(problem, shifted) + jnp.einsum("rnk,rk->rn", design, offsets)
 
 
+def run_sensitivities(problem: FitProblem, base: dict[str, Any], v0_mps: Any, batch: RunBatch) -> jnp.ndarray:
+    """[R, N, k] sensitivities ``d v_r / d(varying)`` of ``batch``'s speed traces at per-run
+    parameter values ``base`` ([R] each) and initial speeds ``v0_mps``, zero on padding (pure
+    JAX: :mod:`.laplace` compiles it with the batch as an argument)."""
+    def speeds(values):
+        return integrate_batch(problem.model, dict(problem.fixed, **values), batch, v0_mps)[0]
+
+    cols = []
+    for name in problem.varying:
+        tangent = {n: jnp.full(problem.n_runs, 1.0 if n == name else 0.0) for n in base}
+        cols.append(jax.jvp(speeds, (base,), (tangent,))[1])
+    return jnp.where(jnp.asarray(batch.mask)[..., None], jnp.stack(cols, axis=-1), 0.0)
+
+
+def run_effect_reference(problem: FitProblem, reference: dict[str, Any], offsets: Any = None) -> tuple[dict, np.ndarray]:
+    """Per-run parameter values ``reference + offsets[r]`` ([R] each) of the varying
+    coefficients and the offsets [R, k] (zero by default), for :func:`run_sensitivities`."""
+    r, k = problem.n_runs, len(problem.varying)
+    offsets = np.zeros((r, k)) if offsets is None else np.asarray(offsets, float).reshape(r, k)
+    base = {n: jnp.full(r, float(reference[n])) for n in problem.free}
+    for i, n in enumerate(problem.varying):
+        base[n] = base[n] + offsets[:, i]
+    return base, offsets
+
+
 def linearise_run_effects(problem: FitProblem, reference: dict[str, Any], offsets: Any = None) -> FitProblem:
     """The hierarchical ``problem`` with its run sensitivities ``J_r = d v_r / d(varying)``
     evaluated at each run's coefficients ``reference + offsets[r]`` (``reference``:
@@ -435,23 +460,9 @@ def linearise_run_effects(problem: FitProblem, reference: dict[str, Any], offset
     e.g. :func:`run_effect_means` at a first MAP).  A no-op for pooled fits."""
     if not problem.varying:
         return problem
-    r, k = problem.n_runs, len(problem.varying)
-    offsets = np.zeros((r, k)) if offsets is None else np.asarray(offsets, float).reshape(r, k)
-    base = {n: jnp.full(r, float(reference[n])) for n in problem.free}
-    for i, n in enumerate(problem.varying):
-        base[n] = base[n] + offsets[:, i]
-    v0 = jnp.asarray(reference["v0_mps"], float)
-
-    def speeds(values):
-        params = dict(problem.fixed, **values)
-        return integrate_batch(problem.model, params, problem.batch, v0)[0]
-
-    cols = []
-    for name in problem.varying:
-        tangent = {n: jnp.full(r, 1.0 if n == name else 0.0) for n in base}
-        cols.append(jax.jvp(speeds, (base,), (tangent,))[1])
-    jac = np.where(np.asarray(problem.batch.mask)[..., None], np.stack([np.asarray(c) for c in cols], axis=-1), 0.0)
-    return dataclasses.replace(problem, run_jacobian=jac, run_offsets=offsets)
+    base, offsets = run_effect_reference(problem, reference, offsets)
+    jac = run_sensitivities(problem, base, jnp.asarray(reference["v0_mps"], float), problem.batch)
+    return dataclasses.replace(problem, run_jacobian=np.asarray(jac), run_offsets=offsets)
 
 
 def _effects_posterior(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> tuple[jnp.ndarray, jnp.ndarray]:

@@ -219,18 +219,10 @@ def fit_intervals_nuts(campaign: IntervalCampaign, spec: ModelSpec | str = "spli
                        sampler: config.SamplerConfig = config.DEFAULT_SAMPLER, runs=None):
     """MAP, Laplace whitening and NUTS (:mod:`~bayes_roadload.inference.nuts`) on the interval
     model.  Returns a :class:`~bayes_roadload.inference.nuts.NutsFit`."""
-    from .nuts import find_map, run_nuts, unconstrained_posterior
+    from .nuts import sample_problem
 
     problem = build_interval_problem(campaign, spec, runs=runs)
-    post = map_result = None
-    if sampler.precondition == "laplace":
-        post = unconstrained_posterior(problem, problem.initial)
-        map_result = find_map(problem, {}, posterior=post)
-    fit = run_nuts(problem, sampler=sampler, map_result=map_result, posterior=post)
-    if map_result is not None:
-        fit.timings["map_s"] = map_result.time_s
-    fit.truth = campaign.truth
-    return fit
+    return sample_problem(problem, problem.initial, sampler, campaign.truth)
 
 
 def _flat(x):

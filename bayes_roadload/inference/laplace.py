@@ -39,9 +39,16 @@ from numpyro.infer.util import constrain_fn, potential_energy, unconstrain_fn
 
 from .. import config
 from ..data.campaign import Campaign
-from ..physics import integrate_batch
 from ..physics.roadload import road_load_summary
-from .bayes import FitProblem, _effects_posterior, build_problem, coastdown_model, population_sample
+from .bayes import (
+    FitProblem,
+    _effects_posterior,
+    build_problem,
+    coastdown_model,
+    population_sample,
+    run_effect_reference,
+    run_sensitivities,
+)
 from .nuts import MapResult, _site_scales, initial_values, newton_map
 from .spec import ModelSpec
 
@@ -119,13 +126,7 @@ class CompiledProblem:
             return constrain_fn(coastdown_model, (_with_data(tpl, data),), {}, unravel(y * scale))
 
         def linearise(base, v0, batch):
-            def speeds(values):
-                return integrate_batch(tpl.model, dict(tpl.fixed, **values), batch, v0)[0]
-            cols = []
-            for name in tpl.varying:
-                tangent = {n: jnp.full(tpl.n_runs, 1.0 if n == name else 0.0) for n in base}
-                cols.append(jax.jvp(speeds, (base,), (tangent,))[1])
-            return jnp.where(batch.mask[..., None], jnp.stack(cols, axis=-1), 0.0)
+            return run_sensitivities(tpl, base, v0, batch)
 
         def effect_means(sample, data):
             return _effects_posterior(_with_data(tpl, data), sample)[0]
@@ -147,11 +148,7 @@ class CompiledProblem:
         """:func:`~bayes_roadload.inference.bayes.linearise_run_effects`, compiled once."""
         if not problem.varying:
             return problem
-        r, k = problem.n_runs, len(problem.varying)
-        offsets = np.zeros((r, k)) if offsets is None else np.asarray(offsets, float).reshape(r, k)
-        base = {n: jnp.full(r, float(reference[n])) for n in problem.free}
-        for i, n in enumerate(problem.varying):
-            base[n] = base[n] + offsets[:, i]
+        base, offsets = run_effect_reference(problem, reference, offsets)
         jac = self._fns["linearise"](base, jnp.asarray(reference["v0_mps"], float), problem.batch)
         return dataclasses.replace(problem, run_jacobian=np.asarray(jac), run_offsets=offsets)
 

@@ -446,6 +446,14 @@ def fit_nuts(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling
              sampler: config.SamplerConfig = config.DEFAULT_SAMPLER) -> NutsFit:
     """Fit every run of a campaign jointly with NUTS (see the module docstring)."""
     problem, init = prepare_problem(build_problem(campaign, spec, pooling=pooling, noise=noise, robust=robust), campaign)
+    return sample_problem(problem, init, sampler, campaign.truth)
+
+
+def sample_problem(problem, init: dict[str, Any], sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
+                   truth: dict | None = None) -> NutsFit:
+    """MAP from the constrained starting values ``init`` (with the Laplace preconditioning),
+    then NUTS (:func:`run_nuts`) on any problem whose numpyro model :func:`numpyro_model_of`
+    knows; the fit's ``truth`` is ``truth``."""
     map_result = post = None
     if sampler.precondition == "laplace":
         post = unconstrained_posterior(problem, init)
@@ -453,5 +461,5 @@ def fit_nuts(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling
     fit = run_nuts(problem, sampler=sampler, map_result=map_result, posterior=post)
     if map_result is not None:
         fit.timings["map_s"] = map_result.time_s
-    fit.truth = campaign.truth
+    fit.truth = truth
     return fit
