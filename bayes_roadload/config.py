@@ -398,6 +398,10 @@ QUANTITY_UNITS: dict[str, str] = {**PARAMETER_UNITS, "F50_N": "N", "F50_tyre_N":
                                   "F2_N_per_kph2": "N/(km/h)^2"}
 """Units of the quantities a planning target may name (absolute targets are in these units)."""
 
+MAX_LOGGED_YAW_RAD = 1.5
+"""Largest |yaw| a simulated future run logs (the simulator's ``max_yaw_rad``; the data contract
+holds |yaw| <= pi/2)."""
+
 PLAN_CONFIDENCE = 0.95
 """Level of the interval whose half-width a planning target bounds."""
 

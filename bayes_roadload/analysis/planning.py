@@ -229,7 +229,9 @@ def simulate_future(population: Population, pairs: int, seed: int) -> Campaign:
     of the observed run whose conditions it takes, from that run's first speed, through the
     observed wind: along-track ``a cos(psi) - v`` and cross ``a sin(psi)`` from the logged
     airspeed ``a``, yaw ``psi`` and speed ``v`` of the observed run; the airspeed and yaw
-    channels are recomputed from the simulated speed (two fixed-point passes).  The campaign's
+    channels are recomputed from the simulated speed (three fixed-point passes; the yaw held
+    within +-``config.MAX_LOGGED_YAW_RAD``, the simulator's vane limit: a strong tail wind near
+    the stop speed can turn the relative air round).  The campaign's
     ``truth`` is the population draw's means; ``meta["pad_to_samples"]`` is the longest observed
     run, so that every future campaign of ``pairs`` pairs has one shape.
     """
@@ -273,8 +275,8 @@ def simulate_future(population: Population, pairs: int, seed: int) -> Campaign:
     for _ in range(3 if has_air else 1):
         if has_air:
             rel = v + along
-            batch = batch._replace(airspeed_mps=jnp.asarray(np.hypot(rel, cross)),
-                                   yaw_rad=jnp.asarray(np.arctan2(cross, rel)))
+            yaw = np.clip(np.arctan2(cross, rel), -config.MAX_LOGGED_YAW_RAD, config.MAX_LOGGED_YAW_RAD)
+            batch = batch._replace(airspeed_mps=jnp.asarray(np.hypot(rel, cross)), yaw_rad=jnp.asarray(yaw))
         v = np.asarray(integrate_batch(model, dict(fixed, **stacked), batch, jnp.asarray(v_obs[:, 0]))[0])
     t = np.asarray(batch.time_s)
     dt = np.diff(t, axis=1, prepend=t[:, :1])

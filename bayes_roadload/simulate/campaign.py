@@ -158,7 +158,7 @@ class SimulationSettings:
     system_noise_mode: Literal["band_limited", "per_run"] = "band_limited"
     system_noise_bandwidth_hz: float = config.THESIS_WIND["bandwidth_hz"]
     speed_decimals: int = 5
-    max_yaw_rad: float = 1.5
+    max_yaw_rad: float = config.MAX_LOGGED_YAW_RAD
     coefficients: Mapping[str, float] = field(default_factory=lambda: dict(config.THESIS_COEFFICIENTS))
     full_model_params: Mapping[str, float] = field(default_factory=lambda: dict(config.THESIS_FULL_MODEL))
     driveline_params: Mapping[str, float] = field(default_factory=lambda: dict(config.THESIS_DRIVELINE))
