@@ -437,6 +437,9 @@ GTR_REFERENCE_SPEEDS_KPH = (20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0, 100.
 MIN_REGULATION_PAIRS = 3
 """GTR 15 needs at least three pairs."""
 
+REGULATION_MAX_PAIRS = 200
+"""Largest number of pairs searched for the pairs a failing criterion still needs."""
+
 # Sim-to-real diagnosis (bayes_roadload.analysis.diagnose, issue 6)
 @dataclass(frozen=True)
 class DiagnosisConfig:

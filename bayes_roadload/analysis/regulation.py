@@ -28,8 +28,7 @@ from scipy import stats
 from .. import config
 from ..data.campaign import Campaign
 
-MAX_PAIRS = 200
-"""Largest number of pairs searched for ``extra_pairs``."""
+MAX_PAIRS = config.REGULATION_MAX_PAIRS
 
 
 def _band_time(t: np.ndarray, v: np.ndarray, high: float, low: float) -> float:
