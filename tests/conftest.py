@@ -23,6 +23,20 @@ def clean_case():
                                system_noise=False)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def keep_compiled_code():
+    """The test process runs hundreds of small fits whose compiled pieces later tests reuse
+    (e.g. the planning refits of one campaign shape): clearing JAX's caches once the process
+    passes 4 GB (the batch door's default for long studies) made later tests recompile.  The
+    suite stays well inside the CI machine's memory without it."""
+    from bayes_roadload.analysis import batch
+
+    before = batch.CLEAR_JAX_CACHES_ABOVE_MB
+    batch.CLEAR_JAX_CACHES_ABOVE_MB = 12288.0
+    yield
+    batch.CLEAR_JAX_CACHES_ABOVE_MB = before
+
+
 @pytest.fixture(scope="session")
 def small_campaign():
     with warnings.catch_warnings():

@@ -88,16 +88,16 @@ def test_uniform_ranks_pass_and_shifted_ranks_fail():
 
 @pytest.fixture(scope="module")
 def fast_subset():
-    """2 calibrated campaigns and 1 of the negative control (1 pair, 2 x (150 + 150) draws)."""
+    """1 calibrated campaign and 1 of the negative control (1 pair, 2 x (150 + 150) draws)."""
     sampler = dataclasses.replace(SBC_SAMPLER, num_warmup=150, num_samples=150)
-    jobs = sbc_jobs(2, seed0=100, pairs=1, sampler=sampler) + sbc_jobs(1, seed0=200, pairs=1, sampler=sampler,
+    jobs = sbc_jobs(1, seed0=100, pairs=1, sampler=sampler) + sbc_jobs(1, seed0=200, pairs=1, sampler=sampler,
                                                                        control_factor=1.05)
     return run_batch(jobs)
 
 
 def test_fast_subset_calibrated_and_control(fast_subset):
-    """Loose binomial bounds on the study's own fits.  Calibrated: of 2 x 6 = 12 central 90 %
-    intervals at least 8 cover the truth (P(X < 8) = 0.004 for Binomial(12, 0.9); intervals of
+    """Loose binomial bounds on the study's own fits.  Calibrated: of the 6 central 90 %
+    intervals at least 4 cover the truth (P(X < 4) = 0.016 for Binomial(6, 0.9); intervals of
     one campaign are correlated, which widens that, hence the loose bound).  Control: a 5 %
     effective-mass error moves C_D0 by ~0.02, 6 posterior sd on one pair, so its 95 % interval
     misses (it must fail the test the calibrated arm passes)."""
@@ -105,7 +105,7 @@ def test_fast_subset_calibrated_and_control(fast_subset):
     assert rec["error"].isna().all(), rec["error"].tolist()
     cal, bad = rec[rec["arm"] == "calibrated"], rec[rec["arm"] == "wrong_mass"]
     covered = sum(int(cal[f"{p}_in90"].astype(bool).sum()) for p in SBC_PARAMETERS)
-    assert covered >= 8, covered
+    assert covered >= 4, covered
     assert not bad["CD0_in95"].astype(bool).any()
     assert (bad["effective_mass_factor"] == 1.05).all()
     # the shift is in the direction the physics says: a heavier stated vehicle needs more drag
