@@ -177,11 +177,11 @@ def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys):
                                                   "campaign": str(tmp_path / "campaign")}))
     out = tmp_path / "plan"
     code = main(["plan", str(fit_dir), "--target", "CD0=1%", "--target", "F50_N=0.5%", "--confidence", "0.95",
-                 "--pairs", "2", "--simulations", "2", "--out", str(out)])
+                 "--pairs", "4", "--simulations", "2", "--out", str(out)])
     assert code == 0
     plan = pd.read_csv(out / "plan.csv")
     assert list(plan.columns[:4]) == ["quantity", "n_pairs", "median_half_width", "assurance"]
-    assert set(plan["quantity"]) == {"CD0", "F50_N"} and set(plan["n_pairs"]) == {2}
+    assert set(plan["quantity"]) == {"CD0", "F50_N"} and set(plan["n_pairs"]) == {4}
     assert plan["assurance"].between(0, 1).all()
     assert (out / "plan.png").stat().st_size > 0
     assert {"quantity", "n_pairs", "reached"} <= set(pd.read_csv(out / "recommendation.csv").columns)

@@ -121,7 +121,7 @@ def test_plan_through_the_batch_door(conditions):
     spreads is refitted hierarchically.)"""
     pop = _population(conditions, sigma=0.05, q=0.002)
     assert _population(conditions, tau={"AD": np.ones(50)}).pooling == "hierarchical"
-    jobs = plan_jobs(pop, pairs=(1, 2), simulations=2, seed=4)
+    jobs = plan_jobs(pop, pairs=(1, 4), simulations=2, seed=4)
     assert {j.pooling for j in jobs} == {"pooled"} and {j.method for j in jobs} == {"laplace"}
     records = run_batch(jobs)
     assert records["error"].isna().all(), records["error"].dropna().tolist()
@@ -130,5 +130,5 @@ def test_plan_through_the_batch_door(conditions):
     assert (records["gate_pass"].astype(bool) == expected).all() and expected.mean() >= 0.5
     table = plan_table(records, [Target.parse("AD=1%"), Target.parse("F50_N=0.5%")]).set_index(["quantity", "n_pairs"])
     for q in ("AD", "F50_N"):
-        assert table.loc[(q, 2), "median_half_width"] < table.loc[(q, 1), "median_half_width"]
+        assert table.loc[(q, 4), "median_half_width"] < table.loc[(q, 1), "median_half_width"]
     assert records.groupby("n_pairs")["time_compile_s"].min().max() < 0.5 * records["time_compile_s"].max()

@@ -88,13 +88,16 @@ def test_uniform_ranks_pass_and_shifted_ranks_fail():
 
 @pytest.fixture(scope="module")
 def fast_subset():
-    """1 calibrated campaign and 1 of the negative control (1 pair, 2 x (150 + 150) draws)."""
+    """1 calibrated campaign and 1 of the negative control (1 pair, 2 x (150 + 150) draws).
+    Slow (~60 s, three NUTS compilations): the default suite keeps the SBC's prior draws and
+    rank statistics; the study itself is benchmarks/sbc_study.py (docs/validation.md)."""
     sampler = dataclasses.replace(SBC_SAMPLER, num_warmup=150, num_samples=150)
     jobs = sbc_jobs(1, seed0=100, pairs=1, sampler=sampler) + sbc_jobs(1, seed0=200, pairs=1, sampler=sampler,
                                                                        control_factor=1.05)
     return run_batch(jobs)
 
 
+@pytest.mark.slow
 def test_fast_subset_calibrated_and_control(fast_subset):
     """Loose binomial bounds on the study's own fits.  Calibrated: of the 6 central 90 %
     intervals at least 4 cover the truth (P(X < 4) = 0.016 for Binomial(6, 0.9); intervals of
