@@ -284,12 +284,13 @@ def _cmd_import_vbox(args) -> int:
     import json
 
     from .data import load_campaign, save_campaign
+    from .data.campaign import read_vehicle_file
     from .data.vbox import import_vbox
 
     if args.vehicle is None:
         raise ValueError("the VBOX export does not record the vehicle: pass --vehicle vehicle.toml "
                          "([vehicle] mass_kg, effective_mass_kg, frontal_area_m2; docs/data-format.md)")
-    vehicle, _, tunnel, meta = _read_vehicle_file(args.vehicle)
+    vehicle, _, tunnel, meta = read_vehicle_file(args.vehicle)
     gates = args.gates
     if gates is not None and len(gates) != len(args.files):
         raise ValueError(f"{len(args.files)} files but {len(gates)} --gates entries: give one per file, "
@@ -303,21 +304,6 @@ def _cmd_import_vbox(args) -> int:
     print(f"{len(campaign.run_ids)} runs, {len(campaign.intervals)} bands, {len(campaign.pairs())} pairs -> {out} "
           "(intervals.csv, vehicle.toml, import_report.json)")
     return 0
-
-
-def _read_vehicle_file(path):
-    import tomllib
-
-    from .data.campaign import CampaignError, _vehicle_from_toml
-
-    p = Path(path)
-    if not p.exists():
-        raise CampaignError(f"{p}: missing")
-    try:
-        doc = tomllib.loads(p.read_text())
-    except tomllib.TOMLDecodeError as e:
-        raise CampaignError(f"{p}: not valid TOML ({e})") from e
-    return _vehicle_from_toml(doc, str(p))
 
 
 def _cmd_sensitivity(args) -> int:

@@ -348,7 +348,13 @@ def _vehicle_from_toml(doc: dict, where: str) -> tuple[Vehicle, Anemometer, dict
 
 
 def _read_vehicle(root: Path):
-    vfile = root / "vehicle.toml"
+    return read_vehicle_file(root / "vehicle.toml")
+
+
+def read_vehicle_file(path) -> tuple:
+    """``vehicle.toml`` (or any file of its format) as (vehicle, anemometer, tunnel, meta),
+    validated; refused with the file's name when missing or not TOML."""
+    vfile = Path(path)
     if not vfile.exists():
         raise CampaignError(f"{vfile}: missing")
     try:

@@ -49,7 +49,7 @@ from .bayes import (
     run_effect_reference,
     run_sensitivities,
 )
-from .nuts import MapResult, _site_scales, initial_values, newton_map
+from .nuts import MapResult, initial_values, newton_map, site_layout
 from .spec import ModelSpec
 
 DEFAULT_LAPLACE_DRAWS = config.LAPLACE_DRAWS
@@ -101,13 +101,7 @@ class CompiledProblem:
         if problem.varying and problem.run_jacobian is None:  # placeholders of the right shape
             r, n, k = problem.n_runs, np.shape(problem.batch.time_s)[-1], len(problem.varying)
             problem = dataclasses.replace(problem, run_jacobian=np.zeros((r, n, k)), run_offsets=np.zeros((r, k)))
-        z0 = unconstrain_fn(coastdown_model, (problem,), {}, init)
-        _, unravel = ravel_pytree(z0)
-        scale = np.asarray(ravel_pytree(_site_scales(problem, z0))[0])
-        r = problem.n_runs
-        run_of = {k: (np.arange(r) if np.shape(v) == (r,) and r > 1 else np.full(np.size(v), -1))
-                  for k, v in z0.items()}
-        run_index = np.asarray(ravel_pytree({k: jnp.asarray(v) for k, v in run_of.items()})[0]).astype(int)
+        unravel, scale, run_index = site_layout(problem, unconstrain_fn(coastdown_model, (problem,), {}, init))
         self = cls(template=problem, unravel=unravel, scale=scale, run_index=run_index)
         self._compile()
         return self

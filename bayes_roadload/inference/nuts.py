@@ -246,18 +246,25 @@ def numpyro_model_of(problem) -> Any:
     return getattr(problem, "numpyro_model", coastdown_model)
 
 
-def unconstrained_posterior(problem: FitProblem, init: dict[str, Any]) -> Posterior:
-    """numpyro's potential of ``problem``, starting at the constrained values ``init``."""
-    info, potential_fn, postprocess_fn, _ = initialize_model(
-        jax.random.PRNGKey(0), numpyro_model_of(problem), model_args=(problem,),
-        init_strategy=init_to_value(values=init), validate_grad=False)
-    z0 = info.z
+def site_layout(problem: FitProblem, z0: dict[str, Any]) -> tuple[Any, np.ndarray, np.ndarray]:
+    """Of the unconstrained sites ``z0``: the flat vector's ``unravel``, its O(1) ``scale``
+    (:func:`_site_scales`) and ``run_index`` (the run of each coordinate, -1 for shared ones)."""
     _, unravel = ravel_pytree(z0)
     scale = np.asarray(ravel_pytree(_site_scales(problem, z0))[0])
     r = problem.n_runs
     run_of = {k: (np.arange(r) if np.shape(v) == (r,) and r > 1 else np.full(np.size(v), -1))
               for k, v in z0.items()}
     run_index = np.asarray(ravel_pytree({k: jnp.asarray(v) for k, v in run_of.items()})[0]).astype(int)
+    return unravel, scale, run_index
+
+
+def unconstrained_posterior(problem: FitProblem, init: dict[str, Any]) -> Posterior:
+    """numpyro's potential of ``problem``, starting at the constrained values ``init``."""
+    info, potential_fn, postprocess_fn, _ = initialize_model(
+        jax.random.PRNGKey(0), numpyro_model_of(problem), model_args=(problem,),
+        init_strategy=init_to_value(values=init), validate_grad=False)
+    z0 = info.z
+    unravel, scale, run_index = site_layout(problem, z0)
     return Posterior(problem=problem, z0=z0, potential_fn=potential_fn, postprocess_fn=postprocess_fn,
                      unravel=unravel, scale=scale, run_index=run_index)
 
