@@ -25,10 +25,12 @@ def _cmd_simulate(args) -> int:
     from .data import save_campaign
     from .simulate import simulate_campaign
 
-    campaign = simulate_campaign(args.case, pairs=args.pairs, seed=args.seed, driveline=args.driveline)
+    campaign = simulate_campaign(args.case, pairs=args.pairs, seed=args.seed, driveline=args.driveline,
+                                 masses_kg=args.masses)
     out = save_campaign(campaign, args.out, fmt=args.format)
     n = campaign.runs["run"].nunique()
-    print(f"case {args.case}: {n} runs ({args.pairs} pairs), {len(campaign.runs)} samples -> {out}")
+    masses = "" if args.masses is None else f" at {', '.join(f'{m:g}' for m in campaign.meta['masses_kg'])} kg"
+    print(f"case {args.case}: {n} runs ({args.pairs} pairs{masses}), {len(campaign.runs)} samples -> {out}")
     return 0
 
 
@@ -375,6 +377,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--pairs", type=int, default=1, help="number of opposite-direction pairs")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--driveline", action="store_true", help="also log a driveline force channel")
+    s.add_argument("--masses", type=float, nargs="+", default=None, metavar="KG",
+                   help="test masses (kg), assigned to the pairs in turn (pair 1 at the first, pair 2 at the "
+                        "second, ...); writes a mass_kg column (M_e shifts by the same amount)")
     s.add_argument("--format", choices=("csv", "parquet"), default="csv")
     s.add_argument("--out", required=True)
     s.set_defaults(func=_cmd_simulate)
