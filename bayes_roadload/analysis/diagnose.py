@@ -279,11 +279,8 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
                 if kin is not None:
                     # one factor for both: the dynamics' and the kinematics' gains (each a
                     # Gaussian in the factor) add, less their disagreement at the joint optimum
-                    dyn = ident.get("airspeed_factor")
-                    conflict = 0.0
-                    if dyn is not None and math.isfinite(dyn["sd"]):
-                        conflict = (dyn["estimate"] - kin["factor"]) ** 2 / (2.0 * (dyn["sd"] ** 2 + kin["se"] ** 2))
-                    kin = dict(kin, conflict=float(conflict))
+                    conflict = fx.kinematic_conflict(ident.get("airspeed_factor"), kin)
+                    kin = dict(kin, conflict=conflict)
                     entry["kinematics"] = kin
                     delta += kin["loglik_gain"] - conflict
                     # the paired runs identify the scale where the dynamics cannot

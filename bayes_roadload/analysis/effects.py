@@ -540,3 +540,14 @@ def airspeed_kinematics(problem, campaign, stated_factor: float) -> dict[str, fl
     se = sd / math.sqrt(k)
     z = (float(ratios.mean()) - stated_factor) / se
     return {"factor": float(ratios.mean()), "se": se, "n_pairs": k, "z": z, "loglik_gain": 0.5 * z * z}
+
+
+def kinematic_conflict(dynamics: Mapping[str, float] | None, kinematics: Mapping[str, float]) -> float:
+    """The log likelihood lost when one airspeed factor must serve both the dynamics (estimate
+    and sd from :func:`identifiability`) and the paired-run kinematics (factor and se of
+    :func:`airspeed_kinematics`): each gain is a Gaussian in the factor, so the joint maximum
+    is the sum of the two maxima less (f_dyn - f_kin)^2 / (2 (sd_dyn^2 + se_kin^2))."""
+    if dynamics is None or not math.isfinite(dynamics.get("sd", math.nan)):
+        return 0.0
+    var = dynamics["sd"] ** 2 + kinematics["se"] ** 2
+    return float((dynamics["estimate"] - kinematics["factor"]) ** 2 / (2.0 * var)) if var > 0 else 0.0
