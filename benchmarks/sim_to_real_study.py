@@ -86,6 +86,8 @@ def summarise(records: pd.DataFrame) -> dict:
         "not_distinguishable": int((effects["outcome"] == "indistinct").sum()),
         "nothing_claimed": int((effects["outcome"] == "none").sum()),
         "wrong_claim": int((effects["outcome"] == "wrong").sum()),
+        "extra_claims": int(sum(1 for _, r in effects.iterrows()
+                                if set(filter(None, str(r["supported"]).split(","))) - {r["true_effect"]})),
         "null_campaigns": int(len(nulls)), "null_false_claims": int((nulls["top"] != "none").sum()),
         "median_trend_shrink_pct_when_correct": float(shrink.median()) if len(shrink) else None,
         "median_time_per_campaign_s": float(ok["time_total_s"].median()) if len(ok) else None,

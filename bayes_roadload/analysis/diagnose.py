@@ -139,7 +139,10 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
         return []
     chosen = [best["effect"]]
     best["supported"] = True
-    dynamic = [] if best.get("kinematics") else [best["effect"]]
+    # the claimed effect's parameters are refitted in the dynamics too (an airspeed scale
+    # claimed from the kinematics included: what it leaves in the drag must not be credited
+    # to the next candidate)
+    dynamic = [best["effect"]]
     current = fx.fit_effects(lin, tuple(dynamic), library).loglik_gain
     for c in qualifying[1:]:
         if len(chosen) >= settings.max_refit_effects:
