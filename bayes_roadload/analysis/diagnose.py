@@ -148,7 +148,25 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
         if len(chosen) >= settings.max_refit_effects:
             break
         if c.get("kinematics"):
-            gain_ok = c["delta_elpd"] >= settings.support_delta_elpd
+            # joint again, given the effects in: the dynamics' gain and factor with them
+            # refitted, the kinematics with a claimed vane factor
+            trial = tuple(dynamic + [c["effect"]])
+            sol = fx.fit_effects(lin, trial, library)
+            names = [lin.columns[j] for j in sol.shared]
+            dyn = None
+            if "airspeed_factor" in names:
+                j = names.index("airspeed_factor")
+                dyn = {"estimate": float(lin.values.get("airspeed_factor", 1.0) + sol.beta[j]),
+                       "sd": float(math.sqrt(max(sol.cov_shared[j, j], 0.0)))}
+            kin = c.get("kinematics_given_yaw") if "yaw_calibration" in chosen and c.get("kinematics_given_yaw") \
+                else c["kinematics"]
+            k = fx.n_added_parameters(lin, (c["effect"],), library)
+            given = sol.loglik_gain - current - k + kin["loglik_gain"] - fx.kinematic_conflict(dyn, kin)
+            c["delta_elpd_given_supported"] = float(given)
+            gain_ok = given >= settings.support_delta_elpd
+            if gain_ok:
+                dynamic.append(c["effect"])
+                current = sol.loglik_gain
         else:
             trial = tuple(dynamic + [c["effect"]])
             gain = fx.fit_effects(lin, trial, library).loglik_gain
@@ -300,6 +318,13 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
             entry["shrink_pct"] = shrink(before, after, lin.n_runs)
         entry["needs"] = e.needs
         entries.append(entry)
+    air = next((c for c in entries if c.get("kinematics")), None)
+    yaw = next((c for c in entries if c["effect"] == "yaw_calibration" and "yaw_factor" in c["estimates"]), None)
+    if air is not None and yaw is not None:
+        # the paired-run ratios use the vane (a cos psi): as they come out with the vane's factor estimated
+        air["kinematics_given_yaw"] = fx.airspeed_kinematics(problem, campaign,
+                                                             float(lin.values.get("airspeed_factor", 1.0)),
+                                                             yaw_factor=yaw["estimates"]["yaw_factor"])
     chosen = select_effects(lin, entries, library, settings)
     for entry in entries:
         entry["statement"] = _statement(library[entry["effect"]], entry, settings)

@@ -518,14 +518,16 @@ def coefficient_spread(lin: Linearisation, sol: Solution | None, library: Mappin
     return out
 
 
-def airspeed_kinematics(problem, campaign, stated_factor: float) -> dict[str, float] | None:
+def airspeed_kinematics(problem, campaign, stated_factor: float,
+                        yaw_factor: float | None = None) -> dict[str, float] | None:
     """The airspeed scale from the paired runs' kinematics (thesis 4.7.3): each
     opposite-direction pair's ratio of mean ground speed to mean along-track airspeed reading
     (:func:`~bayes_roadload.inference.bayes.airspeed_pair_ratios`) estimates the true factor.
     Returns the mean ratio, its standard error (the pairs' scatter, at least
     ``config.NOISE_PRIORS["airspeed_calibration_sd"]`` per pair), the z-score against the
     factor the model uses and the log likelihood gain of the ratios with the factor free
-    (z^2 / 2); None without pairs or measured air."""
+    (z^2 / 2); None without pairs or measured air.  ``yaw_factor`` overrides the model's vane
+    factor (the along-track airspeed is a cos(psi))."""
     from ..inference.bayes import airspeed_pair_ratios, calibration_pairs
 
     if not campaign.has_anemometer:
@@ -533,7 +535,7 @@ def airspeed_kinematics(problem, campaign, stated_factor: float) -> dict[str, fl
     pairs = calibration_pairs(campaign, problem.run_ids)
     if not pairs:
         return None
-    yaw_factor = float(problem.fixed.get("yaw_factor", 1.0))
+    yaw_factor = float(problem.fixed.get("yaw_factor", 1.0)) if yaw_factor is None else float(yaw_factor)
     ratios = np.asarray(airspeed_pair_ratios(problem.batch, pairs, yaw_factor))
     k = ratios.size
     sd = max(float(np.std(ratios, ddof=1)) if k > 1 else 0.0, config.NOISE_PRIORS["airspeed_calibration_sd"])
