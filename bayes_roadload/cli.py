@@ -1,6 +1,6 @@
 """The ``bayes-roadload`` command line.
 
-Subcommands: ``demo``, ``simulate``, ``fit``, ``import-vbox``, ``plan``, ``diagnose``, ``sensitivity``,
+Subcommands: ``demo``, ``simulate``, ``fit``, ``fit-driveline``, ``import-vbox``, ``plan``, ``diagnose``, ``sensitivity``,
 ``cases``, ``models``.
 Every command that writes a directory validates its input first and writes nothing when the
 input is refused; errors are printed as one line naming the file, column and row.  Exit codes:
@@ -115,6 +115,28 @@ def _cmd_fit(args) -> int:
     summary, diag, table, _ = _fit_nuts(campaign, args, out, args.campaign)
     print(table)
     print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, diagnostics.json, fit.json")
+    return 0 if diag["pass"] else EXIT_GATES_FAILED
+
+
+def _cmd_fit_driveline(args) -> int:
+    from . import config
+    from .data import load_campaign
+    from .inference.driveline import fit_driveline_nuts, write_driveline_outputs
+    from .inference.results import format_posterior_table
+
+    campaign = load_campaign(args.campaign)
+    if getattr(campaign, "kind", "traces") != "traces":
+        raise ValueError(f"{args.campaign}: fit-driveline needs a speed-trace campaign (runs.csv) that logs "
+                         "driveline_force_n or the two wheel torques")
+    out = Path(args.out)
+    fit = fit_driveline_nuts(campaign, args.model, sampler=_sampler(args))
+    summary, diag = write_driveline_outputs(fit, out)
+    truth = dict(campaign.truth or {})
+    if all(isinstance(truth.get(k), (int, float)) for k in ("At", "Bt", "Ct")):
+        v = config.SPEED_50MPH_MPS
+        truth["F50_driveline_N"] = truth["At"] + truth["Bt"] * v + truth["Ct"] * v**2
+    print(format_posterior_table(summary, diag, truth or None))
+    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, diagnostics.json")
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
@@ -402,6 +424,15 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--out", required=True)
     _add_nuts_options(f, seed=0)
     f.set_defaults(func=_cmd_fit)
+
+    fd = sub.add_parser("fit-driveline", help="the driveline off-load loss At + Bt v + Ct v^2 from the logged "
+                                              "driveline_force_n (or wheel torques) alone, thesis eq. 5.12")
+    fd.add_argument("campaign")
+    fd.add_argument("--model", default="four_term_driveline",
+                    help="model variant whose At, Bt, Ct priors are used (default four_term_driveline)")
+    fd.add_argument("--out", required=True)
+    _add_nuts_options(fd, seed=0)
+    fd.set_defaults(func=_cmd_fit_driveline)
 
     pl = sub.add_parser("plan", help="how many pairs until each quantity is known to a target: posterior-predictive "
                                      "campaigns refitted by MAP + Laplace")

@@ -228,3 +228,53 @@ def test_import_vbox_and_fit_an_interval_campaign(tmp_path, capsys):
     assert abs(summary.loc["F0_N", "mean"] - f0) < 4 * summary.loc["F0_N", "sd"]
     assert abs(summary.loc["F2_N_per_kph2", "mean"] - c / 3.6**2) < 4 * summary.loc["F2_N_per_kph2", "sd"]
     assert len(pd.read_csv(tmp_path / "fit" / "runs_summary.csv")) == 10
+
+
+def _driveline_campaign(path, *, with_channel=True, seed=0):
+    """Two runs of 60 samples whose logged driveline force is 21 + 2.09 v - 0.02 v^2 N plus
+    1 N noise (thesis table 8.12 coefficients)."""
+    rng = np.random.default_rng(seed)
+    path.mkdir(parents=True)
+    frames = []
+    for run, d in ((1, 1), (2, -1)):
+        t = np.arange(60) * 0.5
+        v = 30.0 * np.exp(-t / 40.0)
+        df = pd.DataFrame({"run": run, "time_s": t, "speed_mps": v, "direction": d})
+        if with_channel:
+            df["driveline_force_n"] = 21.0 + 2.09 * v - 0.02 * v**2 + rng.normal(0.0, 1.0, v.size)
+        frames.append(df)
+    pd.concat(frames).to_csv(path / "runs.csv", index=False)
+    (path / "vehicle.toml").write_text("[vehicle]\nmass_kg = 1100.0\neffective_mass_kg = 1130.0\n"
+                                       "frontal_area_m2 = 1.85\n")
+    (path / "truth.json").write_text(json.dumps({"At": 21.0, "Bt": 2.09, "Ct": -0.02}))
+    return path
+
+
+def test_fit_driveline_writes_summary_and_gates(tmp_path, capsys):
+    camp = _driveline_campaign(tmp_path / "dl")
+    out = tmp_path / "fit"
+    code = main(["fit-driveline", str(camp), "--warmup", "200", "--draws", "300", "--no-progress",
+                 "--seed", "2", "--out", str(out)])
+    diag = json.loads((out / "diagnostics.json").read_text())
+    assert code == (0 if diag["pass"] else EXIT_GATES_FAILED)
+    assert diag["kind"] == "driveline" and set(diag["gates"]) == {"divergences", "r_hat", "ess_bulk", "ess_tail",
+                                                                 "bfmi", "tree_depth"}
+    assert diag["samples_fitted"] == 120
+    s = pd.read_csv(out / "summary.csv")
+    assert list(s.columns) == SUMMARY_COLUMNS
+    s = s.set_index("parameter")
+    assert list(s.index) == ["At", "Bt", "Ct", "sigma_driveline_n", "F50_driveline_N"]
+    # 120 samples with 1 N noise: the posterior sd of At is ~0.9 N; the truth lies within 4 sd
+    for name, true in (("At", 21.0), ("Bt", 2.09), ("Ct", -0.02)):
+        assert abs(s.loc[name, "mean"] - true) < 4 * s.loc[name, "sd"], name
+    f50 = 21.0 + 2.09 * config.SPEED_50MPH_MPS - 0.02 * config.SPEED_50MPH_MPS**2
+    assert s.loc["F50_driveline_N", "q2.5"] < f50 < s.loc["F50_driveline_N", "q97.5"]
+    assert (out / "posterior.nc").exists()
+    assert "At" in capsys.readouterr().out
+
+
+def test_fit_driveline_refuses_a_campaign_without_the_channel(tmp_path, capsys):
+    camp = _driveline_campaign(tmp_path / "nodl", with_channel=False)
+    out = tmp_path / "o"
+    assert main(["fit-driveline", str(camp), "--out", str(out)]) == EXIT_REFUSED
+    assert "driveline_force_n" in capsys.readouterr().err and not out.exists()

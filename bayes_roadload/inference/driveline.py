@@ -82,14 +82,28 @@ def driveline_model(problem: DrivelineProblem) -> None:
 def fit_driveline_nuts(campaign, spec: ModelSpec | str = "four_term_driveline", *,
                        sampler: config.SamplerConfig = config.DEFAULT_SAMPLER):
     """A_t, B_t, C_t from the driveline channel alone (module docstring); a
-    :class:`~bayes_roadload.inference.nuts.NutsFit`."""
-    from .nuts import find_map, run_nuts, unconstrained_posterior
+    :class:`~bayes_roadload.inference.nuts.NutsFit` (MAP, Laplace whitening, NUTS:
+    :func:`~bayes_roadload.inference.nuts.sample_problem`)."""
+    from .nuts import sample_problem
 
     problem = build_driveline_problem(campaign, spec)
-    post = map_result = None
-    if sampler.precondition == "laplace":
-        post = unconstrained_posterior(problem, problem.initial)
-        map_result = find_map(problem, {}, posterior=post)
-    fit = run_nuts(problem, sampler=sampler, map_result=map_result, posterior=post)
-    fit.truth = campaign.truth
-    return fit
+    return sample_problem(problem, problem.initial, sampler, campaign.truth)
+
+
+def driveline_derived(samples: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The driveline loss at 50 mph, ``F50_driveline_N`` = A_t + B_t v + C_t v^2 per draw."""
+    v = config.SPEED_50MPH_MPS
+    return {"F50_driveline_N": np.asarray(samples["At"]) + np.asarray(samples["Bt"]) * v
+            + np.asarray(samples["Ct"]) * v**2}
+
+
+def write_driveline_outputs(fit, out_dir, *, gates: config.Gates = config.DEFAULT_GATES):
+    """``posterior.nc``, ``summary.csv`` (At, Bt, Ct, sigma_driveline_n, F50_driveline_N) and
+    ``diagnostics.json`` (the gates of the coastdown fits) of :func:`fit_driveline_nuts`."""
+    from .results import write_channel_outputs
+
+    p = fit.problem
+    return write_channel_outputs(
+        fit, out_dir, list(p.free) + ["sigma_driveline_n"], kind="driveline", derived=driveline_derived(fit.samples),
+        observed={"driveline_force_n": np.asarray(p.force_n)}, gates=gates,
+        extra={"samples_fitted": int(np.size(p.force_n)), "runs": [str(r) for r in p.run_ids]})
