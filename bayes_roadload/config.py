@@ -127,6 +127,19 @@ THESIS_FULL_MODEL = {
 }
 THESIS_DRIVELINE = {"At": 21.0, "Bt": 2.09, "Ct": -0.02}
 THESIS_UNDRIVEN = {"Au": 3.24, "Bu": 0.232}
+THESIS_UNDRIVEN_PER_WHEEL = {
+    "nearside": {"Aw": (1.76, 1.58, 1.55), "Bw": (0.117, 0.123, 0.125), "mean": (1.66, 0.121)},
+    "offside": {"Aw": (1.57, 1.58, 1.58), "Bw": (0.109, 0.115, 0.121), "mean": (1.58, 0.114)},
+}
+"""Thesis table 7.10, undriven (rear) wheel spin-downs, three tests per wheel: A (N) and B (N s/m) of
+each test and the table's means (as printed: the nearside A tests as transcribed average 1.63, not
+1.66; the totals use the printed means).  Vehicle totals ``THESIS_UNDRIVEN``: A_u = 3.24 N (std
+0.155, 4.8 %), B_u = 0.232 N s/m (std 0.012, 5.1 %; the printed means add up to 0.235)."""
+THESIS_UNDRIVEN_SD = {"Au": 0.155, "Bu": 0.012}
+"""Table 7.10's "total std. dev." of A_u and B_u."""
+THESIS_WHEEL_INERTIA_KGM2 = 0.59
+"""Polar moment of inertia of one wheel of the thesis car *(reconstructed: the transcript gives
+none; M_e - M = 30 kg over four wheels at R_r = 0.28 m, drivetrain inertia neglected)*."""
 THESIS_TUNNEL_TABLE = {
     "yaw_deg": [-25.0, -20.0, -15.0, -10.0, -5.0, 0.0, 5.0, 10.0, 15.0, 20.0, 25.0],
     "cd": [0.491, 0.468, 0.455, 0.422, 0.412, 0.401, 0.409, 0.426, 0.456, 0.481, 0.486],
@@ -331,6 +344,18 @@ scattered by 0.0063 (table 4.1), ~0.011 per pair."""
 TAU_PRIOR_SCALES = {"AD": 1.0e-3, "BD": 5.0e-5, "CD0": 0.02}
 """Prior means of the run-to-run spreads tau of the hierarchical model, Gamma(2) priors (10 %,
 25 %, 5 % of typical values: the thesis' track spreads were 4.3 %, 23.1 %, 4.3 %)."""
+
+
+# Undriven-wheel spin-down (bayes_roadload.data.spindown, inference.spindown)
+WHEEL_INERTIA_RANGE_KGM2 = (0.01, 50.0)
+"""Plausible polar moments of inertia of one road wheel (kg m^2): a car wheel with tyre and disc
+is ~0.5-1.5, a truck wheel ~10-20; outside, the unit is likely wrong (kg cm^2, g m^2)."""
+DEFAULT_UNDRIVEN_WHEELS = 2
+"""Undriven wheels of a two-axle vehicle with one driven axle (``[spindown] undriven_wheels``)."""
+SPINDOWN_SIMULATION = {"v0_mps": 31.0, "v_end_mps": 3.0, "sample_rate_hz": 4.0, "speed_noise_mps": 0.02}
+"""Simulated spin-downs: released at ~70 mph tread speed (the thesis' maximum test speed), logged at
+4 Hz until the tread speed falls to 3 m/s, wheel-speed noise 0.02 m/s (a toothed-wheel pickup;
+the coastdown speed channel's 0.05 m/s of table 6.6 is an upper bound)."""
 
 
 # Run validity (bayes_roadload.analysis.validity)

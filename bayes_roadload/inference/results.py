@@ -315,33 +315,34 @@ def write_nuts_outputs(fit: NutsFit, out_dir: str | os.PathLike, *,
 
 
 def channel_inference_data(fit: NutsFit, *, derived: dict[str, np.ndarray] | None = None,
-                           observed: dict[str, np.ndarray] | None = None,
-                           run_sites: tuple[str, ...] = (), run_ids=()) -> az.InferenceData:
+                           observed: dict[str, np.ndarray] | None = None, dims: dict | None = None,
+                           coords: dict | None = None) -> az.InferenceData:
     """ArviZ data of a fit that has no speed-trace model (a measured channel, a wheel spin-down,
-    steady-state forces): ``posterior`` (the draws and ``derived`` [chain, draw] quantities),
-    ``observed_data``, ``sample_stats``; ``run_sites`` sit on a ``run`` coordinate."""
+    steady-state forces): ``posterior`` (the draws and ``derived`` [chain, draw, ...]
+    quantities), ``observed_data``, ``sample_stats``; ``dims`` / ``coords`` name the extra axes
+    (e.g. ``{"v0_mps": ["run"]}``, ``{"run": [...]}``)."""
     posterior = dict(fit.samples)
     posterior.update(derived or {})
     stats = {"diverging": fit.stats["diverging"].astype(bool), "tree_depth": fit.stats["tree_depth"],
              "n_steps": fit.stats["num_steps"], "energy": fit.stats["energy"],
              "acceptance_rate": fit.stats["accept_prob"]}
-    dims = {k: ["run"] for k in run_sites if k in posterior}
-    coords = {"run": [str(r) for r in run_ids]} if dims else None
+    dims = {k: v for k, v in (dims or {}).items() if k in posterior or k in (observed or {})}
     return az.from_dict(posterior=posterior, observed_data=observed or {}, sample_stats=stats,
-                        coords=coords, dims=dims or None)
+                        coords=coords or None, dims=dims or None)
 
 
 def write_channel_outputs(fit: NutsFit, out_dir: str | os.PathLike, names: list[str], *, kind: str,
                           derived: dict[str, np.ndarray] | None = None,
                           observed: dict[str, np.ndarray] | None = None, run_sites: tuple[str, ...] = (),
-                          run_ids=(), gates: config.Gates = config.DEFAULT_GATES,
+                          dims: dict | None = None, coords: dict | None = None,
+                          gates: config.Gates = config.DEFAULT_GATES,
                           extra: dict | None = None) -> tuple[pd.DataFrame, dict]:
     """``posterior.nc``, ``summary.csv`` (rows ``names`` then ``derived``), ``runs_summary.csv``
     (the ``run_sites``, when any) and ``diagnostics.json`` of a fit without a speed-trace model,
     with the gates of :func:`diagnostics` over every sampled quantity; ``kind`` (and ``extra``)
     are recorded in the diagnostics."""
     out = Path(out_dir)
-    idata = channel_inference_data(fit, derived=derived, observed=observed, run_sites=run_sites, run_ids=run_ids)
+    idata = channel_inference_data(fit, derived=derived, observed=observed, dims=dims, coords=coords)
     summary = _rows(idata, list(names) + list(derived or {}))
     runs = _rows(idata, [k for k in run_sites if k in idata.posterior]) if run_sites else \
         pd.DataFrame(columns=list(SUMMARY_COLUMNS))
