@@ -25,6 +25,25 @@ def _cmd_simulate(args) -> int:
     from .data import save_campaign
     from .simulate import simulate_campaign
 
+    if args.kind == "spindown":
+        from .data.spindown import save_spindown
+        from .simulate.spindown import simulate_spindown
+
+        campaign = simulate_spindown(tests_per_wheel=args.pairs, seed=args.seed)
+        out = save_spindown(campaign, args.out)
+        print(f"spin-down: {len(campaign.run_ids)} runs of wheels {', '.join(campaign.wheels)}, "
+              f"{len(campaign.runs)} samples -> {out}")
+        return 0
+    if args.kind == "steady":
+        from .data.steady import save_steady
+        from .simulate.steady import simulate_steady
+
+        campaign = simulate_steady(args.case, pairs=args.pairs, seed=args.seed)
+        out = save_steady(campaign, args.out)
+        print(f"steady state: {len(campaign.run_ids)} runs, {len(campaign.runs)} samples -> {out}")
+        return 0
+    if args.case is None:
+        raise ValueError("simulate: --case is required for coastdowns (see `cases`)")
     campaign = simulate_campaign(args.case, pairs=args.pairs, seed=args.seed, driveline=args.driveline)
     out = save_campaign(campaign, args.out, fmt=args.format)
     n = campaign.runs["run"].nunique()
@@ -79,15 +98,67 @@ def _fit_intervals(campaign, args, out: Path) -> int:
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
-def _cmd_fit(args) -> int:
+def _only_nuts_options(args, kind: str) -> None:
+    if args.method != "nuts":
+        raise ValueError(f"a {kind} campaign is fitted by --method nuts only")
+    if args.pooling != "pooled" or args.robust or args.noise != "integrated" or args.validity:
+        raise ValueError(f"a {kind} campaign has its own likelihood: --pooling, --noise, --robust and --validity "
+                         "do not apply")
+
+
+def _fit_spindown(campaign, args, out: Path) -> int:
+    from .inference.results import format_posterior_table
+    from .inference.spindown import fit_spindown_nuts, write_spindown_outputs
+
+    _only_nuts_options(args, "spin-down")
+    fit = fit_spindown_nuts(campaign, args.model or "undriven_spindown", sampler=_sampler(args))
+    summary, diag, comparison = write_spindown_outputs(fit, out, campaign)
+    truth = campaign.truth or {}
+    flat = {k: v for k, v in truth.items() if isinstance(v, (int, float))}
+    for site in ("Au_wheel", "Bu_wheel"):
+        flat.update({f"{site}[{w}]": v for w, v in truth.get(site, {}).items()})
+    if {"Au", "Bu"} <= set(flat):
+        from . import config
+
+        flat["F50_undriven_N"] = flat["Au"] + flat["Bu"] * config.SPEED_50MPH_MPS
+    print(format_posterior_table(summary, diag, flat or None))
+    print("\nAgainst thesis table 7.10 (A_u = 3.24 N, B_u = 0.232 N s/m):")
+    for _, r in comparison.iterrows():
+        print(f"  {r['parameter']}: {r['mean']:.4g} [{r['q2.5']:.4g}, {r['q97.5']:.4g}]  thesis "
+              f"{r['thesis_table_7_10']:.4g} +- {r['thesis_sd']:.3g}  ({r['difference_pct']:+.1f} %)")
+    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, diagnostics.json, table_7_10.csv, "
+          "classical.csv")
+    return 0 if diag["pass"] else EXIT_GATES_FAILED
+
+
+def _load_for_fit(args):
+    """The campaign of ``fit``: the spin-down options go to a spin-down campaign only."""
     from .data import load_campaign
+
+    root = Path(args.campaign)
+    given = args.wheel_inertia_kgm2 is not None or args.rolling_radius_m is not None
+    if (root / "spindown.csv").exists():
+        from .data.spindown import load_spindown
+
+        return load_spindown(root, wheel_inertia_kgm2=args.wheel_inertia_kgm2, rolling_radius_m=args.rolling_radius_m)
+    if given:
+        raise ValueError("--wheel-inertia-kgm2 / --rolling-radius-m apply to spin-down campaigns (spindown.csv) only")
+    return load_campaign(root)
+
+
+def _cmd_fit(args) -> int:
     from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table, write_lsq_outputs
     from .inference.spec import load_model_spec
 
-    campaign = load_campaign(args.campaign)
+    campaign = _load_for_fit(args)
     out = Path(args.out)
-    if getattr(campaign, "kind", "traces") == "intervals":
+    kind = getattr(campaign, "kind", "traces")
+    if kind == "intervals":
         return _fit_intervals(campaign, args, out)
+    if kind == "spindown":
+        return _fit_spindown(campaign, args, out)
+    if kind == "steady":
+        return _fit_steady(campaign, args, out)
     spec = load_model_spec(args.model or "four_term")
     if args.validity:
         from .analysis.validity import format_validity, trace_validity
@@ -393,8 +464,13 @@ def build_parser() -> argparse.ArgumentParser:
     d.set_defaults(func=_cmd_demo, pooling="pooled", noise="integrated", robust=False)
 
     s = sub.add_parser("simulate", help="simulate a campaign of a thesis table 6.7 case")
-    s.add_argument("--case", type=int, required=True, help="1-19, thesis table 6.7 (see `cases`)")
-    s.add_argument("--pairs", type=int, default=1, help="number of opposite-direction pairs")
+    s.add_argument("--kind", choices=("coastdown", "spindown", "steady"), default="coastdown",
+                   help="coastdown runs (runs.csv), undriven-wheel spin-downs (spindown.csv, thesis table 7.10 "
+                        "wheels) or steady-state torque tests (steady.csv, the case's winds)")
+    s.add_argument("--case", type=int, default=None, help="1-19, thesis table 6.7 (see `cases`); required for "
+                                                         "coastdowns, the winds of a steady-state simulation")
+    s.add_argument("--pairs", type=int, default=1, help="number of opposite-direction pairs (spindown: tests "
+                                                       "per wheel; steady: run pairs per steady speed)")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--driveline", action="store_true", help="also log a driveline force channel")
     s.add_argument("--format", choices=("csv", "parquet"), default="csv")
@@ -421,6 +497,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "with their partners, or only report them (validity.csv); default: reject for interval "
                         "campaigns, no check for speed traces")
     f.add_argument("--wind-limits", default="gtr_onboard", help="eec | gtr_stationary | gtr_onboard (config.WIND_LIMITS)")
+    f.add_argument("--wheel-inertia-kgm2", type=float, default=None,
+                   help="spin-down: polar moment of inertia of the wheel (kg m^2), if not in vehicle.toml [spindown]")
+    f.add_argument("--rolling-radius-m", type=float, default=None,
+                   help="spin-down: rolling radius (m), if not in vehicle.toml")
     f.add_argument("--out", required=True)
     _add_nuts_options(f, seed=0)
     f.set_defaults(func=_cmd_fit)

@@ -140,6 +140,24 @@ THESIS_UNDRIVEN_SD = {"Au": 0.155, "Bu": 0.012}
 THESIS_WHEEL_INERTIA_KGM2 = 0.59
 """Polar moment of inertia of one wheel of the thesis car *(reconstructed: the transcript gives
 none; M_e - M = 30 kg over four wheels at R_r = 0.28 m, drivetrain inertia neglected)*."""
+THESIS_TABLE_7_11 = {
+    "coastdown_low_wind": {"AD": 0.0094, "BD": 0.231e-3, "CD0": 0.386},
+    "coastdown_high_wind": {"AD": 0.0103, "BD": 0.260e-3, "CD0": 0.384},
+    "coastdown_set_of_24": {"AD": 0.0098, "BD": 0.233e-3, "CD0": 0.391},
+    "steady_state": {"AD": 0.0110, "BD": 0.208e-3, "CD0": 0.410},
+    "wind_tunnel": {"CD0": 0.401},
+    "std_pct": {"coastdown_low_wind": {"AD": 5.5, "BD": 31.4, "CD0": 8.3},
+                "coastdown_high_wind": {"AD": 6.2, "BD": 31.2, "CD0": 9.6},
+                "coastdown_set_of_24": {"AD": 4.9, "BD": 27.3, "CD0": 6.4},
+                "steady_state": {"AD": 7.6, "BD": 131.7, "CD0": 12.9}},
+}
+"""Thesis table 7.11, "Summary of initial study results", transcribed from the transcript: mean
+coefficients of the coastdowns (low wind, high wind, the set of 24) and of the five steady-state
+sets (table 7.6), with their test-to-test standard deviations in %.  The text: steady state gives
+AD ~10 % higher, BD ~12 % lower, the aerodynamic term 4.5 % higher and the total drag at 50 mph
+4.5 % higher (tyres transmitting torque, section 2.3.1.6); both within 2.5 % of the tunnel C_D0."""
+THESIS_STEADY_F50_DIFFERENCE_PCT = 4.5
+"""Total drag at 50 mph, steady state above coastdown (thesis section 7.7; not in table 7.11)."""
 THESIS_TUNNEL_TABLE = {
     "yaw_deg": [-25.0, -20.0, -15.0, -10.0, -5.0, 0.0, 5.0, 10.0, 15.0, 20.0, 25.0],
     "cd": [0.491, 0.468, 0.455, 0.422, 0.412, 0.401, 0.409, 0.426, 0.456, 0.481, 0.486],
@@ -356,6 +374,26 @@ SPINDOWN_SIMULATION = {"v0_mps": 31.0, "v_end_mps": 3.0, "sample_rate_hz": 4.0, 
 """Simulated spin-downs: released at ~70 mph tread speed (the thesis' maximum test speed), logged at
 4 Hz until the tread speed falls to 3 m/s, wheel-speed noise 0.02 m/s (a toothed-wheel pickup;
 the coastdown speed channel's 0.05 m/s of table 6.6 is an upper bound)."""
+
+
+# Steady-state torque tests (bayes_roadload.data.steady, inference.steady, simulate.steady)
+STEADY_MAX_ACCEL_MPS2 = 0.5
+"""Largest |dv/dt| of a steady-speed sample: beyond it the run is not steady (or the column holds
+g or km/h/s); the inertial correction M_e dv/dt is then no longer a small correction."""
+STEADY_NOISE_PRIORS = {"sigma_force_n": 20.0, "run_force_sd_n": 10.0, "pair_wind_mps": 3.0}
+"""Priors of the steady-state likelihood: ``sigma_force_n`` half-normal scale of the
+sample-to-sample scatter of the tractive force (N; the thesis' steady residuals are an order of
+magnitude above the coastdown's, section 7.4); ``run_force_sd_n`` mean of the Gamma(2) prior of a
+run's constant force offset (gusts averaged over the run, tyre temperature, the driver; vanishes at
+0, no funnel); ``pair_wind_mps`` normal scale of the latent along-track wind of an
+opposite-direction pair when no anemometer was fitted."""
+STEADY_SIMULATION = {"speeds_mph": (20.0, 30.0, 40.0, 50.0, 60.0, 70.0), "duration_s": 30.0,
+                     "sample_rate_hz": 1.0, "force_noise_n": 15.0, "run_force_sd_n": 8.0,
+                     "accel_sd_mps2": 0.02, "speed_noise_mps": 0.05}
+"""Simulated steady-state groups (thesis section 5.1.3: 20-70 mph in 10 mph steps, both
+directions): each run held ``duration_s`` at its set speed with a constant drift of sd
+``accel_sd_mps2`` (the driver holds the throttle, section 5.4.1), logged at ``sample_rate_hz``;
+torque-meter noise ``force_noise_n`` per sample and a run offset of sd ``run_force_sd_n``."""
 
 
 # Run validity (bayes_roadload.analysis.validity)

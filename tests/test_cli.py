@@ -278,3 +278,31 @@ def test_fit_driveline_refuses_a_campaign_without_the_channel(tmp_path, capsys):
     out = tmp_path / "o"
     assert main(["fit-driveline", str(camp), "--out", str(out)]) == EXIT_REFUSED
     assert "driveline_force_n" in capsys.readouterr().err and not out.exists()
+
+
+def test_spindown_simulate_and_fit_recover_the_undriven_wheels(tmp_path, capsys):
+    """Two spin-downs per rear wheel of the thesis car (table 7.10 means), fitted by NUTS: the
+    vehicle's Au, Bu inside their 99 % posterior intervals (tolerance from the posterior: the
+    truth within 2.6 posterior sd), the outputs' contract, the comparison with table 7.10."""
+    camp = tmp_path / "sd"
+    assert main(["simulate", "--kind", "spindown", "--pairs", "2", "--seed", "3", "--out", str(camp)]) == 0
+    out = tmp_path / "fit"
+    code = main(["fit", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--out", str(out)])
+    diag = json.loads((out / "diagnostics.json").read_text())
+    assert diag["kind"] == "spindown" and code == (0 if diag["pass"] else EXIT_GATES_FAILED)
+    s = pd.read_csv(out / "summary.csv").set_index("parameter")
+    assert {"Au", "Bu", "F50_undriven_N", "Au_wheel[nearside]", "Bu_wheel[offside]"} <= set(s.index)
+    for name, true in (("Au", 3.24), ("Bu", 0.235)):
+        assert abs(s.loc[name, "mean"] - true) < 2.6 * s.loc[name, "sd"], name
+    cmp = pd.read_csv(out / "table_7_10.csv").set_index("parameter")
+    assert cmp.loc["Au", "thesis_table_7_10"] == 3.24 and cmp.loc["Bu", "thesis_table_7_10"] == 0.232
+    assert bool(cmp.loc["Au", "truth_in_95"]) and list(pd.read_csv(out / "runs_summary.csv")["parameter"])[:1] == ["v0_mps[1]"]
+    classical = pd.read_csv(out / "classical.csv").set_index("wheel")
+    # the classical eq. 5.14 line is ~30x less precise than the fit of the speeds themselves
+    assert classical.loc["total", "Au_se"] > 5 * s.loc["Au", "sd"]
+    assert "table 7.10" in capsys.readouterr().out
+
+
+def test_spindown_fit_refuses_spindown_options_elsewhere(campaign_dir, tmp_path, capsys):
+    assert main(["fit", str(campaign_dir), "--wheel-inertia-kgm2", "0.6", "--out", str(tmp_path / "o")]) == EXIT_REFUSED
+    assert "spin-down" in capsys.readouterr().err
