@@ -131,6 +131,41 @@ def _fit_spindown(campaign, args, out: Path) -> int:
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
+def _fit_steady(campaign, args, out: Path) -> int:
+    import pandas as pd
+
+    from .inference.results import format_posterior_table
+    from .inference.steady import compare_with_coastdown, fit_steady_nuts, resolve_wind, write_steady_outputs
+
+    _only_nuts_options(args, "steady-state")
+    wind = resolve_wind(campaign, args.steady_wind)
+    model = args.model or ("four_term" if wind == "measured" else "three_term")
+    fit = fit_steady_nuts(campaign, model, wind=wind, sampler=_sampler(args))
+    summary, diag = write_steady_outputs(fit, out, campaign)
+    truth = {k: v for k, v in (campaign.truth or {}).items() if isinstance(v, (int, float))}
+    if truth:
+        from .inference.results import truth_derived
+
+        truth.update(truth_derived(fit.problem, truth))
+    print(format_posterior_table(summary, diag, truth or None))
+    print(f"relative air: {wind}; acceleration: {campaign.accel_source}")
+    written = ["posterior.nc", "summary.csv", "diagnostics.json"] + (["classical.csv"] if (out / "classical.csv").exists() else [])
+    if args.compare:
+        cd_file = Path(args.compare) / "summary.csv"
+        if not cd_file.is_file():
+            raise FileNotFoundError(f"{cd_file}: --compare takes the output directory of a coastdown `fit`")
+        table = compare_with_coastdown(summary, pd.read_csv(cd_file))
+        table.to_csv(out / "comparison.csv", index=False)
+        written.append("comparison.csv")
+        print("\nsteady state against coastdown (thesis table 7.11: steady AD +12 %, BD -11 %, CD0 +4.9 %):")
+        for _, r in table.iterrows():
+            print(f"  {r['parameter']:<6} coastdown {r['coastdown_mean']:.4g} +- {r['coastdown_sd']:.2g}   steady "
+                  f"{r['steady_mean']:.4g} +- {r['steady_sd']:.2g}   {r['difference_pct']:+.1f} % "
+                  f"({r['difference_z']:+.1f} sd)")
+    print(f"\nwrote {', '.join(written)} in {out}")
+    return 0 if diag["pass"] else EXIT_GATES_FAILED
+
+
 def _load_for_fit(args):
     """The campaign of ``fit``: the spin-down options go to a spin-down campaign only."""
     from .data import load_campaign
@@ -497,6 +532,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "with their partners, or only report them (validity.csv); default: reject for interval "
                         "campaigns, no check for speed traces")
     f.add_argument("--wind-limits", default="gtr_onboard", help="eec | gtr_stationary | gtr_onboard (config.WIND_LIMITS)")
+    f.add_argument("--steady-wind", choices=("auto", "measured", "pair", "still"), default="auto",
+                   help="steady state: relative air from the anemometers, a latent along-track wind per "
+                        "opposite-direction pair, or still air (auto: measured if logged, else pair)")
+    f.add_argument("--compare", default=None, metavar="COASTDOWN_FIT_DIR",
+                   help="steady state: a coastdown fit's output directory; writes comparison.csv (thesis table 7.11)")
     f.add_argument("--wheel-inertia-kgm2", type=float, default=None,
                    help="spin-down: polar moment of inertia of the wheel (kg m^2), if not in vehicle.toml [spindown]")
     f.add_argument("--rolling-radius-m", type=float, default=None,

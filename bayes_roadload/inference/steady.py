@@ -177,7 +177,7 @@ def _with_initial(problem: SteadyProblem) -> SteadyProblem:
         base["head_wind_mps"] = jnp.zeros(problem.force_n.shape)
 
     def force(values):
-        return problem.model.force_n(dict(base, **values), problem.conditions)
+        return drag_force_n(problem.model, dict(base, **values), problem.conditions)
 
     f0 = force({})
     columns = [np.asarray(force({k: base[k] + 1.0})) - np.asarray(f0) for k in problem.free]
@@ -199,12 +199,19 @@ def _with_initial(problem: SteadyProblem) -> SteadyProblem:
     return dataclasses.replace(problem, initial=init)
 
 
+def drag_force_n(model: DragModel, params: dict[str, Any], c: Conditions) -> jnp.ndarray:
+    """F_D of ``model`` under the logged conditions ``c``, the relative air taken from the model's
+    air treatment (calibrated readings, a wind, or still air) as the coastdown integrator does."""
+    airspeed, yaw = model.air.relative_air(model.complete(params), c.speed_mps, c.airspeed_mps, c.yaw_rad)
+    return model.force_n(params, c._replace(airspeed_mps=airspeed, yaw_rad=yaw))
+
+
 def model_force_n(problem: SteadyProblem, sample: dict[str, Any]) -> jnp.ndarray:
     """The road load F_D at every sample (N) for the parameters of ``sample``."""
     params = dict(problem.fixed, **{k: sample[k] for k in problem.free})
     if problem.wind == "pair":
         params["head_wind_mps"] = problem.conditions.direction * sample["head_wind_mps"][problem.pair_index]
-    return problem.model.force_n(params, problem.conditions)
+    return drag_force_n(problem.model, params, problem.conditions)
 
 
 def run_offset_log_likelihood(residual_n, run_index, n_runs: int, sigma, tau) -> jnp.ndarray:
