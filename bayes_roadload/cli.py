@@ -135,11 +135,16 @@ def _fit_steady(campaign, args, out: Path) -> int:
     import pandas as pd
 
     from .inference.results import format_posterior_table
-    from .inference.steady import compare_with_coastdown, fit_steady_nuts, resolve_wind, write_steady_outputs
+    from .inference.steady import (build_steady_problem, compare_with_coastdown, fit_steady_nuts, resolve_wind,
+                                   write_steady_outputs)
 
     _only_nuts_options(args, "steady-state")
     wind = resolve_wind(campaign, args.steady_wind)
     model = args.model or ("four_term" if wind == "measured" else "three_term")
+    cd_file = Path(args.compare) / "summary.csv" if args.compare else None
+    if cd_file is not None and not cd_file.is_file():
+        raise FileNotFoundError(f"{cd_file}: --compare takes the output directory of a coastdown `fit`")
+    build_steady_problem(campaign, model, wind=wind)  # refuses a model that does not apply, before sampling
     fit = fit_steady_nuts(campaign, model, wind=wind, sampler=_sampler(args))
     summary, diag = write_steady_outputs(fit, out, campaign)
     truth = {k: v for k, v in (campaign.truth or {}).items() if isinstance(v, (int, float))}
@@ -150,10 +155,7 @@ def _fit_steady(campaign, args, out: Path) -> int:
     print(format_posterior_table(summary, diag, truth or None))
     print(f"relative air: {wind}; acceleration: {campaign.accel_source}")
     written = ["posterior.nc", "summary.csv", "diagnostics.json"] + (["classical.csv"] if (out / "classical.csv").exists() else [])
-    if args.compare:
-        cd_file = Path(args.compare) / "summary.csv"
-        if not cd_file.is_file():
-            raise FileNotFoundError(f"{cd_file}: --compare takes the output directory of a coastdown `fit`")
+    if cd_file is not None:
         table = compare_with_coastdown(summary, pd.read_csv(cd_file))
         table.to_csv(out / "comparison.csv", index=False)
         written.append("comparison.csv")

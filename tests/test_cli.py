@@ -280,6 +280,7 @@ def test_fit_driveline_refuses_a_campaign_without_the_channel(tmp_path, capsys):
     assert "driveline_force_n" in capsys.readouterr().err and not out.exists()
 
 
+@pytest.mark.slow
 def test_spindown_simulate_and_fit_recover_the_undriven_wheels(tmp_path, capsys):
     """Two spin-downs per rear wheel of the thesis car (table 7.10 means), fitted by NUTS: the
     vehicle's Au, Bu inside their 99 % posterior intervals (tolerance from the posterior: the
@@ -303,6 +304,51 @@ def test_spindown_simulate_and_fit_recover_the_undriven_wheels(tmp_path, capsys)
     assert "table 7.10" in capsys.readouterr().out
 
 
-def test_spindown_fit_refuses_spindown_options_elsewhere(campaign_dir, tmp_path, capsys):
-    assert main(["fit", str(campaign_dir), "--wheel-inertia-kgm2", "0.6", "--out", str(tmp_path / "o")]) == EXIT_REFUSED
+def test_spindown_and_steady_fits_refuse_options_that_do_not_apply(tmp_path, capsys):
+    """Contract of `fit` on the new kinds, refusals before anything is fitted or written."""
+    traces = _driveline_campaign(tmp_path / "traces")
+    assert main(["fit", str(traces), "--wheel-inertia-kgm2", "0.6", "--out", str(tmp_path / "o1")]) == EXIT_REFUSED
     assert "spin-down" in capsys.readouterr().err
+    sd = tmp_path / "sd"
+    assert main(["simulate", "--kind", "spindown", "--pairs", "1", "--out", str(sd)]) == 0
+    assert main(["fit", str(sd), "--method", "lsq", "--out", str(tmp_path / "o2")]) == EXIT_REFUSED
+    assert "nuts only" in capsys.readouterr().err
+    assert main(["fit", str(sd), "--wheel-inertia-kgm2", "0.9", "--out", str(tmp_path / "o3")]) == EXIT_REFUSED
+    assert "ambiguous" in capsys.readouterr().err
+    ss = tmp_path / "ss"
+    assert main(["simulate", "--kind", "steady", "--case", "9", "--out", str(ss)]) == 0
+    assert main(["fit", str(ss), "--pooling", "hierarchical", "--out", str(tmp_path / "o4")]) == EXIT_REFUSED
+    assert main(["fit", str(ss), "--model", "four_term_driveline", "--out", str(tmp_path / "o5")]) == EXIT_REFUSED
+    assert "beyond the driveline" in capsys.readouterr().err
+    assert main(["fit", str(ss), "--compare", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o6")]) == EXIT_REFUSED
+    assert "--compare" in capsys.readouterr().err
+    assert not any((tmp_path / f"o{i}").exists() for i in range(1, 7))
+
+
+@pytest.mark.slow
+def test_steady_simulate_fit_and_compare_with_a_coastdown(tmp_path, capsys):
+    """Steady-state runs at 20-70 mph in case 9 winds with anemometers, fitted by NUTS: AD, CD0 and
+    F50_N within 3 posterior sd of the truth; comparison.csv against a coastdown summary."""
+    camp = tmp_path / "ss"
+    assert main(["simulate", "--kind", "steady", "--case", "9", "--seed", "4", "--out", str(camp)]) == 0
+    coast = tmp_path / "coast"
+    coast.mkdir()
+    pd.DataFrame({"parameter": ["AD", "BD", "CD0", "KD", "F50_N"], "mean": [0.01, 2e-4, 0.4, 0.614, 373.6],
+                  "sd": [2e-4, 1e-5, 0.004, 0.1, 1.0], "q2.5": [0.0096, 1.8e-4, 0.392, 0.42, 371.6],
+                  "q97.5": [0.0104, 2.2e-4, 0.408, 0.81, 375.6]}).to_csv(coast / "summary.csv", index=False)
+    out = tmp_path / "fit"
+    code = main(["fit", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--compare", str(coast),
+                 "--out", str(out)])
+    diag = json.loads((out / "diagnostics.json").read_text())
+    assert diag["kind"] == "steady" and diag["wind"] == "measured" and code == (0 if diag["pass"] else EXIT_GATES_FAILED)
+    s = pd.read_csv(out / "summary.csv").set_index("parameter")
+    assert {"AD", "BD", "CD0", "KD", "sigma_force_n", "run_force_sd_n", "F50_N", "F0_N"} <= set(s.index)
+    truth = json.loads((camp / "truth.json").read_text())
+    for name in ("AD", "CD0"):
+        assert abs(s.loc[name, "mean"] - truth[name]) < 3 * s.loc[name, "sd"], name
+    cmp = pd.read_csv(out / "comparison.csv").set_index("parameter")
+    assert list(cmp.index) == ["AD", "BD", "CD0", "KD", "F50_N"]
+    assert cmp.loc["CD0", "thesis_steady"] == 0.410
+    # the simulated steady state has the coastdown's physics: F50 within 3 combined sd of the truth
+    assert abs(cmp.loc["F50_N", "difference_z"]) < 3
+    assert (out / "classical.csv").exists() and "table 7.11" in capsys.readouterr().out
