@@ -233,13 +233,16 @@ def _cmd_fit_driveline(args) -> int:
     from .inference.results import format_posterior_table
 
     campaign = load_campaign(args.campaign)
-    if getattr(campaign, "kind", "traces") != "traces":
+    if getattr(campaign, "kind", "traces") not in ("traces", "steady"):
         raise ValueError(f"{args.campaign}: fit-driveline needs a speed-trace campaign (runs.csv) that logs "
-                         "driveline_force_n or the two wheel torques")
+                         "driveline_force_n or the two wheel torques (off-load), or a steady-state campaign "
+                         "(steady.csv) that logs gearbox_input_force_n (on-load)")
     out = Path(args.out)
     fit = fit_driveline_nuts(campaign, args.model, sampler=_sampler(args))
     summary, diag = write_driveline_outputs(fit, out)
     truth = dict(campaign.truth or {})
+    if getattr(campaign, "kind", "traces") == "steady":  # the on-load loss has its own truth
+        truth = {k[:-len("_on_load")]: v for k, v in truth.items() if k.endswith("_on_load")}
     if all(isinstance(truth.get(k), (int, float)) for k in ("At", "Bt", "Ct")):
         v = config.SPEED_50MPH_MPS
         truth["F50_driveline_N"] = truth["At"] + truth["Bt"] * v + truth["Ct"] * v**2
@@ -547,8 +550,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_nuts_options(f, seed=0)
     f.set_defaults(func=_cmd_fit)
 
-    fd = sub.add_parser("fit-driveline", help="the driveline off-load loss At + Bt v + Ct v^2 from the logged "
-                                              "driveline_force_n (or wheel torques) alone, thesis eq. 5.12")
+    fd = sub.add_parser("fit-driveline", help="the driveline loss At + Bt v + Ct v^2 alone: off-load from a "
+                                              "coastdown's driveline_force_n (or wheel torques, eq. 5.12), or "
+                                              "on-load from a steady-state campaign's gearbox_input_force_n minus "
+                                              "its wheel force (section 5.5.2)")
     fd.add_argument("campaign")
     fd.add_argument("--model", default="four_term_driveline",
                     help="model variant whose At, Bt, Ct priors are used (default four_term_driveline)")

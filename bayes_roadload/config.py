@@ -126,6 +126,11 @@ THESIS_FULL_MODEL = {
     "pitch_gain": 1100.0 * 0.55 / 60e3,
 }
 THESIS_DRIVELINE = {"At": 21.0, "Bt": 2.09, "Ct": -0.02}
+THESIS_DRIVELINE_ON_LOAD = {"At": 36.3, "Bt": 0.0, "Ct": 0.0}
+"""On-load (steady-state) driveline loss, thesis table 7.9: weighted averages of five sets, A_t 36.3 N
+(standard error 2.2), B_t 0.0 N s/m (0.11); C_t not fitted (straight line, section 5.5.2)."""
+THESIS_DRIVELINE_OFF_LOAD_LOW_WIND = {"At": 17.03, "Bt": 1.59}
+"""Off-load (coastdown) driveline loss of the initial study's low-wind coastdowns, thesis table 7.8."""
 THESIS_UNDRIVEN = {"Au": 3.24, "Bu": 0.232}
 THESIS_UNDRIVEN_PER_WHEEL = {
     "nearside": {"Aw": (1.76, 1.58, 1.55), "Bw": (0.117, 0.123, 0.125), "mean": (1.66, 0.121)},
@@ -389,11 +394,12 @@ run's constant force offset (gusts averaged over the run, tyre temperature, the 
 opposite-direction pair when no anemometer was fitted."""
 STEADY_SIMULATION = {"speeds_mph": (20.0, 30.0, 40.0, 50.0, 60.0, 70.0), "duration_s": 30.0,
                      "sample_rate_hz": 1.0, "force_noise_n": 15.0, "run_force_sd_n": 8.0,
-                     "accel_sd_mps2": 0.02, "speed_noise_mps": 0.05}
+                     "accel_sd_mps2": 0.02, "speed_noise_mps": 0.05, "driveline_noise_n": 10.0}
 """Simulated steady-state groups (thesis section 5.1.3: 20-70 mph in 10 mph steps, both
 directions): each run held ``duration_s`` at its set speed with a constant drift of sd
 ``accel_sd_mps2`` (the driver holds the throttle, section 5.4.1), logged at ``sample_rate_hz``;
-torque-meter noise ``force_noise_n`` per sample and a run offset of sd ``run_force_sd_n``."""
+torque-meter noise ``force_noise_n`` per sample and a run offset of sd ``run_force_sd_n``; the
+gearbox input force carries the on-load driveline loss plus ``driveline_noise_n`` noise."""
 
 
 # Run validity (bayes_roadload.analysis.validity)

@@ -352,3 +352,8 @@ def test_steady_simulate_fit_and_compare_with_a_coastdown(tmp_path, capsys):
     # the simulated steady state has the coastdown's physics: F50 within 3 combined sd of the truth
     assert abs(cmp.loc["F50_N", "difference_z"]) < 3
     assert (out / "classical.csv").exists() and "table 7.11" in capsys.readouterr().out
+    # the on-load driveline loss (gearbox input minus wheel force, table 7.9: At 36.3 N, Bt 0)
+    dl = tmp_path / "dl"
+    main(["fit-driveline", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--out", str(dl)])
+    d = pd.read_csv(dl / "summary.csv").set_index("parameter")
+    assert abs(d.loc["At", "mean"] - 36.3) < 3 * d.loc["At", "sd"] and abs(d.loc["Bt", "mean"]) < 3 * d.loc["Bt", "sd"]

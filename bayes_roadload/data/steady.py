@@ -19,6 +19,9 @@ column                                      unit   required  meaning
 ``direction``, ``pair``                     +/-1,  no        heading and the opposite-direction pair
                                             id               (consecutive runs pair up without ``pair``)
 ``temperature_k``, ``pressure_pa``          K, Pa  no        ambient conditions (air density, tyre temperature)
+``gearbox_input_force_n``                   N      no        gearbox input (engine output) torque referred to
+                                                             the driven wheels (x overall ratio / R_r): minus
+                                                             the wheel force it is the on-load driveline loss
 ==========================================  =====  ========  ===========================================
 
 Without ``accel_mps2`` the acceleration of a run logged with ``time_s`` is the slope of a
@@ -56,7 +59,7 @@ from .spindown import write_atomically
 FORCE_COLUMNS = ("tractive_force_n",)
 TORQUE_COLUMNS = ("wheel_torque_left_nm", "wheel_torque_right_nm")
 OPTIONAL_COLUMNS = ("time_s", "accel_mps2", "airspeed_mps", "yaw_rad", "direction", "pair",
-                    "temperature_k", "pressure_pa")
+                    "temperature_k", "pressure_pa", "gearbox_input_force_n")
 KNOWN_COLUMNS = ("run", "speed_mps") + FORCE_COLUMNS + TORQUE_COLUMNS + OPTIONAL_COLUMNS
 RUN_CONSTANT = ("direction", "pair")
 
@@ -112,6 +115,19 @@ class SteadyCampaign:
     def has_driveline(self) -> bool:
         """False: the wheel torque is measured beyond the driveline (thesis section 5.4.1)."""
         return False
+
+    @property
+    def has_driveline_loss(self) -> bool:
+        """The gearbox input is logged: the on-load driveline loss is measured (section 5.5.2)."""
+        return "gearbox_input_force_n" in self.runs
+
+    def driveline_loss_n(self) -> np.ndarray:
+        """The on-load driveline loss of every sample, gearbox input minus wheel force (N;
+        thesis section 5.5.2: "not necessary to correct the measured data as the difference is
+        required")."""
+        if not self.has_driveline_loss:
+            raise ValueError("steady.csv logs no gearbox_input_force_n: the on-load driveline loss is not measured")
+        return (self.runs["gearbox_input_force_n"] - self.runs["tractive_force_n"]).to_numpy(float)
 
     def directions(self) -> dict:
         if "direction" not in self.runs:

@@ -40,14 +40,17 @@ class SteadySettings:
     run_force_sd_n: float = config.STEADY_SIMULATION["run_force_sd_n"]
     accel_sd_mps2: float = config.STEADY_SIMULATION["accel_sd_mps2"]
     speed_noise_mps: float = config.STEADY_SIMULATION["speed_noise_mps"]
+    driveline_noise_n: float = config.STEADY_SIMULATION["driveline_noise_n"]
 
 
 def simulate_steady(case: int | SimulationCase | None = 9, pairs: int = 1, seed: int = 0, *,
-                    anemometer: bool = True, settings: SteadySettings = SteadySettings(),
+                    anemometer: bool = True, gearbox_input: bool = True, settings: SteadySettings = SteadySettings(),
                     simulation: SimulationSettings = DEFAULT_SETTINGS) -> SteadyCampaign:
     """``pairs`` opposite-direction pairs at each steady speed, in the winds of ``case``
     (table 6.7; default 9: 2 m/s head and cross wind; ``None``: still air), truth = the case's
-    coefficients (table 6.3).  Runs 2k-1 (+) and 2k (-) form pair k."""
+    coefficients (table 6.3).  Runs 2k-1 (+) and 2k (-) form pair k.  With ``gearbox_input`` the
+    gearbox input force is logged too: wheel force + the on-load driveline loss A_t + B_t v of
+    thesis table 7.9 (``config.THESIS_DRIVELINE_ON_LOAD``) + ``driveline_noise_n`` noise."""
     sc = get_case(case if case is not None else 1) if not isinstance(case, SimulationCase) else case
     head, cross = (sc.head_wind_mps, sc.cross_wind_mps) if case is not None else (0.0, 0.0)
     model = case_model(sc)
@@ -83,12 +86,18 @@ def simulate_steady(case: int | SimulationCase | None = 9, pairs: int = 1, seed:
                          + rng.normal(0.0, settings.run_force_sd_n) + rng.normal(0.0, settings.force_noise_n, n))
                 cols = {"run": run, "time_s": t, "speed_mps": v + rng.normal(0.0, settings.speed_noise_mps, n),
                         "tractive_force_n": force, "direction": d, "pair": pair}
+                if gearbox_input:
+                    on = config.THESIS_DRIVELINE_ON_LOAD
+                    cols["gearbox_input_force_n"] = (force + on["At"] + on["Bt"] * v
+                                                     + rng.normal(0.0, settings.driveline_noise_n, n))
                 if anemometer:
                     cols["airspeed_mps"] = vr + rng.normal(0.0, simulation.airspeed_noise_mps, n)
                     cols["yaw_rad"] = psi + rng.normal(0.0, simulation.yaw_noise_rad, n)
                 frames.append(pd.DataFrame(cols))
     truth = {k: float(params[k]) for k in ("AD", "BD", "CD0", "KD")}
     truth.update({k: float(v) for k, v in params.items()})
+    if gearbox_input:
+        truth.update({f"{k}_on_load": float(v) for k, v in config.THESIS_DRIVELINE_ON_LOAD.items()})
     truth.update({"case": sc.number if case is not None else None, "model": sc.model,
                   "sigma_force_n": settings.force_noise_n, "run_force_sd_n": settings.run_force_sd_n})
     tunnel = {"KD": float(simulation.coefficients["KD"]), "CL0": float(simulation.full_model_params["CL0"]),
