@@ -421,9 +421,14 @@ StVZO Anlage XXIII 3.9.2.3 (regelwerke.vbg.de/vbg_vero/nstvzo/nstvzo_533_.html: 
 ``gtr_stationary`` / ``gtr_onboard``: UN GTR No. 15 (WLTP) Annex 4, paragraphs 4.1.1.1.1
 (stationary anemometry: average below 5 m/s, peaks below 8 m/s for less than 2 s, cross component
 below 2 m/s) and 4.1.1.1.2 (on-board anemometry: overall average below 7 m/s, peaks below 10 m/s,
-cross component below 4 m/s).  The GTR text itself was not among the sources searchable here
-(searched 2026-11: UNECE/globalautoregs pages name the GTR's amendments but not this paragraph);
-the values are those of the consolidated GTR 15 as the project reads it and are unchanged.
+cross component below 4 m/s).  The paragraphs' text was not among the sources searchable here
+(searched 2026-11): UNECE/globalautoregs pages name the GTR's amendments only, and an extract of
+its EU transposition, Regulation (EU) 2017/1151 Annex XXI Sub-Annex 4, confirms the on-board
+procedure around it (4.3.2.4: at least 5 pairs; a run failing the on-board anemometry conditions
+is rejected with its opposite-direction partner, as :mod:`bayes_roadload.analysis.validity` does)
+and that Regulation (EU) 2018/1832 replaced 4.1.1.1 - 4.1.1.1.2 ("Permissible wind conditions"),
+but stops before the figures.  The values are those of the consolidated GTR 15 as the project
+reads it, unverified against the text, and unchanged.
 The stationary peak limit allows peaks above 8 m/s shorter than 2 s; the check here
 (:mod:`bayes_roadload.analysis.validity`) applies the peak to the maximum of the run, which is
 stricter by that allowance."""
