@@ -70,6 +70,8 @@ def _fit_nuts(campaign, args, out: Path, campaign_path=None):
     (out / "fit.json").write_text(json.dumps({
         "model": fit.problem.spec.name, "model_file": fit.problem.spec.source,
         "free": list(fit.problem.free), "pooling": args.pooling, "noise": args.noise, "robust": bool(args.robust),
+        "undriven": ({k: fit.problem.fixed[k] for k in ("Au", "Bu")} if "undriven_wheels" in fit.problem.spec.terms
+                     else None),
         "campaign": None if campaign_path is None else str(Path(campaign_path).resolve())}, indent=2) + "\n")
     truth = dict(campaign.truth or {}, **truth_derived(fit.problem, campaign.truth))
     return summary, diag, format_posterior_table(summary, diag, truth or None), truth
@@ -85,7 +87,7 @@ def _fit_intervals(campaign, args, out: Path) -> int:
     if args.pooling != "pooled" or args.robust or args.noise != "integrated":
         raise ValueError("an interval campaign has its own likelihood (gate timing, band noise, run effect): "
                          "--pooling, --noise and --robust do not apply")
-    model = args.model or "split_f0_f2"
+    model = _model_for(args, "split_f0_f2")
     mode = args.validity or "reject"
     validity = interval_validity(campaign)
     runs = list(validity["run"]) if mode == "report" else list(validity.loc[~validity["rejected"], "run"])
@@ -111,6 +113,9 @@ def _fit_spindown(campaign, args, out: Path) -> int:
     from .inference.spindown import fit_spindown_nuts, write_spindown_outputs
 
     _only_nuts_options(args, "spin-down")
+    if args.undriven:
+        raise ValueError("--undriven feeds a spin-down result into coastdown or steady-state fits; a spin-down "
+                         "campaign is what gives it")
     fit = fit_spindown_nuts(campaign, args.model or "undriven_spindown", sampler=_sampler(args))
     summary, diag, comparison = write_spindown_outputs(fit, out, campaign)
     truth = campaign.truth or {}
@@ -140,7 +145,7 @@ def _fit_steady(campaign, args, out: Path) -> int:
 
     _only_nuts_options(args, "steady-state")
     wind = resolve_wind(campaign, args.steady_wind)
-    model = args.model or ("four_term" if wind == "measured" else "three_term")
+    model = _model_for(args, "four_term" if wind == "measured" else "three_term")
     cd_file = Path(args.compare) / "summary.csv" if args.compare else None
     if cd_file is not None and not cd_file.is_file():
         raise FileNotFoundError(f"{cd_file}: --compare takes the output directory of a coastdown `fit`")
@@ -166,6 +171,37 @@ def _fit_steady(campaign, args, out: Path) -> int:
                   f"({r['difference_z']:+.1f} sd)")
     print(f"\nwrote {', '.join(written)} in {out}")
     return 0 if diag["pass"] else EXIT_GATES_FAILED
+
+
+def _undriven_values(arg: str) -> tuple[float, float]:
+    """``--undriven``: a spin-down fit directory (its summary.csv Au, Bu means) or "Au,Bu" in SI."""
+    path = Path(arg)
+    if path.is_dir():
+        import pandas as pd
+
+        f = path / "summary.csv"
+        if not f.is_file():
+            raise FileNotFoundError(f"{f}: --undriven takes a spin-down fit's output directory or 'Au,Bu' (N, N s/m)")
+        s = pd.read_csv(f).set_index("parameter")
+        if not {"Au", "Bu"} <= set(s.index):
+            raise ValueError(f"{f}: no Au, Bu rows: not a spin-down fit")
+        return float(s.loc["Au", "mean"]), float(s.loc["Bu", "mean"])
+    try:
+        au, bu = (float(x) for x in arg.split(","))
+    except ValueError:
+        raise ValueError(f"--undriven {arg!r}: give a spin-down fit directory or 'Au,Bu' in N and N s/m, "
+                         "e.g. 3.24,0.232") from None
+    return au, bu
+
+
+def _model_for(args, default: str):
+    """The model spec of a fit: ``--model`` (or ``default``), with ``--undriven`` added."""
+    from .inference.spec import load_model_spec, with_undriven_wheels
+
+    spec = args.model if not isinstance(args.model, (str, type(None))) else load_model_spec(args.model or default)
+    if getattr(args, "undriven", None):
+        spec = with_undriven_wheels(spec, *_undriven_values(args.undriven))
+    return spec
 
 
 def _load_for_fit(args):
@@ -196,7 +232,7 @@ def _cmd_fit(args) -> int:
         return _fit_spindown(campaign, args, out)
     if kind == "steady":
         return _fit_steady(campaign, args, out)
-    spec = load_model_spec(args.model or "four_term")
+    spec = _model_for(args, "four_term")
     if args.validity:
         from .analysis.validity import format_validity, trace_validity
 
@@ -542,6 +578,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "opposite-direction pair, or still air (auto: measured if logged, else pair)")
     f.add_argument("--compare", default=None, metavar="COASTDOWN_FIT_DIR",
                    help="steady state: a coastdown fit's output directory; writes comparison.csv (thesis table 7.11)")
+    f.add_argument("--undriven", default=None, metavar="SPINDOWN_FIT_DIR|Au,Bu",
+                   help="add the undriven-wheel loss Au + Bu v as a known term (eq. 2.16): a spin-down fit's output "
+                        "directory (posterior means) or 'Au,Bu' in N and N s/m; the tyre terms then exclude it")
     f.add_argument("--wheel-inertia-kgm2", type=float, default=None,
                    help="spin-down: polar moment of inertia of the wheel (kg m^2), if not in vehicle.toml [spindown]")
     f.add_argument("--rolling-radius-m", type=float, default=None,

@@ -357,3 +357,18 @@ def test_steady_simulate_fit_and_compare_with_a_coastdown(tmp_path, capsys):
     main(["fit-driveline", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--out", str(dl)])
     d = pd.read_csv(dl / "summary.csv").set_index("parameter")
     assert abs(d.loc["At", "mean"] - 36.3) < 3 * d.loc["At", "sd"] and abs(d.loc["Bt", "mean"]) < 3 * d.loc["Bt", "sd"]
+
+
+def test_undriven_values_come_from_a_spindown_fit_or_numbers(tmp_path):
+    from bayes_roadload.cli import _undriven_values
+
+    fit = tmp_path / "sdfit"
+    fit.mkdir()
+    pd.DataFrame({"parameter": ["Au", "Bu"], "mean": [3.2, 0.23]}).to_csv(fit / "summary.csv", index=False)
+    assert _undriven_values(str(fit)) == (3.2, 0.23)
+    assert _undriven_values("3.24,0.232") == (3.24, 0.232)
+    with pytest.raises(ValueError, match="Au,Bu"):
+        _undriven_values("3.24")
+    (fit / "summary.csv").write_text("parameter,mean\nAD,0.01\n")
+    with pytest.raises(ValueError, match="not a spin-down fit"):
+        _undriven_values(str(fit))

@@ -41,3 +41,37 @@ def test_classical_baseline_recovers_the_wheels(campaign):
     for w, a, b in (("nearside", 1.66, 0.121), ("offside", 1.58, 0.114)):
         assert abs(c.loc[w, "Au"] - a) < 4 * c.loc[w, "Au_se"] and abs(c.loc[w, "Bu"] - b) < 4 * c.loc[w, "Bu_se"]
     assert c.loc["total", "Au"] == pytest.approx(c.loc["nearside", "Au"] + c.loc["offside", "Au"])
+
+
+def test_a_spindown_result_becomes_a_fixed_undriven_term(small_campaign):
+    from bayes_roadload.inference.spec import ModelSpecError, load_model_spec, with_undriven_wheels
+    from bayes_roadload.physics.roadload import road_load_parts_n
+
+    spec = with_undriven_wheels(load_model_spec("three_term"), 3.24, 0.232)
+    model, fixed, free = spec.build(small_campaign)
+    assert "undriven_wheels" in model.term_names and fixed["Au"] == 3.24 and free == ("AD", "BD", "CD0")
+    v = np.array([10.0, 22.352])
+    parts = road_load_parts_n(model, dict(fixed, AD=0.01, BD=2e-4, CD0=0.4), v, 1100.0, 1.85)
+    np.testing.assert_allclose(np.asarray(parts["undriven"]), 3.24 + 0.232 * v, rtol=1e-12)
+    with pytest.raises(ModelSpecError, match="already"):
+        with_undriven_wheels(spec, 1.0, 0.1)
+
+
+@pytest.mark.slow
+def test_undriven_values_move_from_the_tyre_terms_into_their_own(small_campaign):
+    """A spin-down result fed into a coastdown model (the thesis' practice): the undriven loss
+    Au + Bu v leaves the tyre terms, AD by Au / (M g) and BD by Bu / (M g): the least-squares fits
+    of the same pair differ by that within 1 % of the shift (lift unloads the tyre terms, not the
+    wheel bearings, by q A C_L / (M g) ~ 0.5-1 %)."""
+    from bayes_roadload import config
+    from bayes_roadload.inference.lsq import fit_lsq
+    from bayes_roadload.inference.spec import load_model_spec, with_undriven_wheels
+
+    spec = with_undriven_wheels(load_model_spec("three_term"), 3.24, 0.232)
+    pair = small_campaign.subset(small_campaign.run_ids[:2])
+    base = fit_lsq(pair, "three_term", grouping="all").groups[0].estimate
+    moved = fit_lsq(pair, spec, grouping="all").groups[0].estimate
+    mg = small_campaign.vehicle.mass_kg * config.GRAVITY_MPS2
+    assert base["AD"] - moved["AD"] == pytest.approx(3.24 / mg, rel=1e-2)
+    assert base["BD"] - moved["BD"] == pytest.approx(0.232 / mg, rel=1e-2)
+    assert moved["CD0"] == pytest.approx(base["CD0"], rel=1e-3)  # measured 5e-4 (lift coupling)
