@@ -100,23 +100,23 @@ def _fit_intervals(campaign, args, out: Path) -> int:
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
-def _only_nuts_options(args, kind: str) -> None:
+def _only_nuts_options(args, kind: str, pooling: bool = False) -> None:
     if args.method != "nuts":
         raise ValueError(f"a {kind} campaign is fitted by --method nuts only")
-    if args.pooling != "pooled" or args.robust or args.noise != "integrated" or args.validity:
-        raise ValueError(f"a {kind} campaign has its own likelihood: --pooling, --noise, --robust and --validity "
-                         "do not apply")
+    if (args.pooling != "pooled" and not pooling) or args.robust or args.noise != "integrated" or args.validity:
+        raise ValueError(f"a {kind} campaign has its own likelihood: "
+                         + ("" if pooling else "--pooling, ") + "--noise, --robust and --validity do not apply")
 
 
 def _fit_spindown(campaign, args, out: Path) -> int:
     from .inference.results import format_posterior_table
     from .inference.spindown import fit_spindown_nuts, write_spindown_outputs
 
-    _only_nuts_options(args, "spin-down")
+    _only_nuts_options(args, "spin-down", pooling=True)
     if args.undriven:
         raise ValueError("--undriven feeds a spin-down result into coastdown or steady-state fits; a spin-down "
                          "campaign is what gives it")
-    fit = fit_spindown_nuts(campaign, args.model or "undriven_spindown", sampler=_sampler(args))
+    fit = fit_spindown_nuts(campaign, args.model or "undriven_spindown", pooling=args.pooling, sampler=_sampler(args))
     summary, diag, comparison = write_spindown_outputs(fit, out, campaign)
     truth = campaign.truth or {}
     flat = {k: v for k, v in truth.items() if isinstance(v, (int, float))}

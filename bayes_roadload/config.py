@@ -373,6 +373,10 @@ TAU_PRIOR_SCALES = {"AD": 1.0e-3, "BD": 5.0e-5, "CD0": 0.02}
 WHEEL_INERTIA_RANGE_KGM2 = (0.01, 50.0)
 """Plausible polar moments of inertia of one road wheel (kg m^2): a car wheel with tyre and disc
 is ~0.5-1.5, a truck wheel ~10-20; outside, the unit is likely wrong (kg cm^2, g m^2)."""
+SPINDOWN_TAU_PRIOR_MEANS = {"Au": 0.1, "Bu": 0.005}
+"""Prior means of the test-to-test spreads of one wheel's A_w (N) and B_w (N s/m) in a
+hierarchical spin-down fit, Gamma(2) priors (~6 % and ~4 % of table 7.10's values; the table's
+three tests per wheel scatter by 0.02-0.11 N and 0.003-0.006 N s/m)."""
 DEFAULT_UNDRIVEN_WHEELS = 2
 """Undriven wheels of a two-axle vehicle with one driven axle (``[spindown] undriven_wheels``)."""
 SPINDOWN_SIMULATION = {"v0_mps": 31.0, "v_end_mps": 3.0, "sample_rate_hz": 4.0, "speed_noise_mps": 0.02}

@@ -2,7 +2,8 @@
 
 1. Spin-downs (table 7.10): 3 tests of each rear wheel of the thesis car (table 7.10 means),
    fitted by NUTS over all runs; the vehicle's Au, Bu against the truth, the classical eq. 5.14
-   line and table 7.10, for ``--seeds`` seeds.
+   line and table 7.10, for ``--seeds`` seeds; then tests scattering like table 7.10's (sd 0.1 N,
+   0.004 N s/m per test), pooled against ``pooling="hierarchical"``.
 2. Steady state against coastdown (table 7.11): per seed a coastdown campaign (``--coast-pairs``
    pairs, four_term) and a steady-state group (20-70 mph, both directions, one pair per speed) in
    the same table 6.7 case's winds, both fitted by NUTS (steady state: with anemometers, four_term;
@@ -52,6 +53,23 @@ def spindown_study(seeds, sampler):
     return out
 
 
+def spindown_scatter_study(seeds, sampler, test_sd=(0.1, 0.004)):
+    """Tests scattering like table 7.10's: pooled against hierarchical (run-level A, B)."""
+    out = []
+    for seed in seeds:
+        c = simulate_spindown(tests_per_wheel=3, seed=seed, test_sd=test_sd)
+        row = {"seed": seed, "runs_mean_Au": sum(r["Au"] for r in c.truth["per_run"].values()) / 3.0,
+               "Au_truth": c.truth["Au"], "Bu_truth": c.truth["Bu"]}
+        for pooling in ("pooled", "hierarchical"):
+            t0 = time.perf_counter()
+            fit = fit_spindown_nuts(c, pooling=pooling, sampler=sampler)
+            s = _summary(fit, ["Au", "Bu"], spindown_derived(fit.samples)).set_index("parameter")
+            row[pooling] = {"wall_s": round(time.perf_counter() - t0, 1), "divergences": int(fit.stats["diverging"].sum()),
+                            **{f"{k}_{q}": float(s.loc[k, q]) for k in ("Au", "Bu") for q in ("mean", "sd", "q2.5", "q97.5")}}
+        out.append(row)
+    return out
+
+
 def steady_study(seeds, case, coast_pairs, sampler):
     out = []
     for seed in seeds:
@@ -85,6 +103,7 @@ def main() -> None:
     sampler = config.SamplerConfig(progress_bar=False, seed=1)
     t0 = time.perf_counter()
     result = {"spindown": spindown_study(args.seeds, sampler),
+              "spindown_test_scatter": spindown_scatter_study(args.seeds, sampler),
               "steady_vs_coastdown": steady_study(args.seeds, args.case, args.coast_pairs, sampler),
               "truth": {**config.THESIS_COEFFICIENTS}, "case": args.case, "wall_s": round(time.perf_counter() - t0, 1)}
     print(json.dumps(result, indent=1, default=float))

@@ -15,6 +15,12 @@ A_w``, ``Bu = sum B_w`` (deterministic sites).  When fewer wheels were tested th
 has (``[spindown] undriven_wheels``), the sum is scaled by undriven / tested (the untested
 wheels taken as the mean of the tested ones; the summary says so).
 
+``pooling="hierarchical"``: every run r has its own ``Au_run ~ N(A_w(r), tau_Au_wheel)``,
+``Bu_run ~ N(B_w(r), tau_Bu_wheel)`` (centred: each spin-down pins its own A, B much more tightly
+than tests scatter), the test-to-test scatter of thesis table 7.10 (4.8 % in A_u); the per-wheel
+``A_w, B_w`` are then the wheel's mean over tests and their posterior includes that scatter.
+Spreads: Gamma(2) priors with means ``config.SPINDOWN_TAU_PRIOR_MEANS``, shared by the wheels.
+
 Sampling goes through the same MAP -> Laplace whitening -> NUTS -> gates as every fit
 (:func:`~bayes_roadload.inference.nuts.sample_problem`).  :func:`classical_spindown` is the
 thesis' analysis (eq. 5.14 interval drags and a least-squares line per wheel), kept as a
@@ -82,8 +88,12 @@ class SpindownProblem:
         return spindown_model
 
 
-def build_spindown_problem(campaign, spec: ModelSpec | str = "undriven_spindown") -> SpindownProblem:
-    """The spin-down problem of a campaign with the per-wheel priors of ``spec``."""
+def build_spindown_problem(campaign, spec: ModelSpec | str = "undriven_spindown", *,
+                           pooling: str = "pooled") -> SpindownProblem:
+    """The spin-down problem of a campaign with the per-wheel priors of ``spec``; ``pooling``
+    "hierarchical" gives every run its own A, B around its wheel's (module docstring)."""
+    if pooling not in ("pooled", "hierarchical"):
+        raise ValueError(f"pooling must be 'pooled' or 'hierarchical', not {pooling!r}")
     spec = load_model_spec(spec) if isinstance(spec, str) else spec
     missing = [p for p in ("Au", "Bu") if p not in spec.priors]
     if missing:
@@ -112,12 +122,27 @@ def build_spindown_problem(campaign, spec: ModelSpec | str = "undriven_spindown"
     aw = np.maximum(aw, (lo if lo is not None else -np.inf) + 1e-3)
     initial = {"Au_wheel": jnp.asarray(aw), "Bu_wheel": jnp.asarray(bw), "v0_mps": jnp.asarray(v[:, 0]),
                "sigma_mps": jnp.full(r, 0.05)}
+    if pooling == "hierarchical":
+        a_r, b_r = classical_run_estimates(t, v, mask, mass)
+        initial.update({"tau_Au_wheel": config.SPINDOWN_TAU_PRIOR_MEANS["Au"],
+                        "tau_Bu_wheel": config.SPINDOWN_TAU_PRIOR_MEANS["Bu"],
+                        "Au_run": jnp.asarray(a_r), "Bu_run": jnp.asarray(b_r)})
     return SpindownProblem(spec=spec, priors={"Au": spec.priors["Au"], "Bu": spec.priors["Bu"]},
                            time_s=jnp.asarray(t), speed_mps=jnp.asarray(v), mask=jnp.asarray(mask),
                            first_speed_mps=jnp.asarray(v[:, 0]), wheel_index=jnp.asarray(widx),
                            equivalent_mass_kg=jnp.asarray(mass), wheels=wheels,
                            run_ids=tuple(campaign.run_ids), undriven_wheels=int(campaign.undriven_wheels),
-                           initial=initial)
+                           initial=initial, pooling=pooling)
+
+
+def classical_run_estimates(t, v, mask, mass) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 5.14 and a least-squares line for every run on its own: (A_r, B_r) ([R] each)."""
+    a, b = np.zeros(len(mass)), np.zeros(len(mass))
+    for i in range(len(mass)):
+        k = int(np.asarray(mask)[i].sum())
+        f, s = spindown_interval_drag_n(np.asarray(t)[i, :k], np.asarray(v)[i, :k], float(mass[i]))
+        b[i], a[i] = np.polyfit(np.asarray(s), np.asarray(f), 1)
+    return a, b
 
 
 def classical_wheel_estimates(t, v, mask, widx, mass, n_wheels) -> tuple[np.ndarray, np.ndarray]:
@@ -144,11 +169,22 @@ def spindown_model(problem: SpindownProblem) -> None:
         bw = numpyro.sample("Bu_wheel", problem.priors["Bu"].to_numpyro())
     numpyro.deterministic("Au", problem.total_scale * jnp.sum(aw))
     numpyro.deterministic("Bu", problem.total_scale * jnp.sum(bw))
+    a_run, b_run = aw[problem.wheel_index], bw[problem.wheel_index]
+    if problem.pooling == "hierarchical":
+        means = config.SPINDOWN_TAU_PRIOR_MEANS
+        tau_a = numpyro.sample("tau_Au_wheel", dist.Gamma(2.0, 2.0 / means["Au"]))
+        tau_b = numpyro.sample("tau_Bu_wheel", dist.Gamma(2.0, 2.0 / means["Bu"]))
+        # centred: each run's spin-down pins its own A, B far more tightly (sd ~0.003 N) than they
+        # scatter between tests, the regime where the centred form has no funnel (the non-centred
+        # one diverged and hit the tree-depth limit on 6 runs)
+        with numpyro.plate("run_effect", r):
+            a_run = numpyro.sample("Au_run", dist.Normal(a_run, tau_a))
+            b_run = numpyro.sample("Bu_run", dist.Normal(b_run, tau_b))
     with numpyro.plate("run", r):
         v0 = numpyro.sample("v0_mps", dist.Normal(problem.first_speed_mps, config.NOISE_PRIORS["v0_scale_mps"]))
         sigma = numpyro.sample("sigma_mps", dist.HalfNormal(config.NOISE_PRIORS["sigma_mps"]))
-    model = spindown_speed_mps(problem.time_s, v0[:, None], aw[problem.wheel_index][:, None],
-                               bw[problem.wheel_index][:, None], problem.equivalent_mass_kg[:, None])
+    model = spindown_speed_mps(problem.time_s, v0[:, None], a_run[:, None], b_run[:, None],
+                               problem.equivalent_mass_kg[:, None])
     numpyro.sample("wheel_speed_mps", dist.Normal(model, sigma[:, None]).mask(problem.mask), obs=problem.speed_mps)
 
 
@@ -161,13 +197,13 @@ def spindown_log_likelihood(problem: SpindownProblem, sample: dict[str, Any]) ->
     return jnp.sum(jnp.where(problem.mask, lp, 0.0))
 
 
-def fit_spindown_nuts(campaign, spec: ModelSpec | str = "undriven_spindown", *,
+def fit_spindown_nuts(campaign, spec: ModelSpec | str = "undriven_spindown", *, pooling: str = "pooled",
                       sampler: config.SamplerConfig = config.DEFAULT_SAMPLER):
     """MAP, Laplace whitening, NUTS and gates (:func:`~bayes_roadload.inference.nuts.sample_problem`)
     on the spin-down model.  Returns a :class:`~bayes_roadload.inference.nuts.NutsFit`."""
     from .nuts import sample_problem
 
-    problem = build_spindown_problem(campaign, spec)
+    problem = build_spindown_problem(campaign, spec, pooling=pooling)
     return sample_problem(problem, problem.initial, sampler, campaign.truth)
 
 
@@ -226,13 +262,17 @@ def write_spindown_outputs(fit, out_dir, campaign=None, *, gates: config.Gates =
 
     p = fit.problem
     observed = np.where(np.asarray(p.mask), np.asarray(p.speed_mps), np.nan)
+    hier = p.pooling == "hierarchical"
+    names = list(TOTALS) + list(WHEEL_SITES) + (["tau_Au_wheel", "tau_Bu_wheel"] if hier else [])
+    run_sites = ("v0_mps", "sigma_mps") + (("Au_run", "Bu_run") if hier else ())
     summary, diag = write_channel_outputs(
-        fit, out_dir, list(TOTALS) + list(WHEEL_SITES), kind="spindown", derived=spindown_derived(fit.samples),
-        observed={"wheel_speed_mps": observed}, run_sites=("v0_mps", "sigma_mps"),
+        fit, out_dir, names, kind="spindown", derived=spindown_derived(fit.samples),
+        observed={"wheel_speed_mps": observed}, run_sites=run_sites,
         dims={"Au_wheel": ["wheel"], "Bu_wheel": ["wheel"], "v0_mps": ["run"], "sigma_mps": ["run"],
+              "Au_run": ["run"], "Bu_run": ["run"],
               "wheel_speed_mps": ["run", "sample"]},
         coords={"wheel": list(p.wheels), "run": [str(r) for r in p.run_ids]}, gates=gates,
-        extra={"wheels": list(p.wheels), "undriven_wheels": p.undriven_wheels,
+        extra={"wheels": list(p.wheels), "undriven_wheels": p.undriven_wheels, "pooling": p.pooling,
                "totals_scaled_from_tested_wheels": p.total_scale != 1.0})
     out = Path(out_dir)
     comparison = table_7_10_comparison(summary, fit.truth)

@@ -75,3 +75,22 @@ def test_undriven_values_move_from_the_tyre_terms_into_their_own(small_campaign)
     assert base["AD"] - moved["AD"] == pytest.approx(3.24 / mg, rel=1e-2)
     assert base["BD"] - moved["BD"] == pytest.approx(0.232 / mg, rel=1e-2)
     assert moved["CD0"] == pytest.approx(base["CD0"], rel=1e-3)  # measured 5e-4 (lift coupling)
+
+
+def test_hierarchical_model_gives_every_run_its_own_coefficients(campaign):
+    """The centred run level: Au_run, Bu_run around their wheel's, started from each run's own
+    eq. 5.14 line; the vehicle totals still sum the wheels."""
+    import jax
+    from numpyro import handlers
+
+    from bayes_roadload.inference.spindown import spindown_model
+
+    p = build_spindown_problem(campaign, pooling="hierarchical")
+    assert p.initial["Au_run"].shape == (4,) and float(p.initial["tau_Au_wheel"]) == 0.1
+    tr = handlers.trace(handlers.seed(spindown_model, jax.random.PRNGKey(0))).get_trace(p)
+    assert tr["Au_run"]["value"].shape == (4,) and tr["Au_run"]["fn"].loc.shape == (4,)
+    np.testing.assert_allclose(np.asarray(tr["Au_run"]["fn"].loc),
+                               np.asarray(tr["Au_wheel"]["value"])[np.asarray(p.wheel_index)])
+    assert float(tr["Au"]["value"]) == pytest.approx(float(np.sum(tr["Au_wheel"]["value"])))
+    with pytest.raises(ValueError, match="pooling"):
+        build_spindown_problem(campaign, pooling="partial")
