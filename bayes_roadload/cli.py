@@ -44,10 +44,12 @@ def _cmd_simulate(args) -> int:
         return 0
     if args.case is None:
         raise ValueError("simulate: --case is required for coastdowns (see `cases`)")
-    campaign = simulate_campaign(args.case, pairs=args.pairs, seed=args.seed, driveline=args.driveline)
+    campaign = simulate_campaign(args.case, pairs=args.pairs, seed=args.seed, driveline=args.driveline,
+                                 masses_kg=args.masses)
     out = save_campaign(campaign, args.out, fmt=args.format)
     n = campaign.runs["run"].nunique()
-    print(f"case {args.case}: {n} runs ({args.pairs} pairs), {len(campaign.runs)} samples -> {out}")
+    masses = "" if args.masses is None else f" at {', '.join(f'{m:g}' for m in campaign.meta['masses_kg'])} kg"
+    print(f"case {args.case}: {n} runs ({args.pairs} pairs{masses}), {len(campaign.runs)} samples -> {out}")
     return 0
 
 
@@ -287,13 +289,36 @@ def _cmd_fit_driveline(args) -> int:
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
+def _diagnose_intervals(campaign, args) -> int:
+    from .analysis.diagnose_intervals import diagnose_intervals, write_interval_diagnosis
+    from .inference.spec import load_model_spec
+
+    spec = load_model_spec(args.model or "split_f0_f2")
+    diag = diagnose_intervals(campaign, spec, sampler=_sampler(args))
+    path = write_interval_diagnosis(diag, args.out)
+    gap = diag.result["gap"]
+    print(f"gap of {spec.name} on the band times: residual RMS {gap['band_z_rms']:.2f} predictive sd (floor 1), "
+          f"+/- heading difference {gap['heading_z_diff']:.2f} sd, 90 % coverage {gap['coverage_90']:.2f}; "
+          f"residuals concentrate by {diag.result['localisation']['where'][0]}")
+    for c in diag.candidates:
+        d = c["delta_elpd"]
+        print(f"{c['rank']:3d}  {c['effect']:22s} delta_elpd_loo {'-' if d is None else f'{d:9.1f}'}  {c['statement']}")
+    print(f"\nwrote {path}, {Path(args.out) / 'report.md'} (+ plots)")
+    return 0
+
+
 def _cmd_diagnose(args) -> int:
     from .analysis.diagnose import diagnose, write_diagnosis
     from .data import load_campaign
     from .inference.spec import load_model_spec
 
     campaign = load_campaign(args.campaign)
-    spec = load_model_spec(args.model)
+    if getattr(campaign, "kind", "traces") == "intervals":
+        return _diagnose_intervals(campaign, args)
+    if getattr(campaign, "kind", "traces") in ("spindown", "steady"):
+        raise ValueError(f"{args.campaign}: the sim-to-real diagnosis works on coastdowns (speed traces or interval "
+                         f"times), not on a {campaign.kind} campaign")
+    spec = load_model_spec(args.model or "three_term")
     diag = diagnose(campaign, spec)
     path = write_diagnosis(diag, args.out)
     gap = diag.result["gap"]
@@ -549,6 +574,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                        "per wheel; steady: run pairs per steady speed)")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--driveline", action="store_true", help="also log a driveline force channel")
+    s.add_argument("--masses", type=float, nargs="+", default=None, metavar="KG",
+                   help="test masses (kg), assigned to the pairs in turn (pair 1 at the first, pair 2 at the "
+                        "second, ...); writes a mass_kg column (M_e shifts by the same amount)")
     s.add_argument("--format", choices=("csv", "parquet"), default="csv")
     s.add_argument("--out", required=True)
     s.set_defaults(func=_cmd_simulate)
@@ -626,11 +654,15 @@ def build_parser() -> argparse.ArgumentParser:
     pl.set_defaults(func=_cmd_plan, noise="integrated", robust=False)
 
     g = sub.add_parser("diagnose", help="sim-to-real diagnosis: the gap of a model on a campaign, where it lies, "
-                                        "which candidate effect explains it and how far it shrinks")
+                                        "which candidate effect explains it and how far it shrinks (speed traces: "
+                                        "one MAP fit, candidates linearised; interval times: candidates refitted "
+                                        "with NUTS (--warmup 500 --draws 1000) and compared by PSIS-LOO)")
     g.add_argument("campaign")
-    g.add_argument("--model", default="three_term", help="a name in models/ or a TOML path (see `models`)")
+    g.add_argument("--model", default=None, help="a name in models/ or a TOML path (see `models`); default "
+                                                 "three_term (speed traces), split_f0_f2 (interval times)")
     g.add_argument("--out", required=True, help="directory for diagnosis.json, refit.json, report.md and plots")
-    g.set_defaults(func=_cmd_diagnose)
+    _add_nuts_options(g, seed=11)   # interval campaigns: every candidate is refitted with NUTS
+    g.set_defaults(func=_cmd_diagnose, warmup=500, draws=1000, target_accept=0.9)
 
     iv = sub.add_parser("import-vbox", help="import VBOX Coastdown CSV exports (speed-gate interval times) as an "
                                             "interval campaign")

@@ -552,6 +552,11 @@ class DiagnosisConfig:
         other candidate's (identifiable or not) by at least this much (nats: Akaike weight
         e^2 ~ 7 to 1); otherwise the candidates within the margin explain the gap alike and
         none is supported ("not distinguishable here").
+    min_distinct_share : the top candidate is claimed only when, against every other candidate
+        that reaches ``support_delta_elpd`` on its own, at least this share of its Fisher
+        information (the coefficients refitted) is left once the rival's parameters are fitted
+        too (0.1: the variance-inflation-factor rule VIF < 10); below it their signatures are
+        one and none is supported ("not distinguishable here").
     max_refit_effects : leading supported candidates refitted together (forward selection).
     gauss_newton_steps : re-linearisations of the combined refit (nonlinear check).
     """
@@ -559,6 +564,7 @@ class DiagnosisConfig:
     support_delta_elpd: float = 5.0
     min_contraction: float = 0.5
     ambiguity_margin: float = 2.0
+    min_distinct_share: float = 0.1
     max_refit_effects: int = 3
     gauss_newton_steps: int = 2
 

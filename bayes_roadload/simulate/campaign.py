@@ -214,6 +214,29 @@ def true_parameters(case: SimulationCase | str, *, driveline: bool = False,
     return {k: float(values[k]) for k in model.parameter_names if k in values}
 
 
+def run_effective_mass_kg(vehicle: Vehicle, mass_kg: float) -> float:
+    """Effective mass of a run at test mass ``mass_kg``: M_e moves by the same amount as M
+    (eq. 2.2, M_e = M + I_w / R_r^2, the rotating inertia unchanged by the load), as
+    :meth:`bayes_roadload.data.Campaign.to_batch` reads a run's ``mass_kg``."""
+    return float(vehicle.effective_mass_kg + (float(mass_kg) - vehicle.mass_kg))
+
+
+def pair_masses_kg(masses_kg: Sequence[float] | None, pairs: int, vehicle: Vehicle) -> list[float]:
+    """The test mass of each of ``pairs`` pairs: the masses assigned to the pairs in turn
+    (pair k gets ``masses_kg[(k - 1) % len(masses_kg)]``); without masses every pair is at the
+    vehicle's mass.  Refused: masses outside ``config.MASS_RANGE_KG``."""
+    if masses_kg is None:
+        return [float(vehicle.mass_kg)] * int(pairs)
+    masses = [float(m) for m in np.atleast_1d(np.asarray(masses_kg, float))]
+    lo, hi = config.MASS_RANGE_KG
+    if not masses:
+        raise ValueError("masses_kg must hold at least one test mass")
+    for m in masses:
+        if not (math.isfinite(m) and lo <= m <= hi):
+            raise ValueError(f"test mass {m!r} kg is outside the physical range [{lo}, {hi}] kg")
+    return [masses[k % len(masses)] for k in range(int(pairs))]
+
+
 # --------------------------------------------------------------------------- JAX core
 
 def _relative_air(speed, direction, wind_along, wind_cross):
@@ -243,9 +266,10 @@ def band_limited_noise(n: int, dt_s: float, bandwidth_hz: float, rng: np.random.
 
 @functools.partial(jax.jit, static_argnames=("model", "n_samples", "substeps", "dynamics", "sensors",
                                              "band_limited", "noise_names"))
-def _integrate_runs(params, fields, direction, start_m, consts, sys_noise, *, model, n_samples, substeps,
+def _integrate_runs(params, fields, direction, start_m, masses, consts, sys_noise, *, model, n_samples, substeps,
                     dynamics, sensors, band_limited, noise_names):
-    """Integrate R runs ([R] params, [R, G, 2] wind fields) and sample every ``substeps``.
+    """Integrate R runs ([R] params, [R, G, 2] wind fields, [R, 2] test and effective masses)
+    and sample every ``substeps``.
 
     ``sys_noise`` ([R, T, k]) is added over time to the parameters ``noise_names`` (a series
     ``SYSTEM_NOISE_STEP_S`` apart, linearly interpolated).
@@ -253,11 +277,11 @@ def _integrate_runs(params, fields, direction, start_m, consts, sys_noise, *, mo
     State: [v, s, t, band-limited w_a, its rate, band-limited w_c, its rate, 5 sensor states].
     Returns a dict of [R, n_samples] arrays.
     """
-    (grid_start, grid_dx, dt, v0, v_floor, rho, temp, mass, area, eff_mass, length,
-     band_omega) = consts
+    (grid_start, grid_dx, dt, v0, v_floor, rho, temp, area, length, band_omega) = consts
     n_grid = fields.shape[1]
 
-    def one_run(p, field_, d, x0, noise_):
+    def one_run(p, field_, d, x0, mass_pair, noise_):
+        mass, eff_mass = mass_pair[0], mass_pair[1]
         n_noise = noise_.shape[0]
 
         def params_at(t):
@@ -326,13 +350,14 @@ def _integrate_runs(params, fields, direction, start_m, consts, sys_noise, *, mo
         _, outs = jax.lax.scan(sample, y0, None, length=n_samples)
         return outs
 
-    return jax.vmap(one_run)(params, fields, direction, start_m, sys_noise)
+    return jax.vmap(one_run)(params, fields, direction, start_m, masses, sys_noise)
 
 
 def simulate_true_runs(model: DragModel, params: Sequence[Mapping[str, float]],
                        winds: Sequence[wind_mod.WindField], directions: Sequence[int], *,
                        dynamics: bool, settings: SimulationSettings = DEFAULT_SETTINGS,
-                       system_noise: Mapping[str, np.ndarray] | None = None
+                       system_noise: Mapping[str, np.ndarray] | None = None,
+                       masses_kg: Sequence[float] | None = None
                        ) -> list[dict[str, np.ndarray]]:
     """Noise-free channels of coastdown runs through given wind fields, at the logging rate.
 
@@ -346,6 +371,9 @@ def simulate_true_runs(model: DragModel, params: Sequence[Mapping[str, float]],
     settings : the simulation settings.
     system_noise : optional, parameter name -> [R, T] perturbation series added over time
         (``SYSTEM_NOISE_STEP_S`` apart, T covering ``settings.max_run_duration_s``).
+    masses_kg : optional, per run, the test mass M (kg); default ``settings.vehicle.mass_kg``.
+        The effective mass moves by the same amount, M_e = vehicle M_e + (M - vehicle M): the
+        rotating inertia does not change with the load (:func:`run_effective_mass_kg`).
 
     Returns
     -------
@@ -370,10 +398,13 @@ def simulate_true_runs(model: DragModel, params: Sequence[Mapping[str, float]],
     direction = jnp.asarray(directions, float)
     start_m = jnp.where(direction > 0, 0.0, settings.track_length_m)
     veh = settings.vehicle
+    run_masses = [veh.mass_kg] * r if masses_kg is None else [float(m) for m in masses_kg]
+    if len(run_masses) != r:
+        raise ValueError(f"masses_kg needs one entry per run ({r}), got {len(run_masses)}")
+    masses = jnp.asarray([[m, run_effective_mass_kg(veh, m)] for m in run_masses])
     consts = tuple(jnp.asarray(x, float) for x in (
         start, dx, settings.dt_s, settings.start_speed_mps, 0.5 * settings.stop_speed_mps,
-        air_density_kgpm3(), config.REFERENCE_TEMPERATURE_K, veh.mass_kg, veh.frontal_area_m2,
-        veh.effective_mass_kg, veh.length_m,
+        air_density_kgpm3(), config.REFERENCE_TEMPERATURE_K, veh.frontal_area_m2, veh.length_m,
         2.0 * math.pi * (settings.wind_bandwidth_hz or 1.0)))
     n_samples = int(math.floor(settings.max_run_duration_s * settings.sample_rate_hz)) + 1
     names = tuple(system_noise) if system_noise else ()
@@ -381,7 +412,7 @@ def simulate_true_runs(model: DragModel, params: Sequence[Mapping[str, float]],
         sys_noise = jnp.asarray(np.stack([np.asarray(system_noise[k], float) for k in names], axis=-1))
     else:
         sys_noise = jnp.zeros((r, 2, 0))
-    outs = _integrate_runs(stacked, fields, direction, start_m, consts, sys_noise, model=model, noise_names=names,
+    outs = _integrate_runs(stacked, fields, direction, start_m, masses, consts, sys_noise, model=model, noise_names=names,
                            n_samples=n_samples, substeps=settings.substeps, dynamics=bool(dynamics),
                            sensors=settings.sensors,
                            band_limited=settings.wind_bandwidth_hz is not None)
@@ -412,7 +443,8 @@ def _rng(seed: int, run: int, stream: int) -> np.random.Generator:
 
 
 def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0, *,
-                      driveline: bool = False, settings: SimulationSettings | None = None) -> Campaign:
+                      driveline: bool = False, settings: SimulationSettings | None = None,
+                      masses_kg: Sequence[float] | None = None) -> Campaign:
     """Simulate ``pairs`` opposite-direction pairs of coastdowns of a thesis case (table 6.7).
 
     Parameters
@@ -430,12 +462,21 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
         ``simplified_model(driveline="measured")``.
     settings : SimulationSettings, optional
         Everything else (defaults: thesis chapter 6).
+    masses_kg : sequence of float, optional
+        Test masses M (kg) of a campaign at several loads (seed 002's way of separating
+        rolling resistance from drag): assigned to the pairs in turn, pair k at
+        ``masses_kg[(k - 1) % len(masses_kg)]`` (:func:`pair_masses_kg`); each run's effective
+        mass is the vehicle's shifted by the same amount (:func:`run_effective_mass_kg`).  The
+        runs then carry a ``mass_kg`` column.  Default: every run at
+        ``settings.vehicle.mass_kg``, no column.  A run's wind and noise draws do not depend on
+        its mass (common random numbers between loads).
 
     Returns
     -------
     bayes_roadload.data.Campaign
         Runs with columns run, time_s, speed_mps, direction, pair, airspeed_mps, yaw_rad,
-        distance_m, position_m (and driveline_force_n).  ``truth`` holds the nominal true
+        distance_m, position_m (and driveline_force_n, and mass_kg with ``masses_kg``).
+        ``truth`` holds the nominal true
         parameters (A_D, B_D, C_D0, K_D, C_L0, K_L, the "comp" extras, A_t, B_t, C_t when
         simulated), the case number and model, and ``per_run``: ``str(run id)`` -> the A_D,
         B_D, C_D0 of that run after system noise (string keys, as JSON stores them; for the
@@ -453,6 +494,8 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
 
     run_ids = list(range(1, 2 * pairs + 1))
     directions = [1 if rid % 2 == 1 else -1 for rid in run_ids]
+    pair_mass = pair_masses_kg(masses_kg, pairs, settings.vehicle)
+    run_mass = [pair_mass[(rid - 1) // 2] for rid in run_ids]
     winds, params, per_run = [], [], {}
     n_noise = int(math.ceil(settings.max_run_duration_s / SYSTEM_NOISE_STEP_S)) + 2
     band = sc.system_noise and settings.system_noise_mode == "band_limited"
@@ -478,7 +521,7 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
         params.append(p)
 
     runs = simulate_true_runs(model, params, winds, directions, dynamics=sc.dynamics, settings=settings,
-                              system_noise=series)
+                              system_noise=series, masses_kg=run_mass)
     for i, (rid, p, run) in enumerate(zip(run_ids, params, runs)):
         # per run: the coefficients (band-limited noise: their mean over the run's duration)
         k = max(int(run["time_s"][-1] / SYSTEM_NOISE_STEP_S), 1)
@@ -486,7 +529,7 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
                              for name in settings.system_noise_std}
 
     frames = []
-    for rid, d, run, p in zip(run_ids, directions, runs, params):
+    for rid, d, run, p, mass in zip(run_ids, directions, runs, params, run_mass):
         n = run["speed_mps"].size
         noise = _rng(seed, rid, 2).standard_normal((4, n))
         m = 1.0 if sc.measurement_noise else 0.0
@@ -504,6 +547,8 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
             "distance_m": run["distance_m"],
             "position_m": run["position_m"],
         }
+        if masses_kg is not None:
+            cols["mass_kg"] = np.full(n, mass)
         if driveline:
             v = run["speed_mps"]
             cols["driveline_force_n"] = (p["At"] + p["Bt"] * v + p["Ct"] * v**2
@@ -528,6 +573,8 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
             "measurement_noise": sc.measurement_noise, "system_noise": sc.system_noise,
             "system_noise_mode": settings.system_noise_mode,
             "driveline": bool(driveline), "generator": "bayes_roadload.simulate"}
+    if masses_kg is not None:
+        meta["masses_kg"] = list(dict.fromkeys(pair_mass))
     tunnel = {"KD": float(settings.coefficients["KD"]),
               "CL0": float(settings.full_model_params["CL0"]),
               "KL": float(settings.full_model_params["KL"]),
