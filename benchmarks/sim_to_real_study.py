@@ -222,6 +222,9 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", type=int, default=3, help="pairs per campaign (standard design)")
     ap.add_argument("--effects", nargs="+", default=list(EFFECT_NAMES))
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--names", nargs="+", default=None,
+                    help="re-diagnose only these campaigns (e.g. yaw_calibration-s3 null-s1004) and replace their "
+                         "rows in the design's records")
     ap.add_argument("--report-only", action="store_true")
     ap.add_argument("--replay", type=int, default=0, help="pairs per effect of the thesis replay (0: skip)")
     args = ap.parse_args(argv)
@@ -232,6 +235,14 @@ def main(argv=None) -> int:
         jobs = withheld_effect_jobs(args.effects, seeds=tuple(args.seeds), pairs=args.pairs, nulls=args.nulls,
                                     design=args.design)
         done = []
+        if args.names:
+            wanted = set(args.names)
+            jobs = [j for j in jobs if j.name in wanted]
+            missing = wanted - {j.name for j in jobs}
+            if missing:
+                raise SystemExit(f"no such campaigns in --seeds/--nulls: {sorted(missing)}")
+            old = read_records(path)
+            done = [r for r in old.to_dict("records") if r["name"] not in wanted]
         t0 = time.perf_counter()
 
         def keep(rec):
