@@ -557,6 +557,9 @@ class DiagnosisConfig:
         information (the coefficients refitted) is left once the rival's parameters are fitted
         too (0.1: the variance-inflation-factor rule VIF < 10); below it their signatures are
         one and none is supported ("not distinguishable here").
+    min_vuong_z : and against every other candidate that explains part of the gap (delta_elpd > 0),
+        the best's per-run gains must beat the rival's by this many standard errors over the
+        runs (Vuong's test for non-nested models): a lead that one run makes is not a claim.
     max_refit_effects : leading supported candidates refitted together (forward selection).
     gauss_newton_steps : re-linearisations of the combined refit (nonlinear check).
     """
@@ -565,6 +568,7 @@ class DiagnosisConfig:
     min_contraction: float = 0.5
     ambiguity_margin: float = 2.0
     min_distinct_share: float = 0.1
+    min_vuong_z: float = 2.0
     max_refit_effects: int = 3
     gauss_newton_steps: int = 2
 

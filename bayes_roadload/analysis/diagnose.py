@@ -103,6 +103,17 @@ def shrink(before: Mapping[str, float], after: Mapping[str, float], n_runs: int 
     return out
 
 
+def vuong_z(best: list[float] | None, rival: list[float] | None) -> float:
+    """Vuong's statistic over the runs: the summed difference of the two candidates' per-run
+    gains (parameters charged) over its standard error sqrt(n) sd; inf without per-run gains
+    or when every run agrees exactly."""
+    if best is None or rival is None or len(best) < 2:
+        return math.inf
+    d = np.asarray(best, float) - np.asarray(rival, float)
+    sd = float(np.std(d, ddof=1))
+    return float(d.sum() / (math.sqrt(d.size) * sd)) if sd > 0 else (math.inf if d.sum() > 0 else -math.inf)
+
+
 def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings: config.DiagnosisConfig) -> list[str]:
     """Decide which candidates are supported (sets ``supported`` in ``entries``) and return them
     in order.  A candidate *qualifies* when it is identifiable here and its own delta_elpd
@@ -122,15 +133,23 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
     best = qualifying[0]
     rivals = [c for c in scored if c is not best and c["delta_elpd"] > best["delta_elpd"] - settings.ambiguity_margin]
     if not best.get("kinematics"):
-        # a rival that explains the gap on its own with nearly the same signature (what is
-        # left of the best's information once the rival is fitted: VIF rule) cannot be told
-        # apart by this campaign, however the gains fall
         for c in scored:
-            if c is best or c in rivals or c.get("kinematics") or c["delta_elpd"] < settings.support_delta_elpd:
+            if c is best or c in rivals or c.get("kinematics") or c["delta_elpd"] <= 0.0:
                 continue
-            share = fx.distinct_share(lin, best["effect"], c["effect"], library)
-            best.setdefault("distinct_share", {})[c["effect"]] = share
-            if share < settings.min_distinct_share:
+            # a rival with nearly the same signature (what is left of the best's information
+            # once the rival is fitted: VIF rule) that explains the gap on its own cannot be
+            # told apart by this campaign, however the gains fall
+            if c["delta_elpd"] >= settings.support_delta_elpd:
+                share = fx.distinct_share(lin, best["effect"], c["effect"], library)
+                best.setdefault("distinct_share", {})[c["effect"]] = share
+                if share < settings.min_distinct_share:
+                    rivals.append(c)
+                    continue
+            # and any rival that explains part of it must lose run by run, not by one run's
+            # luck (Vuong's test of non-nested models over the runs' gains)
+            z = vuong_z(best.get("run_gains"), c.get("run_gains"))
+            best.setdefault("vuong_z", {})[c["effect"]] = z
+            if z < settings.min_vuong_z:
                 rivals.append(c)
     if rivals:
         group = [best] + rivals
@@ -291,6 +310,9 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
             sol = fx.fit_effects(lin, (name,), library)
             k = fx.n_added_parameters(lin, (name,), library)
             delta = sol.loglik_gain - base_sol.loglik_gain - k
+            # each run's share of the gain, less the added parameters spread over the runs
+            entry["run_gains"] = [fx.run_loglik_gain(sol, i) - fx.run_loglik_gain(base_sol, i) - k / lin.n_runs
+                                  for i in range(lin.n_runs)]
             ident = fx.identifiability(lin, name, library)
             identifiable = all(v["contraction"] >= settings.min_contraction for v in ident.values())
             entry.update(identification=ident, identifiable=identifiable,

@@ -208,3 +208,29 @@ def test_a_distorted_yaw_reading_ends_the_run_at_the_logged_limit():
     assert r1["yaw_rad"].abs().max() <= config.MAX_LOGGED_YAW_RAD
     assert len(r1) == int(np.sum(yaw / 0.869 <= config.MAX_LOGGED_YAW_RAD))
     assert len(d.runs[d.runs["run"] == 2]) == t.size
+
+
+def test_a_lead_made_by_one_run_is_not_a_claim(monkeypatch):
+    """Vuong's test over the runs: a best candidate whose gain over a rival comes from one run
+    is not claimed; the same total spread over every run is."""
+    from bayes_roadload import config
+    from bayes_roadload.analysis import diagnose as dg
+
+    cfg = config.DEFAULT_DIAGNOSIS
+    lucky = [9.5] + [0.5] * 5                    # 12 nats, 9 of them in one run
+    steady = [2.0] * 6                           # 12 nats, 2 in every run
+    rival = [0.5] * 6                            # 3 nats
+    assert dg.vuong_z(lucky, rival) < cfg.min_vuong_z < dg.vuong_z([2.0, 2.1, 1.9, 2.0, 2.2, 1.8], rival)
+    assert dg.vuong_z(steady, rival) == math.inf
+    assert dg.vuong_z(None, rival) == math.inf
+
+    def entries(best_runs):
+        return [{"effect": "mass_error", "delta_elpd": 12.0, "qualifies": True, "run_gains": best_runs},
+                {"effect": "anemometer_dynamics", "delta_elpd": 3.0, "qualifies": False, "run_gains": rival}]
+
+    e = entries(lucky)
+    assert dg.select_effects(None, e, {}, cfg) == []
+    assert e[0]["ambiguous_with"] == ["anemometer_dynamics"]
+    monkeypatch.setattr(dg.fx, "fit_effects", lambda lin, eff, lib: type("S", (), {"loglik_gain": 12.0})())
+    e = entries([2.0, 2.1, 1.9, 2.0, 2.2, 1.8])
+    assert dg.select_effects(None, e, {}, cfg) == ["mass_error"]
