@@ -228,3 +228,14 @@ def test_import_vbox_and_fit_an_interval_campaign(tmp_path, capsys):
     assert abs(summary.loc["F0_N", "mean"] - f0) < 4 * summary.loc["F0_N", "sd"]
     assert abs(summary.loc["F2_N_per_kph2", "mean"] - c / 3.6**2) < 4 * summary.loc["F2_N_per_kph2", "sd"]
     assert len(pd.read_csv(tmp_path / "fit" / "runs_summary.csv")) == 10
+
+
+def test_simulate_at_several_masses(tmp_path, capsys):
+    out = tmp_path / "masses"
+    assert main(["simulate", "--case", "2", "--pairs", "2", "--seed", "3", "--masses", "1100", "1400",
+                 "--out", str(out)]) == 0
+    c = load_campaign(out)
+    assert c.runs.groupby("run")["mass_kg"].first().tolist() == [1100.0, 1100.0, 1400.0, 1400.0]
+    assert "at 1100, 1400 kg" in capsys.readouterr().out
+    assert main(["simulate", "--case", "2", "--masses", "-5", "--out", str(tmp_path / "bad")]) == EXIT_REFUSED
+    assert "physical range" in capsys.readouterr().err and not (tmp_path / "bad").exists()
