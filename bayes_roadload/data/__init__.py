@@ -6,4 +6,5 @@ from .campaign import CampaignError as CampaignError
 from .campaign import Vehicle as Vehicle
 from .campaign import load_campaign as load_campaign
 from .campaign import save_campaign as save_campaign
+from .distances import DistanceCampaign as DistanceCampaign
 from .intervals import IntervalCampaign as IntervalCampaign
