@@ -205,10 +205,11 @@ markers (one segment time) only determine that speed."""
 DISTANCE_SEGMENT_SPEED_RANGE_MPS = (0.1, MAX_SPEED_MPS)
 """Accepted mean speed between two consecutive markers of a run (m/s); outside it the units are
 wrong (km or mm in ``distance_m``, ms in ``time_s``)."""
-DISTANCE_RK4_SUBSTEPS = 8
+DISTANCE_RK4_SUBSTEPS = 4
 """RK4 steps (in distance) between two consecutive markers: on 100 m marker spacing from 30 m/s
-the passing times agree with the closed form of a quadratic road load to 1e-10 s over 1300 m
-(tested; 4 steps: 1e-9 s, 2 steps: 2e-8 s)."""
+the passing times agree with the closed form of a quadratic road load to ~1e-9 s over 1300 m
+(tested; 8 steps: 1e-10 s, 2 steps: 2e-8 s), far below any timing error (a light gate's ~1 ms);
+the error grows as the fourth power of the step (500 m spacing: ~1e-6 s)."""
 DISTANCE_MIN_SPEED_MPS = 0.05
 """Floor of the speed in the distance-domain ODE (dv/dx = a / v, dt/dx = 1 / v): keeps a draw
 whose vehicle would stop before the last marker finite (its times then are merely very long)."""

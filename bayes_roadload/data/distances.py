@@ -38,7 +38,6 @@ _DISTANCE_HINTS = dict(_AMBIGUOUS_HINTS, **{
 
 _LIMITS = {
     "distance_m": (-1.0e5, 1.0e5, "not a distance in metres"),
-    "time_s": (-1.0e6, 1.0e6, "not a time in seconds"),
     "temperature_k": (200.0, 350.0, "degrees Celsius in a kelvin column"),
     "pressure_pa": (50_000.0, 120_000.0, "kPa, hPa or bar in a pascal column"),
     "mass_kg": config.MASS_RANGE_KG + ("not a test mass in kg",),
