@@ -1,0 +1,81 @@
+"""Bayesian fit of distance-time records: the likelihood against an independent computation
+(appendix D's closed form and a dense multivariate normal), and, slow, truth recovery and the
+separation of rolling resistance from drag by a second test mass."""
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+from numpyro.infer.util import log_density
+from scipy.stats import gamma, multivariate_normal, norm, truncnorm
+
+from bayes_roadload import config
+from bayes_roadload.data import DistanceCampaign, Vehicle
+from bayes_roadload.inference.distances import build_distance_problem, distance_time_model, fit_distances_nuts
+from bayes_roadload.inference.intervals import run_log_likelihood, summary_table, to_inference_data
+from bayes_roadload.inference.results import SUMMARY_COLUMNS, diagnostics, truth_derived
+from bayes_roadload.physics.atmosphere import REFERENCE_AIR_DENSITY_KGPM3
+from bayes_roadload.physics.integrate import quadratic_coastdown_time
+
+AD, CD0, AREA, G = 0.008, 0.30, 2.2, config.GRAVITY_MPS2
+
+
+def closed_form_times(x, v0, mass, ad=AD, cd0=CD0, extra_decel=0.0):
+    """Passing times of F = M g AD + c v^2 (c = 0.5 rho A CD0) from v0 at x = 0: appendix D's
+    t(v) with v(x) in closed form; a constant extra deceleration d adds M_e d to the constant
+    force."""
+    me = mass + 30.0
+    a = mass * G * ad + me * extra_decel
+    c = 0.5 * REFERENCE_AIR_DENSITY_KGPM3 * AREA * cd0
+    v = np.sqrt((v0**2 + a / c) * np.exp(-2.0 * c * np.asarray(x) / me) - a / c)
+    return np.asarray(quadratic_coastdown_time(v, v0, a, 0.0, c, me))
+
+
+def marker_campaign(masses=(1500.0, 1800.0), n_markers=(7, 5), seed=0, sd=0.02):
+    """Runs at their own masses past markers 100 m apart (unequal counts: padding), times
+    from the closed form with a time origin of each run's own and Gaussian timing noise."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for r, (m, k) in enumerate(zip(masses, n_markers)):
+        x = 100.0 * np.arange(k)
+        t = closed_form_times(x, 29.0 - r, m) + rng.normal(0.0, sd, k) + 600.0 * r + 12.0
+        rows += [{"run": r + 1, "distance_m": 250.0 + xx, "time_s": tt, "mass_kg": m} for xx, tt in zip(x, t)]
+    return DistanceCampaign(pd.DataFrame(rows), Vehicle(1500.0, 1530.0, AREA))
+
+
+def test_likelihood_equals_the_dense_normal_of_closed_form_segment_times():
+    camp = marker_campaign()
+    problem = build_distance_problem(camp, "split_f0_f2")
+    assert problem.free == ("AD", "CD0") and np.asarray(problem.mask).sum() == 6 + 4
+    sample = {"AD": 0.0085, "CD0": 0.31, "v0_mps": np.array([29.1, 27.8]), "sigma_gate_s": 0.03,
+              "band_noise_s_per_sqrt_s": 0.01, "run_decel_sd_mps2": 0.004}
+    ll = np.asarray(run_log_likelihood(problem, sample))
+    for i, (run, g) in enumerate(camp.markers.groupby("run")):
+        x = g["distance_m"].to_numpy() - g["distance_m"].iloc[0]
+        obs = np.diff(g["time_s"].to_numpy())
+        m, v0 = float(g["mass_kg"].iloc[0]), sample["v0_mps"][i]
+        model_seg = np.diff(closed_form_times(x, v0, m, 0.0085, 0.31))
+        h = 1e-6
+        sens = (np.diff(closed_form_times(x, v0, m, 0.0085, 0.31, h))
+                - np.diff(closed_form_times(x, v0, m, 0.0085, 0.31, -h))) / (2 * h)
+        k = obs.size
+        tri = 2.0 * np.eye(k) - np.eye(k, k=1) - np.eye(k, k=-1)
+        cov = (sample["sigma_gate_s"] ** 2 * tri + sample["band_noise_s_per_sqrt_s"] ** 2 * np.diag(model_seg)
+               + sample["run_decel_sd_mps2"] ** 2 * np.outer(sens, sens))
+        ref = multivariate_normal(model_seg, cov).logpdf(obs)
+        # RK4 (4 steps per 100 m, ~1e-9 s) and the finite-difference sensitivity: to 1e-6
+        assert ll[i] == pytest.approx(ref, abs=1e-6)
+    # the numpyro model: that likelihood plus the priors of the coefficients (truncated normals
+    # of split_f0_f2), of the nuisances (Gamma, config.DISTANCE_NOISE_PRIORS) and of each run's
+    # speed at its first marker (normal around the quadratic through its first three passings)
+    total, _ = log_density(distance_time_model, (problem,), {}, sample)
+    prior = truncnorm.logpdf(0.0085, -1.0, np.inf, 0.01, 0.01) + truncnorm.logpdf(0.31, -0.4 / 0.15, np.inf, 0.4, 0.15)
+    for name, mean in config.DISTANCE_NOISE_PRIORS.items():
+        shape = config.DISTANCE_NOISE_PRIOR_SHAPES[name]
+        prior += gamma.logpdf(sample[name], shape, scale=mean / shape)
+    guess = np.asarray(problem.v0_guess_mps)
+    assert np.all(np.abs(guess - [29.0, 28.0]) < 0.5)   # 0.02 s timing noise on 3.4 s segments
+    prior += norm.logpdf(sample["v0_mps"], guess, config.DISTANCE_V0_PRIOR_SD_MPS).sum()
+    assert float(total) == pytest.approx(float(ll.sum()) + prior, abs=1e-8)
