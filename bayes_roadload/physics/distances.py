@@ -27,6 +27,7 @@ Nothing here imports numpyro.
 
 from __future__ import annotations
 
+import functools
 from typing import Mapping, NamedTuple
 
 import jax
@@ -138,16 +139,24 @@ def passing_times(model: DragModel, params: Mapping[str, Array], runs: MarkerRun
     sensitivity equations, :func:`_passing_one_run`).
     """
     r = runs.n_runs
-    p = model.complete(params)
-    axes = {k: (0 if jnp.ndim(v) == 1 and jnp.shape(v)[0] == r else None) for k, v in p.items()}
+    p = {k: jnp.asarray(v, float) for k, v in model.complete(params).items()}
     v0 = jnp.broadcast_to(jnp.asarray(v0_mps, float), (r,))
     off = jnp.broadcast_to(jnp.asarray(decel_offset_mps2, float), (r,))
+    t, v, w = _passing_batch(model, p, runs, v0, off, int(substeps))
+    return {"time_s": t, "speed_mps": v, "dtime_ddecel_s_per_mps2": w}
+
+
+@functools.partial(jax.jit, static_argnums=(0, 5))
+def _passing_batch(model: DragModel, p, runs: MarkerRuns, v0, off, substeps: int):
+    """:func:`_passing_one_run` vmapped over the runs; compiled once per model and shapes, so
+    that eager calls (numpyro's initialisation, checks) do not recompile the scan."""
+    r = runs.n_runs
+    axes = {k: (0 if jnp.ndim(v) == 1 and jnp.shape(v)[0] == r else None) for k, v in p.items()}
 
     def one(pp, run, v, o):
-        return _passing_one_run(model, pp, run, v, o, int(substeps))
+        return _passing_one_run(model, pp, run, v, o, substeps)
 
-    t, v, w = jax.vmap(one, in_axes=(axes, 0, 0, 0))(p, runs, v0, off)
-    return {"time_s": t, "speed_mps": v, "dtime_ddecel_s_per_mps2": w}
+    return jax.vmap(one, in_axes=(axes, 0, 0, 0))(p, runs, v0, off)
 
 
 def segment_times(model: DragModel, params: Mapping[str, Array], runs: MarkerRuns, v0_mps: Array, *,

@@ -5,6 +5,7 @@ separation of rolling resistance from drag by a second test mass."""
 import dataclasses
 import warnings
 
+import jax
 import numpy as np
 import pandas as pd
 import pytest
@@ -51,7 +52,10 @@ def test_likelihood_equals_the_dense_normal_of_closed_form_segment_times():
     assert problem.free == ("AD", "CD0") and np.asarray(problem.mask).sum() == 6 + 4
     sample = {"AD": 0.0085, "CD0": 0.31, "v0_mps": np.array([29.1, 27.8]), "sigma_gate_s": 0.03,
               "band_noise_s_per_sqrt_s": 0.01, "run_decel_sd_mps2": 0.004}
-    ll = np.asarray(run_log_likelihood(problem, sample))
+    # one compiled program for the per-run likelihood and the numpyro model's log density
+    both = jax.jit(lambda smp: (run_log_likelihood(problem, smp), log_density(distance_time_model, (problem,), {}, smp)[0]))
+    ll, total = both(sample)
+    ll = np.asarray(ll)
     for i, (run, g) in enumerate(camp.markers.groupby("run")):
         x = g["distance_m"].to_numpy() - g["distance_m"].iloc[0]
         obs = np.diff(g["time_s"].to_numpy())
@@ -70,7 +74,6 @@ def test_likelihood_equals_the_dense_normal_of_closed_form_segment_times():
     # the numpyro model: that likelihood plus the priors of the coefficients (truncated normals
     # of split_f0_f2), of the nuisances (Gamma, config.DISTANCE_NOISE_PRIORS) and of each run's
     # speed at its first marker (normal around the quadratic through its first three passings)
-    total, _ = log_density(distance_time_model, (problem,), {}, sample)
     prior = truncnorm.logpdf(0.0085, -1.0, np.inf, 0.01, 0.01) + truncnorm.logpdf(0.31, -0.4 / 0.15, np.inf, 0.4, 0.15)
     for name, mean in config.DISTANCE_NOISE_PRIORS.items():
         shape = config.DISTANCE_NOISE_PRIOR_SHAPES[name]
