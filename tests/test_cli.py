@@ -243,6 +243,8 @@ def test_simulate_and_fit_a_distance_time_campaign_at_two_masses(tmp_path, capsy
     assert c.kind == "distances" and c.masses_kg() == {1: 1100.0, 2: 1100.0, 3: 1400.0, 4: 1400.0}
     assert main(["fit", str(camp), "--method", "lsq", "--out", str(tmp_path / "no")]) == EXIT_REFUSED
     assert "--method nuts only" in capsys.readouterr().err and not (tmp_path / "no").exists()
+    assert main(["fit", str(camp), "--validity", "report", "--out", str(tmp_path / "no")]) == EXIT_REFUSED
+    assert "--validity" in capsys.readouterr().err and not (tmp_path / "no").exists()
     out = tmp_path / "fit"
     code = main(["fit", str(camp), "--model", "three_term", "--out", str(out), "--warmup", "150", "--draws", "150",
                  "--target-accept", "0.9", "--no-progress"])

@@ -89,7 +89,10 @@ def test_likelihood_equals_the_dense_normal_of_closed_form_segment_times():
 SLOW_CASE = dataclasses.replace(get_case(9), head_wind_mps=0.0, cross_wind_mps=0.0, system_noise=True)
 """Case 9 without its wind (still air, as the model), measurement noise, and the thesis' system
 noise as one offset per run: the runs differ from the nominal coefficients."""
-SLOW_SAMPLER = config.SamplerConfig(num_warmup=300, num_samples=500, seed=1, target_accept=0.9)
+SLOW_SAMPLER = config.SamplerConfig(seed=1, target_accept=0.95)
+"""2 x 1000 draws at target acceptance 0.95: with 2 x 500 at 0.9 the two-mass fit of seed 5 had
+divergences (the run-effect and segment-noise scales near 0), at 0.95 an R-hat of the noise
+scales above the gate."""
 
 
 def _distance_fit(masses):
@@ -108,7 +111,7 @@ def _distance_fit(masses):
 
 @pytest.mark.slow
 def test_two_masses_one_joint_distance_time_fit_recovers_and_separates():
-    """~2 min (two NUTS fits).  2 pairs timed past 13 markers 100 m apart (0.02 s timing error):
+    """~5 min (two NUTS fits).  2 pairs timed past 13 markers 100 m apart (0.02 s timing error):
     all at 1100 kg, against pair 2 at 1400 kg (the same wind, noise and timing draws)."""
     one_camp, one_fit, one, one_diag, one_corr = _distance_fit(None)
     camp, fit, two, diag, corr = _distance_fit([1100.0, 1400.0])
