@@ -222,8 +222,13 @@ DISTANCE_NOISE_PRIORS = {
 the interval-time likelihood's three (the segment between two markers plays the band): a timing
 error per marker passing (a camera frame at 25-30 fps is 0.03-0.04 s, a light gate ~0.001 s),
 scatter growing with a segment's duration, and a run-level deceleration offset."""
-DISTANCE_NOISE_PRIOR_SHAPES = dict(INTERVAL_NOISE_PRIOR_SHAPES)
-"""Gamma shapes of those priors (as the interval-time ones)."""
+DISTANCE_NOISE_PRIOR_SHAPES = {"sigma_gate_s": 4.0, "run_decel_sd_mps2": 4.0, "band_noise_s_per_sqrt_s": 2.0}
+"""Gamma shapes of those priors: the interval-time ones but shape 4 (sd half the mean) for the run
+effect, which a few runs barely identify: with shape 2 the sampler reached run-effect sds of
+0.0002 m/s^2, where the coefficients' posterior narrows into a funnel, and diverged in some of
+1000 draws of every 4-run fit at target acceptance 0.9 (benchmarks/distance_masses.py, seeds 5-7;
+seed 7: 9 divergences, 2 with shape 4, the rest in the curved tails of AD-BD-CD0, which target
+acceptance 0.95 removes).  Shape 4 for the segment noise too did not help (4)."""
 DISTANCE_V0_PRIOR_SD_MPS = 5.0
 """sd of the Normal prior of each run's speed at its first marker, centred on the speed a
 quadratic through the run's first three passing times gives (the data fix it to ~0.01 m/s)."""
