@@ -5,7 +5,7 @@ one offset per run) of 2 opposite-direction pairs, all at 1100 kg against pair 1
 pair 2 at 1400 kg (``simulate_campaign(masses_kg=...)``, common random numbers), timed past 13
 markers 100 m apart (100 -> 1300 m from the start of the coast) with 0.02 s of timing error per
 passing (:func:`~bayes_roadload.simulate.distances.distance_campaign_from_traces`), fitted by
-NUTS with ``three_term``.  Prints JSON per seed: posterior mean and sd of AD, BD, CD0, F50_N,
+NUTS with ``three_term`` (2 x 1000 draws, target acceptance 0.95).  Prints JSON per seed: posterior mean and sd of AD, BD, CD0, F50_N,
 the correlation AD-CD0, the gates and the wall time.
 
     python benchmarks/distance_masses.py [SEED ...]
@@ -34,7 +34,8 @@ from bayes_roadload.simulate.distances import distance_campaign_from_traces  # n
 
 CASE = dataclasses.replace(get_case(9), head_wind_mps=0.0, cross_wind_mps=0.0, system_noise=True)
 SETTINGS = SimulationSettings(system_noise_mode="per_run")
-SAMPLER = config.SamplerConfig(num_warmup=300, num_samples=500, seed=1, target_accept=0.9, progress_bar=False)
+SAMPLER = config.SamplerConfig(seed=1, target_accept=0.95, progress_bar=False)
+"""2 x 1000 draws at target acceptance 0.95 (as tests/inference/test_distances.py's slow test)."""
 MASSES = {"one mass (4 runs at 1100 kg)": None, "two masses (2 runs at 1100 + 2 at 1400 kg)": [1100.0, 1400.0]}
 
 
