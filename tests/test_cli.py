@@ -232,13 +232,14 @@ def test_import_vbox_and_fit_an_interval_campaign(tmp_path, capsys):
 
 def test_simulate_and_fit_a_distance_time_campaign_at_two_masses(tmp_path, capsys):
     """simulate --masses --markers writes distances.csv (one pair at 1100 kg, one at 1400 kg,
-    timed past 7 markers 200 m apart); fit takes the kind: one joint NUTS fit of both masses."""
+    timed past 5 markers 300 m apart); fit takes the kind: one joint NUTS fit of both masses
+    (few draws: the gates may fail, the estimates must still hold the truth)."""
     assert main(["simulate", "--case", "2", "--masses", "-5", "--out", str(tmp_path / "bad")]) == EXIT_REFUSED
     assert "physical range" in capsys.readouterr().err and not (tmp_path / "bad").exists()
     camp = tmp_path / "dt"
     assert main(["simulate", "--case", "1", "--pairs", "2", "--seed", "2", "--masses", "1100", "1400",
-                 "--markers", "100:200:1300", "--timing-sd", "0.01", "--out", str(camp)]) == 0
-    assert "timed past 7 markers (100-1300 m, timing sd 0.01 s)" in capsys.readouterr().out
+                 "--markers", "100:300:1300", "--timing-sd", "0.01", "--out", str(camp)]) == 0
+    assert "timed past 5 markers (100-1300 m, timing sd 0.01 s)" in capsys.readouterr().out
     c = load_campaign(camp)
     assert c.kind == "distances" and c.masses_kg() == {1: 1100.0, 2: 1100.0, 3: 1400.0, 4: 1400.0}
     assert main(["fit", str(camp), "--method", "lsq", "--out", str(tmp_path / "no")]) == EXIT_REFUSED
@@ -249,13 +250,13 @@ def test_simulate_and_fit_a_distance_time_campaign_at_two_masses(tmp_path, capsy
     code = main(["fit", str(camp), "--model", "three_term", "--out", str(out), "--warmup", "150", "--draws", "150",
                  "--target-accept", "0.9", "--no-progress"])
     text = capsys.readouterr().out
-    assert code in (0, EXIT_GATES_FAILED) and "4 runs at 1100, 1400 kg, 28 marker passings" in text
+    assert code in (0, EXIT_GATES_FAILED) and "4 runs at 1100, 1400 kg, 20 marker passings" in text
     summary = pd.read_csv(out / "summary.csv")
     assert list(summary.columns) == SUMMARY_COLUMNS
     s = summary.set_index("parameter")
     truth = json.loads((camp / "truth.json").read_text())
     # case 1's 1 m/s head and cross wind is not in the still-air model: a small bias against
-    # sd of ~8 % (AD) and ~7 % (CD0) with 4 runs past 7 markers; within 3 sd
+    # the posterior sd (AD 19 %, CD0 12 % with 4 runs past 5 markers, measured); within 3 sd
     for name in ("AD", "CD0"):
         assert abs(s.loc[name, "mean"] - truth[name]) < 3 * s.loc[name, "sd"], name
     runs = pd.read_csv(out / "runs_summary.csv")
