@@ -59,7 +59,8 @@ def one(seed: int, masses, model: str = "three_term", sampler: config.SamplerCon
     truth = dict(camp.truth, **truth_derived(fit.problem, camp.truth))
     out = {k: [float(s.loc[k, "mean"]), float(s.loc[k, "sd"]), float(truth[k])] for k in ("AD", "BD", "CD0", "F50_N")}
     out.update({"corr_AD_CD0": float(np.corrcoef(fit.samples["AD"].ravel(), fit.samples["CD0"].ravel())[0, 1]),
-                "pass": bool(d["pass"]), "failed": d["failed"], "wall_s": round(time.perf_counter() - t0, 1)})
+                "pass": bool(d["pass"]), "failed": d["failed"], "divergences": int(d["divergences"]),
+                "max_r_hat": float(d["max_r_hat"]), "wall_s": round(time.perf_counter() - t0, 1)})
     return out
 
 
