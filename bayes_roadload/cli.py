@@ -1,6 +1,6 @@
 """The ``bayes-roadload`` command line.
 
-Subcommands: ``demo``, ``simulate``, ``fit``, ``import-vbox``, ``plan``, ``diagnose``, ``sensitivity``,
+Subcommands: ``demo``, ``simulate``, ``fit``, ``fit-driveline``, ``import-vbox``, ``plan``, ``diagnose``, ``sensitivity``,
 ``cases``, ``models``.
 Every command that writes a directory validates its input first and writes nothing when the
 input is refused; errors are printed as one line naming the file, column and row.  Exit codes:
@@ -25,6 +25,27 @@ def _cmd_simulate(args) -> int:
     from .data import save_campaign
     from .simulate import simulate_campaign
 
+    if args.kind != "coastdown" and (args.markers is not None or args.timing_sd is not None):
+        raise ValueError("--markers / --timing-sd time simulated coastdowns past markers (--kind coastdown)")
+    if args.kind == "spindown":
+        from .data.spindown import save_spindown
+        from .simulate.spindown import simulate_spindown
+
+        campaign = simulate_spindown(tests_per_wheel=args.pairs, seed=args.seed)
+        out = save_spindown(campaign, args.out)
+        print(f"spin-down: {len(campaign.run_ids)} runs of wheels {', '.join(campaign.wheels)}, "
+              f"{len(campaign.runs)} samples -> {out}")
+        return 0
+    if args.kind == "steady":
+        from .data.steady import save_steady
+        from .simulate.steady import simulate_steady
+
+        campaign = simulate_steady(args.case, pairs=args.pairs, seed=args.seed)
+        out = save_steady(campaign, args.out)
+        print(f"steady state: {len(campaign.run_ids)} runs, {len(campaign.runs)} samples -> {out}")
+        return 0
+    if args.case is None:
+        raise ValueError("simulate: --case is required for coastdowns (see `cases`)")
     campaign = simulate_campaign(args.case, pairs=args.pairs, seed=args.seed, driveline=args.driveline,
                                  masses_kg=args.masses)
     masses = "" if args.masses is None else f" at {', '.join(f'{m:g}' for m in campaign.meta['masses_kg'])} kg"
@@ -82,6 +103,8 @@ def _fit_nuts(campaign, args, out: Path, campaign_path=None):
     (out / "fit.json").write_text(json.dumps({
         "model": fit.problem.spec.name, "model_file": fit.problem.spec.source,
         "free": list(fit.problem.free), "pooling": args.pooling, "noise": args.noise, "robust": bool(args.robust),
+        "undriven": ({k: fit.problem.fixed[k] for k in ("Au", "Bu")} if "undriven_wheels" in fit.problem.spec.terms
+                     else None),
         "campaign": None if campaign_path is None else str(Path(campaign_path).resolve())}, indent=2) + "\n")
     truth = dict(campaign.truth or {}, **truth_derived(fit.problem, campaign.truth))
     return summary, diag, format_posterior_table(summary, diag, truth or None), truth
@@ -97,7 +120,7 @@ def _fit_intervals(campaign, args, out: Path) -> int:
     if args.pooling != "pooled" or args.robust or args.noise != "integrated":
         raise ValueError("an interval campaign has its own likelihood (gate timing, band noise, run effect): "
                          "--pooling, --noise and --robust do not apply")
-    model = args.model or "split_f0_f2"
+    model = _model_for(args, "split_f0_f2")
     mode = args.validity or "reject"
     validity = interval_validity(campaign)
     runs = list(validity["run"]) if mode == "report" else list(validity.loc[~validity["rejected"], "run"])
@@ -110,18 +133,85 @@ def _fit_intervals(campaign, args, out: Path) -> int:
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
+def _only_nuts_options(args, kind: str, pooling: bool = False) -> None:
+    if args.method != "nuts":
+        raise ValueError(f"a {kind} campaign is fitted by --method nuts only")
+    if (args.pooling != "pooled" and not pooling) or args.robust or args.noise != "integrated" or args.validity:
+        raise ValueError(f"a {kind} campaign has its own likelihood: "
+                         + ("" if pooling else "--pooling, ") + "--noise, --robust and --validity do not apply")
+
+
+def _fit_spindown(campaign, args, out: Path) -> int:
+    from .inference.results import format_posterior_table
+    from .inference.spindown import fit_spindown_nuts, write_spindown_outputs
+
+    _only_nuts_options(args, "spin-down", pooling=True)
+    if args.undriven:
+        raise ValueError("--undriven feeds a spin-down result into coastdown or steady-state fits; a spin-down "
+                         "campaign is what gives it")
+    fit = fit_spindown_nuts(campaign, args.model or "undriven_spindown", pooling=args.pooling, sampler=_sampler(args))
+    summary, diag, comparison = write_spindown_outputs(fit, out, campaign)
+    truth = campaign.truth or {}
+    flat = {k: v for k, v in truth.items() if isinstance(v, (int, float))}
+    for site in ("Au_wheel", "Bu_wheel"):
+        flat.update({f"{site}[{w}]": v for w, v in truth.get(site, {}).items()})
+    if {"Au", "Bu"} <= set(flat):
+        from . import config
+
+        flat["F50_undriven_N"] = flat["Au"] + flat["Bu"] * config.SPEED_50MPH_MPS
+    print(format_posterior_table(summary, diag, flat or None))
+    print("\nAgainst thesis table 7.10 (A_u = 3.24 N, B_u = 0.232 N s/m):")
+    for _, r in comparison.iterrows():
+        print(f"  {r['parameter']}: {r['mean']:.4g} [{r['q2.5']:.4g}, {r['q97.5']:.4g}]  thesis "
+              f"{r['thesis_table_7_10']:.4g} +- {r['thesis_sd']:.3g}  ({r['difference_pct']:+.1f} %)")
+    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, diagnostics.json, table_7_10.csv, "
+          "classical.csv")
+    return 0 if diag["pass"] else EXIT_GATES_FAILED
+
+
+def _fit_steady(campaign, args, out: Path) -> int:
+    import pandas as pd
+
+    from .inference.results import format_posterior_table
+    from .inference.steady import (build_steady_problem, compare_with_coastdown, fit_steady_nuts, resolve_wind,
+                                   write_steady_outputs)
+
+    _only_nuts_options(args, "steady-state")
+    wind = resolve_wind(campaign, args.steady_wind)
+    model = _model_for(args, "four_term" if wind == "measured" else "three_term")
+    cd_file = Path(args.compare) / "summary.csv" if args.compare else None
+    if cd_file is not None and not cd_file.is_file():
+        raise FileNotFoundError(f"{cd_file}: --compare takes the output directory of a coastdown `fit`")
+    build_steady_problem(campaign, model, wind=wind)  # refuses a model that does not apply, before sampling
+    fit = fit_steady_nuts(campaign, model, wind=wind, sampler=_sampler(args))
+    summary, diag = write_steady_outputs(fit, out, campaign)
+    truth = {k: v for k, v in (campaign.truth or {}).items() if isinstance(v, (int, float))}
+    if truth:
+        from .inference.results import truth_derived
+
+        truth.update(truth_derived(fit.problem, truth))
+    print(format_posterior_table(summary, diag, truth or None))
+    print(f"relative air: {wind}; acceleration: {campaign.accel_source}")
+    written = ["posterior.nc", "summary.csv", "diagnostics.json"] + (["classical.csv"] if (out / "classical.csv").exists() else [])
+    if cd_file is not None:
+        table = compare_with_coastdown(summary, pd.read_csv(cd_file))
+        table.to_csv(out / "comparison.csv", index=False)
+        written.append("comparison.csv")
+        print("\nsteady state against coastdown (thesis table 7.11: steady AD +12 %, BD -11 %, CD0 +4.9 %):")
+        for _, r in table.iterrows():
+            print(f"  {r['parameter']:<6} coastdown {r['coastdown_mean']:.4g} +- {r['coastdown_sd']:.2g}   steady "
+                  f"{r['steady_mean']:.4g} +- {r['steady_sd']:.2g}   {r['difference_pct']:+.1f} % "
+                  f"({r['difference_z']:+.1f} sd)")
+    print(f"\nwrote {', '.join(written)} in {out}")
+    return 0 if diag["pass"] else EXIT_GATES_FAILED
+
+
 def _fit_distances(campaign, args, out: Path) -> int:
     from .inference.distances import DEFAULT_MODEL, fit_distances_nuts, write_distance_outputs
     from .inference.results import format_posterior_table, truth_derived
 
-    if args.method != "nuts":
-        raise ValueError("a distance-time campaign (distances.csv) is fitted by --method nuts only")
-    if args.pooling != "pooled" or args.robust or args.noise != "integrated":
-        raise ValueError("a distance-time campaign has its own likelihood (marker timing, segment noise, run "
-                         "effect): --pooling, --noise and --robust do not apply")
-    if args.validity:
-        raise ValueError("--validity has no checks for distance-time records yet")
-    fit = fit_distances_nuts(campaign, args.model or DEFAULT_MODEL, sampler=_sampler(args))
+    _only_nuts_options(args, "distance-time")
+    fit = fit_distances_nuts(campaign, _model_for(args, DEFAULT_MODEL), sampler=_sampler(args))
     summary, diag = write_distance_outputs(fit, out)
     masses = sorted(set(campaign.masses_kg().values()))
     print(f"{len(campaign.run_ids)} runs at {', '.join(f'{m:g}' for m in masses)} kg, "
@@ -132,18 +222,68 @@ def _fit_distances(campaign, args, out: Path) -> int:
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
-def _cmd_fit(args) -> int:
+def _undriven_values(arg: str) -> tuple[float, float]:
+    """``--undriven``: a spin-down fit directory (its summary.csv Au, Bu means) or "Au,Bu" in SI."""
+    path = Path(arg)
+    if path.is_dir():
+        import pandas as pd
+
+        f = path / "summary.csv"
+        if not f.is_file():
+            raise FileNotFoundError(f"{f}: --undriven takes a spin-down fit's output directory or 'Au,Bu' (N, N s/m)")
+        s = pd.read_csv(f).set_index("parameter")
+        if not {"Au", "Bu"} <= set(s.index):
+            raise ValueError(f"{f}: no Au, Bu rows: not a spin-down fit")
+        return float(s.loc["Au", "mean"]), float(s.loc["Bu", "mean"])
+    try:
+        au, bu = (float(x) for x in arg.split(","))
+    except ValueError:
+        raise ValueError(f"--undriven {arg!r}: give a spin-down fit directory or 'Au,Bu' in N and N s/m, "
+                         "e.g. 3.24,0.232") from None
+    return au, bu
+
+
+def _model_for(args, default: str):
+    """The model spec of a fit: ``--model`` (or ``default``), with ``--undriven`` added."""
+    from .inference.spec import load_model_spec, with_undriven_wheels
+
+    spec = args.model if not isinstance(args.model, (str, type(None))) else load_model_spec(args.model or default)
+    if getattr(args, "undriven", None):
+        spec = with_undriven_wheels(spec, *_undriven_values(args.undriven))
+    return spec
+
+
+def _load_for_fit(args):
+    """The campaign of ``fit``: the spin-down options go to a spin-down campaign only."""
     from .data import load_campaign
+
+    root = Path(args.campaign)
+    given = args.wheel_inertia_kgm2 is not None or args.rolling_radius_m is not None
+    if (root / "spindown.csv").exists():
+        from .data.spindown import load_spindown
+
+        return load_spindown(root, wheel_inertia_kgm2=args.wheel_inertia_kgm2, rolling_radius_m=args.rolling_radius_m)
+    if given:
+        raise ValueError("--wheel-inertia-kgm2 / --rolling-radius-m apply to spin-down campaigns (spindown.csv) only")
+    return load_campaign(root)
+
+
+def _cmd_fit(args) -> int:
     from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table, write_lsq_outputs
     from .inference.spec import load_model_spec
 
-    campaign = load_campaign(args.campaign)
+    campaign = _load_for_fit(args)
     out = Path(args.out)
-    if getattr(campaign, "kind", "traces") == "intervals":
+    kind = getattr(campaign, "kind", "traces")
+    if kind == "intervals":
         return _fit_intervals(campaign, args, out)
-    if getattr(campaign, "kind", "traces") == "distances":
+    if kind == "distances":
         return _fit_distances(campaign, args, out)
-    spec = load_model_spec(args.model or "four_term")
+    if kind == "spindown":
+        return _fit_spindown(campaign, args, out)
+    if kind == "steady":
+        return _fit_steady(campaign, args, out)
+    spec = _model_for(args, "four_term")
     if args.validity:
         from .analysis.validity import format_validity, trace_validity
 
@@ -173,13 +313,61 @@ def _cmd_fit(args) -> int:
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
+def _cmd_fit_driveline(args) -> int:
+    from . import config
+    from .data import load_campaign
+    from .inference.driveline import fit_driveline_nuts, write_driveline_outputs
+    from .inference.results import format_posterior_table
+
+    campaign = load_campaign(args.campaign)
+    if getattr(campaign, "kind", "traces") not in ("traces", "steady"):
+        raise ValueError(f"{args.campaign}: fit-driveline needs a speed-trace campaign (runs.csv) that logs "
+                         "driveline_force_n or the two wheel torques (off-load), or a steady-state campaign "
+                         "(steady.csv) that logs gearbox_input_force_n (on-load)")
+    out = Path(args.out)
+    fit = fit_driveline_nuts(campaign, args.model, sampler=_sampler(args))
+    summary, diag = write_driveline_outputs(fit, out)
+    truth = dict(campaign.truth or {})
+    if getattr(campaign, "kind", "traces") == "steady":  # the on-load loss has its own truth
+        truth = {k[:-len("_on_load")]: v for k, v in truth.items() if k.endswith("_on_load")}
+    if all(isinstance(truth.get(k), (int, float)) for k in ("At", "Bt", "Ct")):
+        v = config.SPEED_50MPH_MPS
+        truth["F50_driveline_N"] = truth["At"] + truth["Bt"] * v + truth["Ct"] * v**2
+    print(format_posterior_table(summary, diag, truth or None))
+    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, diagnostics.json")
+    return 0 if diag["pass"] else EXIT_GATES_FAILED
+
+
+def _diagnose_intervals(campaign, args) -> int:
+    from .analysis.diagnose_intervals import diagnose_intervals, write_interval_diagnosis
+    from .inference.spec import load_model_spec
+
+    spec = load_model_spec(args.model or "split_f0_f2")
+    diag = diagnose_intervals(campaign, spec, sampler=_sampler(args))
+    path = write_interval_diagnosis(diag, args.out)
+    gap = diag.result["gap"]
+    print(f"gap of {spec.name} on the band times: residual RMS {gap['band_z_rms']:.2f} predictive sd (floor 1), "
+          f"+/- heading difference {gap['heading_z_diff']:.2f} sd, 90 % coverage {gap['coverage_90']:.2f}; "
+          f"residuals concentrate by {diag.result['localisation']['where'][0]}")
+    for c in diag.candidates:
+        d = c["delta_elpd"]
+        print(f"{c['rank']:3d}  {c['effect']:22s} delta_elpd_loo {'-' if d is None else f'{d:9.1f}'}  {c['statement']}")
+    print(f"\nwrote {path}, {Path(args.out) / 'report.md'} (+ plots)")
+    return 0
+
+
 def _cmd_diagnose(args) -> int:
     from .analysis.diagnose import diagnose, write_diagnosis
     from .data import load_campaign
     from .inference.spec import load_model_spec
 
     campaign = load_campaign(args.campaign)
-    spec = load_model_spec(args.model)
+    if getattr(campaign, "kind", "traces") == "intervals":
+        return _diagnose_intervals(campaign, args)
+    if getattr(campaign, "kind", "traces") in ("spindown", "steady"):
+        raise ValueError(f"{args.campaign}: the sim-to-real diagnosis works on coastdowns (speed traces or interval "
+                         f"times), not on a {campaign.kind} campaign")
+    spec = load_model_spec(args.model or "three_term")
     diag = diagnose(campaign, spec)
     path = write_diagnosis(diag, args.out)
     gap = diag.result["gap"]
@@ -426,8 +614,13 @@ def build_parser() -> argparse.ArgumentParser:
     d.set_defaults(func=_cmd_demo, pooling="pooled", noise="integrated", robust=False)
 
     s = sub.add_parser("simulate", help="simulate a campaign of a thesis table 6.7 case")
-    s.add_argument("--case", type=int, required=True, help="1-19, thesis table 6.7 (see `cases`)")
-    s.add_argument("--pairs", type=int, default=1, help="number of opposite-direction pairs")
+    s.add_argument("--kind", choices=("coastdown", "spindown", "steady"), default="coastdown",
+                   help="coastdown runs (runs.csv), undriven-wheel spin-downs (spindown.csv, thesis table 7.10 "
+                        "wheels) or steady-state torque tests (steady.csv, the case's winds)")
+    s.add_argument("--case", type=int, default=None, help="1-19, thesis table 6.7 (see `cases`); required for "
+                                                         "coastdowns, the winds of a steady-state simulation")
+    s.add_argument("--pairs", type=int, default=1, help="number of opposite-direction pairs (spindown: tests "
+                                                       "per wheel; steady: run pairs per steady speed)")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--driveline", action="store_true", help="also log a driveline force channel")
     s.add_argument("--masses", type=float, nargs="+", default=None, metavar="KG",
@@ -464,9 +657,32 @@ def build_parser() -> argparse.ArgumentParser:
                         "with their partners, or only report them (validity.csv); default: reject for interval "
                         "campaigns, no check for speed traces")
     f.add_argument("--wind-limits", default="gtr_onboard", help="eec | gtr_stationary | gtr_onboard (config.WIND_LIMITS)")
+    f.add_argument("--steady-wind", choices=("auto", "measured", "pair", "still"), default="auto",
+                   help="steady state: relative air from the anemometers, a latent along-track wind per "
+                        "opposite-direction pair, or still air (auto: measured if logged, else pair)")
+    f.add_argument("--compare", default=None, metavar="COASTDOWN_FIT_DIR",
+                   help="steady state: a coastdown fit's output directory; writes comparison.csv (thesis table 7.11)")
+    f.add_argument("--undriven", default=None, metavar="SPINDOWN_FIT_DIR|Au,Bu",
+                   help="add the undriven-wheel loss Au + Bu v as a known term (eq. 2.16): a spin-down fit's output "
+                        "directory (posterior means) or 'Au,Bu' in N and N s/m; the tyre terms then exclude it")
+    f.add_argument("--wheel-inertia-kgm2", type=float, default=None,
+                   help="spin-down: polar moment of inertia of the wheel (kg m^2), if not in vehicle.toml [spindown]")
+    f.add_argument("--rolling-radius-m", type=float, default=None,
+                   help="spin-down: rolling radius (m), if not in vehicle.toml")
     f.add_argument("--out", required=True)
     _add_nuts_options(f, seed=0)
     f.set_defaults(func=_cmd_fit)
+
+    fd = sub.add_parser("fit-driveline", help="the driveline loss At + Bt v + Ct v^2 alone: off-load from a "
+                                              "coastdown's driveline_force_n (or wheel torques, eq. 5.12), or "
+                                              "on-load from a steady-state campaign's gearbox_input_force_n minus "
+                                              "its wheel force (section 5.5.2)")
+    fd.add_argument("campaign")
+    fd.add_argument("--model", default="four_term_driveline",
+                    help="model variant whose At, Bt, Ct priors are used (default four_term_driveline)")
+    fd.add_argument("--out", required=True)
+    _add_nuts_options(fd, seed=0)
+    fd.set_defaults(func=_cmd_fit_driveline)
 
     pl = sub.add_parser("plan", help="how many pairs until each quantity is known to a target: posterior-predictive "
                                      "campaigns refitted by MAP + Laplace")
@@ -494,11 +710,15 @@ def build_parser() -> argparse.ArgumentParser:
     pl.set_defaults(func=_cmd_plan, noise="integrated", robust=False)
 
     g = sub.add_parser("diagnose", help="sim-to-real diagnosis: the gap of a model on a campaign, where it lies, "
-                                        "which candidate effect explains it and how far it shrinks")
+                                        "which candidate effect explains it and how far it shrinks (speed traces: "
+                                        "one MAP fit, candidates linearised; interval times: candidates refitted "
+                                        "with NUTS (--warmup 500 --draws 1000) and compared by PSIS-LOO)")
     g.add_argument("campaign")
-    g.add_argument("--model", default="three_term", help="a name in models/ or a TOML path (see `models`)")
+    g.add_argument("--model", default=None, help="a name in models/ or a TOML path (see `models`); default "
+                                                 "three_term (speed traces), split_f0_f2 (interval times)")
     g.add_argument("--out", required=True, help="directory for diagnosis.json, refit.json, report.md and plots")
-    g.set_defaults(func=_cmd_diagnose)
+    _add_nuts_options(g, seed=11)   # interval campaigns: every candidate is refitted with NUTS
+    g.set_defaults(func=_cmd_diagnose, warmup=500, draws=1000, target_accept=0.9)
 
     iv = sub.add_parser("import-vbox", help="import VBOX Coastdown CSV exports (speed-gate interval times) as an "
                                             "interval campaign")

@@ -126,7 +126,43 @@ THESIS_FULL_MODEL = {
     "pitch_gain": 1100.0 * 0.55 / 60e3,
 }
 THESIS_DRIVELINE = {"At": 21.0, "Bt": 2.09, "Ct": -0.02}
+THESIS_DRIVELINE_ON_LOAD = {"At": 36.3, "Bt": 0.0, "Ct": 0.0}
+"""On-load (steady-state) driveline loss, thesis table 7.9: weighted averages of five sets, A_t 36.3 N
+(standard error 2.2), B_t 0.0 N s/m (0.11); C_t not fitted (straight line, section 5.5.2)."""
+THESIS_DRIVELINE_OFF_LOAD_LOW_WIND = {"At": 17.03, "Bt": 1.59}
+"""Off-load (coastdown) driveline loss of the initial study's low-wind coastdowns, thesis table 7.8."""
 THESIS_UNDRIVEN = {"Au": 3.24, "Bu": 0.232}
+THESIS_UNDRIVEN_PER_WHEEL = {
+    "nearside": {"Aw": (1.76, 1.58, 1.55), "Bw": (0.117, 0.123, 0.125), "mean": (1.66, 0.121)},
+    "offside": {"Aw": (1.57, 1.58, 1.58), "Bw": (0.109, 0.115, 0.121), "mean": (1.58, 0.114)},
+}
+"""Thesis table 7.10, undriven (rear) wheel spin-downs, three tests per wheel: A (N) and B (N s/m) of
+each test and the table's means (as printed: the nearside A tests as transcribed average 1.63, not
+1.66; the totals use the printed means).  Vehicle totals ``THESIS_UNDRIVEN``: A_u = 3.24 N (std
+0.155, 4.8 %), B_u = 0.232 N s/m (std 0.012, 5.1 %; the printed means add up to 0.235)."""
+THESIS_UNDRIVEN_SD = {"Au": 0.155, "Bu": 0.012}
+"""Table 7.10's "total std. dev." of A_u and B_u."""
+THESIS_WHEEL_INERTIA_KGM2 = 0.59
+"""Polar moment of inertia of one wheel of the thesis car *(reconstructed: the transcript gives
+none; M_e - M = 30 kg over four wheels at R_r = 0.28 m, drivetrain inertia neglected)*."""
+THESIS_TABLE_7_11 = {
+    "coastdown_low_wind": {"AD": 0.0094, "BD": 0.231e-3, "CD0": 0.386},
+    "coastdown_high_wind": {"AD": 0.0103, "BD": 0.260e-3, "CD0": 0.384},
+    "coastdown_set_of_24": {"AD": 0.0098, "BD": 0.233e-3, "CD0": 0.391},
+    "steady_state": {"AD": 0.0110, "BD": 0.208e-3, "CD0": 0.410},
+    "wind_tunnel": {"CD0": 0.401},
+    "std_pct": {"coastdown_low_wind": {"AD": 5.5, "BD": 31.4, "CD0": 8.3},
+                "coastdown_high_wind": {"AD": 6.2, "BD": 31.2, "CD0": 9.6},
+                "coastdown_set_of_24": {"AD": 4.9, "BD": 27.3, "CD0": 6.4},
+                "steady_state": {"AD": 7.6, "BD": 131.7, "CD0": 12.9}},
+}
+"""Thesis table 7.11, "Summary of initial study results", transcribed from the transcript: mean
+coefficients of the coastdowns (low wind, high wind, the set of 24) and of the five steady-state
+sets (table 7.6), with their test-to-test standard deviations in %.  The text: steady state gives
+AD ~10 % higher, BD ~12 % lower, the aerodynamic term 4.5 % higher and the total drag at 50 mph
+4.5 % higher (tyres transmitting torque, section 2.3.1.6); both within 2.5 % of the tunnel C_D0."""
+THESIS_STEADY_F50_DIFFERENCE_PCT = 4.5
+"""Total drag at 50 mph, steady state above coastdown (thesis section 7.7; not in table 7.11)."""
 THESIS_TUNNEL_TABLE = {
     "yaw_deg": [-25.0, -20.0, -15.0, -10.0, -5.0, 0.0, 5.0, 10.0, 15.0, 20.0, 25.0],
     "cd": [0.491, 0.468, 0.455, 0.422, 0.412, 0.401, 0.409, 0.426, 0.456, 0.481, 0.486],
@@ -368,17 +404,73 @@ TAU_PRIOR_SCALES = {"AD": 1.0e-3, "BD": 5.0e-5, "CD0": 0.02}
 25 %, 5 % of typical values: the thesis' track spreads were 4.3 %, 23.1 %, 4.3 %)."""
 
 
+# Undriven-wheel spin-down (bayes_roadload.data.spindown, inference.spindown)
+WHEEL_INERTIA_RANGE_KGM2 = (0.01, 50.0)
+"""Plausible polar moments of inertia of one road wheel (kg m^2): a car wheel with tyre and disc
+is ~0.5-1.5, a truck wheel ~10-20; outside, the unit is likely wrong (kg cm^2, g m^2)."""
+SPINDOWN_TAU_PRIOR_MEANS = {"Au": 0.1, "Bu": 0.005}
+"""Prior means of the test-to-test spreads of one wheel's A_w (N) and B_w (N s/m) in a
+hierarchical spin-down fit, Gamma(2) priors (~6 % and ~4 % of table 7.10's values; the table's
+three tests per wheel scatter by 0.02-0.11 N and 0.003-0.006 N s/m)."""
+DEFAULT_UNDRIVEN_WHEELS = 2
+"""Undriven wheels of a two-axle vehicle with one driven axle (``[spindown] undriven_wheels``)."""
+SPINDOWN_SIMULATION = {"v0_mps": 31.0, "v_end_mps": 3.0, "sample_rate_hz": 4.0, "speed_noise_mps": 0.02}
+"""Simulated spin-downs: released at ~70 mph tread speed (the thesis' maximum test speed), logged at
+4 Hz until the tread speed falls to 3 m/s, wheel-speed noise 0.02 m/s (a toothed-wheel pickup;
+the coastdown speed channel's 0.05 m/s of table 6.6 is an upper bound)."""
+
+
+# Steady-state torque tests (bayes_roadload.data.steady, inference.steady, simulate.steady)
+STEADY_MAX_ACCEL_MPS2 = 0.5
+"""Largest |dv/dt| of a steady-speed sample: beyond it the run is not steady (or the column holds
+g or km/h/s); the inertial correction M_e dv/dt is then no longer a small correction."""
+STEADY_NOISE_PRIORS = {"sigma_force_n": 20.0, "run_force_sd_n": 10.0, "pair_wind_mps": 3.0}
+"""Priors of the steady-state likelihood: ``sigma_force_n`` half-normal scale of the
+sample-to-sample scatter of the tractive force (N; the thesis' steady residuals are an order of
+magnitude above the coastdown's, section 7.4); ``run_force_sd_n`` mean of the Gamma(2) prior of a
+run's constant force offset (gusts averaged over the run, tyre temperature, the driver; vanishes at
+0, no funnel); ``pair_wind_mps`` normal scale of the latent along-track wind of an
+opposite-direction pair when no anemometer was fitted."""
+STEADY_SIMULATION = {"speeds_mph": (20.0, 30.0, 40.0, 50.0, 60.0, 70.0), "duration_s": 30.0,
+                     "sample_rate_hz": 1.0, "force_noise_n": 15.0, "run_force_sd_n": 8.0,
+                     "accel_sd_mps2": 0.02, "speed_noise_mps": 0.05, "driveline_noise_n": 10.0}
+"""Simulated steady-state groups (thesis section 5.1.3: 20-70 mph in 10 mph steps, both
+directions): each run held ``duration_s`` at its set speed with a constant drift of sd
+``accel_sd_mps2`` (the driver holds the throttle, section 5.4.1), logged at ``sample_rate_hz``;
+torque-meter noise ``force_noise_n`` per sample and a run offset of sd ``run_force_sd_n``; the
+gearbox input force carries the on-load driveline loss plus ``driveline_noise_n`` noise."""
+
+
 # Run validity (bayes_roadload.analysis.validity)
 WIND_LIMITS = {
     "eec": {"mean_wind_mps": 3.0, "peak_wind_mps": 5.0, "mean_cross_wind_mps": 2.0},
     "gtr_stationary": {"mean_wind_mps": 5.0, "peak_wind_mps": 8.0, "mean_cross_wind_mps": 2.0},
     "gtr_onboard": {"mean_wind_mps": 7.0, "peak_wind_mps": 10.0, "mean_cross_wind_mps": 4.0},
 }
-"""Wind limits of a valid coastdown run.  ``eec``: Directive 70/220/EEC (as in StVZO Anlage
-XXIII 3.9.2.3): mean wind at most 3 m/s, gusts below 5 m/s, cross component below 2 m/s.
-``gtr_stationary`` / ``gtr_onboard``: UN GTR 15 (WLTP) Annex 4 for stationary and on-board
-anemometry (5 / 8 / 2 and 7 / 10 / 4 m/s: the values as this project read them; check against
-the text in force before relying on them)."""
+"""Wind limits of a valid coastdown run (m/s).
+
+``eec``: Directive 70/220/EEC as amended by 88/436/EEC (road load; ECE R15.04 alike): "wind
+speeds averaging less than 3 m/s with peak speeds less than 5 m/s; the vector component of the
+wind speed across the test road less than 2 m/s".  Checked against two texts: the thesis quotes
+it word for word (transcript, section 1.5, citing EEC 88/436; its table 7.1 lists average 3.0,
+peak 5.0, cross-track 2.0 m/s as "ECE 15.04"), and the German transposition,
+StVZO Anlage XXIII 3.9.2.3 (regelwerke.vbg.de/vbg_vero/nstvzo/nstvzo_533_.html: mean at most
+3 m/s, gusts below 5 m/s, cross component below 2 m/s, measured 0.7 m above the road).
+
+``gtr_stationary`` / ``gtr_onboard``: UN GTR No. 15 (WLTP) Annex 4, paragraphs 4.1.1.1.1
+(stationary anemometry: average below 5 m/s, peaks below 8 m/s for less than 2 s, cross component
+below 2 m/s) and 4.1.1.1.2 (on-board anemometry: overall average below 7 m/s, peaks below 10 m/s,
+cross component below 4 m/s).  The paragraphs' text was not among the sources searchable here
+(searched 2026-11): UNECE/globalautoregs pages name the GTR's amendments only, and an extract of
+its EU transposition, Regulation (EU) 2017/1151 Annex XXI Sub-Annex 4, confirms the on-board
+procedure around it (4.3.2.4: at least 5 pairs; a run failing the on-board anemometry conditions
+is rejected with its opposite-direction partner, as :mod:`bayes_roadload.analysis.validity` does)
+and that Regulation (EU) 2018/1832 replaced 4.1.1.1 - 4.1.1.1.2 ("Permissible wind conditions"),
+but stops before the figures.  The values are those of the consolidated GTR 15 as the project
+reads it, unverified against the text, and unchanged.
+The stationary peak limit allows peaks above 8 m/s shorter than 2 s; the check here
+(:mod:`bayes_roadload.analysis.validity`) applies the peak to the maximum of the run, which is
+stricter by that allowance."""
 DEFAULT_WIND_LIMITS = "gtr_onboard"
 """The limits applied to campaigns with on-board anemometers unless another set is chosen."""
 HAMPEL_THRESHOLD = 3.0
@@ -495,6 +587,11 @@ class DiagnosisConfig:
         other candidate's (identifiable or not) by at least this much (nats: Akaike weight
         e^2 ~ 7 to 1); otherwise the candidates within the margin explain the gap alike and
         none is supported ("not distinguishable here").
+    min_distinct_share : the top candidate is claimed only when, against every other candidate
+        that reaches ``support_delta_elpd`` on its own, at least this share of its Fisher
+        information (the coefficients refitted) is left once the rival's parameters are fitted
+        too (0.1: the variance-inflation-factor rule VIF < 10); below it their signatures are
+        one and none is supported ("not distinguishable here").
     max_refit_effects : leading supported candidates refitted together (forward selection).
     gauss_newton_steps : re-linearisations of the combined refit (nonlinear check).
     """
@@ -502,6 +599,7 @@ class DiagnosisConfig:
     support_delta_elpd: float = 5.0
     min_contraction: float = 0.5
     ambiguity_margin: float = 2.0
+    min_distinct_share: float = 0.1
     max_refit_effects: int = 3
     gauss_newton_steps: int = 2
 

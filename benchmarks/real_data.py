@@ -171,6 +171,21 @@ def heading_models(camp, runs):
     return rows
 
 
+def heading_diagnosis(camp) -> dict:
+    """``diagnose_intervals`` on the accepted runs: the gap and the scored candidates."""
+    from bayes_roadload.analysis.diagnose_intervals import diagnose_intervals
+
+    validity = interval_validity(camp)
+    runs = list(validity.loc[~validity["rejected"], "run"])
+    t0 = time.perf_counter()
+    d = diagnose_intervals(camp, "split_f0_f2", sampler=FIT_SAMPLER, runs=runs)
+    scored = [{k: c.get(k) for k in ("effect", "rank", "supported", "delta_elpd", "delta_elpd_se", "estimates",
+                                     "shrink_pct", "statement")}
+              for c in d.candidates if c["delta_elpd"] is not None]
+    return {"gap": d.result["gap"], "where": d.result["localisation"]["where"], "candidates": scored,
+            "top": d.top, "wall_s": round(time.perf_counter() - t0, 1)}
+
+
 def run(data: Path, skip_lopo: bool):
     records = {}
     for name, (files, use_weather) in DATASETS.items():
@@ -373,6 +388,25 @@ def markdown(records) -> str:
                     if "head_wind_mps_mean" in m else "-")
             lines.append(f"| {name} | {model} | {m['elpd_loo']:.1f} ({m['elpd_se']:.1f}) | {m['elpd_diff']:.1f} "
                          f"({m['dse']:.1f}) | {grade} | {wind} | {'pass' if m['pass'] else 'FAIL ' + ','.join(m['failed'])} |")
+    if any("diagnosis" in r for _, r in _datasets(records)):
+        lines += ["", "## `bayes-roadload diagnose` on the interval campaigns", "",
+                  "The sim-to-real diagnosis of interval times (`analysis/diagnose_intervals.py`): `split_f0_f2` fitted, "
+                  "then each candidate an interval campaign can carry added and refitted with NUTS, compared by "
+                  "PSIS-LOO over runs (supported: delta_elpd_loo >= 5, > 2 se, 2 ahead of the others, its fit "
+                  "passing the gates).", "",
+                  "| campaign | residual RMS (sd) | +/- difference (sd) | 90 % coverage | candidate | delta_elpd_loo (se) "
+                  "| estimate | heading shrink % | verdict |", "|---|---|---|---|---|---|---|---|---|"]
+        for name, r in _datasets(records):
+            dg = r.get("diagnosis")
+            if not dg:
+                continue
+            g = dg["gap"]
+            for c in dg["candidates"]:
+                est = ", ".join(f"{k} {v['mean']:.4g} +- {v['sd']:.2g}" for k, v in c.get("estimates", {}).items()) or "-"
+                sh = c.get("shrink_pct", {}).get("heading_z_diff")
+                lines.append(f"| {name} | {g['band_z_rms']:.2f} | {g['heading_z_diff']:.2f} | {g['coverage_90']:.2f} | "
+                             f"{c['effect']} | {c['delta_elpd']:.1f} ({c['delta_elpd_se']:.1f}) | {est} | "
+                             f"{'-' if sh is None else f'{sh:.0f}'} | {c['statement']} |")
     if "gnss" in records.get("_extra", {}):
         lines += [""] + gnss_markdown(records["_extra"]["gnss"])
     lines += ["", "<!-- reading -->", ""]
@@ -396,9 +430,25 @@ def main(argv=None):
     ap.add_argument("--extras-only", action="store_true",
                     help="read the records in --json, add the drift table and the eco-car GNSS fits, rewrite the markdown")
     ap.add_argument("--markdown-only", action="store_true", help="rewrite the markdown from the records in --json")
+    ap.add_argument("--diagnose-only", action="store_true",
+                    help="read the records in --json, run `diagnose` on the interval campaigns, rewrite the markdown")
     args = ap.parse_args(argv)
     if args.markdown_only:
         _write_markdown(json.loads(args.json.read_text()), args.out)
+        return 0
+    if args.diagnose_only:
+        if not (args.data / "coastdown").is_dir():
+            print(json.dumps({"skipped": f"{args.data} not found"}))
+            return 0
+        records = json.loads(args.json.read_text())
+        for name, (files, use_weather) in DATASETS.items():
+            if name in records:
+                weather = args.data / "meteo" / "AGRICULTR_SPLIT.csv" if use_weather else None
+                camp, _ = import_vbox([args.data / "coastdown" / f for f in files], VEHICLE, weather=weather)
+                records[name]["diagnosis"] = heading_diagnosis(camp)
+                print(f"{name}: diagnosed", file=sys.stderr)
+        args.json.write_text(json.dumps(records, indent=2) + "\n")
+        _write_markdown(records, args.out)
         return 0
     if args.extras_only:
         records = json.loads(args.json.read_text())

@@ -1,15 +1,17 @@
 """The withheld-effect proof suite of the sim-to-real diagnosis (issue 6).
 
-For every effect of the library, campaigns are simulated with the effect present (thesis case
-9 conditions, a plausible size: ``bayes_roadload.analysis.diagnose.withheld_campaign``),
-analysed with a model that withholds it, and diagnosed; null controls have no added effect.
-Every diagnosis goes through the batch door (``analysis.batch.run_batch`` with
-``DiagnoseJob``).  Writes ``docs/sim_to_real/records.csv`` (one row per campaign, appended as
-they finish: a partial run keeps what it did), ``docs/sim_to_real/confusion.csv`` and
-``docs/sim_to_real.md``; prints a JSON summary.
+For every effect of the library, campaigns are simulated with the effect present
+(``bayes_roadload.analysis.diagnose.withheld_campaign``: ``--design standard``, thesis case 9
+conditions at a plausible size; ``--design identifying``, the library's ``[proof.identifying]``
+campaign), analysed with a model that withholds it, and diagnosed; null controls have no added
+effect.  Every diagnosis goes through the batch door (``analysis.batch.run_batch`` with
+``DiagnoseJob``).  Writes ``docs/sim_to_real/records_DESIGN.csv`` (one row per campaign,
+appended as they finish: a partial run keeps what it did), ``docs/sim_to_real/confusion_DESIGN.csv``
+and ``docs/sim_to_real.md`` (every design with records); prints a JSON summary.
 
-    python benchmarks/sim_to_real_study.py --seeds 1 2 --nulls 4 --pairs 3 --workers 1
-    python benchmarks/sim_to_real_study.py --report-only     # rebuild the markdown from records.csv
+    python benchmarks/sim_to_real_study.py --design standard --seeds 1 2 --nulls 4 --pairs 3 --workers 1
+    python benchmarks/sim_to_real_study.py --design identifying --seeds 1 2 --nulls 4 --workers 2
+    python benchmarks/sim_to_real_study.py --report-only     # rebuild the markdown from the records
     python benchmarks/sim_to_real_study.py --report-only --replay 8   # + the thesis replay (replay.csv)
 """
 
@@ -29,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_roadload import config  # noqa: E402
 from bayes_roadload.analysis.batch import process_pool, run_batch  # noqa: E402
-from bayes_roadload.analysis.diagnose import withheld_effect_jobs  # noqa: E402
+from bayes_roadload.analysis.diagnose import PROOF_DESIGNS, proof_design, withheld_effect_jobs  # noqa: E402
 from bayes_roadload.analysis.effects import EFFECT_NAMES  # noqa: E402
 from bayes_roadload.analysis.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
 
@@ -54,9 +56,23 @@ def outcome(row) -> str:
     return "wrong"
 
 
+def true_rank(row) -> float:
+    """Rank of the true effect among every candidate by delta_elpd alone (1 = best), claimed
+    or not; NaN for nulls."""
+    truth = row["true_effect"]
+    if truth == "null" or f"delta_elpd_{truth}" not in row:
+        return float("nan")
+    scores = {e: float(row.get(f"delta_elpd_{e}", float("nan"))) for e in EFFECT_NAMES}
+    mine = scores[truth]
+    if not np.isfinite(mine):
+        return float("nan")
+    return 1.0 + sum(1 for e, v in scores.items() if e != truth and np.isfinite(v) and v > mine)
+
+
 def summarise(records: pd.DataFrame) -> dict:
     ok = records[records["error"].isna()].copy()
     ok["outcome"] = ok.apply(outcome, axis=1)
+    ok["true_rank"] = ok.apply(true_rank, axis=1)
     effects = ok[ok["true_effect"] != "null"]
     nulls = ok[ok["true_effect"] == "null"]
     shrink = effects.loc[effects["outcome"] == "correct", "shrink_trend_rms_mps"].astype(float)
@@ -64,10 +80,14 @@ def summarise(records: pd.DataFrame) -> dict:
         "campaigns": int(len(ok)), "failed": int(len(records) - len(ok)),
         "effect_campaigns": int(len(effects)),
         "true_first": int((effects["outcome"] == "correct").sum()),
+        "true_first_pct": 100.0 * float((effects["outcome"] == "correct").mean()) if len(effects) else None,
+        "true_top_by_delta_elpd": int((effects["true_rank"] == 1).sum()),
         "flagged_not_identifiable": int((effects["outcome"] == "flagged").sum()),
         "not_distinguishable": int((effects["outcome"] == "indistinct").sum()),
         "nothing_claimed": int((effects["outcome"] == "none").sum()),
         "wrong_claim": int((effects["outcome"] == "wrong").sum()),
+        "extra_claims": int(sum(1 for _, r in effects.iterrows()
+                                if set(filter(None, str(r["supported"]).split(","))) - {r["true_effect"]})),
         "null_campaigns": int(len(nulls)), "null_false_claims": int((nulls["top"] != "none").sum()),
         "median_trend_shrink_pct_when_correct": float(shrink.median()) if len(shrink) else None,
         "median_time_per_campaign_s": float(ok["time_total_s"].median()) if len(ok) else None,
@@ -82,41 +102,84 @@ def confusion(records: pd.DataFrame) -> pd.DataFrame:
     return table.reindex(order)
 
 
-def markdown(records: pd.DataFrame, args_text: str) -> str:
+DESIGN_TEXT = {
+    "standard": ("Each campaign is thesis case 9 conditions (2 m/s head and cross wind, Dryden turbulence, table 6.6 "
+                 "measurement noise, the 'basic' drag model with lift), {pairs} pairs, with one effect added at a "
+                 "plausible size (`analysis.diagnose.withheld_campaign`)"),
+    "identifying": ("Each campaign is the library's `[proof.identifying]` design (`models/effects/library.toml`): "
+                    "what the effects' *needs* ask of a track test -- {pairs} pairs, {head:g} m/s head and {cross:g} m/s "
+                    "cross wind with case 9's turbulence and noise, the pairs at test masses {masses} kg in turn (a "
+                    "weighed ballast), half of them started at each of {starts} m/s -- with one effect added, at the "
+                    "plausible size times {factors} (1 for the others)"),
+}
+
+
+def design_intro(design: str) -> str:
+    plan = proof_design(design)
+    factors = ", ".join(f"{v:g} for {k}" for k, v in plan.get("size_factor", {}).items()) or "1"
+    return DESIGN_TEXT[design].format(pairs=plan.get("pairs", "3"), head=plan.get("head_wind_mps", 0.0),
+                                      cross=plan.get("cross_wind_mps", 0.0),
+                                      masses=" / ".join(f"{m:g}" for m in plan.get("masses_kg", [])),
+                                      starts=" / ".join(f"{v:.1f}" for v in plan.get("start_speeds_mps", [])),
+                                      factors=factors)
+
+
+def design_section(design: str, records: pd.DataFrame) -> list[str]:
     s = summarise(records)
     ok = records[records["error"].isna()].copy()
     ok["outcome"] = ok.apply(outcome, axis=1)
-    cfg = config.DEFAULT_DIAGNOSIS
-    lines = ["# Sim-to-real diagnosis: the withheld-effect proof suite", "",
-             f"Generated by `python benchmarks/sim_to_real_study.py {args_text}` (records: "
-             "[sim_to_real/records.csv](sim_to_real/records.csv)).", "",
-             "Each campaign is thesis case 9 conditions (2 m/s head and cross wind, Dryden turbulence, table 6.6 "
-             "measurement noise, the 'basic' drag model with lift) with one effect added at a plausible size "
-             "(`analysis.diagnose.withheld_campaign`), analysed with `three_term` (for `aero_lift`: `three_term` "
-             "without its tunnel lift), which withholds it; null controls add nothing.  The diagnosis is one MAP fit "
-             "of the model and every candidate scored about it (README, *Sim-to-real diagnosis*).  Support: "
-             f"delta_elpd >= {cfg.support_delta_elpd:g}, identifiable (prior contraction >= {cfg.min_contraction:g}) "
-             f"and ahead of every other candidate by {cfg.ambiguity_margin:g}.", "",
-             "## Summary", "", "| quantity | value |", "| --- | --- |"]
+    ok["true_rank"] = ok.apply(true_rank, axis=1)
+    pairs = int(ok["pairs"].iloc[0]) if len(ok) and "pairs" in ok else 3
+    intro = design_intro(design).replace("{pairs}", str(pairs))
+    if design == "standard":
+        intro = intro.format(pairs=pairs) if "{pairs}" in intro else intro
+    lines = [f"## Design `{design}`", "", intro + ", analysed with `three_term` (for `aero_lift`: `three_term` "
+             "without its tunnel lift), which withholds it; null controls add nothing.  Records: "
+             f"[sim_to_real/records_{design}.csv](sim_to_real/records_{design}.csv).", "",
+             "| quantity | value |", "| --- | --- |"]
     lines += [f"| {k} | {v if not isinstance(v, float) else f'{v:.1f}'} |" for k, v in s.items()]
-    lines += ["", "Outcomes: *correct* = the true effect ranked first and supported (nulls: nothing claimed); "
-              "*flagged* = nothing claimed and the true effect reported 'not identifiable here'; *indistinct* = nothing "
-              "claimed, the true effect among candidates reported 'not distinguishable here'; *none* = nothing "
-              "claimed; *wrong* = another effect claimed.", "",
-              "## Confusion matrix (rows: true effect; columns: top-ranked supported effect)", ""]
+    lines += ["", f"Target (issue 6): true effect ranked first in >= 90 % of campaigns -- here "
+              f"{s['true_first_pct']:.0f} % claimed ({s['true_top_by_delta_elpd']} of {s['effect_campaigns']} first "
+              f"by delta_elpd alone); median shrink >= 80 % -- here {s['median_trend_shrink_pct_when_correct']}; "
+              f"no false claims on nulls -- here {s['null_false_claims']} of {s['null_campaigns']}.", "",
+              "### Confusion matrix (rows: true effect; columns: top-ranked supported effect)", ""]
     cm = confusion(records)
     cols = [c for c in cm.columns if cm[c].sum() > 0 or c == "none"]
     lines += ["| true \\ top | " + " | ".join(cols) + " |", "|" + " --- |" * (len(cols) + 1)]
     for idx, row in cm.iterrows():
         lines.append(f"| {idx} | " + " | ".join(str(int(row[c])) for c in cols) + " |")
-    lines += ["", "## Per campaign", "",
-              "| campaign | outcome | top | supported | not identifiable here | trend before (m/s) | after | shrink % | time (s) |",
-              "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    lines += ["", "### Per campaign", "",
+              "| campaign | outcome | true rank | top | supported | not identifiable here | trend before (m/s) | after | shrink % | time (s) |",
+              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for _, r in ok.iterrows():
         sh = r.get("shrink_trend_rms_mps")
-        lines.append(f"| {r['name']} | {r['outcome']} | {r['top']} | {r['supported'] or '-'} | "
+        rank = "-" if pd.isna(r["true_rank"]) else f"{r['true_rank']:.0f}"
+        lines.append(f"| {r['name']} | {r['outcome']} | {rank} | {r['top']} | {r['supported'] or '-'} | "
                      f"{r['not_identifiable'] or '-'} | {r['before_trend_rms_mps']:.4f} | {r['after_trend_rms_mps']:.4f} | "
                      f"{'-' if pd.isna(sh) else f'{sh:.0f}'} | {r['time_total_s']:.0f} |")
+    bad = records[records["error"].notna()]
+    if len(bad):
+        lines += ["", "Failed jobs: " + "; ".join(f"{n}: {e}" for n, e in zip(bad["name"], bad["error"]))]
+    return lines + [""]
+
+
+def markdown(by_design: dict[str, pd.DataFrame], args_text: str) -> str:
+    cfg = config.DEFAULT_DIAGNOSIS
+    lines = ["# Sim-to-real diagnosis: the withheld-effect proof suite", "",
+             f"Generated by `python benchmarks/sim_to_real_study.py {args_text}`.", "",
+             "For every effect of the library, campaigns are simulated with the effect present and analysed with a "
+             "model that withholds it; null controls add nothing.  The diagnosis is one MAP fit of the model and "
+             "every candidate scored about it (README, *Sim-to-real diagnosis*).  Support: "
+             f"delta_elpd >= {cfg.support_delta_elpd:g}, identifiable (prior contraction >= {cfg.min_contraction:g}) "
+             f"and ahead of every other candidate by {cfg.ambiguity_margin:g}.  Two designs: `standard` (what a usual "
+             "campaign can tell: effects it cannot see must be reported 'not identifiable here' or nothing claimed, "
+             "never a wrong effect) and `identifying` (the campaign the effects' *needs* ask for).", "",
+             "Outcomes: *correct* = the true effect ranked first and supported (nulls: nothing claimed); "
+             "*flagged* = nothing claimed and the true effect reported 'not identifiable here'; *indistinct* = nothing "
+             "claimed, the true effect among candidates reported 'not distinguishable here'; *none* = nothing "
+             "claimed; *wrong* = another effect claimed.  *true rank*: the true effect's place by delta_elpd alone.", ""]
+    for design, records in by_design.items():
+        lines += design_section(design, records)
     rp = OUT / "replay.csv"
     if rp.exists():
         rep = pd.read_csv(rp)
@@ -138,28 +201,48 @@ def markdown(records: pd.DataFrame, args_text: str) -> str:
             lines.append(f"| {r['effect']} | {what} | {r['spread_pct_AD']:.2f} | {r['spread_pct_BD']:.1f} | "
                          f"{r['spread_pct_CD0']:.2f} |")
         lines.append("| track (thesis table 8.3) | | 4.3 | 23.1 | 4.3 |")
-    bad = records[records["error"].notna()]
-    if len(bad):
-        lines += ["", "Failed jobs: " + "; ".join(f"{n}: {e}" for n, e in zip(bad["name"], bad["error"]))]
     return "\n".join(lines) + "\n"
+
+
+def read_records(path: Path) -> pd.DataFrame:
+    records = pd.read_csv(path, keep_default_na=False, na_values=[""])  # "null" is an arm, not NaN
+    for col in ("supported", "not_identifiable", "not_distinguishable", "refit_effects"):
+        if col not in records:
+            records[col] = ""
+        records[col] = records[col].fillna("")
+    return records
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--design", choices=PROOF_DESIGNS, default="standard",
+                    help="campaign design of the suite (models/effects/library.toml [proof])")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1])
     ap.add_argument("--nulls", type=int, default=3)
-    ap.add_argument("--pairs", type=int, default=3)
+    ap.add_argument("--pairs", type=int, default=3, help="pairs per campaign (standard design)")
     ap.add_argument("--effects", nargs="+", default=list(EFFECT_NAMES))
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--names", nargs="+", default=None,
+                    help="re-diagnose only these campaigns (e.g. yaw_calibration-s3 null-s1004) and replace their "
+                         "rows in the design's records")
     ap.add_argument("--report-only", action="store_true")
     ap.add_argument("--replay", type=int, default=0, help="pairs per effect of the thesis replay (0: skip)")
     args = ap.parse_args(argv)
     OUT.mkdir(parents=True, exist_ok=True)
-    path = OUT / "records.csv"
+    path = OUT / f"records_{args.design}.csv"
     args_text = " ".join(argv if argv is not None else sys.argv[1:])
     if not args.report_only:
-        jobs = withheld_effect_jobs(args.effects, seeds=tuple(args.seeds), pairs=args.pairs, nulls=args.nulls)
+        jobs = withheld_effect_jobs(args.effects, seeds=tuple(args.seeds), pairs=args.pairs, nulls=args.nulls,
+                                    design=args.design)
         done = []
+        if args.names:
+            wanted = set(args.names)
+            jobs = [j for j in jobs if j.name in wanted]
+            missing = wanted - {j.name for j in jobs}
+            if missing:
+                raise SystemExit(f"no such campaigns in --seeds/--nulls: {sorted(missing)}")
+            old = read_records(path)
+            done = [r for r in old.to_dict("records") if r["name"] not in wanted]
         t0 = time.perf_counter()
 
         def keep(rec):
@@ -176,14 +259,12 @@ def main(argv=None) -> int:
         rep["time_s"] = time.perf_counter() - t0
         rep.to_csv(OUT / "replay.csv", index=False)
         print(rep.round(3).to_string(), flush=True)
-    records = pd.read_csv(path, keep_default_na=False, na_values=[""])  # "null" is an arm, not NaN
-    for col in ("supported", "not_identifiable", "not_distinguishable", "refit_effects"):
-        if col not in records:
-            records[col] = ""
-        records[col] = records[col].fillna("")
-    confusion(records).to_csv(OUT / "confusion.csv")
-    (ROOT / "docs" / "sim_to_real.md").write_text(markdown(records, args_text))
-    print(json.dumps(summarise(records), indent=1))
+    by_design = {d: read_records(OUT / f"records_{d}.csv") for d in PROOF_DESIGNS
+                 if (OUT / f"records_{d}.csv").exists()}
+    for d, records in by_design.items():
+        confusion(records).to_csv(OUT / f"confusion_{d}.csv")
+    (ROOT / "docs" / "sim_to_real.md").write_text(markdown(by_design, args_text))
+    print(json.dumps({d: summarise(r) for d, r in by_design.items()}, indent=1))
     return 0
 
 

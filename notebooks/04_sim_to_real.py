@@ -12,13 +12,15 @@
 # %% [markdown]
 # # Sim-to-real: the withheld-effect proof suite
 #
-# `benchmarks/sim_to_real_study.py` simulates campaigns at thesis case 9 conditions with one
-# candidate effect present at a plausible size, analyses each with a model that withholds it
-# (`three_term`), and runs the diagnosis (`bayes-roadload diagnose`); null controls add no
-# effect.  Its records are in `docs/sim_to_real/records.csv`; this notebook plots them:
+# `benchmarks/sim_to_real_study.py` simulates campaigns with one candidate effect present,
+# analyses each with a model that withholds it (`three_term`), and runs the diagnosis
+# (`bayes-roadload diagnose`); null controls add no effect.  Two designs: `standard` (thesis
+# case 9 conditions, the effect at a plausible size) and `identifying` (the campaign the
+# effects' *needs* ask for: `[proof.identifying]` in `models/effects/library.toml`).  Its
+# records are in `docs/sim_to_real/records_DESIGN.csv`; this notebook plots them:
 #
-# 1. the confusion matrix, true effect against the top-ranked supported effect ("none" when
-#    nothing is claimed);
+# 1. per design, the confusion matrix, true effect against the top-ranked supported effect
+#    ("none" when nothing is claimed);
 # 2. each campaign's delta_elpd of the true effect, against the support threshold, and the
 #    largest delta_elpd of any candidate on the null controls;
 # 3. the shrink of the residual trend after the refit.
@@ -43,31 +45,42 @@ from bayes_roadload.analysis.effects import EFFECT_NAMES
 ROOT = Path.cwd() if (Path.cwd() / "docs").is_dir() else Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("BR_SIM_TO_REAL_DIR", ROOT / "docs" / "sim_to_real"))
 OUT = Path(os.environ.get("BR_OUT", "."))
-records = pd.read_csv(DATA / "records.csv", keep_default_na=False, na_values=[""])  # "null" is an arm
+frames = []
+for path in sorted(DATA.glob("records_*.csv")):
+    frame = pd.read_csv(path, keep_default_na=False, na_values=[""])  # "null" is an arm
+    frame["design"] = path.stem.removeprefix("records_")
+    frames.append(frame)
+records = pd.concat(frames, ignore_index=True)
 records = records[records["error"].isna()]
+records["name"] = records["design"] + ":" + records["name"]
+designs = list(dict.fromkeys(records["design"]))
 threshold = config.DEFAULT_DIAGNOSIS.support_delta_elpd
-print(f"{len(records)} campaigns, {records['true_effect'].nunique()} arms")
+print(f"{len(records)} campaigns, designs {designs}, {records['true_effect'].nunique()} arms")
 
 # %% [markdown]
 # ## 1. Confusion matrix
 
 # %%
-rows = [e for e in list(EFFECT_NAMES) + ["null"] if e in set(records["true_effect"])]
 cols = list(EFFECT_NAMES) + ["none"]
-cm = pd.crosstab(records["true_effect"], records["top"]).reindex(index=rows, columns=cols, fill_value=0)
-fig, ax = plt.subplots(figsize=(9, 6))
-ax.imshow(cm.to_numpy(), cmap="Blues")
-ax.set_xticks(range(len(cols)), cols, rotation=60, ha="right", fontsize=7)
-ax.set_yticks(range(len(rows)), rows, fontsize=7)
-for (i, j), v in np.ndenumerate(cm.to_numpy()):
-    if v:
-        ax.text(j, i, str(v), ha="center", va="center", fontsize=8)
-ax.set_xlabel("top-ranked supported effect")
-ax.set_ylabel("true (withheld) effect")
+fig, axes = plt.subplots(1, len(designs), figsize=(9 * len(designs), 6), squeeze=False)
+for ax, design in zip(axes[0], designs):
+    part = records[records["design"] == design]
+    rows = [e for e in list(EFFECT_NAMES) + ["null"] if e in set(part["true_effect"])]
+    cm = pd.crosstab(part["true_effect"], part["top"]).reindex(index=rows, columns=cols, fill_value=0)
+    ax.imshow(cm.to_numpy(), cmap="Blues")
+    ax.set_xticks(range(len(cols)), cols, rotation=60, ha="right", fontsize=7)
+    ax.set_yticks(range(len(rows)), rows, fontsize=7)
+    for (i, j), v in np.ndenumerate(cm.to_numpy()):
+        if v:
+            ax.text(j, i, str(v), ha="center", va="center", fontsize=8)
+    ax.set_title(f"design {design}")
+    ax.set_xlabel("top-ranked supported effect")
+    ax.set_ylabel("true (withheld) effect")
+    correct = sum(cm.loc[e, e] for e in rows if e in cm.columns)
+    print(f"{design}: true effect ranked first:", correct, "of",
+          int(cm.drop(index="null", errors="ignore").to_numpy().sum()))
 fig.tight_layout()
 fig.savefig(OUT / "sim_to_real_confusion.png", dpi=90)
-correct = sum(cm.loc[e, e] for e in rows if e in cm.columns)
-print("true effect ranked first:", correct, "of", int(cm.drop(index="null", errors="ignore").to_numpy().sum()))
 
 # %% [markdown]
 # ## 2. Evidence for the true effect, and the null controls

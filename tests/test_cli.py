@@ -264,3 +264,168 @@ def test_simulate_and_fit_a_distance_time_campaign_at_two_masses(tmp_path, capsy
     assert runs["v0_mps_mean"].between(25.0, 31.3).all() and runs["v0_mps_sd"].lt(0.2).all()
     diag = json.loads((out / "diagnostics.json").read_text())
     assert diag["kind"] == "distances" and diag["runs_fitted"] == 4
+
+
+def _driveline_campaign(path, *, with_channel=True, seed=0):
+    """Two runs of 60 samples whose logged driveline force is 21 + 2.09 v - 0.02 v^2 N plus
+    1 N noise (thesis table 8.12 coefficients)."""
+    rng = np.random.default_rng(seed)
+    path.mkdir(parents=True)
+    frames = []
+    for run, d in ((1, 1), (2, -1)):
+        t = np.arange(60) * 0.5
+        v = 30.0 * np.exp(-t / 40.0)
+        df = pd.DataFrame({"run": run, "time_s": t, "speed_mps": v, "direction": d})
+        if with_channel:
+            df["driveline_force_n"] = 21.0 + 2.09 * v - 0.02 * v**2 + rng.normal(0.0, 1.0, v.size)
+        frames.append(df)
+    pd.concat(frames).to_csv(path / "runs.csv", index=False)
+    (path / "vehicle.toml").write_text("[vehicle]\nmass_kg = 1100.0\neffective_mass_kg = 1130.0\n"
+                                       "frontal_area_m2 = 1.85\n")
+    (path / "truth.json").write_text(json.dumps({"At": 21.0, "Bt": 2.09, "Ct": -0.02}))
+    return path
+
+
+def test_fit_driveline_writes_summary_and_gates(tmp_path, capsys):
+    camp = _driveline_campaign(tmp_path / "dl")
+    out = tmp_path / "fit"
+    code = main(["fit-driveline", str(camp), "--warmup", "200", "--draws", "300", "--no-progress",
+                 "--seed", "2", "--out", str(out)])
+    diag = json.loads((out / "diagnostics.json").read_text())
+    assert code == (0 if diag["pass"] else EXIT_GATES_FAILED)
+    assert diag["kind"] == "driveline" and set(diag["gates"]) == {"divergences", "r_hat", "ess_bulk", "ess_tail",
+                                                                 "bfmi", "tree_depth"}
+    assert diag["samples_fitted"] == 120
+    s = pd.read_csv(out / "summary.csv")
+    assert list(s.columns) == SUMMARY_COLUMNS
+    s = s.set_index("parameter")
+    assert list(s.index) == ["At", "Bt", "Ct", "sigma_driveline_n", "F50_driveline_N"]
+    # 120 samples with 1 N noise: the posterior sd of At is ~0.9 N; the truth lies within 4 sd
+    for name, true in (("At", 21.0), ("Bt", 2.09), ("Ct", -0.02)):
+        assert abs(s.loc[name, "mean"] - true) < 4 * s.loc[name, "sd"], name
+    f50 = 21.0 + 2.09 * config.SPEED_50MPH_MPS - 0.02 * config.SPEED_50MPH_MPS**2
+    assert s.loc["F50_driveline_N", "q2.5"] < f50 < s.loc["F50_driveline_N", "q97.5"]
+    assert (out / "posterior.nc").exists()
+    assert "At" in capsys.readouterr().out
+
+
+def test_fit_driveline_refuses_a_campaign_without_the_channel(tmp_path, capsys):
+    camp = _driveline_campaign(tmp_path / "nodl", with_channel=False)
+    out = tmp_path / "o"
+    assert main(["fit-driveline", str(camp), "--out", str(out)]) == EXIT_REFUSED
+    assert "driveline_force_n" in capsys.readouterr().err and not out.exists()
+
+
+@pytest.mark.slow
+def test_spindown_simulate_and_fit_recover_the_undriven_wheels(tmp_path, capsys):
+    """Two spin-downs per rear wheel of the thesis car (table 7.10 means), fitted by NUTS: the
+    vehicle's Au, Bu inside their 99 % posterior intervals (tolerance from the posterior: the
+    truth within 2.6 posterior sd), the outputs' contract, the comparison with table 7.10."""
+    camp = tmp_path / "sd"
+    assert main(["simulate", "--kind", "spindown", "--pairs", "2", "--seed", "3", "--out", str(camp)]) == 0
+    out = tmp_path / "fit"
+    code = main(["fit", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--out", str(out)])
+    diag = json.loads((out / "diagnostics.json").read_text())
+    assert diag["kind"] == "spindown" and code == (0 if diag["pass"] else EXIT_GATES_FAILED)
+    s = pd.read_csv(out / "summary.csv").set_index("parameter")
+    assert {"Au", "Bu", "F50_undriven_N", "Au_wheel[nearside]", "Bu_wheel[offside]"} <= set(s.index)
+    for name, true in (("Au", 3.24), ("Bu", 0.235)):
+        assert abs(s.loc[name, "mean"] - true) < 2.6 * s.loc[name, "sd"], name
+    cmp = pd.read_csv(out / "table_7_10.csv").set_index("parameter")
+    assert cmp.loc["Au", "thesis_table_7_10"] == 3.24 and cmp.loc["Bu", "thesis_table_7_10"] == 0.232
+    assert bool(cmp.loc["Au", "truth_in_95"]) and list(pd.read_csv(out / "runs_summary.csv")["parameter"])[:1] == ["v0_mps[1]"]
+    classical = pd.read_csv(out / "classical.csv").set_index("wheel")
+    # the classical eq. 5.14 line is ~30x less precise than the fit of the speeds themselves
+    assert classical.loc["total", "Au_se"] > 5 * s.loc["Au", "sd"]
+    assert "table 7.10" in capsys.readouterr().out
+
+
+def test_spindown_and_steady_fits_refuse_options_that_do_not_apply(tmp_path, capsys):
+    """Contract of `fit` on the new kinds, refusals before anything is fitted or written."""
+    traces = _driveline_campaign(tmp_path / "traces")
+    assert main(["fit", str(traces), "--wheel-inertia-kgm2", "0.6", "--out", str(tmp_path / "o1")]) == EXIT_REFUSED
+    assert "spin-down" in capsys.readouterr().err
+    sd = tmp_path / "sd"
+    assert main(["simulate", "--kind", "spindown", "--pairs", "1", "--out", str(sd)]) == 0
+    assert main(["fit", str(sd), "--method", "lsq", "--out", str(tmp_path / "o2")]) == EXIT_REFUSED
+    assert "nuts only" in capsys.readouterr().err
+    assert main(["fit", str(sd), "--wheel-inertia-kgm2", "0.9", "--out", str(tmp_path / "o3")]) == EXIT_REFUSED
+    assert "ambiguous" in capsys.readouterr().err
+    ss = tmp_path / "ss"
+    assert main(["simulate", "--kind", "steady", "--case", "9", "--out", str(ss)]) == 0
+    assert main(["fit", str(ss), "--pooling", "hierarchical", "--out", str(tmp_path / "o4")]) == EXIT_REFUSED
+    assert main(["fit", str(ss), "--model", "four_term_driveline", "--out", str(tmp_path / "o5")]) == EXIT_REFUSED
+    assert "beyond the driveline" in capsys.readouterr().err
+    assert main(["fit", str(ss), "--compare", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o6")]) == EXIT_REFUSED
+    assert "--compare" in capsys.readouterr().err
+    assert not any((tmp_path / f"o{i}").exists() for i in range(1, 7))
+
+
+@pytest.mark.slow
+def test_steady_simulate_fit_and_compare_with_a_coastdown(tmp_path, capsys):
+    """Steady-state runs at 20-70 mph in case 9 winds with anemometers, fitted by NUTS: AD, CD0 and
+    F50_N within 3 posterior sd of the truth; comparison.csv against a coastdown summary."""
+    camp = tmp_path / "ss"
+    assert main(["simulate", "--kind", "steady", "--case", "9", "--seed", "4", "--out", str(camp)]) == 0
+    coast = tmp_path / "coast"
+    coast.mkdir()
+    pd.DataFrame({"parameter": ["AD", "BD", "CD0", "KD", "F50_N"], "mean": [0.01, 2e-4, 0.4, 0.614, 373.6],
+                  "sd": [2e-4, 1e-5, 0.004, 0.1, 1.0], "q2.5": [0.0096, 1.8e-4, 0.392, 0.42, 371.6],
+                  "q97.5": [0.0104, 2.2e-4, 0.408, 0.81, 375.6]}).to_csv(coast / "summary.csv", index=False)
+    out = tmp_path / "fit"
+    code = main(["fit", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--compare", str(coast),
+                 "--out", str(out)])
+    diag = json.loads((out / "diagnostics.json").read_text())
+    assert diag["kind"] == "steady" and diag["wind"] == "measured" and code == (0 if diag["pass"] else EXIT_GATES_FAILED)
+    s = pd.read_csv(out / "summary.csv").set_index("parameter")
+    assert {"AD", "BD", "CD0", "KD", "sigma_force_n", "run_force_sd_n", "F50_N", "F0_N"} <= set(s.index)
+    truth = json.loads((camp / "truth.json").read_text())
+    for name in ("AD", "CD0"):
+        assert abs(s.loc[name, "mean"] - truth[name]) < 3 * s.loc[name, "sd"], name
+    cmp = pd.read_csv(out / "comparison.csv").set_index("parameter")
+    assert list(cmp.index) == ["AD", "BD", "CD0", "KD", "F50_N"]
+    assert cmp.loc["CD0", "thesis_steady"] == 0.410
+    # the simulated steady state has the coastdown's physics: F50 within 3 combined sd of the truth
+    assert abs(cmp.loc["F50_N", "difference_z"]) < 3
+    assert (out / "classical.csv").exists() and "table 7.11" in capsys.readouterr().out
+    # the on-load driveline loss (gearbox input minus wheel force, table 7.9: At 36.3 N, Bt 0)
+    dl = tmp_path / "dl"
+    main(["fit-driveline", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--out", str(dl)])
+    d = pd.read_csv(dl / "summary.csv").set_index("parameter")
+    assert abs(d.loc["At", "mean"] - 36.3) < 3 * d.loc["At", "sd"] and abs(d.loc["Bt", "mean"]) < 3 * d.loc["Bt", "sd"]
+
+
+def test_undriven_values_come_from_a_spindown_fit_or_numbers(tmp_path):
+    from bayes_roadload.cli import _undriven_values
+
+    fit = tmp_path / "sdfit"
+    fit.mkdir()
+    pd.DataFrame({"parameter": ["Au", "Bu"], "mean": [3.2, 0.23]}).to_csv(fit / "summary.csv", index=False)
+    assert _undriven_values(str(fit)) == (3.2, 0.23)
+    assert _undriven_values("3.24,0.232") == (3.24, 0.232)
+    with pytest.raises(ValueError, match="Au,Bu"):
+        _undriven_values("3.24")
+    (fit / "summary.csv").write_text("parameter,mean\nAD,0.01\n")
+    with pytest.raises(ValueError, match="not a spin-down fit"):
+        _undriven_values(str(fit))
+
+
+@pytest.mark.slow
+def test_hierarchical_spindown_carries_the_test_to_test_scatter(tmp_path):
+    """Tests scattering like table 7.10's (sd 0.1 N, 0.004 N s/m per test): the pooled fit is
+    overconfident (truth ~30 posterior sd away on this seed), the hierarchical one holds the truth
+    in its 95 % interval and passes the gates (measured: Au 3.338 [3.063, 3.615], truth 3.24)."""
+    from bayes_roadload.data.spindown import save_spindown
+    from bayes_roadload.simulate.spindown import simulate_spindown
+
+    camp = save_spindown(simulate_spindown(tests_per_wheel=3, seed=0, test_sd=(0.1, 0.004)), tmp_path / "sd")
+    out = tmp_path / "h"
+    assert main(["fit", str(camp), "--pooling", "hierarchical", "--no-progress", "--out", str(out)]) == 0
+    s = pd.read_csv(out / "summary.csv").set_index("parameter")
+    assert s.loc["Au", "q2.5"] < 3.24 < s.loc["Au", "q97.5"] and s.loc["Bu", "q2.5"] < 0.235 < s.loc["Bu", "q97.5"]
+    assert {"tau_Au_wheel", "tau_Bu_wheel"} <= set(s.index)
+    assert "Au_run[1]" in set(pd.read_csv(out / "runs_summary.csv")["parameter"])
+    pooled = tmp_path / "p"
+    main(["fit", str(camp), "--no-progress", "--out", str(pooled)])
+    sp = pd.read_csv(pooled / "summary.csv").set_index("parameter")
+    assert abs(sp.loc["Au", "mean"] - 3.24) > 5 * sp.loc["Au", "sd"]

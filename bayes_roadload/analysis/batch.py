@@ -115,6 +115,8 @@ class SimulatedCampaign:
         Noise levels, speeds, vehicle, ... (default: thesis chapter 6).
     driveline : bool
         Simulate and log the driveline force channel ``driveline_force_n``.
+    masses_kg : tuple of float, optional
+        Test masses assigned to the pairs in turn (``simulate_campaign(masses_kg=...)``).
     """
 
     case: Any
@@ -122,12 +124,13 @@ class SimulatedCampaign:
     seed: int = 0
     settings: Any = None
     driveline: bool = False
+    masses_kg: tuple | None = None
 
     def __call__(self) -> Campaign:
         from ..simulate import simulate_campaign
 
         return simulate_campaign(self.case, self.pairs, self.seed, driveline=self.driveline,
-                                 settings=self.settings)
+                                 settings=self.settings, masses_kg=self.masses_kg)
 
 
 @dataclass(frozen=True)

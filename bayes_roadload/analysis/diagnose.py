@@ -121,6 +121,17 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
         return []
     best = qualifying[0]
     rivals = [c for c in scored if c is not best and c["delta_elpd"] > best["delta_elpd"] - settings.ambiguity_margin]
+    if not best.get("kinematics"):
+        # a rival that explains the gap on its own with nearly the same signature (what is
+        # left of the best's information once the rival is fitted: VIF rule) cannot be told
+        # apart by this campaign, however the gains fall
+        for c in scored:
+            if c is best or c in rivals or c.get("kinematics") or c["delta_elpd"] < settings.support_delta_elpd:
+                continue
+            share = fx.distinct_share(lin, best["effect"], c["effect"], library)
+            best.setdefault("distinct_share", {})[c["effect"]] = share
+            if share < settings.min_distinct_share:
+                rivals.append(c)
     if rivals:
         group = [best] + rivals
         for c in group:
@@ -128,13 +139,34 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
         return []
     chosen = [best["effect"]]
     best["supported"] = True
-    dynamic = [] if best.get("kinematics") else [best["effect"]]
+    # the claimed effect's parameters are refitted in the dynamics too (an airspeed scale
+    # claimed from the kinematics included: what it leaves in the drag must not be credited
+    # to the next candidate)
+    dynamic = [best["effect"]]
     current = fx.fit_effects(lin, tuple(dynamic), library).loglik_gain
     for c in qualifying[1:]:
         if len(chosen) >= settings.max_refit_effects:
             break
         if c.get("kinematics"):
-            gain_ok = c["delta_elpd"] >= settings.support_delta_elpd
+            # joint again, given the effects in: the dynamics' gain and factor with them
+            # refitted, the kinematics with a claimed vane factor
+            trial = tuple(dynamic + [c["effect"]])
+            sol = fx.fit_effects(lin, trial, library)
+            names = [lin.columns[j] for j in sol.shared]
+            dyn = None
+            if "airspeed_factor" in names:
+                j = names.index("airspeed_factor")
+                dyn = {"estimate": float(lin.values.get("airspeed_factor", 1.0) + sol.beta[j]),
+                       "sd": float(math.sqrt(max(sol.cov_shared[j, j], 0.0)))}
+            kin = c.get("kinematics_given_yaw") if "yaw_calibration" in chosen and c.get("kinematics_given_yaw") \
+                else c["kinematics"]
+            k = fx.n_added_parameters(lin, (c["effect"],), library)
+            given = sol.loglik_gain - current - k + kin["loglik_gain"] - fx.kinematic_conflict(dyn, kin)
+            c["delta_elpd_given_supported"] = float(given)
+            gain_ok = given >= settings.support_delta_elpd
+            if gain_ok:
+                dynamic.append(c["effect"])
+                current = sol.loglik_gain
         else:
             trial = tuple(dynamic + [c["effect"]])
             gain = fx.fit_effects(lin, trial, library).loglik_gain
@@ -266,8 +298,12 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
             if name == "airspeed_calibration":
                 kin = fx.airspeed_kinematics(problem, campaign, float(lin.values.get("airspeed_factor", 1.0)))
                 if kin is not None:
+                    # one factor for both: the dynamics' and the kinematics' gains (each a
+                    # Gaussian in the factor) add, less their disagreement at the joint optimum
+                    conflict = fx.kinematic_conflict(ident.get("airspeed_factor"), kin)
+                    kin = dict(kin, conflict=conflict)
                     entry["kinematics"] = kin
-                    delta += kin["loglik_gain"]
+                    delta += kin["loglik_gain"] - conflict
                     # the paired runs identify the scale where the dynamics cannot
                     identifiable = identifiable or kin["loglik_gain"] - 1.0 >= settings.support_delta_elpd
                     entry["identifiable"] = identifiable
@@ -282,6 +318,13 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
             entry["shrink_pct"] = shrink(before, after, lin.n_runs)
         entry["needs"] = e.needs
         entries.append(entry)
+    air = next((c for c in entries if c.get("kinematics")), None)
+    yaw = next((c for c in entries if c["effect"] == "yaw_calibration" and "yaw_factor" in c["estimates"]), None)
+    if air is not None and yaw is not None:
+        # the paired-run ratios use the vane (a cos psi): as they come out with the vane's factor estimated
+        air["kinematics_given_yaw"] = fx.airspeed_kinematics(problem, campaign,
+                                                             float(lin.values.get("airspeed_factor", 1.0)),
+                                                             yaw_factor=yaw["estimates"]["yaw_factor"])
     chosen = select_effects(lin, entries, library, settings)
     for entry in entries:
         entry["statement"] = _statement(library[entry["effect"]], entry, settings)
@@ -418,7 +461,9 @@ class Distorted:
     """A picklable campaign factory distorting another's logged channels or stated vehicle:
     ``airspeed_scale`` x airspeed reading, yaw reading = (true yaw - ``yaw_offset_rad``) /
     ``yaw_factor`` (so true = yaw_factor x reading + offset), stated effective mass x
-    ``effective_mass_factor``.  The truth records the distortion."""
+    ``effective_mass_factor``.  A run whose distorted yaw reading leaves
+    ``|yaw| <= config.MAX_LOGGED_YAW_RAD`` ends before that sample, as a simulated run does.
+    The truth records the distortion."""
 
     factory: Callable[[], Campaign]
     airspeed_scale: float = 1.0
@@ -431,6 +476,8 @@ class Distorted:
         runs = c.runs.copy()
         runs["airspeed_mps"] = runs["airspeed_mps"] * self.airspeed_scale
         runs["yaw_rad"] = (runs["yaw_rad"] - self.yaw_offset_rad) / self.yaw_factor
+        over = (runs["yaw_rad"].abs() > config.MAX_LOGGED_YAW_RAD).astype(int)
+        runs = runs[over.groupby(runs["run"], sort=False).cummax() == 0].reset_index(drop=True)
         vehicle = dataclasses.replace(c.vehicle, effective_mass_kg=c.vehicle.effective_mass_kg * self.effective_mass_factor)
         truth = dict(c.truth or {}, airspeed_scale=self.airspeed_scale, yaw_factor=self.yaw_factor,
                      yaw_offset_rad=self.yaw_offset_rad, effective_mass_factor=self.effective_mass_factor)
@@ -443,54 +490,105 @@ turbulence, table 6.6 measurement noise, the "basic" drag model with lift), whic
 ``three_term`` fits correctly specified but for the input noise."""
 
 
-def withheld_campaign(effect: str | None, seed: int, pairs: int = 3) -> tuple[Callable[[], Campaign], Any]:
-    """A campaign factory with ``effect`` present at a plausible size (None: the null
-    control) and the analysis model that withholds it (``three_term``; for ``aero_lift``
-    ``three_term`` without its tunnel lift).  Sizes (README, docs/sim_to_real.md): gradient
-    0.1 %, tyre loss 10 % higher at the start decaying over 40 s, airspeed readings 3 % high,
-    the thesis' vane factor 0.869 and a 0.02 rad offset, the thesis' lift, side-force slip
-    (K_S 2.4, C_y 25 kN/rad) and pitch (K_alpha 0.9, l_p 0.55 m, k_p 60 kN m/rad), C_t 0.03 N
-    s^2/m^2, tyre X 3e-4 (v / 20 m/s)^4, 2 m/s of unrecorded wind change along the track,
-    the cup, vane and admittance dynamics of table 6.5, run-to-run offsets of 4 % / 20 % / 4 %
-    (the thesis' track spreads) and an effective mass stated 3 % high."""
+PROOF_DESIGNS = ("standard", "identifying")
+"""The proof suite's campaign designs (``[proof]`` of ``models/effects/library.toml``)."""
+
+
+def proof_design(name: str = "identifying", path=fx.LIBRARY_PATH) -> dict[str, Any]:
+    """The ``[proof.NAME]`` table of the library ("standard" is case 9 as it is: empty)."""
+    import tomllib
+
+    if name not in PROOF_DESIGNS:
+        raise ValueError(f"unknown proof design {name!r}: one of {PROOF_DESIGNS}")
+    if name == "standard":
+        return {}
+    doc = tomllib.loads(Path(path).read_text())
+    design = dict(doc.get("proof", {}).get(name, {}))
+    unknown = set(design) - {"pairs", "head_wind_mps", "cross_wind_mps", "masses_kg", "start_speeds_mps",
+                             "size_factor"}
+    if unknown:
+        raise ValueError(f"{path}: [proof.{name}]: unknown keys {sorted(unknown)}")
+    for e in design.get("size_factor", {}):
+        if e not in fx.EFFECT_NAMES:
+            raise ValueError(f"{path}: [proof.{name}.size_factor]: {e!r} is not an effect of the library")
+    return design
+
+
+def withheld_campaign(effect: str | None, seed: int, pairs: int = 3,
+                      design: str = "standard") -> tuple[Callable[[], Campaign], Any]:
+    """A campaign factory with ``effect`` present (None: the null control) and the analysis
+    model that withholds it (``three_term``; for ``aero_lift`` ``three_term`` without its
+    tunnel lift).
+
+    ``design="standard"``: thesis case 9 conditions, ``pairs`` pairs, the effect at a plausible
+    size (README, docs/sim_to_real.md): gradient 0.1 %, tyre loss 10 % higher at the start
+    decaying over 40 s, airspeed readings 3 % high, the thesis' vane factor 0.869 and a 0.02
+    rad offset, the thesis' lift, side-force slip (K_S 2.4, C_y 25 kN/rad) and pitch (K_alpha
+    0.9, l_p 0.55 m, k_p 60 kN m/rad), C_t 0.03 N s^2/m^2, tyre X 3e-4 (v / 20 m/s)^4, 2 m/s of
+    unrecorded wind change along the track, the cup, vane and admittance dynamics of table 6.5,
+    run-to-run offsets of 4 % / 20 % / 4 % (the thesis' track spreads) and an effective mass
+    stated 3 % high.  ``design="identifying"``: the campaign of ``[proof.identifying]`` in the
+    library (its pairs, winds, test masses and start speeds; ``pairs`` is ignored) with the
+    effect ``size_factor`` times the plausible size."""
     from ..inference.spec import load_model_spec
     from ..physics import effects as pe
     from ..physics.terms import Gradient, PitchAttitude
     from ..simulate import SimulationSettings, get_case
     from .batch import SimulatedCampaign
+    from .pooling import CombinedCampaign
 
+    plan = proof_design(design)
+    f = float(plan.get("size_factor", {}).get(effect, 1.0)) if effect else 1.0
     case = get_case(PROOF_CASE)
+    case = dataclasses.replace(case, head_wind_mps=float(plan.get("head_wind_mps", case.head_wind_mps)),
+                               cross_wind_mps=float(plan.get("cross_wind_mps", case.cross_wind_mps)))
     settings = SimulationSettings()
     model: Any = "three_term"
     extra = {
-        "track_gradient": ((Gradient(),), {"grade_rad": 0.001}),
-        "tyre_temperature": ((pe.TyreTemperatureTransient(),), {"tyre_transient": 0.1, "tyre_time_constant_s": 40.0}),
-        "side_force_slip": ((pe.SideSlipDrag(),), {"side_slip_coeff_per_n": 2.4**2 / (4 * 25_000.0)}),
-        "pitch_attitude": ((PitchAttitude(),), {"Kalpha": 0.9, "pitch_gain": 1100.0 * 0.55 / 60e3}),
-        "driveline_quadratic": ((pe.DrivelineQuadratic(),), {"Ct": 0.03}),
-        "tyre_speed_exponent": ((pe.TyreSpeedPower(),), {"tyre_power_coeff": 3e-4, "tyre_speed_exponent": 4.0}),
-        "spatial_wind": ((pe.SpatialWind(),), {"wind_gradient_mps": 2.0}),
+        "track_gradient": ((Gradient(),), {"grade_rad": 0.001 * f}),
+        "tyre_temperature": ((pe.TyreTemperatureTransient(),), {"tyre_transient": 0.1 * f, "tyre_time_constant_s": 40.0}),
+        "side_force_slip": ((pe.SideSlipDrag(),), {"side_slip_coeff_per_n": f * 2.4**2 / (4 * 25_000.0)}),
+        "pitch_attitude": ((PitchAttitude(),), {"Kalpha": 0.9 * f, "pitch_gain": 1100.0 * 0.55 / 60e3}),
+        "driveline_quadratic": ((pe.DrivelineQuadratic(),), {"Ct": 0.03 * f}),
+        "tyre_speed_exponent": ((pe.TyreSpeedPower(),), {"tyre_power_coeff": 3e-4 * f, "tyre_speed_exponent": 4.0}),
+        "spatial_wind": ((pe.SpatialWind(),), {"wind_gradient_mps": 2.0 * f}),
     }
     if effect in extra:
         terms, params = extra[effect]
         settings = dataclasses.replace(settings, extra_terms=terms, extra_params=params)
     elif effect == "anemometer_dynamics":
         case = dataclasses.replace(case, dynamics=True)
+        s = settings.sensors
+        settings = dataclasses.replace(settings, sensors=dataclasses.replace(
+            s, cup_distance_constant_m=s.cup_distance_constant_m * f))
     elif effect == "run_to_run_variation":
         case = dataclasses.replace(case, system_noise=True)
         settings = dataclasses.replace(settings, system_noise_mode="per_run",
-                                       system_noise_std={"AD": 4e-4, "BD": 4e-5, "CD0": 0.016})
+                                       system_noise_std={"AD": 4e-4 * f, "BD": 4e-5 * f, "CD0": 0.016 * f})
     elif effect == "aero_lift":
         model = dataclasses.replace(load_model_spec("three_term"), name="three_term_no_lift", lift="none")
+        full = dict(settings.full_model_params)
+        full.update(CL0=full["CL0"] * f, KL=full["KL"] * f)
+        settings = dataclasses.replace(settings, full_model_params=full)
     elif effect not in (None, "airspeed_calibration", "yaw_calibration", "mass_error"):
         raise ValueError(f"unknown effect {effect!r}")
-    factory: Callable[[], Campaign] = SimulatedCampaign(case, pairs=pairs, seed=seed, settings=settings)
+    n_pairs = int(plan.get("pairs", pairs))
+    masses = tuple(float(m) for m in plan["masses_kg"]) if "masses_kg" in plan else None
+    starts = [float(v) for v in plan.get("start_speeds_mps", [settings.start_speed_mps])]
+    parts = []
+    for i, v0 in enumerate(starts):
+        k = n_pairs // len(starts) + (1 if i < n_pairs % len(starts) else 0)
+        if k:
+            parts.append(SimulatedCampaign(case, pairs=k, seed=seed + 7919 * i,
+                                           settings=dataclasses.replace(settings, start_speed_mps=v0),
+                                           masses_kg=masses))
+    factory: Callable[[], Campaign] = parts[0] if len(parts) == 1 else CombinedCampaign(tuple(parts))
     if effect == "airspeed_calibration":
-        factory = Distorted(factory, airspeed_scale=1.03)
+        factory = Distorted(factory, airspeed_scale=1.0 + 0.03 * f)
     elif effect == "yaw_calibration":
-        factory = Distorted(factory, yaw_factor=0.869, yaw_offset_rad=0.02)
+        factory = Distorted(factory, yaw_factor=1.0 - 0.131 * f, yaw_offset_rad=0.02 * f)
     elif effect == "mass_error":
-        factory = Distorted(factory, effective_mass_factor=1.03)
+        factory = Distorted(factory, effective_mass_factor=1.0 + 0.03 * f)
     return factory, model
 
 
@@ -551,21 +649,23 @@ def diagnosis_record(d: Diagnosis) -> dict[str, Any]:
     return rec
 
 
-def withheld_effect_jobs(effects=fx.EFFECT_NAMES, seeds=(1,), pairs: int = 3, nulls: int = 0) -> list[DiagnoseJob]:
+def withheld_effect_jobs(effects=fx.EFFECT_NAMES, seeds=(1,), pairs: int = 3, nulls: int = 0,
+                         design: str = "standard") -> list[DiagnoseJob]:
     """The proof suite: one job per (effect, seed) and ``nulls`` null controls (seeds 1000+),
     ordered seed by seed with the nulls spread over the rounds, so that a suite stopped early
-    has every arm about equally often."""
+    has every arm about equally often; campaigns of ``design`` (:func:`withheld_campaign`)."""
     jobs = []
     per_round = -(-nulls // max(len(seeds), 1)) if nulls else 0
     made = 0
     for seed in seeds:
         for effect in effects:
-            factory, model = withheld_campaign(effect, seed, pairs)
-            jobs.append(DiagnoseJob(f"{effect}-s{seed}", factory, model, tags={"true_effect": effect, "seed": seed,
-                                                                             "pairs": pairs}))
+            factory, model = withheld_campaign(effect, seed, pairs, design)
+            jobs.append(DiagnoseJob(f"{effect}-s{seed}", factory, model,
+                                    tags={"true_effect": effect, "seed": seed, "pairs": pairs, "design": design}))
         for _ in range(min(per_round, nulls - made)):
-            factory, model = withheld_campaign(None, 1000 + made, pairs)
+            factory, model = withheld_campaign(None, 1000 + made, pairs, design)
             jobs.append(DiagnoseJob(f"null-s{1000 + made}", factory, model,
-                                    tags={"true_effect": "null", "seed": 1000 + made, "pairs": pairs}))
+                                    tags={"true_effect": "null", "seed": 1000 + made, "pairs": pairs,
+                                          "design": design}))
             made += 1
     return jobs

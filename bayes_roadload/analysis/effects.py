@@ -423,6 +423,44 @@ def lopo_lpd(lin: Linearisation, effects: tuple[str, ...], library: Mapping[str,
     return total
 
 
+def _conditional_ratio(info: np.ndarray, j: int, others: list[int] | None = None) -> float:
+    """Share of column j's Fisher information left once ``others`` (default: every other
+    column of ``info``) are fitted too: 1 - R^2 of its signature on theirs."""
+    others = [i for i in range(info.shape[0]) if i != j] if others is None else others
+    marginal = info[j, j]
+    if marginal <= 0:
+        return 0.0
+    if not others:
+        return 1.0
+    sub = info[np.ix_(others, others)]
+    cross = info[np.ix_([j], others)][0]
+    scale = np.sqrt(np.maximum(np.diag(sub), 1e-300))
+    cond = marginal - cross / scale @ np.linalg.pinv(sub / np.outer(scale, scale), rcond=1e-12) @ (cross / scale)
+    return float(max(cond, 0.0) / marginal)
+
+
+def distinct_share(lin: Linearisation, effect: str, rival: str, library: Mapping[str, Effect]) -> float:
+    """How much of ``effect``'s signature is its own against ``rival``'s: for each of its
+    parameters, the Fisher information left with the user's coefficients *and* the rival's
+    parameters fitted, as a share of that left with the coefficients alone; the largest over
+    its parameters (1: nothing in common, 0: the rival mimics it entirely).  Run effects and
+    effects without shared parameters give 1 (they are told apart by other means)."""
+    if library[effect].kind == "run" or library[rival].kind == "run":
+        return 1.0
+    sol = fit_effects(lin, (effect, rival), library)
+    names = [lin.columns[j] for j in sol.shared]
+    mine = [names.index(p) for p in lin.effects[effect] if p in names]
+    theirs = {names.index(p) for p in lin.effects[rival] if p in names}
+    if not mine or not theirs:
+        return 1.0
+    shares = []
+    for j in mine:
+        base = [i for i in range(len(names)) if i != j and i not in theirs]
+        alone = _conditional_ratio(sol.information, j, base)
+        shares.append(_conditional_ratio(sol.information, j) / alone if alone > 0 else 0.0)
+    return float(max(shares))
+
+
 def identifiability(lin: Linearisation, effect: str, library: Mapping[str, Effect]) -> dict[str, Any]:
     """For each shared parameter of ``effect`` added to the user's model: the fraction of its
     Fisher information left once the user's coefficients are re-fitted
@@ -435,21 +473,9 @@ def identifiability(lin: Linearisation, effect: str, library: Mapping[str, Effec
     sol = fit_effects(lin, (effect,), library)
     shared_names = [lin.columns[j] for j in sol.shared]
     out = {}
-    info = sol.information
     for p in lin.effects[effect]:
         j = shared_names.index(p)
-        marginal = info[j, j]
-        others = [i for i in range(len(shared_names)) if i != j]
-        if marginal <= 0:
-            ratio = 0.0
-        elif others:
-            sub = info[np.ix_(others, others)]
-            cross = info[np.ix_([j], others)][0]
-            scale = np.sqrt(np.maximum(np.diag(sub), 1e-300))
-            cond = marginal - cross / scale @ np.linalg.pinv(sub / np.outer(scale, scale), rcond=1e-12) @ (cross / scale)
-            ratio = float(max(cond, 0.0) / marginal)
-        else:
-            ratio = 1.0
+        ratio = _conditional_ratio(sol.information, j)
         prior_var = e.prior_sd[p] ** 2
         out[p] = {"information_ratio": ratio, "contraction": float(1.0 - sol.cov_shared[j, j] / prior_var),
                   "estimate": float(lin.values.get(p, 0.0) + sol.beta[j]), "sd": float(math.sqrt(max(sol.cov_shared[j, j], 0.0)))}
@@ -492,14 +518,16 @@ def coefficient_spread(lin: Linearisation, sol: Solution | None, library: Mappin
     return out
 
 
-def airspeed_kinematics(problem, campaign, stated_factor: float) -> dict[str, float] | None:
+def airspeed_kinematics(problem, campaign, stated_factor: float,
+                        yaw_factor: float | None = None) -> dict[str, float] | None:
     """The airspeed scale from the paired runs' kinematics (thesis 4.7.3): each
     opposite-direction pair's ratio of mean ground speed to mean along-track airspeed reading
     (:func:`~bayes_roadload.inference.bayes.airspeed_pair_ratios`) estimates the true factor.
     Returns the mean ratio, its standard error (the pairs' scatter, at least
     ``config.NOISE_PRIORS["airspeed_calibration_sd"]`` per pair), the z-score against the
     factor the model uses and the log likelihood gain of the ratios with the factor free
-    (z^2 / 2); None without pairs or measured air."""
+    (z^2 / 2); None without pairs or measured air.  ``yaw_factor`` overrides the model's vane
+    factor (the along-track airspeed is a cos(psi))."""
     from ..inference.bayes import airspeed_pair_ratios, calibration_pairs
 
     if not campaign.has_anemometer:
@@ -507,10 +535,21 @@ def airspeed_kinematics(problem, campaign, stated_factor: float) -> dict[str, fl
     pairs = calibration_pairs(campaign, problem.run_ids)
     if not pairs:
         return None
-    yaw_factor = float(problem.fixed.get("yaw_factor", 1.0))
+    yaw_factor = float(problem.fixed.get("yaw_factor", 1.0)) if yaw_factor is None else float(yaw_factor)
     ratios = np.asarray(airspeed_pair_ratios(problem.batch, pairs, yaw_factor))
     k = ratios.size
     sd = max(float(np.std(ratios, ddof=1)) if k > 1 else 0.0, config.NOISE_PRIORS["airspeed_calibration_sd"])
     se = sd / math.sqrt(k)
     z = (float(ratios.mean()) - stated_factor) / se
     return {"factor": float(ratios.mean()), "se": se, "n_pairs": k, "z": z, "loglik_gain": 0.5 * z * z}
+
+
+def kinematic_conflict(dynamics: Mapping[str, float] | None, kinematics: Mapping[str, float]) -> float:
+    """The log likelihood lost when one airspeed factor must serve both the dynamics (estimate
+    and sd from :func:`identifiability`) and the paired-run kinematics (factor and se of
+    :func:`airspeed_kinematics`): each gain is a Gaussian in the factor, so the joint maximum
+    is the sum of the two maxima less (f_dyn - f_kin)^2 / (2 (sd_dyn^2 + se_kin^2))."""
+    if dynamics is None or not math.isfinite(dynamics.get("sd", math.nan)):
+        return 0.0
+    var = dynamics["sd"] ** 2 + kinematics["se"] ** 2
+    return float((dynamics["estimate"] - kinematics["factor"]) ** 2 / (2.0 * var)) if var > 0 else 0.0

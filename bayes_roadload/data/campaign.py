@@ -388,21 +388,32 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
     """Load and validate a campaign directory (see ``docs/data-format.md``): a
     :class:`Campaign` of speed traces (``runs.csv`` / ``runs.parquet``), an
     :class:`~bayes_roadload.data.intervals.IntervalCampaign` of speed-gate interval times
-    (``intervals.csv``), or a :class:`~bayes_roadload.data.distances.DistanceCampaign` of
-    distance-time records (``distances.csv``)."""
+    (``intervals.csv``), a :class:`~bayes_roadload.data.distances.DistanceCampaign` of
+    distance-time records (``distances.csv``), a :class:`~bayes_roadload.data.spindown.SpindownCampaign` of wheel
+    spin-downs (``spindown.csv``) or a :class:`~bayes_roadload.data.steady.SteadyCampaign` of
+    steady-state torque tests (``steady.csv``)."""
     root = Path(path)
     if not root.is_dir():
         raise CampaignError(f"{root}: not a campaign directory")
     csv, parquet = root / "runs.csv", root / "runs.parquet"
     intervals = root / "intervals.csv"
     distances = root / "distances.csv"
+    kinds = [f.name for f in (csv, parquet, intervals, distances, root / "spindown.csv", root / "steady.csv")
+             if f.exists()]
+    if len(set(kinds) - {"runs.csv", "runs.parquet"}) + any(k.startswith("runs.") for k in kinds) > 1:
+        raise CampaignError(f"{root}: {' and '.join(kinds)} present (ambiguous campaign kind): one data file "
+                            "per campaign directory")
+    if (root / "spindown.csv").exists():
+        from .spindown import load_spindown
+
+        return load_spindown(root)
+    if (root / "steady.csv").exists():
+        from .steady import load_steady
+
+        return load_steady(root)
     if intervals.exists() and (csv.exists() or parquet.exists()):
         raise CampaignError(f"{root}: both intervals.csv and runs.csv/parquet present (ambiguous campaign kind)")
     if distances.exists():
-        others = [f.name for f in (csv, parquet, intervals) if f.exists()]
-        if others:
-            raise CampaignError(f"{root}: both distances.csv and {' and '.join(others)} present (ambiguous "
-                                "campaign kind)")
         return _load_distance_campaign(root, distances)
     if intervals.exists():
         return _load_interval_campaign(root, intervals)

@@ -312,3 +312,47 @@ def write_nuts_outputs(fit: NutsFit, out_dir: str | os.PathLike, *,
     runs.to_csv(out / "runs_summary.csv", index=False)
     (out / "diagnostics.json").write_text(json.dumps(diag, indent=2) + "\n")
     return summary, diag
+
+
+def channel_inference_data(fit: NutsFit, *, derived: dict[str, np.ndarray] | None = None,
+                           observed: dict[str, np.ndarray] | None = None, dims: dict | None = None,
+                           coords: dict | None = None) -> az.InferenceData:
+    """ArviZ data of a fit that has no speed-trace model (a measured channel, a wheel spin-down,
+    steady-state forces): ``posterior`` (the draws and ``derived`` [chain, draw, ...]
+    quantities), ``observed_data``, ``sample_stats``; ``dims`` / ``coords`` name the extra axes
+    (e.g. ``{"v0_mps": ["run"]}``, ``{"run": [...]}``)."""
+    posterior = dict(fit.samples)
+    posterior.update(derived or {})
+    stats = {"diverging": fit.stats["diverging"].astype(bool), "tree_depth": fit.stats["tree_depth"],
+             "n_steps": fit.stats["num_steps"], "energy": fit.stats["energy"],
+             "acceptance_rate": fit.stats["accept_prob"]}
+    dims = {k: v for k, v in (dims or {}).items() if k in posterior or k in (observed or {})}
+    return az.from_dict(posterior=posterior, observed_data=observed or {}, sample_stats=stats,
+                        coords=coords or None, dims=dims or None)
+
+
+def write_channel_outputs(fit: NutsFit, out_dir: str | os.PathLike, names: list[str], *, kind: str,
+                          derived: dict[str, np.ndarray] | None = None,
+                          observed: dict[str, np.ndarray] | None = None, run_sites: tuple[str, ...] = (),
+                          dims: dict | None = None, coords: dict | None = None,
+                          gates: config.Gates = config.DEFAULT_GATES,
+                          extra: dict | None = None) -> tuple[pd.DataFrame, dict]:
+    """``posterior.nc``, ``summary.csv`` (rows ``names`` then ``derived``), ``runs_summary.csv``
+    (the ``run_sites``, when any) and ``diagnostics.json`` of a fit without a speed-trace model,
+    with the gates of :func:`diagnostics` over every sampled quantity; ``kind`` (and ``extra``)
+    are recorded in the diagnostics."""
+    out = Path(out_dir)
+    idata = channel_inference_data(fit, derived=derived, observed=observed, dims=dims, coords=coords)
+    summary = _rows(idata, list(names) + list(derived or {}))
+    runs = _rows(idata, [k for k in run_sites if k in idata.posterior]) if run_sites else \
+        pd.DataFrame(columns=list(SUMMARY_COLUMNS))
+    diag = diagnostics(fit, idata, summary, gates, runs=runs)
+    diag["kind"] = kind
+    diag.update(extra or {})
+    out.mkdir(parents=True, exist_ok=True)
+    idata.to_netcdf(str(out / "posterior.nc"))
+    summary.to_csv(out / "summary.csv", index=False)
+    if run_sites:
+        runs.to_csv(out / "runs_summary.csv", index=False)
+    (out / "diagnostics.json").write_text(json.dumps(diag, indent=2) + "\n")
+    return summary, diag

@@ -479,6 +479,25 @@ def load_model_spec(name_or_path: str | os.PathLike) -> ModelSpec:
     return parse_model_spec(doc, str(path), default_name=path.stem)
 
 
+def with_undriven_wheels(spec: ModelSpec, au_n: float, bu_nspm: float) -> ModelSpec:
+    """``spec`` with the undriven-wheel loss A_u + B_u v (eq. 2.16) added as a known term, fixed
+    at values measured apart (a spin-down fit, thesis section 5.6), so the tyre coefficients no
+    longer absorb it (the thesis' practice, section 5.6: "measured ... and included into the
+    model").  Refused when the spec already has the term."""
+    import dataclasses
+
+    if "undriven_wheels" in spec.terms:
+        raise ModelSpecError(f"{spec._where}: the model already has the undriven_wheels term")
+    if any(not math.isfinite(x) for x in (au_n, bu_nspm)):
+        raise ModelSpecError("undriven-wheel values must be finite numbers")
+    terms = list(spec.terms)
+    terms.insert(terms.index("aero_drag") if "aero_drag" in terms else len(terms), "undriven_wheels")
+    return dataclasses.replace(spec, name=f"{spec.name}+undriven", terms=tuple(terms),
+                               description=f"{spec.description}; undriven wheels fixed at Au {au_n:g} N, "
+                                           f"Bu {bu_nspm:g} N s/m",
+                               fixed=dict(spec.fixed, Au=float(au_n), Bu=float(bu_nspm)))
+
+
 def available_models() -> list[str]:
     """Names of the model files in the repository's ``models/`` directory, sorted."""
     if not MODELS_DIR.is_dir():

@@ -26,3 +26,5 @@ from .effects import OffsetAir as OffsetAir
 from .terms import Conditions as Conditions
 from .terms import Term as Term
 from .terms import register_term as register_term
+from .spindown import spindown_interval_drag_n as spindown_interval_drag_n
+from .spindown import spindown_speed_mps as spindown_speed_mps

@@ -21,3 +21,5 @@ from .wind import dryden_psd_longitudinal as dryden_psd_longitudinal
 from .wind import generate_wind_field as generate_wind_field
 from .wind import mean_wind_profile as mean_wind_profile
 from .wind import synthesize_turbulence as synthesize_turbulence
+from .spindown import simulate_spindown as simulate_spindown
+from .steady import simulate_steady as simulate_steady

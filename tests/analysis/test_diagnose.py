@@ -120,3 +120,91 @@ def test_cli_refuses_an_unknown_model_and_writes_nothing(gradient_diagnosis, tmp
     assert code == 2
     assert "no_such_model" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_a_rival_with_the_same_signature_blocks_a_claim(monkeypatch):
+    """VIF rule: a rival that reaches support on its own and shares > 90 % of the best's
+    signature makes the pair 'not distinguishable', whatever the margin."""
+    from bayes_roadload import config
+    from bayes_roadload.analysis import diagnose as dg
+    from bayes_roadload.analysis import effects as fx
+
+    cfg = config.DEFAULT_DIAGNOSIS
+    shares = {"anemometer_dynamics": 0.04, "track_gradient": 0.9}
+    monkeypatch.setattr(fx, "distinct_share", lambda lin, a, b, lib: shares[b])
+
+    def entries():
+        return [{"effect": "mass_error", "delta_elpd": 23.0, "qualifies": True},
+                {"effect": "anemometer_dynamics", "delta_elpd": 9.0, "qualifies": True},
+                {"effect": "track_gradient", "delta_elpd": 6.0, "qualifies": True}]
+
+    e = entries()
+    assert dg.select_effects(None, e, {}, cfg) == []
+    assert e[0]["ambiguous_with"] == ["anemometer_dynamics"]
+    assert e[0]["distinct_share"]["anemometer_dynamics"] == 0.04
+    # the same gains with a distinct rival: the best is claimed (forward selection stubbed)
+    shares["anemometer_dynamics"] = 0.5
+    monkeypatch.setattr(fx, "fit_effects", lambda lin, eff, lib: type("S", (), {"loglik_gain": 30.0})())
+    monkeypatch.setattr(fx, "n_added_parameters", lambda lin, eff, lib: 1)
+    e = entries()
+    chosen = dg.select_effects(None, e, {}, cfg)
+    assert chosen[0] == "mass_error" and e[0]["supported"]
+
+
+def test_the_identifying_design_is_the_library_table():
+    from bayes_roadload.analysis.diagnose import Distorted, proof_design
+    from bayes_roadload.analysis.pooling import CombinedCampaign
+
+    plan = proof_design("identifying")
+    assert proof_design("standard") == {}
+    factory, model = withheld_campaign("side_force_slip", seed=3, design="identifying")
+    assert model == "three_term" and isinstance(factory, CombinedCampaign)
+    parts = factory.parts
+    # the pairs split over the start speeds, every part at the design's masses and winds
+    assert sum(p.pairs for p in parts) == plan["pairs"]
+    assert [p.settings.start_speed_mps for p in parts] == plan["start_speeds_mps"]
+    assert all(p.masses_kg == tuple(plan["masses_kg"]) for p in parts)
+    assert all(p.case.cross_wind_mps == plan["cross_wind_mps"] for p in parts)
+    assert len({p.seed for p in parts}) == len(parts)
+    # the effect at its size factor times the plausible size of the standard design
+    std, _ = withheld_campaign("side_force_slip", seed=3)
+    ratio = parts[0].settings.extra_params["side_slip_coeff_per_n"] / std.settings.extra_params["side_slip_coeff_per_n"]
+    assert ratio == pytest.approx(plan["size_factor"]["side_force_slip"])
+    mass, _ = withheld_campaign("mass_error", seed=3, design="identifying")
+    assert isinstance(mass, Distorted) and mass.effective_mass_factor == pytest.approx(1.03)
+
+
+def test_proof_design_refuses_unknown_keys_and_effects(tmp_path):
+    from bayes_roadload.analysis.diagnose import proof_design
+
+    bad = tmp_path / "lib.toml"
+    bad.write_text("[proof.identifying]\npairs = 4\nsun_angle_deg = 3\n")
+    with pytest.raises(ValueError, match="sun_angle_deg"):
+        proof_design("identifying", bad)
+    bad.write_text("[proof.identifying.size_factor]\nwarp_drive = 2\n")
+    with pytest.raises(ValueError, match="warp_drive"):
+        proof_design("identifying", bad)
+    with pytest.raises(ValueError, match="unknown proof design"):
+        proof_design("lavish")
+
+
+def test_a_distorted_yaw_reading_ends_the_run_at_the_logged_limit():
+    import numpy as np
+    import pandas as pd
+
+    from bayes_roadload import config
+    from bayes_roadload.analysis.diagnose import Distorted
+    from bayes_roadload.data import Campaign, Vehicle
+
+    t = np.arange(0.0, 10.0, 0.25)
+    yaw = np.linspace(0.0, 1.45, t.size)          # within the limit as logged
+    runs = pd.DataFrame({"run": np.repeat([1, 2], t.size), "time_s": np.tile(t, 2),
+                         "speed_mps": np.tile(30.0 - t, 2), "direction": np.repeat([1, -1], t.size),
+                         "airspeed_mps": np.tile(31.0 - t, 2), "yaw_rad": np.concatenate([yaw, -yaw / 2])})
+    c = Campaign(runs, Vehicle(mass_kg=1100.0, effective_mass_kg=1130.0, frontal_area_m2=1.85))
+    d = Distorted(lambda: c, yaw_factor=0.869)()
+    r1 = d.runs[d.runs["run"] == 1]
+    # true = 0.869 x reading: readings grow by 1 / 0.869 and run 1 stops before the limit
+    assert r1["yaw_rad"].abs().max() <= config.MAX_LOGGED_YAW_RAD
+    assert len(r1) == int(np.sum(yaw / 0.869 <= config.MAX_LOGGED_YAW_RAD))
+    assert len(d.runs[d.runs["run"] == 2]) == t.size

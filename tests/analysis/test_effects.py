@@ -1,5 +1,6 @@
 """The candidate library and the linear algebra of the linearised candidate scoring."""
 
+import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -67,3 +68,30 @@ def test_ridge_pulls_a_shared_step_towards_zero():
     tight = fx.solve(lin, [0, 1, 2], [3, 4], prior_precision=np.array([0.0, 0.0, 1e8]))
     assert abs(tight.beta[2]) < 1e-3 * abs(free.beta[2])
     assert tight.loglik_gain < free.loglik_gain
+
+
+def test_conditional_ratio_is_what_a_columns_signature_keeps_of_its_own():
+    rng = np.random.default_rng(11)
+    n = 4000
+    base = rng.standard_normal(n)
+    a = rng.standard_normal(n)
+    twin = a + 0.05 * rng.standard_normal(n)      # a's signature again, up to 0.25 % of its variance
+    other = rng.standard_normal(n)                # nothing in common with a
+    x = np.column_stack([base, a, twin, other])
+    info = x.T @ x
+    # alone with the coefficients a keeps (almost) all of its information ...
+    assert fx._conditional_ratio(info, 1, [0]) == pytest.approx(1.0, abs=0.01)
+    # ... with its twin fitted too it keeps 1 - R^2 = 0.05^2 / (1 + 0.05^2)
+    assert fx._conditional_ratio(info, 1, [0, 2]) == pytest.approx(0.0025, rel=0.15)
+    # an unrelated column takes nothing
+    assert fx._conditional_ratio(info, 1, [0, 3]) == pytest.approx(1.0, abs=0.01)
+
+
+def test_kinematic_conflict_penalises_a_factor_the_two_sources_disagree_on():
+    kin = {"factor": 1.00, "se": 0.004}
+    # agreeing sources: nothing lost; the dynamics unidentified (sd = inf): nothing lost
+    assert fx.kinematic_conflict({"estimate": 1.00, "sd": 0.01}, kin) == 0.0
+    assert fx.kinematic_conflict(None, kin) == 0.0
+    assert fx.kinematic_conflict({"estimate": 0.9, "sd": math.inf}, kin) == 0.0
+    # 3 % apart with a combined sd of 0.005: (0.03 / 0.005)^2 / 2 = 18 nats
+    assert fx.kinematic_conflict({"estimate": 0.97, "sd": 0.003}, kin) == pytest.approx(18.0)

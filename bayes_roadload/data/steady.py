@@ -1,0 +1,259 @@
+"""The steady-state torque test kind (thesis sections 5.4, 7.4): ``steady.csv`` + ``vehicle.toml``.
+
+The vehicle is driven at a set of steady speeds (the thesis: 20, 30, ..., 70 mph, both
+directions) while the torque at the driven wheels is logged; the tractive force there is the
+road load without the driveline loss (eq. 5.5), plus the small inertial term ``M_e dv/dt`` of
+the speed the driver could not hold exactly.  One row per sample (or per run, a run's mean):
+
+==========================================  =====  ========  ===========================================
+column                                      unit   required  meaning
+==========================================  =====  ========  ===========================================
+``run``                                     id     yes       one steady-speed run; rows contiguous
+``speed_mps``                               m/s    yes       vehicle speed over the ground
+``tractive_force_n``                        N      one of    tractive force at the driven wheels, or ...
+``wheel_torque_left_nm``, ``..._right_nm``  N m    the two   ... the two wheel torques: (left + right) / R_r
+``time_s``                                  s      no        time; gives ``accel_mps2`` when that is absent
+``accel_mps2``                              m/s^2  no        dv/dt (the inertial correction M_e dv/dt)
+``airspeed_mps``, ``yaw_rad``               m/s,   no        on-board anemometer readings (calibrated by
+                                            rad              ``[anemometer]`` as for coastdowns)
+``direction``, ``pair``                     +/-1,  no        heading and the opposite-direction pair
+                                            id               (consecutive runs pair up without ``pair``)
+``temperature_k``, ``pressure_pa``          K, Pa  no        ambient conditions (air density, tyre temperature)
+``gearbox_input_force_n``                   N      no        gearbox input (engine output) torque referred to
+                                                             the driven wheels (x overall ratio / R_r): minus
+                                                             the wheel force it is the on-load driveline loss
+==========================================  =====  ========  ===========================================
+
+Without ``accel_mps2`` the acceleration of a run logged with ``time_s`` is the slope of a
+least-squares quadratic of speed against time over the run (the polynomial method of thesis
+section 1.2.1, which the thesis uses for this corrective term, section 5.4.1); a run without
+either is taken as steady (``accel_mps2 = 0``; :attr:`SteadyCampaign.accel_source` says which).
+``vehicle.toml`` is the coastdown one (``[vehicle]``, ``[anemometer]``, ``[tunnel]``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .. import config
+from .campaign import (
+    _CHANNEL_LIMITS,
+    Anemometer,
+    CampaignError,
+    Vehicle,
+    _fail,
+    _plain,
+    read_vehicle_file,
+    validate_vehicle,
+    vehicle_toml,
+)
+from .spindown import write_atomically
+
+FORCE_COLUMNS = ("tractive_force_n",)
+TORQUE_COLUMNS = ("wheel_torque_left_nm", "wheel_torque_right_nm")
+OPTIONAL_COLUMNS = ("time_s", "accel_mps2", "airspeed_mps", "yaw_rad", "direction", "pair",
+                    "temperature_k", "pressure_pa", "gearbox_input_force_n")
+KNOWN_COLUMNS = ("run", "speed_mps") + FORCE_COLUMNS + TORQUE_COLUMNS + OPTIONAL_COLUMNS
+RUN_CONSTANT = ("direction", "pair")
+
+_AMBIGUOUS_HINTS = {
+    "force": "tractive_force_n (newtons)",
+    "tractive_force": "tractive_force_n (newtons)",
+    "tractive_force_kn": "tractive_force_n (newtons): multiply kN by 1000",
+    "torque": "wheel_torque_left_nm and wheel_torque_right_nm (N m), or tractive_force_n",
+    "wheel_torque_nm": "wheel_torque_left_nm and wheel_torque_right_nm (each wheel), or tractive_force_n",
+    "speed_kph": "speed_mps (m/s): divide km/h by 3.6",
+    "speed_mph": "speed_mps (m/s): multiply mph by 0.44704",
+    "accel_g": "accel_mps2 (m/s^2): multiply g by 9.81",
+    "yaw_deg": "yaw_rad (radians): multiply degrees by pi/180",
+    "temperature_c": "temperature_k (kelvin): add 273.15",
+}
+
+
+@dataclass
+class SteadyCampaign:
+    """A loaded, validated steady-state campaign.
+
+    Attributes
+    ----------
+    runs : ``run``, ``speed_mps``, ``tractive_force_n``, ``accel_mps2`` and the optional columns.
+    vehicle, anemometer, tunnel, truth, meta : as for :class:`~bayes_roadload.data.Campaign`.
+    accel_source : how ``accel_mps2`` was obtained: "logged", "polynomial (time_s)" or "none (steady)".
+    """
+
+    runs: pd.DataFrame
+    vehicle: Vehicle
+    anemometer: Anemometer = field(default_factory=Anemometer)
+    tunnel: dict[str, Any] | None = None
+    truth: dict[str, Any] | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+    accel_source: str = "logged"
+    kind = "steady"
+
+    def __post_init__(self):
+        self.runs, source = validate_steady(self.runs, "steady", self.vehicle.rolling_radius_m)
+        if source != "logged":
+            self.accel_source = source
+        validate_vehicle(self.vehicle, "vehicle")
+
+    @property
+    def run_ids(self) -> list:
+        return [_plain(r) for r in pd.unique(self.runs["run"])]
+
+    @property
+    def has_anemometer(self) -> bool:
+        return "airspeed_mps" in self.runs and "yaw_rad" in self.runs
+
+    @property
+    def has_driveline(self) -> bool:
+        """False: the wheel torque is measured beyond the driveline (thesis section 5.4.1)."""
+        return False
+
+    @property
+    def has_driveline_loss(self) -> bool:
+        """The gearbox input is logged: the on-load driveline loss is measured (section 5.5.2)."""
+        return "gearbox_input_force_n" in self.runs
+
+    def driveline_loss_n(self) -> np.ndarray:
+        """The on-load driveline loss of every sample, gearbox input minus wheel force (N;
+        thesis section 5.5.2: "not necessary to correct the measured data as the difference is
+        required")."""
+        if not self.has_driveline_loss:
+            raise ValueError("steady.csv logs no gearbox_input_force_n: the on-load driveline loss is not measured")
+        return (self.runs["gearbox_input_force_n"] - self.runs["tractive_force_n"]).to_numpy(float)
+
+    def directions(self) -> dict:
+        if "direction" not in self.runs:
+            return {r: 1 for r in self.run_ids}
+        return {_plain(r): int(g["direction"].iloc[0]) for r, g in self.runs.groupby("run", sort=False)}
+
+    def pairs(self) -> list[tuple]:
+        """Opposite-direction pairs: the ``pair`` column, else consecutive runs; unpaired runs dropped."""
+        if "pair" in self.runs:
+            groups = self.runs.groupby("pair", sort=False)["run"].unique()
+            return [tuple(_plain(r) for r in g) for g in groups if len(g) == 2]
+        ids = self.run_ids
+        return [(ids[i], ids[i + 1]) for i in range(0, len(ids) - 1, 2)]
+
+
+def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_m: float | None = None
+                    ) -> tuple[pd.DataFrame, str]:
+    """Check a steady-state table; returns it normalised (``tractive_force_n`` and
+    ``accel_mps2`` present) and the source of the acceleration."""
+    df = df.copy()
+    cols = list(df.columns)
+    for c in cols:
+        if c not in KNOWN_COLUMNS:
+            hint = _AMBIGUOUS_HINTS.get(str(c).strip().lower())
+            _fail(where, str(c), None, f"unknown column; did you mean {hint}?" if hint
+                  else f"unknown column; a steady-state table knows {', '.join(KNOWN_COLUMNS)}")
+    for c in ("run", "speed_mps"):
+        if c not in cols:
+            _fail(where, c, None, "required column is missing")
+    torques = [c for c in TORQUE_COLUMNS if c in cols]
+    if "tractive_force_n" in cols and torques:
+        _fail(where, "tractive_force_n", None, "give tractive_force_n or the wheel torques, not both (ambiguous)")
+    if len(torques) == 1:
+        _fail(where, torques[0], None, "wheel torques need both the left and the right column")
+    if "tractive_force_n" not in cols and not torques:
+        _fail(where, "tractive_force_n", None, "required: tractive_force_n (N) or the two wheel torques (N m)")
+    if len(df) == 0:
+        _fail(where, None, None, "no samples")
+    if df["run"].isna().any():
+        _fail(where, "run", int(np.flatnonzero(df["run"].isna().to_numpy())[0]) + 1, "missing run id")
+    for c in cols:
+        if c == "run" or (c == "pair" and not pd.api.types.is_numeric_dtype(df[c])):
+            continue
+        values = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            _fail(where, c, i + 1, f"value {df[c].iloc[i]!r} is not a finite number")
+        df[c] = values
+        if c in _CHANNEL_LIMITS:
+            lo, hi, meaning = _CHANNEL_LIMITS[c]
+            out = (values < lo) | (values > hi)
+            if out.any():
+                i = int(np.flatnonzero(out)[0])
+                _fail(where, c, i + 1, f"value {values[i]:g} outside [{lo:g}, {hi:g}] ({meaning})")
+    if (df["speed_mps"] <= 0).any():
+        _fail(where, "speed_mps", int(np.flatnonzero(df["speed_mps"].to_numpy() <= 0)[0]) + 1,
+              "a steady-state run needs a positive speed")
+    if "accel_mps2" in cols and (df["accel_mps2"].abs() > config.STEADY_MAX_ACCEL_MPS2).any():
+        i = int(np.flatnonzero(df["accel_mps2"].abs().to_numpy() > config.STEADY_MAX_ACCEL_MPS2)[0])
+        _fail(where, "accel_mps2", i + 1, f"|dv/dt| {df['accel_mps2'].iloc[i]:g} m/s^2 above "
+              f"{config.STEADY_MAX_ACCEL_MPS2:g}: not a steady-speed run (or g / km/h/s in an m/s^2 column)")
+    if "direction" in cols and not np.isin(df["direction"].to_numpy(), (-1.0, 1.0)).all():
+        i = int(np.flatnonzero(~np.isin(df["direction"].to_numpy(), (-1.0, 1.0)))[0])
+        _fail(where, "direction", i + 1, f"direction code {df['direction'].iloc[i]:g} is not +1 or -1")
+    if torques:
+        if rolling_radius_m is None:
+            _fail(where, "wheel_torque_left_nm", None, "needs [vehicle] rolling_radius_m")
+        df["tractive_force_n"] = (df.pop("wheel_torque_left_nm") + df.pop("wheel_torque_right_nm")) / rolling_radius_m
+    positions = np.arange(len(df))
+    accel = np.zeros(len(df))
+    sources = set()
+    for rid, idx in df.groupby("run", sort=False).indices.items():
+        rid = _plain(rid)
+        rows = positions[idx]
+        if np.any(np.diff(rows) != 1):
+            _fail(where, "run", int(rows[np.flatnonzero(np.diff(rows) != 1)[0] + 1]) + 1,
+                  f"the rows of run {rid!r} are not contiguous")
+        for c in RUN_CONSTANT:
+            if c in cols:
+                vals = df[c].to_numpy()[rows]
+                if np.any(vals != vals[0]):
+                    _fail(where, c, int(rows[np.flatnonzero(vals != vals[0])[0]]) + 1, f"{c} changes within run {rid!r}")
+        if "time_s" in cols:
+            t = df["time_s"].to_numpy()[rows]
+            if np.any(np.diff(t) <= 0):
+                _fail(where, "time_s", int(rows[np.flatnonzero(np.diff(t) <= 0)[0] + 1]) + 1,
+                      f"time does not increase within run {rid!r}")
+            if "accel_mps2" not in cols and rows.size >= 3:
+                accel[rows] = polynomial_acceleration(t, df["speed_mps"].to_numpy()[rows])
+                sources.add("polynomial (time_s)")
+    if "accel_mps2" in cols:
+        source = "logged"
+    else:
+        df["accel_mps2"] = accel
+        source = "polynomial (time_s)" if sources else "none (steady)"
+    return df.reset_index(drop=True), source
+
+
+def polynomial_acceleration(time_s, speed_mps) -> np.ndarray:
+    """dv/dt of a run from a least-squares quadratic of speed against time (thesis section 1.2.1,
+    applied to the corrective term only, section 5.4.1)."""
+    t = np.asarray(time_s, float) - float(np.mean(time_s))
+    c2, c1, _ = np.polyfit(t, np.asarray(speed_mps, float), 2)
+    return c1 + 2.0 * c2 * t
+
+
+def load_steady(root: str | os.PathLike) -> SteadyCampaign:
+    """Load and validate a steady-state campaign directory (``steady.csv``, ``vehicle.toml``,
+    optional ``truth.json``)."""
+    root = Path(root)
+    f = root / "steady.csv"
+    if not f.exists():
+        raise CampaignError(f"{root}: steady.csv is missing")
+    vehicle, anem, tunnel, meta = read_vehicle_file(root / "vehicle.toml")
+    df, source = validate_steady(pd.read_csv(f), str(f), vehicle.rolling_radius_m)
+    tfile = root / "truth.json"
+    truth = json.loads(tfile.read_text()) if tfile.exists() else None
+    return SteadyCampaign(df, vehicle, anem, tunnel, truth, meta, accel_source=source)
+
+
+def save_steady(c: SteadyCampaign, path: str | os.PathLike) -> Path:
+    """Validate and write a steady-state campaign (``steady.csv`` with the force and the
+    acceleration used, ``vehicle.toml``, ``truth.json``)."""
+    c.runs, _ = validate_steady(c.runs, "steady", c.vehicle.rolling_radius_m)
+    files = {"steady.csv": c.runs.to_csv(index=False, float_format="%.10g"), "vehicle.toml": vehicle_toml(c)}
+    if c.truth is not None:
+        files["truth.json"] = json.dumps(c.truth, indent=2, sort_keys=True) + "\n"
+    return write_atomically(path, files, stale=("truth.json",))
