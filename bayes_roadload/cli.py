@@ -25,6 +25,8 @@ def _cmd_simulate(args) -> int:
     from .data import save_campaign
     from .simulate import simulate_campaign
 
+    if args.kind != "coastdown" and (args.markers is not None or args.timing_sd is not None):
+        raise ValueError("--markers / --timing-sd time simulated coastdowns past markers (--kind coastdown)")
     if args.kind == "spindown":
         from .data.spindown import save_spindown
         from .simulate.spindown import simulate_spindown
@@ -46,11 +48,40 @@ def _cmd_simulate(args) -> int:
         raise ValueError("simulate: --case is required for coastdowns (see `cases`)")
     campaign = simulate_campaign(args.case, pairs=args.pairs, seed=args.seed, driveline=args.driveline,
                                  masses_kg=args.masses)
-    out = save_campaign(campaign, args.out, fmt=args.format)
-    n = campaign.runs["run"].nunique()
     masses = "" if args.masses is None else f" at {', '.join(f'{m:g}' for m in campaign.meta['masses_kg'])} kg"
+    n = campaign.runs["run"].nunique()
+    if args.timing_sd is not None and args.markers is None:
+        raise ValueError("--timing-sd applies to a distance-time campaign (--markers)")
+    if args.markers is not None:
+        from .simulate.distances import DEFAULT_TIMING_SD_S, distance_campaign_from_traces
+
+        timing_sd = DEFAULT_TIMING_SD_S if args.timing_sd is None else args.timing_sd
+        if args.format != "csv":
+            raise ValueError("a distance-time campaign is written as distances.csv (--format csv)")
+        markers = _parse_markers(args.markers)
+        campaign = distance_campaign_from_traces(campaign, markers, timing_sd_s=timing_sd, seed=args.seed)
+        out = save_campaign(campaign, args.out)
+        print(f"case {args.case}: {n} runs ({args.pairs} pairs{masses}) timed past {len(markers)} markers "
+              f"({markers[0]:g}-{markers[-1]:g} m, timing sd {timing_sd:g} s) -> {out / 'distances.csv'}")
+        return 0
+    out = save_campaign(campaign, args.out, fmt=args.format)
     print(f"case {args.case}: {n} runs ({args.pairs} pairs{masses}), {len(campaign.runs)} samples -> {out}")
     return 0
+
+
+def _parse_markers(values: list[str]) -> list[float]:
+    """``--markers``: distances in m, or one ``START:STEP:END`` range (END included)."""
+    import numpy as np
+
+    if len(values) == 1 and ":" in values[0]:
+        try:
+            start, step, end = (float(x) for x in values[0].split(":"))
+        except ValueError as e:
+            raise ValueError(f"--markers {values[0]!r}: expected START:STEP:END in metres") from e
+        if step <= 0 or end <= start:
+            raise ValueError(f"--markers {values[0]!r}: need STEP > 0 and END > START")
+        return [float(x) for x in np.arange(start, end + 0.5 * step, step)]
+    return [float(x) for x in values]
 
 
 def _sampler(args):
@@ -175,6 +206,22 @@ def _fit_steady(campaign, args, out: Path) -> int:
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
+def _fit_distances(campaign, args, out: Path) -> int:
+    from .inference.distances import DEFAULT_MODEL, fit_distances_nuts, write_distance_outputs
+    from .inference.results import format_posterior_table, truth_derived
+
+    _only_nuts_options(args, "distance-time")
+    fit = fit_distances_nuts(campaign, _model_for(args, DEFAULT_MODEL), sampler=_sampler(args))
+    summary, diag = write_distance_outputs(fit, out)
+    masses = sorted(set(campaign.masses_kg().values()))
+    print(f"{len(campaign.run_ids)} runs at {', '.join(f'{m:g}' for m in masses)} kg, "
+          f"{len(campaign.markers)} marker passings")
+    truth = dict(campaign.truth or {}, **truth_derived(fit.problem, campaign.truth))
+    print(format_posterior_table(summary, diag, truth or None))
+    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, diagnostics.json")
+    return 0 if diag["pass"] else EXIT_GATES_FAILED
+
+
 def _undriven_values(arg: str) -> tuple[float, float]:
     """``--undriven``: a spin-down fit directory (its summary.csv Au, Bu means) or "Au,Bu" in SI."""
     path = Path(arg)
@@ -230,6 +277,8 @@ def _cmd_fit(args) -> int:
     kind = getattr(campaign, "kind", "traces")
     if kind == "intervals":
         return _fit_intervals(campaign, args, out)
+    if kind == "distances":
+        return _fit_distances(campaign, args, out)
     if kind == "spindown":
         return _fit_spindown(campaign, args, out)
     if kind == "steady":
@@ -577,6 +626,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--masses", type=float, nargs="+", default=None, metavar="KG",
                    help="test masses (kg), assigned to the pairs in turn (pair 1 at the first, pair 2 at the "
                         "second, ...); writes a mass_kg column (M_e shifts by the same amount)")
+    s.add_argument("--markers", nargs="+", default=None, metavar="M",
+                   help="write a distance-time campaign (distances.csv) instead of the speed traces: the times "
+                        "each run passes these distances from the start of its coast (m), or START:STEP:END, "
+                        "e.g. 100:100:1300")
+    s.add_argument("--timing-sd", type=float, default=None,
+                   help="with --markers: timing error of one marker passing, s (default 0.02)")
     s.add_argument("--format", choices=("csv", "parquet"), default="csv")
     s.add_argument("--out", required=True)
     s.set_defaults(func=_cmd_simulate)
@@ -584,7 +639,8 @@ def build_parser() -> argparse.ArgumentParser:
     f = sub.add_parser("fit", help="fit a campaign (NUTS over all runs jointly, or classical least squares)")
     f.add_argument("campaign")
     f.add_argument("--model", default=None, help="a name in models/ or a TOML path (see `models`); default "
-                                                "four_term (speed traces), split_f0_f2 (interval campaigns)")
+                                                "four_term (speed traces), split_f0_f2 (interval campaigns), "
+                                                "three_term (distance-time campaigns)")
     f.add_argument("--method", choices=("nuts", "lsq"), default="nuts")
     f.add_argument("--pooling", choices=("pooled", "hierarchical"), default="pooled",
                    help="nuts: one set of coefficients, or run-level AD, BD, CD0 around population means")

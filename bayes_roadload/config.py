@@ -234,6 +234,41 @@ INTERVAL_NOISE_PRIOR_SHAPES = {"sigma_gate_s": 4.0, "run_decel_sd_mps2": 2.0, "b
 on the Ioniq exports the band noise dominates and the gate error is barely identified (posterior
 0.008-0.18 s with shape 2, its upper tail mixing too slowly for the tail-ESS gate)."""
 
+# --- distance-time records (data.distances, physics.distances, inference.distances) ------------
+MIN_DISTANCE_MARKERS = 3
+"""Fewest markers a distance-time run may pass: its speed at the first marker is unknown, so two
+markers (one segment time) only determine that speed."""
+DISTANCE_SEGMENT_SPEED_RANGE_MPS = (0.1, MAX_SPEED_MPS)
+"""Accepted mean speed between two consecutive markers of a run (m/s); outside it the units are
+wrong (km or mm in ``distance_m``, ms in ``time_s``)."""
+DISTANCE_RK4_SUBSTEPS = 4
+"""RK4 steps (in distance) between two consecutive markers: on 100 m marker spacing from 30 m/s
+the passing times agree with the closed form of a quadratic road load to ~1e-9 s over 1300 m
+(tested; 8 steps: 1e-10 s, 2 steps: 2e-8 s), far below any timing error (a light gate's ~1 ms);
+the error grows as the fourth power of the step (500 m spacing: ~1e-6 s)."""
+DISTANCE_MIN_SPEED_MPS = 0.05
+"""Floor of the speed in the distance-domain ODE (dv/dx = a / v, dt/dx = 1 / v): keeps a draw
+whose vehicle would stop before the last marker finite (its times then are merely very long)."""
+DISTANCE_NOISE_PRIORS = {
+    "sigma_gate_s": 0.05,            # mean of the Gamma(4) prior of one marker-passing timing error (s)
+    "run_decel_sd_mps2": 0.005,      # mean of the Gamma(2) prior of a run's deceleration offset (m/s^2)
+    "band_noise_s_per_sqrt_s": 0.02,  # mean of the Gamma(2) prior of the within-run segment noise
+}
+"""Nuisance priors of the distance-time likelihood (:mod:`bayes_roadload.inference.distances`):
+the interval-time likelihood's three (the segment between two markers plays the band): a timing
+error per marker passing (a camera frame at 25-30 fps is 0.03-0.04 s, a light gate ~0.001 s),
+scatter growing with a segment's duration, and a run-level deceleration offset."""
+DISTANCE_NOISE_PRIOR_SHAPES = {"sigma_gate_s": 4.0, "run_decel_sd_mps2": 4.0, "band_noise_s_per_sqrt_s": 2.0}
+"""Gamma shapes of those priors: the interval-time ones but shape 4 (sd half the mean) for the run
+effect, which a few runs barely identify: with shape 2 the sampler reached run-effect sds of
+0.0002 m/s^2, where the coefficients' posterior narrows into a funnel, and diverged in some of
+1000 draws of every 4-run fit at target acceptance 0.9 (benchmarks/distance_masses.py, seeds 5-7;
+seed 7: 9 divergences, 2 with shape 4, the rest in the curved tails of AD-BD-CD0, which target
+acceptance 0.95 removes).  Shape 4 for the segment noise too did not help (4)."""
+DISTANCE_V0_PRIOR_SD_MPS = 5.0
+"""sd of the Normal prior of each run's speed at its first marker, centred on the speed a
+quadratic through the run's first three passing times gives (the data fix it to ~0.01 m/s)."""
+
 
 @dataclass(frozen=True)
 class IntegratorConfig:

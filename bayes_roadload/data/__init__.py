@@ -6,6 +6,7 @@ from .campaign import CampaignError as CampaignError
 from .campaign import Vehicle as Vehicle
 from .campaign import load_campaign as load_campaign
 from .campaign import save_campaign as save_campaign
+from .distances import DistanceCampaign as DistanceCampaign
 from .intervals import IntervalCampaign as IntervalCampaign
 from .spindown import SpindownCampaign as SpindownCampaign
 from .spindown import load_spindown as load_spindown

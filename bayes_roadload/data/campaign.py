@@ -374,11 +374,22 @@ def _load_interval_campaign(root: Path, intervals: Path):
     return IntervalCampaign(df, vehicle, anem, tunnel, truth, meta)
 
 
+def _load_distance_campaign(root: Path, distances: Path):
+    from .distances import DistanceCampaign, read_distances, validate_distances
+
+    vehicle, anem, tunnel, meta = _read_vehicle(root)
+    df = validate_distances(read_distances(distances), str(distances))
+    tfile = root / "truth.json"
+    truth = json.loads(tfile.read_text()) if tfile.exists() else None
+    return DistanceCampaign(df, vehicle, anem, tunnel, truth, meta)
+
+
 def load_campaign(path: str | os.PathLike) -> Campaign:
     """Load and validate a campaign directory (see ``docs/data-format.md``): a
     :class:`Campaign` of speed traces (``runs.csv`` / ``runs.parquet``), an
     :class:`~bayes_roadload.data.intervals.IntervalCampaign` of speed-gate interval times
-    (``intervals.csv``), a :class:`~bayes_roadload.data.spindown.SpindownCampaign` of wheel
+    (``intervals.csv``), a :class:`~bayes_roadload.data.distances.DistanceCampaign` of
+    distance-time records (``distances.csv``), a :class:`~bayes_roadload.data.spindown.SpindownCampaign` of wheel
     spin-downs (``spindown.csv``) or a :class:`~bayes_roadload.data.steady.SteadyCampaign` of
     steady-state torque tests (``steady.csv``)."""
     root = Path(path)
@@ -386,7 +397,9 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
         raise CampaignError(f"{root}: not a campaign directory")
     csv, parquet = root / "runs.csv", root / "runs.parquet"
     intervals = root / "intervals.csv"
-    kinds = [f.name for f in (csv, parquet, intervals, root / "spindown.csv", root / "steady.csv") if f.exists()]
+    distances = root / "distances.csv"
+    kinds = [f.name for f in (csv, parquet, intervals, distances, root / "spindown.csv", root / "steady.csv")
+             if f.exists()]
     if len(set(kinds) - {"runs.csv", "runs.parquet"}) + any(k.startswith("runs.") for k in kinds) > 1:
         raise CampaignError(f"{root}: {' and '.join(kinds)} present (ambiguous campaign kind): one data file "
                             "per campaign directory")
@@ -400,6 +413,8 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
         return load_steady(root)
     if intervals.exists() and (csv.exists() or parquet.exists()):
         raise CampaignError(f"{root}: both intervals.csv and runs.csv/parquet present (ambiguous campaign kind)")
+    if distances.exists():
+        return _load_distance_campaign(root, distances)
     if intervals.exists():
         return _load_interval_campaign(root, intervals)
     if csv.exists() and parquet.exists():
@@ -415,7 +430,7 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
             raise CampaignError(f"{parquet}: reading parquet needs pyarrow ({e})") from e
     else:
         raise CampaignError(f"{root}: runs.csv (or runs.parquet, or intervals.csv for speed-gate interval "
-                            "times) is missing")
+                            "times, or distances.csv for distance-time records) is missing")
     vehicle, anem, tunnel, meta = _read_vehicle(root)
     df = validate_runs(df, str(runs_file))
     if "wheel_torque_left_nm" in df:
@@ -463,13 +478,21 @@ def save_campaign(c: Campaign, path: str | os.PathLike, fmt: str = "csv") -> Pat
 
     Files are written to a temporary directory beside ``path`` and moved into place.
     """
-    interval_kind = getattr(c, "kind", "traces") == "intervals"
+    kind = getattr(c, "kind", "traces")
+    interval_kind = kind == "intervals"
+    distance_kind = kind == "distances"
     if interval_kind:
         from .intervals import validate_intervals
 
         if fmt != "csv":
             raise ValueError("an interval campaign is written as intervals.csv (fmt='csv')")
         c.intervals = validate_intervals(c.intervals, "intervals")
+    elif distance_kind:
+        from .distances import validate_distances
+
+        if fmt != "csv":
+            raise ValueError("a distance-time campaign is written as distances.csv (fmt='csv')")
+        c.markers = validate_distances(c.markers, "distances")
     else:
         c.runs = validate_runs(c.runs, "runs")
     validate_vehicle(c.vehicle, "vehicle")
@@ -477,9 +500,11 @@ def save_campaign(c: Campaign, path: str | os.PathLike, fmt: str = "csv") -> Pat
     root.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".campaign-", dir=root.parent))
     try:
-        runs = None if interval_kind else c.runs.copy()
+        runs = None if interval_kind or distance_kind else c.runs.copy()
         if interval_kind:
             c.intervals.to_csv(tmp / "intervals.csv", index=False, float_format="%.10g")
+        elif distance_kind:
+            c.markers.to_csv(tmp / "distances.csv", index=False, float_format="%.12g")
         elif fmt == "csv":
             runs.to_csv(tmp / "runs.csv", index=False, float_format="%.10g")
         elif fmt == "parquet":
@@ -490,7 +515,7 @@ def save_campaign(c: Campaign, path: str | os.PathLike, fmt: str = "csv") -> Pat
         if c.truth is not None:
             (tmp / "truth.json").write_text(json.dumps(c.truth, indent=2, sort_keys=True) + "\n")
         root.mkdir(exist_ok=True)
-        for stale in ("runs.csv", "runs.parquet", "intervals.csv", "truth.json"):
+        for stale in ("runs.csv", "runs.parquet", "intervals.csv", "distances.csv", "truth.json"):
             (root / stale).unlink(missing_ok=True)
         for f in tmp.iterdir():
             shutil.move(str(f), root / f.name)

@@ -103,6 +103,10 @@ class IntervalProblem:
     robust: bool = False
     varying: tuple = ()
 
+    kind = "intervals"
+    observed_name = "interval_s"
+    """Name of the observed times in ``posterior.nc`` (dims run, band)."""
+
     @property
     def n_runs(self) -> int:
         return len(self.run_ids)
@@ -110,6 +114,24 @@ class IntervalProblem:
     @property
     def numpyro_model(self):
         return interval_model
+
+    @property
+    def sites(self) -> tuple[str, ...]:
+        """The sample sites of a draw the likelihood needs."""
+        return tuple(self.free) + NOISE_SITES
+
+    @property
+    def observed_runs(self):
+        """[R, K] observed band times (0 on padding)."""
+        return jnp.where(self.mask, _per_run(self, self.observed_s), 0.0)
+
+    def run_times(self, sample: dict[str, Any]):
+        """[R, K] model band times of one draw and their sensitivity to a constant extra
+        deceleration of the run (s per m/s^2), the inputs of :func:`~bayes_roadload.physics.
+        intervals.band_time_loglik`."""
+        out = model_band_times(self, sample)
+        t = _per_run(self, out["time_s"])
+        return t, _per_run(self, out["dtime_dforce_s_per_n"]) * self.effective_mass_kg[:, None]
 
 
 def build_interval_problem(campaign: IntervalCampaign, spec: ModelSpec | str = "split_f0_f2",
@@ -192,24 +214,32 @@ def _per_run(problem: IntervalProblem, x):
 
 
 def run_log_likelihood(problem: IntervalProblem, sample: dict[str, Any]) -> jnp.ndarray:
-    """[R] log-likelihood of each run's band times for one draw (module docstring)."""
-    out = model_band_times(problem, sample)
-    t = _per_run(problem, out["time_s"])
-    resid = _per_run(problem, problem.observed_s) - t
-    sens = _per_run(problem, out["dtime_dforce_s_per_n"]) * problem.effective_mass_kg[:, None]
+    """[R] log-likelihood of each run's band times for one draw (module docstring).  Works for
+    any problem with ``run_times``, ``observed_runs`` and ``mask`` (the segments between the
+    markers of a distance-time record too: :mod:`.distances`)."""
+    t, sens = problem.run_times(sample)
+    resid = problem.observed_runs - t
     return band_time_loglik(resid, problem.mask, t, sens, sample["sigma_gate_s"],
                             sample["band_noise_s_per_sqrt_s"], sample["run_decel_sd_mps2"])
 
 
-def interval_model(problem: IntervalProblem) -> None:
-    """The numpyro model of interval times (module docstring); contract names for the sites."""
+def sample_coefficients_and_noise(problem, means=None, shapes=None) -> dict[str, Any]:
+    """numpyro sites of the free coefficients (their priors) and of the three timing-noise
+    nuisances (Gamma priors with the given means and shapes, default
+    ``config.INTERVAL_NOISE_PRIORS`` / ``INTERVAL_NOISE_PRIOR_SHAPES``)."""
+    means = config.INTERVAL_NOISE_PRIORS if means is None else means
+    shapes = config.INTERVAL_NOISE_PRIOR_SHAPES if shapes is None else shapes
     sample: dict[str, Any] = {}
     for name in problem.free:
         sample[name] = numpyro.sample(name, problem.priors[name].to_numpyro())
     for name in NOISE_SITES:
-        mean = config.INTERVAL_NOISE_PRIORS[name]
-        shape = config.INTERVAL_NOISE_PRIOR_SHAPES[name]
-        sample[name] = numpyro.sample(name, dist.Gamma(shape, shape / mean))
+        sample[name] = numpyro.sample(name, dist.Gamma(shapes[name], shapes[name] / means[name]))
+    return sample
+
+
+def interval_model(problem: IntervalProblem) -> None:
+    """The numpyro model of interval times (module docstring); contract names for the sites."""
+    sample = sample_coefficients_and_noise(problem)
     numpyro.factor("interval_loglik", run_log_likelihood(problem, sample).sum())
 
 
@@ -240,14 +270,12 @@ def predictive_band_times(problem: IntervalProblem, samples: dict[str, np.ndarra
     idx = np.linspace(0, total - 1, min(n_draws, total)).astype(int)
 
     def one(s):
-        out = model_band_times(problem, s)
-        t = _per_run(problem, out["time_s"])
-        sens = _per_run(problem, out["dtime_dforce_s_per_n"]) * problem.effective_mass_kg[:, None]
+        t, sens = problem.run_times(s)
         cov = band_time_covariance(problem.mask, t, sens, s["sigma_gate_s"], s["band_noise_s_per_sqrt_s"],
                                    s["run_decel_sd_mps2"])
         return t, cov
 
-    draws = {k: jnp.asarray(v[idx]) for k, v in flat.items() if k in problem.free or k in NOISE_SITES}
+    draws = {k: jnp.asarray(v[idx]) for k, v in flat.items() if k in problem.sites}
     t, cov = jax.jit(jax.vmap(one))(draws)
     t, cov = np.asarray(t), np.asarray(cov)
     chol = np.linalg.cholesky(cov)   # numpy, outside the sampler
@@ -259,12 +287,12 @@ def predictive_band_times(problem: IntervalProblem, samples: dict[str, np.ndarra
 
 def observed_band_times(problem: IntervalProblem) -> np.ndarray:
     """[R, K] observed band times (NaN on padding)."""
-    return np.where(np.asarray(problem.mask), np.asarray(_per_run(problem, problem.observed_s)), np.nan)
+    return np.where(np.asarray(problem.mask), np.asarray(problem.observed_runs), np.nan)
 
 
 def log_likelihood_per_run(problem: IntervalProblem, samples: dict[str, np.ndarray]) -> np.ndarray:
     chains = next(iter(samples.values())).shape[0]
-    flat = {k: jnp.asarray(_flat(v)) for k, v in samples.items() if k in problem.free or k in NOISE_SITES}
+    flat = {k: jnp.asarray(_flat(v)) for k, v in samples.items() if k in problem.sites}
     ll = np.asarray(jax.jit(jax.vmap(lambda s: run_log_likelihood(problem, s)))(flat))
     return ll.reshape((chains, -1) + ll.shape[1:])
 
@@ -275,6 +303,7 @@ def to_inference_data(fit) -> az.InferenceData:
     from .results import derived_quantities
 
     p = fit.problem
+    name = p.observed_name
     posterior = dict(fit.samples)
     posterior.update(derived_quantities(fit))
     pred = predictive_band_times(p, fit.samples, n_draws=fit.sampler.posterior_predictive_draws)
@@ -283,16 +312,17 @@ def to_inference_data(fit) -> az.InferenceData:
     rep = pred["interval_s"][:per_chain * chains].reshape((chains, per_chain) + pred["interval_s"].shape[1:])
     runs = [str(r) for r in p.run_ids]
     k = np.asarray(p.mask).shape[1]
+    per_run_sites = [s for s in posterior if np.ndim(posterior[s]) == 3 and np.shape(posterior[s])[2] == p.n_runs]
     return az.from_dict(
         posterior=posterior,
-        posterior_predictive={"interval_s": rep},
-        log_likelihood={"interval_s": log_likelihood_per_run(p, fit.samples)},
-        observed_data={"interval_s": observed_band_times(p)},
+        posterior_predictive={name: rep},
+        log_likelihood={name: log_likelihood_per_run(p, fit.samples)},
+        observed_data={name: observed_band_times(p)},
         sample_stats={"diverging": fit.stats["diverging"].astype(bool), "tree_depth": fit.stats["tree_depth"],
                       "n_steps": fit.stats["num_steps"], "energy": fit.stats["energy"],
                       "acceptance_rate": fit.stats["accept_prob"]},
         coords={"run": runs, "band": np.arange(k)},
-        dims={"interval_s": ["run", "band"]},
+        dims={name: ["run", "band"], **{s: ["run"] for s in per_run_sites}},
     )
 
 
@@ -308,13 +338,22 @@ def run_predictions(fit, idata) -> pd.DataFrame:
     predictive mean and 95 % interval of it, and whether it falls inside."""
     p = fit.problem
     obs = np.nansum(observed_band_times(p), axis=1)
-    rep = np.asarray(idata.posterior_predictive["interval_s"])
+    rep = np.asarray(idata.posterior_predictive[p.observed_name])
     tot = np.nansum(rep, axis=-1).reshape(-1, p.n_runs)
     lo, hi = np.percentile(tot, [2.5, 97.5], axis=0)
-    return pd.DataFrame({"run": list(p.run_ids), "window": list(p.windows),
-                         "direction": np.asarray(p.directions).astype(int), "observed_time_s": obs,
-                         "predicted_mean_s": tot.mean(axis=0), "predicted_q2.5": lo, "predicted_q97.5": hi,
-                         "inside_95": (obs >= lo) & (obs <= hi)})
+    table = {"run": list(p.run_ids)}
+    if hasattr(p, "windows"):
+        table["window"] = list(p.windows)
+    table["direction"] = np.asarray(p.directions).astype(int)
+    for site in ("mass_kg", "v0_mps"):   # distance-time problems: each run's mass, its speed at the first marker
+        if site == "mass_kg" and hasattr(p, "run_masses_kg"):
+            table["mass_kg"] = np.asarray(p.run_masses_kg)
+        elif site in fit.samples:
+            draws = np.asarray(fit.samples[site]).reshape(-1, p.n_runs)
+            table[f"{site}_mean"], table[f"{site}_sd"] = draws.mean(axis=0), draws.std(axis=0, ddof=1)
+    table.update({"observed_time_s": obs, "predicted_mean_s": tot.mean(axis=0), "predicted_q2.5": lo,
+                  "predicted_q97.5": hi, "inside_95": (obs >= lo) & (obs <= hi)})
+    return pd.DataFrame(table)
 
 
 def write_interval_outputs(fit, out_dir, *, gates: config.Gates = config.DEFAULT_GATES,
@@ -328,7 +367,7 @@ def write_interval_outputs(fit, out_dir, *, gates: config.Gates = config.DEFAULT
     idata = to_inference_data(fit)
     summary = summary_table(fit, idata)
     diag = diagnostics(fit, idata, summary, gates, runs=pd.DataFrame(columns=list(SUMMARY_COLUMNS)))
-    diag["kind"] = "intervals"
+    diag["kind"] = getattr(fit.problem, "kind", "intervals")
     diag["runs_fitted"] = fit.problem.n_runs
     out.mkdir(parents=True, exist_ok=True)
     idata.to_netcdf(str(out / "posterior.nc"))

@@ -1,0 +1,199 @@
+"""The distance-time campaign kind: the times at which each run passes known distances.
+
+Markers along the track (cones filmed by a camera, the light gates of a speed trap, lines on a
+model track: seed 002's speed-trap method) give per run the time the vehicle passes each known
+distance, not a speed trace.  Such a campaign is a directory with ``distances.csv`` (instead of
+``runs.csv`` or ``intervals.csv``: two of them together are refused as ambiguous) and the same
+``vehicle.toml`` (and, simulated, ``truth.json``); :func:`~bayes_roadload.data.load_campaign`
+returns a :class:`DistanceCampaign` for it.  One row per marker passed; the format is in
+``docs/data-format.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .. import config
+from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, validate_vehicle
+
+DISTANCE_REQUIRED = ("run", "distance_m", "time_s")
+DISTANCE_RUN_CONSTANT = ("direction", "pair", "mass_kg", "temperature_k", "pressure_pa")
+DISTANCE_OPTIONAL = DISTANCE_RUN_CONSTANT
+DISTANCE_COLUMNS = DISTANCE_REQUIRED + DISTANCE_OPTIONAL
+_TEXT_COLUMNS = ("run", "pair")
+
+_DISTANCE_HINTS = dict(_AMBIGUOUS_HINTS, **{
+    "distance": "distance_m (metres)",
+    "distance_km": "distance_m (metres): multiply km by 1000",
+    "distance_ft": "distance_m (metres): multiply feet by 0.3048",
+    "position_m": "distance_m (the marker's distance along the run, metres)",
+    "time_ms": "time_s (seconds): divide ms by 1000",
+    "speed_mps": "a speed trace (runs.csv); a distance-time campaign holds only distance_m and time_s",
+    "interval_s": "a speed-gate campaign (intervals.csv); a distance-time campaign holds distance_m and time_s",
+})
+
+_LIMITS = {
+    "distance_m": (-1.0e5, 1.0e5, "not a distance in metres"),
+    "temperature_k": (200.0, 350.0, "degrees Celsius in a kelvin column"),
+    "pressure_pa": (50_000.0, 120_000.0, "kPa, hPa or bar in a pascal column"),
+    "mass_kg": config.MASS_RANGE_KG + ("not a test mass in kg",),
+}
+
+
+@dataclass
+class DistanceCampaign:
+    """A loaded, validated distance-time campaign.
+
+    Attributes
+    ----------
+    markers : one row per marker passed (columns of :data:`DISTANCE_COLUMNS`); the markers of a
+        run are contiguous rows in increasing distance and time.
+    vehicle, anemometer, tunnel, truth, meta : as :class:`~bayes_roadload.data.Campaign` (the
+        anemometer is unused: a distance-time record carries no air data).
+    """
+
+    markers: pd.DataFrame
+    vehicle: Vehicle
+    anemometer: Anemometer = field(default_factory=Anemometer)
+    tunnel: dict[str, Any] | None = None
+    truth: dict[str, Any] | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    kind = "distances"
+    has_anemometer = False
+    has_driveline = False
+
+    def __post_init__(self):
+        self.markers = validate_distances(self.markers, "distances")
+        validate_vehicle(self.vehicle, "vehicle")
+
+    @property
+    def run_ids(self) -> list:
+        return [_plain(r) for r in pd.unique(self.markers["run"])]
+
+    def run_table(self) -> pd.DataFrame:
+        """One row per run: run, the run constants present, the number of markers, the
+        distance and time between the first and the last, and the mean speed over them."""
+        g = self.markers.groupby("run", sort=False)
+        out = g.first()[[c for c in DISTANCE_RUN_CONSTANT if c in self.markers]].copy()
+        out["markers"] = g.size()
+        out["span_m"] = g["distance_m"].last() - g["distance_m"].first()
+        out["span_s"] = g["time_s"].last() - g["time_s"].first()
+        out["mean_speed_mps"] = out["span_m"] / out["span_s"]
+        out.index = [_plain(r) for r in out.index]
+        out.index.name = "run"
+        return out.reset_index()
+
+    def directions(self) -> dict:
+        """run id -> +1/-1 (every run +1 when the column is absent)."""
+        if "direction" not in self.markers:
+            return {r: 1 for r in self.run_ids}
+        return {_plain(r): int(d) for r, d in self.markers.groupby("run", sort=False)["direction"].first().items()}
+
+    def masses_kg(self) -> dict:
+        """run id -> the run's test mass (``[vehicle] mass_kg`` when the column is absent)."""
+        if "mass_kg" not in self.markers:
+            return {r: float(self.vehicle.mass_kg) for r in self.run_ids}
+        return {_plain(r): float(m) for r, m in self.markers.groupby("run", sort=False)["mass_kg"].first().items()}
+
+    def pairs(self) -> list[tuple]:
+        """Opposite-direction pairs: by the ``pair`` column, else consecutive runs in file order."""
+        if "pair" in self.markers:
+            groups = self.markers.groupby("pair", sort=False)["run"].unique()
+            return [tuple(_plain(r) for r in g) for g in groups if len(g) == 2]
+        ids = self.run_ids
+        return [(ids[i], ids[i + 1]) for i in range(0, len(ids) - 1, 2)]
+
+    def subset(self, run_ids) -> "DistanceCampaign":
+        """The campaign restricted to some runs (order as given)."""
+        keep = self.markers[self.markers["run"].isin(list(run_ids))]
+        order = {r: i for i, r in enumerate(run_ids)}
+        keep = keep.sort_values("run", key=lambda s: s.map(order), kind="stable")
+        return DistanceCampaign(keep.reset_index(drop=True), self.vehicle, self.anemometer, self.tunnel,
+                                self.truth, dict(self.meta))
+
+
+def validate_distances(df: pd.DataFrame, where: str = "distances.csv") -> pd.DataFrame:
+    """Check a distance-time table against the contract and return a normalised copy (rows
+    1-based over the data rows).
+
+    Refused: unknown or unit-ambiguous columns, missing required ones, non-finite values,
+    values out of range, the markers of a run not contiguous, distance or time not strictly
+    increasing within a run, fewer than ``config.MIN_DISTANCE_MARKERS`` markers in a run, a
+    mean speed between two markers outside ``config.DISTANCE_SEGMENT_SPEED_RANGE_MPS`` (km or
+    mm in the metre column, ms in the second column), a run-level column changing within a run.
+    """
+    df = df.copy()
+    cols = list(df.columns)
+    for c in cols:
+        if c not in DISTANCE_COLUMNS:
+            hint = _DISTANCE_HINTS.get(str(c).strip().lower())
+            msg = (f"unknown column; did you mean {hint}?" if hint
+                   else f"unknown column; a distance-time campaign knows {', '.join(DISTANCE_COLUMNS)}")
+            _fail(where, str(c), None, msg)
+    for c in DISTANCE_REQUIRED:
+        if c not in cols:
+            _fail(where, c, None, "required column is missing")
+    if len(df) == 0:
+        _fail(where, None, None, "no markers")
+    for c in _TEXT_COLUMNS:
+        if c in cols and df[c].isna().any():
+            _fail(where, c, int(np.flatnonzero(df[c].isna().to_numpy())[0]) + 1, f"missing {c}")
+    for c in cols:
+        if c in _TEXT_COLUMNS:
+            continue
+        values = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            _fail(where, c, i + 1, f"value {df[c].iloc[i]!r} is not a finite number")
+        df[c] = values
+        if c in _LIMITS:
+            lo, hi, meaning = _LIMITS[c]
+            out = (values < lo) | (values > hi)
+            if out.any():
+                i = int(np.flatnonzero(out)[0])
+                _fail(where, c, i + 1, f"value {values[i]:g} outside [{lo:g}, {hi:g}] ({meaning})")
+    if "direction" in cols and not np.isin(df["direction"].to_numpy(), (-1.0, 1.0)).all():
+        i = int(np.flatnonzero(~np.isin(df["direction"].to_numpy(), (-1.0, 1.0)))[0])
+        _fail(where, "direction", i + 1, f"direction code {df['direction'].iloc[i]:g} is not +1 or -1")
+    lo_v, hi_v = config.DISTANCE_SEGMENT_SPEED_RANGE_MPS
+    positions = np.arange(len(df))
+    for rid, idx in df.groupby("run", sort=False).indices.items():
+        rid = _plain(rid)
+        rows = positions[idx]
+        if np.any(np.diff(rows) != 1):
+            _fail(where, "run", int(rows[np.flatnonzero(np.diff(rows) != 1)[0] + 1]) + 1,
+                  f"the markers of run {rid!r} are not contiguous")
+        if len(rows) < config.MIN_DISTANCE_MARKERS:
+            _fail(where, "run", int(rows[0]) + 1, f"run {rid!r} passes {len(rows)} markers; at least "
+                  f"{config.MIN_DISTANCE_MARKERS} are needed (its speed at the first is unknown)")
+        x = df["distance_m"].to_numpy()[rows]
+        t = df["time_s"].to_numpy()[rows]
+        for name, d in (("distance_m", np.diff(x)), ("time_s", np.diff(t))):
+            if np.any(d <= 0):
+                i = int(rows[np.flatnonzero(d <= 0)[0] + 1])
+                _fail(where, name, i + 1, f"{name} does not increase within run {rid!r} (markers in the order "
+                      "passed, distances counted along the direction of travel)")
+        speed = np.diff(x) / np.diff(t)
+        out = (speed < lo_v) | (speed > hi_v)
+        if out.any():
+            i = int(rows[np.flatnonzero(out)[0] + 1])
+            _fail(where, "time_s", i + 1, f"run {rid!r}: mean speed {speed[out][0]:g} m/s since the previous marker "
+                  f"is outside [{lo_v:g}, {hi_v:g}] m/s (km or mm in distance_m, or ms in time_s?)")
+        for c in DISTANCE_RUN_CONSTANT:
+            if c in cols:
+                vals = df[c].to_numpy()[rows]
+                if np.any(vals != vals[0]):
+                    i = int(rows[np.flatnonzero(vals != vals[0])[0]])
+                    _fail(where, c, i + 1, f"{c} changes within run {rid!r}")
+    return df.reset_index(drop=True)
+
+
+def read_distances(path) -> pd.DataFrame:
+    """``distances.csv`` as a table."""
+    return pd.read_csv(path)
