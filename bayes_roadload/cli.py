@@ -364,9 +364,9 @@ def _cmd_diagnose(args) -> int:
     campaign = load_campaign(args.campaign)
     if getattr(campaign, "kind", "traces") == "intervals":
         return _diagnose_intervals(campaign, args)
-    if getattr(campaign, "kind", "traces") in ("spindown", "steady"):
-        raise ValueError(f"{args.campaign}: the sim-to-real diagnosis works on coastdowns (speed traces or interval "
-                         f"times), not on a {campaign.kind} campaign")
+    if getattr(campaign, "kind", "traces") in ("spindown", "steady", "distances"):
+        raise ValueError(f"{args.campaign}: the sim-to-real diagnosis works on coastdowns recorded as speed traces or "
+                         f"interval times, not (yet) on a {campaign.kind} campaign")
     spec = load_model_spec(args.model or "three_term")
     diag = diagnose(campaign, spec)
     path = write_diagnosis(diag, args.out)
