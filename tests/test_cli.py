@@ -230,6 +230,7 @@ def test_import_vbox_and_fit_an_interval_campaign(tmp_path, capsys):
     assert len(pd.read_csv(tmp_path / "fit" / "runs_summary.csv")) == 10
 
 
+@pytest.mark.slow   # ~30 s of NUTS; the distance-time likelihood and model have fast tests of their own
 def test_simulate_and_fit_a_distance_time_campaign_at_two_masses(tmp_path, capsys):
     """simulate --masses --markers writes distances.csv (one pair at 1100 kg, one at 1400 kg,
     timed past 5 markers 300 m apart); fit takes the kind: one joint NUTS fit of both masses
