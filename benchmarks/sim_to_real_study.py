@@ -180,6 +180,16 @@ def markdown(by_design: dict[str, pd.DataFrame], args_text: str) -> str:
              "claimed; *wrong* = another effect claimed.  *true rank*: the true effect's place by delta_elpd alone.", ""]
     for design, records in by_design.items():
         lines += design_section(design, records)
+    before = OUT / "records_identifying_before_vuong.csv"
+    if before.exists():
+        s = summarise(read_records(before))
+        lines += ["## Design `identifying` before Vuong's test", "",
+                  "The same design, seeds 1-5, diagnosed with the rules before Vuong's test over the runs was added "
+                  "(and before the forward selection scored the airspeed scale jointly) "
+                  "([records](sim_to_real/records_identifying_before_vuong.csv)):", "",
+                  "| quantity | value |", "| --- | --- |"]
+        lines += [f"| {k} | {v if not isinstance(v, float) else f'{v:.1f}'} |" for k, v in s.items()]
+        lines.append("")
     rp = OUT / "replay.csv"
     if rp.exists():
         rep = pd.read_csv(rp)

@@ -16,7 +16,7 @@ import tempfile
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 import pandas as pd
@@ -210,6 +210,22 @@ def _fail(where: str, column: str | None, row: int | None, what: str):
     raise CampaignError(": ".join([", ".join(parts), what]))
 
 
+def check_columns(df: pd.DataFrame, known, required, hints: Mapping[str, str], what: str, where: str) -> list:
+    """Refuse a table's unknown columns (naming the likely unit mistake from ``hints``) and
+    missing ``required`` ones; ``what`` names the table in the message ("the contract", "an
+    interval campaign", ...).  Returns the column names.  Every data kind validates with it."""
+    cols = list(df.columns)
+    for c in cols:
+        if c not in known:
+            hint = hints.get(str(c).strip().lower())
+            _fail(where, str(c), None, f"unknown column; did you mean {hint}?" if hint
+                  else f"unknown column; {what} knows {', '.join(known)}")
+    for c in required:
+        if c not in cols:
+            _fail(where, c, None, "required column is missing")
+    return cols
+
+
 def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
     """Check a runs table against the contract and return a normalised copy.
 
@@ -218,16 +234,7 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
     which knows the rolling radius.
     """
     df = df.copy()
-    cols = list(df.columns)
-    for c in cols:
-        if c not in KNOWN_COLUMNS:
-            hint = _AMBIGUOUS_HINTS.get(str(c).strip().lower())
-            msg = (f"unknown column; did you mean {hint}?" if hint
-                   else f"unknown column; the contract knows {', '.join(KNOWN_COLUMNS)}")
-            _fail(where, str(c), None, msg)
-    for c in REQUIRED_COLUMNS:
-        if c not in cols:
-            _fail(where, c, None, "required column is missing")
+    cols = check_columns(df, KNOWN_COLUMNS, REQUIRED_COLUMNS, _AMBIGUOUS_HINTS, "the contract", where)
     if len(df) == 0:
         _fail(where, None, None, "no samples")
     if df["run"].isna().any():

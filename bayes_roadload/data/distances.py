@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, validate_vehicle
+from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, check_columns, validate_vehicle
 
 DISTANCE_REQUIRED = ("run", "distance_m", "time_s")
 DISTANCE_RUN_CONSTANT = ("direction", "pair", "mass_kg", "temperature_k", "pressure_pa")
@@ -128,16 +128,7 @@ def validate_distances(df: pd.DataFrame, where: str = "distances.csv") -> pd.Dat
     mm in the metre column, ms in the second column), a run-level column changing within a run.
     """
     df = df.copy()
-    cols = list(df.columns)
-    for c in cols:
-        if c not in DISTANCE_COLUMNS:
-            hint = _DISTANCE_HINTS.get(str(c).strip().lower())
-            msg = (f"unknown column; did you mean {hint}?" if hint
-                   else f"unknown column; a distance-time campaign knows {', '.join(DISTANCE_COLUMNS)}")
-            _fail(where, str(c), None, msg)
-    for c in DISTANCE_REQUIRED:
-        if c not in cols:
-            _fail(where, c, None, "required column is missing")
+    cols = check_columns(df, DISTANCE_COLUMNS, DISTANCE_REQUIRED, _DISTANCE_HINTS, "a distance-time campaign", where)
     if len(df) == 0:
         _fail(where, None, None, "no markers")
     for c in _TEXT_COLUMNS:

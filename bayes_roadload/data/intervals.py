@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, validate_vehicle
+from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, check_columns, validate_vehicle
 
 INTERVAL_REQUIRED = ("run", "speed_start_mps", "speed_end_mps", "interval_s")
 RUN_CONSTANT_COLUMNS = ("direction", "pair", "window", "valid", "run_distance_m", "start_time_of_day_s",
@@ -134,16 +134,7 @@ def validate_intervals(df: pd.DataFrame, where: str = "intervals.csv") -> pd.Dat
     """Check an interval table against the contract and return a normalised copy (rows
     1-based over the data rows)."""
     df = df.copy()
-    cols = list(df.columns)
-    for c in cols:
-        if c not in INTERVAL_COLUMNS:
-            hint = _INTERVAL_HINTS.get(str(c).strip().lower())
-            msg = (f"unknown column; did you mean {hint}?" if hint
-                   else f"unknown column; an interval campaign knows {', '.join(INTERVAL_COLUMNS)}")
-            _fail(where, str(c), None, msg)
-    for c in INTERVAL_REQUIRED:
-        if c not in cols:
-            _fail(where, c, None, "required column is missing")
+    cols = check_columns(df, INTERVAL_COLUMNS, INTERVAL_REQUIRED, _INTERVAL_HINTS, "an interval campaign", where)
     if len(df) == 0:
         _fail(where, None, None, "no intervals")
     for c in _TEXT_COLUMNS:

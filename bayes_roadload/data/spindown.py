@@ -37,7 +37,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import CampaignError, _fail, _plain
+from .campaign import CampaignError, _fail, _plain, check_columns
 
 SPEED_COLUMNS = ("wheel_speed_radps", "wheel_speed_mps")
 KNOWN_COLUMNS = ("run", "time_s", "wheel") + SPEED_COLUMNS
@@ -99,15 +99,7 @@ def validate_spindown(df: pd.DataFrame, where: str = "spindown.csv", rolling_rad
     """Check a spin-down table and return it normalised (``wheel_speed_mps``, ``wheel`` as text,
     each run's time from 0).  ``rolling_radius_m`` converts ``wheel_speed_radps``."""
     df = df.copy()
-    cols = list(df.columns)
-    for c in cols:
-        if c not in KNOWN_COLUMNS:
-            hint = _AMBIGUOUS_HINTS.get(str(c).strip().lower())
-            _fail(where, str(c), None, f"unknown column; did you mean {hint}?" if hint
-                  else f"unknown column; a spin-down table knows {', '.join(KNOWN_COLUMNS)}")
-    for c in ("run", "time_s"):
-        if c not in cols:
-            _fail(where, c, None, "required column is missing")
+    cols = check_columns(df, KNOWN_COLUMNS, ("run", "time_s"), _AMBIGUOUS_HINTS, "a spin-down table", where)
     given = [c for c in SPEED_COLUMNS if c in cols]
     if not given:
         _fail(where, "wheel_speed_radps", None, "required: wheel_speed_radps (rad/s) or wheel_speed_mps (m/s)")

@@ -47,6 +47,7 @@ from .campaign import (
     _CHANNEL_LIMITS,
     Anemometer,
     CampaignError,
+    check_columns,
     Vehicle,
     _fail,
     _plain,
@@ -148,15 +149,7 @@ def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_
     """Check a steady-state table; returns it normalised (``tractive_force_n`` and
     ``accel_mps2`` present) and the source of the acceleration."""
     df = df.copy()
-    cols = list(df.columns)
-    for c in cols:
-        if c not in KNOWN_COLUMNS:
-            hint = _AMBIGUOUS_HINTS.get(str(c).strip().lower())
-            _fail(where, str(c), None, f"unknown column; did you mean {hint}?" if hint
-                  else f"unknown column; a steady-state table knows {', '.join(KNOWN_COLUMNS)}")
-    for c in ("run", "speed_mps"):
-        if c not in cols:
-            _fail(where, c, None, "required column is missing")
+    cols = check_columns(df, KNOWN_COLUMNS, ("run", "speed_mps"), _AMBIGUOUS_HINTS, "a steady-state table", where)
     torques = [c for c in TORQUE_COLUMNS if c in cols]
     if "tractive_force_n" in cols and torques:
         _fail(where, "tractive_force_n", None, "give tractive_force_n or the wheel torques, not both (ambiguous)")
