@@ -342,7 +342,9 @@ def _diagnose_intervals(campaign, args) -> int:
     from .analysis.diagnose_intervals import diagnose_intervals, write_interval_diagnosis
     from .inference.spec import load_model_spec
 
-    spec = load_model_spec(args.model or "split_f0_f2")
+    from .inference.distances import DEFAULT_MODEL
+
+    spec = load_model_spec(args.model or ("split_f0_f2" if campaign.kind == "intervals" else DEFAULT_MODEL))
     diag = diagnose_intervals(campaign, spec, sampler=_sampler(args))
     path = write_interval_diagnosis(diag, args.out)
     gap = diag.result["gap"]
@@ -362,11 +364,11 @@ def _cmd_diagnose(args) -> int:
     from .inference.spec import load_model_spec
 
     campaign = load_campaign(args.campaign)
-    if getattr(campaign, "kind", "traces") == "intervals":
+    if getattr(campaign, "kind", "traces") in ("intervals", "distances"):
         return _diagnose_intervals(campaign, args)
-    if getattr(campaign, "kind", "traces") in ("spindown", "steady", "distances"):
-        raise ValueError(f"{args.campaign}: the sim-to-real diagnosis works on coastdowns recorded as speed traces or "
-                         f"interval times, not (yet) on a {campaign.kind} campaign")
+    if getattr(campaign, "kind", "traces") in ("spindown", "steady"):
+        raise ValueError(f"{args.campaign}: the sim-to-real diagnosis works on coastdowns (speed traces, interval "
+                         f"times or distance-time records), not on a {campaign.kind} campaign")
     spec = load_model_spec(args.model or "three_term")
     diag = diagnose(campaign, spec)
     path = write_diagnosis(diag, args.out)

@@ -1,7 +1,9 @@
-"""Sim-to-real diagnosis of speed-gate interval campaigns (``intervals.csv``).
+"""Sim-to-real diagnosis of speed-gate interval campaigns (``intervals.csv``) and
+distance-time records (``distances.csv``).
 
 The trace diagnosis (:mod:`.diagnose`) linearises speed traces; a gate logger records only the
-time through each speed band, with no anemometer and no time or position inside a band.  Here
+time through each speed band (a marker record the time between known distances), with no
+anemometer and no time or position inside a band.  Here
 every candidate that such data can carry is added to the model and *refitted* with NUTS, and
 the candidates are compared by leave-one-run-out predictive density (PSIS-LOO over runs,
 ``arviz.loo``): ``delta_elpd`` = elpd_loo(model + candidate) - elpd_loo(model), with the
@@ -134,17 +136,21 @@ def gap_metrics(problem, samples, loo) -> tuple[dict[str, float], np.ndarray]:
 
 
 def localise(problem, z: np.ndarray) -> dict[str, Any]:
-    """eta^2 of the standardised residuals by band speed (mid-speed, 5 km/h bins), direction,
-    window and run, and their mean per bin; ``where`` orders the variables by eta^2."""
+    """eta^2 of the standardised residuals by band speed (interval times: mid-speed, 5 km/h
+    bins), segment (distance-time records: its place in the run), direction, window (interval
+    times) and run, and their mean per bin; ``where`` orders the variables by eta^2."""
     mask = np.asarray(problem.mask)
-    idx = np.asarray(problem.band_index)
-    mid = 0.5 * (np.asarray(problem.bands.speed_start_mps) + np.asarray(problem.bands.speed_end_mps))[idx]
-    variables = {
-        "speed_mps": np.round(mid / (5.0 * config.KPH_TO_MPS)) * 5.0 * config.KPH_TO_MPS,
-        "direction": np.broadcast_to(np.asarray(problem.directions)[:, None], z.shape),
-        "window": np.broadcast_to(np.asarray(problem.windows, dtype=object)[:, None], z.shape),
-        "run": np.broadcast_to(np.asarray([str(r) for r in problem.run_ids], dtype=object)[:, None], z.shape),
-    }
+    variables: dict[str, Any] = {}
+    if hasattr(problem, "bands"):
+        idx = np.asarray(problem.band_index)
+        mid = 0.5 * (np.asarray(problem.bands.speed_start_mps) + np.asarray(problem.bands.speed_end_mps))[idx]
+        variables["speed_mps"] = np.round(mid / (5.0 * config.KPH_TO_MPS)) * 5.0 * config.KPH_TO_MPS
+    else:
+        variables["segment"] = np.broadcast_to(np.arange(z.shape[1], dtype=float)[None, :], z.shape)
+    variables["direction"] = np.broadcast_to(np.asarray(problem.directions)[:, None], z.shape)
+    if hasattr(problem, "windows"):
+        variables["window"] = np.broadcast_to(np.asarray(problem.windows, dtype=object)[:, None], z.shape)
+    variables["run"] = np.broadcast_to(np.asarray([str(r) for r in problem.run_ids], dtype=object)[:, None], z.shape)
     out: dict[str, Any] = {}
     for name, g in variables.items():
         g = np.asarray(g)[mask]
@@ -175,11 +181,16 @@ def _fit(campaign, spec, sampler, runs):
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fit = fit_intervals_nuts(campaign, spec, sampler=sampler, runs=runs)
+        if getattr(campaign, "kind", None) == "distances":
+            from ..inference.distances import fit_distances_nuts
+
+            fit = fit_distances_nuts(campaign, spec, sampler=sampler, runs=runs)
+        else:
+            fit = fit_intervals_nuts(campaign, spec, sampler=sampler, runs=runs)
         idata = to_inference_data(fit)
         summary = summary_table(fit, idata)
         diag = diagnostics(fit, idata, summary, runs=pd.DataFrame(columns=list(SUMMARY_COLUMNS)))
-        loo = az.loo(idata, var_name="interval_s")
+        loo = az.loo(idata, var_name=fit.problem.observed_name)
     return fit, idata, summary, diag, loo
 
 
@@ -271,11 +282,12 @@ def diagnose_intervals(campaign, model: Any = "split_f0_f2", *, library: Mapping
              "shrink_pct": chosen[0]["shrink_pct"] if chosen else _shrink(before, before),
              "estimates": {p: v["mean"] for c in chosen for p, v in c.get("estimates", {}).items()}}
     result = {"gap": before, "localisation": loc, "candidates": entries}
+    from ..inference.intervals import observed_band_times
+
     mask = np.asarray(fit.problem.mask)
     return Diagnosis(result=_json_safe(result), refit=_json_safe(refit), model=str(spec.name),
                      residual=np.nan_to_num(z), residual_after=np.nan_to_num(z),
-                     time_s=np.cumsum(np.where(mask, np.nan_to_num(np.asarray(fit.problem.observed_s)[
-                         np.asarray(fit.problem.band_index)]), 0.0), axis=1),
+                     time_s=np.cumsum(np.nan_to_num(observed_band_times(fit.problem)), axis=1),
                      mask=mask, run_ids=fit.problem.run_ids, timings=timings)
 
 
@@ -286,7 +298,7 @@ def _plot_bands(diag, path) -> None:
     import matplotlib.pyplot as plt
 
     loc = diag.result["localisation"]
-    names = [v for v in ("speed_mps", "direction", "window", "run") if v in loc]
+    names = [v for v in ("speed_mps", "segment", "direction", "window", "run") if v in loc]
     fig, axes = plt.subplots(1, len(names), figsize=(3.4 * len(names), 2.8), squeeze=False)
     for ax, name in zip(axes[0], names):
         bins = loc[name]["bins"]
@@ -322,7 +334,7 @@ def write_interval_diagnosis(diag, out_dir, settings: config.DiagnosisConfig = c
                "no candidate effect is supported (delta_elpd_loo >= "
                f"{settings.support_delta_elpd:g} and twice its standard error, ahead of the others by "
                f"{settings.ambiguity_margin:g}).")
-    lines = [f"# Sim-to-real diagnosis of interval times: model `{diag.model}`", "",
+    lines = [f"# Sim-to-real diagnosis of gate or marker times: model `{diag.model}`", "",
              f"**Verdict**: {verdict} Band-time residuals: RMS {_fmt(gap['band_z_rms'])} predictive sd (floor 1), "
              f"+/- heading difference {_fmt(gap['heading_z_diff'])} sd, 90 % coverage {_fmt(gap['coverage_90'])}.", "",
              "## 1. The gap", "", "| metric | value |", "| --- | --- |"]

@@ -16,6 +16,11 @@ from bayes_roadload.simulate import SimulationSettings, simulate_campaign
 
 from ..conftest import SMALL_SAMPLER, clean_case
 
+pytestmark = pytest.mark.slow
+"""The whole module runs with the slow studies (~75 s: 2 x 1300 NUTS draws of a hierarchical
+campaign); the default suite keeps the hierarchical model's sites and potential
+(tests/inference/test_bayes.py) and its Laplace refits (tests/analysis/test_planning.py)."""
+
 SPREAD = {"AD": 6.0e-4, "BD": 4.0e-5, "CD0": 0.016}
 VARYING = ("AD", "BD", "CD0")
 SAMPLER = dataclasses.replace(SMALL_SAMPLER, num_samples=1000)
@@ -96,7 +101,6 @@ def test_tau_rows_in_summary_and_run_rows(hierarchical_fit, hierarchical_idata):
     assert {f"{k}_run[{r}]" for k in VARYING for r in hierarchical_fit.problem.run_ids} <= set(runs["parameter"])
 
 
-@pytest.mark.slow
 def test_without_variation_the_spreads_are_small(small_campaign):
     """On a campaign without run-to-run variation (2 pairs) every tau's posterior median is
     below half the spread injected above (slow: one more hierarchical fit, ~85 s)."""
