@@ -442,7 +442,7 @@ def main(argv=None):
             return 0
         records = json.loads(args.json.read_text())
         for name, (files, use_weather) in DATASETS.items():
-            if name in records:
+            if name in records and "heading_models" in records[name]:   # the campaigns with the +/- question
                 weather = args.data / "meteo" / "AGRICULTR_SPLIT.csv" if use_weather else None
                 camp, _ = import_vbox([args.data / "coastdown" / f for f in files], VEHICLE, weather=weather)
                 records[name]["diagnosis"] = heading_diagnosis(camp)
