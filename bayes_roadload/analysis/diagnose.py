@@ -120,10 +120,13 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
     reaches ``support_delta_elpd``.  The best qualifying candidate is claimed only when it
     beats every other candidate (qualifying or not) by ``ambiguity_margin``; otherwise the
     candidates within the margin explain the gap alike and none is supported ("not
-    distinguishable here").  After the claimed one, the other qualifying candidates join by
-    forward selection, each when it still gains ``support_delta_elpd`` given those already in
-    (at most ``max_refit_effects``).  The airspeed scale judged from the paired-run
-    kinematics adds independent data: its own delta_elpd is its gain."""
+    distinguishable here"); likewise a rival reaching support with nearly the same signature
+    (``min_distinct_share``, VIF rule) and any rival explaining part of the gap that the best
+    does not beat run by run (``min_vuong_z``, Vuong's test).  After the claimed one, the other
+    qualifying candidates join by forward selection, each when it still gains
+    ``support_delta_elpd`` given those already in (at most ``max_refit_effects``).  The
+    airspeed scale adds the paired-run kinematics (independent data) to its dynamics, less
+    their disagreement (:func:`.effects.kinematic_conflict`), also in the forward selection."""
     scored = [c for c in entries if math.isfinite(c["delta_elpd"])]
     qualifying = sorted((c for c in scored if c["qualifies"]), key=lambda c: -c["delta_elpd"])
     for c in entries:
@@ -203,8 +206,9 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
 
 def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> str:
     if entry.get("ambiguous_with"):
-        return (f"not distinguishable here: explains the gap as well as {', '.join(entry['ambiguous_with'])} "
-                f"(delta_elpd {entry['delta_elpd']:.1f}, within {cfg.ambiguity_margin:g}); needs {effect.needs}")
+        return (f"not distinguishable here from {', '.join(entry['ambiguous_with'])} (delta_elpd "
+                f"{entry['delta_elpd']:.1f}: within {cfg.ambiguity_margin:g} of the best, or the same signature, "
+                f"or not ahead run by run: distinct_share, vuong_z); needs {effect.needs}")
     if entry["unavailable"]:
         return f"not applicable: {entry['unavailable']}"
     kin = entry.get("kinematics")
