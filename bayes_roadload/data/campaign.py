@@ -226,6 +226,25 @@ def check_columns(df: pd.DataFrame, known, required, hints: Mapping[str, str], w
     return cols
 
 
+def check_numeric(df: pd.DataFrame, columns, limits: Mapping[str, tuple], where: str) -> None:
+    """Convert ``columns`` of ``df`` to float in place, refusing a value that is not a finite
+    number and one outside its ``limits[column] = (low, high, what it probably is)``, naming
+    the row.  Every data kind validates with it."""
+    for c in columns:
+        values = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            _fail(where, c, i + 1, f"value {df[c].iloc[i]!r} is not a finite number")
+        df[c] = values
+        if c in limits:
+            lo, hi, meaning = limits[c]
+            out = (values < lo) | (values > hi)
+            if out.any():
+                i = int(np.flatnonzero(out)[0])
+                _fail(where, c, i + 1, f"value {values[i]:g} outside [{lo:g}, {hi:g}] ({meaning})")
+
+
 def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
     """Check a runs table against the contract and return a normalised copy.
 
@@ -239,21 +258,7 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
         _fail(where, None, None, "no samples")
     if df["run"].isna().any():
         _fail(where, "run", int(np.flatnonzero(df["run"].isna().to_numpy())[0]) + 1, "missing run id")
-    for c in cols:
-        if c in ("run",):
-            continue
-        values = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
-        bad = ~np.isfinite(values)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            _fail(where, c, i + 1, f"value {df[c].iloc[i]!r} is not a finite number")
-        df[c] = values
-        if c in _CHANNEL_LIMITS:
-            lo, hi, meaning = _CHANNEL_LIMITS[c]
-            out = (values < lo) | (values > hi)
-            if out.any():
-                i = int(np.flatnonzero(out)[0])
-                _fail(where, c, i + 1, f"value {values[i]:g} outside [{lo:g}, {hi:g}] ({meaning})")
+    check_numeric(df, [c for c in cols if c != "run"], _CHANNEL_LIMITS, where)
     if "direction" in cols:
         d = df["direction"].to_numpy()
         bad = ~np.isin(d, (-1.0, 1.0))

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, check_columns, validate_vehicle
+from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, check_columns, check_numeric, validate_vehicle
 
 DISTANCE_REQUIRED = ("run", "distance_m", "time_s")
 DISTANCE_RUN_CONSTANT = ("direction", "pair", "mass_kg", "temperature_k", "pressure_pa")
@@ -134,21 +134,7 @@ def validate_distances(df: pd.DataFrame, where: str = "distances.csv") -> pd.Dat
     for c in _TEXT_COLUMNS:
         if c in cols and df[c].isna().any():
             _fail(where, c, int(np.flatnonzero(df[c].isna().to_numpy())[0]) + 1, f"missing {c}")
-    for c in cols:
-        if c in _TEXT_COLUMNS:
-            continue
-        values = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
-        bad = ~np.isfinite(values)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            _fail(where, c, i + 1, f"value {df[c].iloc[i]!r} is not a finite number")
-        df[c] = values
-        if c in _LIMITS:
-            lo, hi, meaning = _LIMITS[c]
-            out = (values < lo) | (values > hi)
-            if out.any():
-                i = int(np.flatnonzero(out)[0])
-                _fail(where, c, i + 1, f"value {values[i]:g} outside [{lo:g}, {hi:g}] ({meaning})")
+    check_numeric(df, [c for c in cols if c not in _TEXT_COLUMNS], _LIMITS, where)
     if "direction" in cols and not np.isin(df["direction"].to_numpy(), (-1.0, 1.0)).all():
         i = int(np.flatnonzero(~np.isin(df["direction"].to_numpy(), (-1.0, 1.0)))[0])
         _fail(where, "direction", i + 1, f"direction code {df['direction'].iloc[i]:g} is not +1 or -1")

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, check_columns, validate_vehicle
+from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, check_columns, check_numeric, validate_vehicle
 
 INTERVAL_REQUIRED = ("run", "speed_start_mps", "speed_end_mps", "interval_s")
 RUN_CONSTANT_COLUMNS = ("direction", "pair", "window", "valid", "run_distance_m", "start_time_of_day_s",
@@ -142,21 +142,7 @@ def validate_intervals(df: pd.DataFrame, where: str = "intervals.csv") -> pd.Dat
             _fail(where, c, int(np.flatnonzero(df[c].isna().to_numpy())[0]) + 1, f"missing {c}")
     if "window" in cols:
         df["window"] = df["window"].astype(str)
-    for c in cols:
-        if c in _TEXT_COLUMNS:
-            continue
-        values = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
-        bad = ~np.isfinite(values)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            _fail(where, c, i + 1, f"value {df[c].iloc[i]!r} is not a finite number")
-        df[c] = values
-        if c in _LIMITS:
-            lo, hi, meaning = _LIMITS[c]
-            out = (values < lo) | (values > hi)
-            if out.any():
-                i = int(np.flatnonzero(out)[0])
-                _fail(where, c, i + 1, f"value {values[i]:g} outside [{lo:g}, {hi:g}] ({meaning})")
+    check_numeric(df, [c for c in cols if c not in _TEXT_COLUMNS], _LIMITS, where)
     if (df["interval_s"] <= 0).any():
         i = int(np.flatnonzero(df["interval_s"].to_numpy() <= 0)[0])
         _fail(where, "interval_s", i + 1, "a band time must be positive")

@@ -37,7 +37,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import CampaignError, _fail, _plain, check_columns
+from .campaign import CampaignError, _fail, _plain, check_columns, check_numeric
 
 SPEED_COLUMNS = ("wheel_speed_radps", "wheel_speed_mps")
 KNOWN_COLUMNS = ("run", "time_s", "wheel") + SPEED_COLUMNS
@@ -109,13 +109,7 @@ def validate_spindown(df: pd.DataFrame, where: str = "spindown.csv", rolling_rad
         _fail(where, None, None, "no samples")
     if df["run"].isna().any():
         _fail(where, "run", int(np.flatnonzero(df["run"].isna().to_numpy())[0]) + 1, "missing run id")
-    for c in ("time_s",) + tuple(given):
-        values = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
-        bad = ~np.isfinite(values)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            _fail(where, c, i + 1, f"value {df[c].iloc[i]!r} is not a finite number")
-        df[c] = values
+    check_numeric(df, ("time_s",) + tuple(given), {}, where)
     if given[0] == "wheel_speed_radps":
         if rolling_radius_m is None:
             _fail(where, "wheel_speed_radps", None, "needs the rolling radius ([spindown] or [vehicle] "

@@ -48,6 +48,7 @@ from .campaign import (
     Anemometer,
     CampaignError,
     check_columns,
+    check_numeric,
     Vehicle,
     _fail,
     _plain,
@@ -161,21 +162,8 @@ def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_
         _fail(where, None, None, "no samples")
     if df["run"].isna().any():
         _fail(where, "run", int(np.flatnonzero(df["run"].isna().to_numpy())[0]) + 1, "missing run id")
-    for c in cols:
-        if c == "run" or (c == "pair" and not pd.api.types.is_numeric_dtype(df[c])):
-            continue
-        values = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
-        bad = ~np.isfinite(values)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            _fail(where, c, i + 1, f"value {df[c].iloc[i]!r} is not a finite number")
-        df[c] = values
-        if c in _CHANNEL_LIMITS:
-            lo, hi, meaning = _CHANNEL_LIMITS[c]
-            out = (values < lo) | (values > hi)
-            if out.any():
-                i = int(np.flatnonzero(out)[0])
-                _fail(where, c, i + 1, f"value {values[i]:g} outside [{lo:g}, {hi:g}] ({meaning})")
+    check_numeric(df, [c for c in cols if c != "run" and not (c == "pair" and not pd.api.types.is_numeric_dtype(df[c]))],
+                  _CHANNEL_LIMITS, where)
     if (df["speed_mps"] <= 0).any():
         _fail(where, "speed_mps", int(np.flatnonzero(df["speed_mps"].to_numpy() <= 0)[0]) + 1,
               "a steady-state run needs a positive speed")
