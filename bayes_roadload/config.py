@@ -595,6 +595,7 @@ class DiagnosisConfig:
     min_vuong_z : and against every other candidate that explains part of the gap (delta_elpd > 0),
         the best's per-run gains must beat the rival's by this many standard errors over the
         runs (Vuong's test for non-nested models): a lead that one run makes is not a claim.
+        Not asked of a run-level best (``kind = "run"``), whose gain lies in the runs that differ.
     max_refit_effects : leading supported candidates refitted together (forward selection).
     gauss_newton_steps : re-linearisations of the combined refit (nonlinear check).
     """

@@ -122,7 +122,8 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
     candidates within the margin explain the gap alike and none is supported ("not
     distinguishable here"); likewise a rival reaching support with nearly the same signature
     (``min_distinct_share``, VIF rule) and any rival explaining part of the gap that the best
-    does not beat run by run (``min_vuong_z``, Vuong's test).  After the claimed one, the other
+    does not beat run by run (``min_vuong_z``, Vuong's test; not asked of a run-level best,
+    whose gain lies by construction in the runs that differ most).  After the claimed one, the other
     qualifying candidates join by forward selection, each when it still gains
     ``support_delta_elpd`` given those already in (at most ``max_refit_effects``).  The
     airspeed scale adds the paired-run kinematics (independent data) to its dynamics, less
@@ -149,7 +150,11 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
                     rivals.append(c)
                     continue
             # and any rival that explains part of it must lose run by run, not by one run's
-            # luck (Vuong's test of non-nested models over the runs' gains)
+            # luck (Vuong's test of non-nested models over the runs' gains).  Not asked of a
+            # run-level best (each run its own coefficients): its gain lies, by what it is, in
+            # the runs that differ most, and runs that happen to match the mean gain nothing
+            if getattr(library.get(best["effect"]), "kind", "term") == "run":
+                continue
             z = vuong_z(best.get("run_gains"), c.get("run_gains"))
             best.setdefault("vuong_z", {})[c["effect"]] = z
             if z < settings.min_vuong_z:
