@@ -41,8 +41,8 @@ from ..data.campaign import Campaign
 from . import effects as fx
 from .gap import localise, plot_localisation, plot_residuals, residual_structure
 
-SHRINK_FLOORS = {"trend_rms_mps": "trend_floor_mps", "lag1_autocorr": 0.0, "spread_excess_AD": 1.0,
-                 "spread_excess_BD": 1.0, "spread_excess_CD0": 1.0}
+SHRINK_FLOORS = {"trend_rms_mps": "trend_floor_mps", "lag1_autocorr": 0.0, "spread_excess": 1.0,
+                 "spread_excess_AD": 1.0, "spread_excess_BD": 1.0, "spread_excess_CD0": 1.0}
 """Gap metrics with a shrink, and the level a correct model leaves (a number, or the gap key
 holding it)."""
 

@@ -33,8 +33,10 @@ def test_cli_writes_the_contract(gradient_diagnosis):
     assert code == 0
     d = json.loads((out / "diagnosis.json").read_text())
     assert set(d) == {"gap", "localisation", "candidates"}
-    for k in ("trend_rms_mps", "lag1_autocorr", "lopo_lpd_per_sample", "spread_excess_AD"):
+    for k in ("trend_rms_mps", "lag1_autocorr", "lopo_lpd_per_sample", "spread_excess", "spread_p_value",
+              "spread_excess_AD"):
         assert k in d["gap"]
+    assert d["gap"]["spread_excess"] > 0 and 0.0 <= d["gap"]["spread_p_value"] <= 1.0
     for v in ("time_s", "speed_mps", "distance_m", "yaw_rad", "airspeed_mps", "direction", "run"):
         assert 0.0 <= d["localisation"][v]["eta2"] <= 1.0
     names = [c["effect"] for c in d["candidates"]]

@@ -95,3 +95,27 @@ def test_kinematic_conflict_penalises_a_factor_the_two_sources_disagree_on():
     assert fx.kinematic_conflict({"estimate": 0.9, "sd": math.inf}, kin) == 0.0
     # 3 % apart with a combined sd of 0.005: (0.03 / 0.005)^2 / 2 = 18 nats
     assert fx.kinematic_conflict({"estimate": 0.97, "sd": 0.003}, kin) == pytest.approx(18.0)
+
+
+def test_birge_ratio_is_one_for_noise_and_sees_offsets_the_marginals_hide():
+    """The runs' coefficient vectors against their covariances: ~1 when they differ by their
+    noise only; a run-to-run offset along the direction the runs pin down (A_D, C_D0 ~0.99
+    correlated within a run) is seen by the full covariance though each coefficient's
+    marginal spread stays within its own wide variance."""
+    import numpy as np
+
+    from bayes_roadload.analysis.effects import birge_ratio
+
+    rng = np.random.default_rng(5)
+    runs, corr = 400, 0.99
+    cov = np.array([[1.0, corr], [corr, 1.0]])
+    est = rng.multivariate_normal([0.0, 0.0], cov, size=runs)
+    ratio, p = birge_ratio(est, np.broadcast_to(cov, (runs, 2, 2)))
+    dof = (runs - 1) * 2
+    assert abs(ratio - 1.0) < 3.0 / np.sqrt(2.0 * dof) and p > 0.001
+    # offsets of 0.3 marginal sd along (1, -1): the direction whose variance is 1 - corr = 0.01
+    off = est + 0.3 * np.outer(rng.standard_normal(runs), [1.0, -1.0])
+    ratio_off, p_off = birge_ratio(off, np.broadcast_to(cov, (runs, 2, 2)))
+    marginal = off.std(axis=0, ddof=1)
+    assert np.all(marginal < 1.1)                       # each coefficient: within its marginal sd
+    assert ratio_off > 2.0 and p_off < 1e-6             # jointly: far outside the noise
