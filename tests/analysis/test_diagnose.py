@@ -1,5 +1,6 @@
 """The sim-to-real diagnosis end to end: the CLI contract on a campaign with a withheld track
-gradient, and (slow) null controls and a non-identifiable effect through the batch door."""
+gradient, a null control, and (slow) more nulls and non-identifiable effects through the batch
+door."""
 
 import json
 import math
@@ -7,7 +8,8 @@ import warnings
 
 import pytest
 
-from bayes_roadload.analysis.diagnose import DiagnoseJob, withheld_campaign
+from bayes_roadload import config
+from bayes_roadload.analysis.diagnose import DiagnoseJob, diagnose, withheld_campaign
 from bayes_roadload.analysis.effects import EFFECT_NAMES
 from bayes_roadload.cli import main
 from bayes_roadload.data import save_campaign
@@ -71,6 +73,21 @@ def test_withheld_gradient_is_ranked_first_estimated_and_shrinks_the_trend(gradi
     assert not mass["supported"]
 
 
+def test_a_null_control_claims_nothing():
+    """No added effect (case 9, 2 pairs; seed 1001 is the null whose best candidate came
+    closest to the threshold, yaw_calibration at 3.5 nats): nothing may be claimed, and the
+    runs' coefficients spread about as their noise predicts: the Birge ratio within 3 of its
+    sd, 1 / sqrt(2 dof) with dof = 3 x 3, of 1 (case 9 nulls of 2 pairs measure 1.32-1.37)."""
+    factory, model = withheld_campaign(None, seed=1001, pairs=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        d = diagnose(factory(), model)
+    assert d.top is None and not any(c["supported"] for c in d.candidates)
+    assert all(c["delta_elpd"] < config.DEFAULT_DIAGNOSIS.support_delta_elpd
+               for c in d.candidates if math.isfinite(c["delta_elpd"]))
+    assert d.result["gap"]["spread_excess"] < 1.0 + 3.0 / math.sqrt(2 * 9)
+
+
 @pytest.mark.slow
 def test_null_controls_and_a_confounded_effect_through_the_batch_door():
     from bayes_roadload.analysis.batch import run_batch
@@ -90,7 +107,6 @@ def test_null_controls_and_a_confounded_effect_through_the_batch_door():
 
 
 def test_a_claim_needs_a_margin_over_every_other_candidate():
-    from bayes_roadload import config
     from bayes_roadload.analysis.diagnose import select_effects
 
     margin = config.DEFAULT_DIAGNOSIS.ambiguity_margin
@@ -127,7 +143,6 @@ def test_cli_refuses_an_unknown_model_and_writes_nothing(gradient_diagnosis, tmp
 def test_a_rival_with_the_same_signature_blocks_a_claim(monkeypatch):
     """VIF rule: a rival that reaches support on its own and shares > 90 % of the best's
     signature makes the pair 'not distinguishable', whatever the margin."""
-    from bayes_roadload import config
     from bayes_roadload.analysis import diagnose as dg
     from bayes_roadload.analysis import effects as fx
 
@@ -194,7 +209,6 @@ def test_a_distorted_yaw_reading_ends_the_run_at_the_logged_limit():
     import numpy as np
     import pandas as pd
 
-    from bayes_roadload import config
     from bayes_roadload.analysis.diagnose import Distorted
     from bayes_roadload.data import Campaign, Vehicle
 
@@ -215,7 +229,6 @@ def test_a_distorted_yaw_reading_ends_the_run_at_the_logged_limit():
 def test_a_lead_made_by_one_run_is_not_a_claim(monkeypatch):
     """Vuong's test over the runs: a best candidate whose gain over a rival comes from one run
     is not claimed; the same total spread over every run is."""
-    from bayes_roadload import config
     from bayes_roadload.analysis import diagnose as dg
 
     cfg = config.DEFAULT_DIAGNOSIS
