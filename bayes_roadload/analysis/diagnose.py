@@ -86,7 +86,9 @@ def shrink(before: Mapping[str, float], after: Mapping[str, float], n_runs: int 
     refit removes the whole excess, 0 = nothing, negative = worse.  NaN when there was no
     excess to remove: the trend within its floor of the floor (twice white noise's), the
     autocorrelation below 0.05, a spread ratio within two of its standard errors of 1
-    (1 / sqrt(2 (R - 1)) for R runs), where a percentage would be noise over noise."""
+    (1 / sqrt(2 (R - 1)) for R runs; for the Birge ratio ``spread_excess``, whose sd is
+    1 / sqrt(2 (R - 1) P), the same margin is the stricter), where a percentage would be noise
+    over noise."""
     out = {}
     for k, floor in SHRINK_FLOORS.items():
         if k not in before or k not in after or before[k] is None or after[k] is None:
