@@ -77,13 +77,20 @@ def gap_metrics(lin: fx.Linearisation, residual: np.ndarray, sol: fx.Solution | 
     gain = sol.loglik_gain if sol is not None else fx.fit_effects(lin, (), library).loglik_gain
     out["insample_lpd_per_sample"] = (float(lin.loglik.sum()) + gain) / n
     out["lopo_lpd_per_sample"] = fx.lopo_lpd(lin, effects, library, groups) / n if len(groups) > 1 else math.nan
-    out.update(fx.coefficient_spread(lin, sol, library))
+    # the spread against what the noise left by this model predicts (its noise levels refitted
+    # to its residuals: a misfit inflates the integrated error, and with it every covariance)
+    spread = fx.coefficient_spread(fx.with_noise(lin, *fx.fit_noise(lin, residual)), sol, library)
+    if any(library[e].kind == "run" for e in effects if e in library):
+        # each run its own coefficients: no spread left to compare (the refit is the spread)
+        spread = {k: math.nan for k in spread}
+    out.update(spread)
     return out
 
 
 def shrink(before: Mapping[str, float], after: Mapping[str, float], n_runs: int = 2) -> dict[str, float]:
     """Shrink (%) of each metric's excess over its floor (:data:`SHRINK_FLOORS`): 100 = the
-    refit removes the whole excess, 0 = nothing, negative = worse.  NaN when there was no
+    refit removes the whole excess, 0 = nothing, negative = worse, above 100 = the metric ends
+    below its floor (by its noise).  NaN when there was no
     excess to remove: the trend within its floor of the floor (twice white noise's), the
     autocorrelation below 0.05, a spread ratio within two of its standard errors of 1
     (1 / sqrt(2 (R - 1)) for R runs; for the Birge ratio ``spread_excess``, whose sd is

@@ -161,6 +161,7 @@ class Linearisation:
     run_ids: tuple
     speed_fn: Any = None
     x: Any = None
+    noise_fns: Any = None
 
     def index(self, names) -> list[int]:
         return [self.columns.index(n) for n in names]
@@ -387,6 +388,63 @@ def n_added_parameters(lin: Linearisation, effects: tuple[str, ...], library: Ma
         e = library[name]
         k += len(lin.effects[name]) * (lin.n_runs - 1 if e.kind == "run" else 1)
     return k
+
+
+_effect_terms_jit = jax.jit(_effect_terms)
+
+
+def noise_objective(lin: Linearisation):
+    """``(objective, value_and_grad, per_run)``, jitted: the negative local-level log
+    likelihood of residuals [R, N] on ``lin``'s sample grid as a function of theta = (log
+    sigma [R], log q), its gradient, and the [R] log likelihoods; built once per
+    linearisation (the grid is a constant of the compiled functions)."""
+    if getattr(lin, "noise_fns", None) is None:
+        t, m = np.asarray(lin.batch.time_s, float), np.asarray(lin.batch.mask, bool)
+        r = t.shape[0]
+
+        def per_run(theta, residual):
+            return local_level_loglik_batch(residual, t, m, jnp.exp(theta[:r]), jnp.exp(theta[r]))
+
+        def objective(theta, residual):
+            return -jnp.sum(per_run(theta, residual))
+
+        lin.noise_fns = (jax.jit(objective), jax.jit(jax.value_and_grad(objective)), jax.jit(per_run))
+    return lin.noise_fns
+
+
+def fit_noise(lin: Linearisation, residual: np.ndarray) -> tuple[np.ndarray, float]:
+    """The noise levels (each run's white-noise sigma [R], the integrated error's q) that
+    maximise the local-level likelihood of ``residual`` -- the model's own noise model,
+    refitted once a candidate has taken its share of the misfit (a misfit the model cannot
+    follow inflates q, and with it every covariance the fit predicts)."""
+    from scipy.optimize import minimize
+
+    _, value_and_grad, _ = noise_objective(lin)
+    resid = jnp.asarray(residual, float)
+    theta0 = np.concatenate([np.log(np.asarray(lin.sigma_mps, float)), [math.log(max(float(lin.q), 1e-12))]])
+
+    def fun(theta):
+        v, g = value_and_grad(jnp.asarray(theta), resid)
+        return float(v), np.asarray(g, float)
+
+    res = minimize(fun, theta0, jac=True, method="L-BFGS-B")
+    theta = res.x if np.all(np.isfinite(res.x)) else theta0
+    return np.exp(theta[:-1]), float(np.exp(theta[-1]))
+
+
+def with_noise(lin: Linearisation, sigma_mps: np.ndarray, q: float) -> Linearisation:
+    """``lin`` at the same point with other noise levels: its information (gram), score and
+    log likelihood recomputed (no model evaluation)."""
+    batch = lin.batch
+    resid = jnp.asarray(lin.residual)
+    g, b = _effect_terms_jit(resid, jnp.asarray(batch.time_s), jnp.asarray(batch.mask, bool), jnp.asarray(sigma_mps),
+                             jnp.asarray(q), jnp.asarray(lin.jacobian))
+    theta = jnp.asarray(np.concatenate([np.log(np.asarray(sigma_mps, float)), [math.log(float(q))]]))
+    ll = noise_objective(lin)[2](theta, resid)
+    out = Linearisation(**{**lin.__dict__})
+    out.gram, out.score, out.loglik = np.asarray(g), np.asarray(b), np.asarray(ll)
+    out.sigma_mps, out.q = np.asarray(sigma_mps, float), float(q)
+    return out
 
 
 def refit_residual(lin: Linearisation, sol: Solution) -> np.ndarray:
