@@ -114,6 +114,8 @@ def summarise(records: pd.DataFrame) -> dict:
         **{f"median_spread_excess_{arm}": median_of(arm_rows, "before_spread_excess")
            for arm, arm_rows in (("nulls", nulls), ("run_to_run", effects[effects["true_effect"] == "run_to_run_variation"]),
                                  ("other_effects", effects[effects["true_effect"] != "run_to_run_variation"]))},
+        "median_spread_excess_after_refit_when_correct": median_of(effects[effects["outcome"] == "correct"],
+                                                                   "after_spread_excess"),
         "median_time_per_campaign_s": float(ok["time_total_s"].median()) if len(ok) else None,
     }
 
