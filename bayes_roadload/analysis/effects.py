@@ -427,7 +427,11 @@ def fit_noise(lin: Linearisation, residual: np.ndarray) -> tuple[np.ndarray, flo
         v, g = value_and_grad(jnp.asarray(theta), resid)
         return float(v), np.asarray(g, float)
 
-    res = minimize(fun, theta0, jac=True, method="L-BFGS-B")
+    # sigma within 1 um/s .. 10 m/s, q within 1e-9 .. 10 m/s per sqrt(s): a vanishing level
+    # is a boundary, not a direction to follow to -inf
+    bounds = [(math.log(1e-6), math.log(10.0))] * (theta0.size - 1) + [(math.log(1e-9), math.log(10.0))]
+    theta0 = np.clip(theta0, [b[0] for b in bounds], [b[1] for b in bounds])
+    res = minimize(fun, theta0, jac=True, method="L-BFGS-B", bounds=bounds)
     theta = res.x if np.all(np.isfinite(res.x)) else theta0
     return np.exp(theta[:-1]), float(np.exp(theta[-1]))
 
