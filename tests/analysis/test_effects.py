@@ -102,8 +102,6 @@ def test_birge_ratio_is_one_for_noise_and_sees_offsets_the_marginals_hide():
     noise only; a run-to-run offset along the direction the runs pin down (A_D, C_D0 ~0.99
     correlated within a run) is seen by the full covariance though each coefficient's
     marginal spread stays within its own wide variance."""
-    import numpy as np
-
     from bayes_roadload.analysis.effects import birge_ratio
 
     rng = np.random.default_rng(5)
