@@ -99,22 +99,23 @@ class DrivelineQuadratic(Term):
 @register_term
 @dataclass(frozen=True)
 class AnemometerLag(Term):
-    """First-order lag of the cup anemometer, to first order in the lag.  The cup reads
-    a_m = a - (d / a) da/dt (distance constant d = ``cup_lag_m``); on a coastdown the airspeed
-    falls with the vehicle, da/dt ~ dv/dt, so the true airspeed is a_m + (d / a_m) dv/dt and
-    the true drag q_r A C_D differs from the one computed with the reading by
-    rho A C_D(psi) d dv/dt (negative: the lagging reading is too high while decelerating).
-    Affine in dv/dt: solved exactly like pitch attitude.  Uses the aerodynamic CD0, KD."""
+    """First-order lag of the cup anemometer, to first order in the lag.  The cup reads a_m
+    with da_m/dt = (a - a_m) a / d (distance constant d = ``cup_lag_m``), so the true airspeed
+    is a = a_m + (d / a_m) da_m/dt and the true drag q_r A C_D differs from the one computed
+    with the reading by rho A C_D(psi) d da_m/dt: the reading's own rate
+    (``Conditions.airspeed_rate_mps2``), which follows the gusts the cup smooths as well as
+    the deceleration (with dv/dt in its place the term is an effective-mass error, rho A C_D
+    d).  Negative while decelerating: the lagging reading is too high.  Uses the aerodynamic
+    CD0, KD."""
 
     name: ClassVar[str] = "anemometer_lag"
     defaults: ClassVar[Mapping[str, float]] = {"cup_lag_m": 0.0}
-    uses_accel: ClassVar[bool] = True
     speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "2.26 with a first-order cup (thesis 4.7, 6.3)"
 
     def force_n(self, p: Params, c: Conditions) -> Array:
         cd = p.get("CD0", 0.4) + p.get("KD", 0.0) * c.yaw_rad**2
-        return c.air_density_kgpm3 * c.frontal_area_m2 * cd * p["cup_lag_m"] * c.accel_mps2
+        return c.air_density_kgpm3 * c.frontal_area_m2 * cd * p["cup_lag_m"] * c.airspeed_rate_mps2
 
 
 @register_term

@@ -74,6 +74,7 @@ def _conditions(model: DragModel, p, run: RunBatch, v, s, t, u) -> Conditions:
         temperature_k=u[4],
         mass_kg=run.mass_kg,
         frontal_area_m2=run.frontal_area_m2,
+        airspeed_rate_mps2=u[5],
     )
 
 
@@ -119,10 +120,27 @@ def stride2_schedule(time_s, inputs) -> tuple:
     return ta, h, ua, u_mid, uc, dense
 
 
+def reading_rate(time_s, reading, mask):
+    """d/dt of a logged channel ([..., N]): central differences on the sample grid (one-sided
+    at the ends), zero on padded samples and where the step is zero."""
+    concrete = not any(isinstance(x, jax.core.Tracer) for x in (time_s, reading, mask))
+    xp = np if concrete else jnp
+    t, x, m = xp.asarray(time_s, dtype=float), xp.asarray(reading, dtype=float), xp.asarray(mask, dtype=bool)
+    pad_t = lambda a: xp.concatenate([a[..., :1], a, a[..., -1:]], axis=-1)  # noqa: E731
+    tt, xx = pad_t(t), pad_t(x)
+    # neighbours: the sample itself at the ends (one-sided differences there)
+    dt = tt[..., 2:] - tt[..., :-2]
+    dx = xx[..., 2:] - xx[..., :-2]
+    ok = m & (dt > 0)
+    return xp.where(ok, dx / xp.where(ok, dt, 1.0), 0.0)
+
+
 def _inputs(run: RunBatch):
-    """The input channels stacked on a last axis ([..., N, C]); with numpy when they are
-    concrete, so that data-only work on them is done once per trace."""
+    """The input channels stacked on a last axis ([..., N, C]): those of ``_CHANNELS`` and the
+    rate of the airspeed reading (:func:`reading_rate`); with numpy when they are concrete,
+    so that data-only work on them is done once per trace."""
     channels = [getattr(run, ch) for ch in _CHANNELS]
+    channels.append(reading_rate(run.time_s, run.airspeed_mps, run.mask))
     if any(isinstance(x, jax.core.Tracer) for x in channels):
         return jnp.stack([jnp.asarray(x) for x in channels], axis=-1)
     return np.stack([np.asarray(x) for x in channels], axis=-1)

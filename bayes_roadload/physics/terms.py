@@ -40,6 +40,8 @@ class Conditions(NamedTuple):
     temperature_k : ambient (tyre) temperature T_0.
     mass_kg : test mass M.
     frontal_area_m2 : frontal area A.
+    airspeed_rate_mps2 : d/dt of the airspeed *reading* (the logged channel, before
+        calibration), for terms that undo an instrument lag; 0 where no reading is integrated.
     """
 
     speed_mps: Array
@@ -55,6 +57,7 @@ class Conditions(NamedTuple):
     temperature_k: Array
     mass_kg: Array
     frontal_area_m2: Array
+    airspeed_rate_mps2: Array = 0.0
 
     @property
     def dynamic_pressure_area_n(self) -> Array:

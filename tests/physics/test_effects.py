@@ -20,7 +20,7 @@ def conditions(**kw):
                 time_s=jnp.array([0.0, 40.0, 80.0]), accel_mps2=jnp.array([-0.2, -0.3, -0.5]),
                 direction=jnp.array(-1.0), air_density_kgpm3=jnp.array(RHO),
                 temperature_k=jnp.array(config.REFERENCE_TEMPERATURE_K), mass_kg=jnp.array(1100.0),
-                frontal_area_m2=jnp.array(1.85))
+                frontal_area_m2=jnp.array(1.85), airspeed_rate_mps2=jnp.array([-0.35, 0.1, -0.6]))
     base.update(kw)
     return Conditions(**base)
 
@@ -68,12 +68,13 @@ def test_mass_error_is_the_equation_of_motion_with_the_true_mass():
 
 
 def test_anemometer_lag_matches_the_drag_at_the_corrected_airspeed():
-    """To first order in the lag the term is the drag at a_m + (d / a_m) dv/dt minus that at
-    the reading a_m: check against the exact difference for a small lag."""
+    """To first order in the lag the term is the drag at a_m + (d / a_m) da_m/dt (the
+    reading's own rate, gusts included: not dv/dt) minus that at the reading a_m: check
+    against the exact difference for a small lag."""
     c = conditions()
     d = 0.05
     p = {"CD0": 0.4, "KD": 0.6, "cup_lag_m": d}
-    corrected = c._replace(airspeed_mps=c.airspeed_mps + d / c.airspeed_mps * c.accel_mps2)
+    corrected = c._replace(airspeed_mps=c.airspeed_mps + d / c.airspeed_mps * c.airspeed_rate_mps2)
     exact = AeroDrag().force_n(p, corrected) - AeroDrag().force_n(p, c)
     lag = fx.AnemometerLag().force_n(p, c)
     # first order: relative error ~ (d a / a_m^2) / 2, below 1e-4 here
@@ -106,3 +107,28 @@ def test_offset_air_adds_the_vane_offset_and_keeps_the_measured_air_path():
     assert float(psi) == pytest.approx(0.087 + 0.02)
     model = DragModel(simplified_model(lift=True).terms, OffsetAir()).with_terms(PitchAttitude())
     assert model.speed_affine and "yaw_offset_rad" in model.defaults
+
+
+def test_the_integrator_feeds_the_reading_rate_to_the_cup_lag():
+    """End to end: a run integrated with the cup-lag term on a gusty airspeed reading a_m(t)
+    equals the run integrated without it on the corrected reading a_m + (d / a_m) da_m/dt
+    (first order in a small lag d); the rate is the reading's central difference."""
+    from bayes_roadload.physics.integrate import integrate_run, make_run, reading_rate
+
+    t = np.arange(0.0, 60.0, 0.1)
+    v = 30.0 - 0.35 * t
+    gust = 1.5 * np.sin(2 * np.pi * t / 7.0)
+    a_m = v + 2.0 + gust
+    rate = reading_rate(t, a_m, np.ones(t.size, bool))
+    exact = -0.35 + 1.5 * 2 * np.pi / 7.0 * np.cos(2 * np.pi * t / 7.0)
+    assert np.max(np.abs(rate[1:-1] - exact[1:-1])) < 2e-3          # central differences, O(h^2)
+    d = 0.05
+    base = DragModel((TyreRolling(), AeroDrag()))
+    p = {"AD": 0.01, "BD": 2e-4, "CD0": 0.4, "KD": 0.6, "cup_lag_m": d}
+    with_lag = base.with_terms(fx.AnemometerLag())
+    v_lag, _ = integrate_run(with_lag, p, make_run(t, v, airspeed_mps=a_m), v0_mps=30.0)
+    v_cor, _ = integrate_run(base, p, make_run(t, v, airspeed_mps=a_m + d / a_m * np.asarray(rate)), v0_mps=30.0)
+    v_none, _ = integrate_run(base, p, make_run(t, v, airspeed_mps=a_m), v0_mps=30.0)
+    effect = np.max(np.abs(np.asarray(v_cor) - np.asarray(v_none)))
+    assert effect > 1e-4                                               # the lag matters
+    assert np.max(np.abs(np.asarray(v_lag) - np.asarray(v_cor))) < 0.01 * effect
