@@ -228,7 +228,8 @@ def markdown(by_design: dict[str, pd.DataFrame], args_text: str) -> str:
         s = summarise(read_records(before))
         lines += ["## Design `identifying` before Vuong's test", "",
                   "The same design, seeds 1-5, diagnosed with the rules before Vuong's test over the runs was added "
-                  "(and before the forward selection scored the airspeed scale jointly) "
+                  "(and before the forward selection scored the airspeed scale jointly, with the cup-lag candidate "
+                  "driven by dv/dt instead of the reading's rate) "
                   "([records](sim_to_real/records_identifying_before_vuong.csv)):", "",
                   "| quantity | value |", "| --- | --- |"]
         lines += [f"| {k} | {v if not isinstance(v, float) else f'{v:.1f}'} |" for k, v in s.items()]
