@@ -1,7 +1,8 @@
 """RK4 integration of the coastdown equation over the sample grid of each run.
 
 The state is (speed v, distance travelled s).  Between two samples the measured inputs
-(airspeed, yaw, driveline force, air density, temperature) are linearly interpolated, so the
+(airspeed, yaw, driveline force, air density, temperature, and the airspeed reading's rate for
+terms that undo an instrument lag) are linearly interpolated, so the
 RK4 stages at the half step see the mean of the two neighbouring samples (thesis section 5.2).
 Runs of unequal length are padded to a common length by repeating their last sample: a padded
 step has dt = 0 and leaves the state unchanged, and ``mask`` marks the real samples.
