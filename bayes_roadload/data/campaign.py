@@ -125,7 +125,7 @@ class Campaign:
     @property
     def run_ids(self) -> list:
         """Run ids in file order, as plain Python values."""
-        return [_plain(r) for r in pd.unique(self.runs["run"])]
+        return run_ids_of(self.runs)
 
     @property
     def has_anemometer(self) -> bool:
@@ -137,25 +137,17 @@ class Campaign:
 
     def directions(self) -> dict:
         """run id -> +1/-1 (every run +1 when the column is absent)."""
-        if "direction" not in self.runs:
-            return {r: 1 for r in self.run_ids}
-        return {_plain(r): int(g["direction"].iloc[0]) for r, g in self.runs.groupby("run", sort=False)}
+        return run_directions(self.runs)
 
     def pairs(self) -> list[tuple]:
         """Opposite-direction pairs of run ids: by the ``pair`` column when present, else
         consecutive runs in file order.  A run left without a partner is dropped."""
-        if "pair" in self.runs:
-            groups = self.runs.groupby("pair", sort=False)["run"].unique()
-            return [tuple(_plain(r) for r in g) for g in groups if len(g) == 2]
-        ids = self.run_ids
-        return [(ids[i], ids[i + 1]) for i in range(0, len(ids) - 1, 2)]
+        by_column = pairs_by_column(self.runs)
+        return by_column if by_column is not None else consecutive_pairs(self.run_ids)
 
     def subset(self, run_ids) -> "Campaign":
         """The campaign restricted to some runs (order as given)."""
-        keep = self.runs[self.runs["run"].isin(list(run_ids))]
-        order = {r: i for i, r in enumerate(run_ids)}
-        keep = keep.sort_values("run", key=lambda s: s.map(order), kind="stable")
-        return Campaign(keep.reset_index(drop=True), self.vehicle, self.anemometer,
+        return Campaign(subset_table(self.runs, run_ids), self.vehicle, self.anemometer,
                         self.tunnel, self.truth, dict(self.meta))
 
     def to_batch(self):
@@ -245,6 +237,70 @@ def check_numeric(df: pd.DataFrame, columns, limits: Mapping[str, tuple], where:
                 _fail(where, c, i + 1, f"value {values[i]:g} outside [{lo:g}, {hi:g}] ({meaning})")
 
 
+def check_direction_codes(df: pd.DataFrame, where: str) -> None:
+    """Refuse a ``direction`` value other than +1 / -1 (when the column is present)."""
+    if "direction" not in df:
+        return
+    d = df["direction"].to_numpy()
+    bad = ~np.isin(d, (-1.0, 1.0))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        _fail(where, "direction", i + 1, f"direction code {d[i]:g} is not +1 or -1")
+
+
+def check_contiguous(rows: np.ndarray, rid, what: str, where: str) -> None:
+    """Refuse a run whose rows (positions in the table) are not one block; ``what`` names
+    them ("samples", "bands", ...)."""
+    if np.any(np.diff(rows) != 1):
+        _fail(where, "run", int(rows[np.flatnonzero(np.diff(rows) != 1)[0] + 1]) + 1,
+              f"the {what} of run {rid!r} are not contiguous")
+
+
+def check_run_constants(df: pd.DataFrame, rows: np.ndarray, columns, rid, where: str) -> None:
+    """Refuse a run-level column (of ``columns`` present in ``df``) that changes within the run."""
+    for c in columns:
+        if c in df:
+            vals = df[c].to_numpy()[rows]
+            if np.any(vals != vals[0]):
+                _fail(where, c, int(rows[np.flatnonzero(vals != vals[0])[0]]) + 1, f"{c} changes within run {rid!r}")
+
+
+# --------------------------------------------------------------------------- run tables
+# What every kind of campaign (speed traces, intervals, distance-time, steady state) asks of
+# its table of runs: one row per sample, band or marker with a ``run`` column.
+
+def run_ids_of(table: pd.DataFrame) -> list:
+    """Run ids in file order, as plain Python values."""
+    return [_plain(r) for r in pd.unique(table["run"])]
+
+
+def run_directions(table: pd.DataFrame) -> dict:
+    """run id -> +1/-1 (every run +1 when the column is absent)."""
+    if "direction" not in table:
+        return {r: 1 for r in run_ids_of(table)}
+    return {_plain(r): int(d) for r, d in table.groupby("run", sort=False)["direction"].first().items()}
+
+
+def pairs_by_column(table: pd.DataFrame) -> list[tuple] | None:
+    """Pairs of run ids by the ``pair`` column (groups of two runs), None without it."""
+    if "pair" not in table:
+        return None
+    groups = table.groupby("pair", sort=False)["run"].unique()
+    return [tuple(_plain(r) for r in g) for g in groups if len(g) == 2]
+
+
+def consecutive_pairs(ids: list) -> list[tuple]:
+    """Consecutive runs in file order; a run left without a partner is dropped."""
+    return [(ids[i], ids[i + 1]) for i in range(0, len(ids) - 1, 2)]
+
+
+def subset_table(table: pd.DataFrame, run_ids) -> pd.DataFrame:
+    """The rows of some runs, in the order of ``run_ids``, re-indexed."""
+    keep = table[table["run"].isin(list(run_ids))]
+    order = {r: i for i, r in enumerate(run_ids)}
+    return keep.sort_values("run", key=lambda s: s.map(order), kind="stable").reset_index(drop=True)
+
+
 def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
     """Check a runs table against the contract and return a normalised copy.
 
@@ -259,12 +315,7 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
     if df["run"].isna().any():
         _fail(where, "run", int(np.flatnonzero(df["run"].isna().to_numpy())[0]) + 1, "missing run id")
     check_numeric(df, [c for c in cols if c != "run"], _CHANNEL_LIMITS, where)
-    if "direction" in cols:
-        d = df["direction"].to_numpy()
-        bad = ~np.isin(d, (-1.0, 1.0))
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            _fail(where, "direction", i + 1, f"direction code {d[i]:g} is not +1 or -1")
+    check_direction_codes(df, where)
     if ("wheel_torque_left_nm" in cols) != ("wheel_torque_right_nm" in cols):
         _fail(where, "wheel_torque_left_nm" if "wheel_torque_left_nm" not in cols else "wheel_torque_right_nm",
               None, "wheel torques need both the left and the right column")
@@ -279,20 +330,13 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
         if len(rows) < config.MIN_RUN_SAMPLES:
             _fail(where, "run", int(rows[0]) + 1,
                   f"run {rid!r} has {len(rows)} samples; at least {config.MIN_RUN_SAMPLES} are needed")
-        if np.any(np.diff(rows) != 1):
-            _fail(where, "run", int(rows[np.flatnonzero(np.diff(rows) != 1)[0] + 1]) + 1,
-                  f"the samples of run {rid!r} are not contiguous")
+        check_contiguous(rows, rid, "samples", where)
         t = df["time_s"].to_numpy()[rows]
         dt = np.diff(t)
         if np.any(dt <= 0):
             i = int(rows[np.flatnonzero(dt <= 0)[0] + 1])
             _fail(where, "time_s", i + 1, f"time does not increase within run {rid!r}")
-        for c in ("direction", "pair", "mass_kg"):
-            if c in cols:
-                vals = df[c].to_numpy()[rows]
-                if np.any(vals != vals[0]):
-                    i = int(rows[np.flatnonzero(vals != vals[0])[0]])
-                    _fail(where, c, i + 1, f"{c} changes within run {rid!r}")
+        check_run_constants(df, rows, ("direction", "pair", "mass_kg"), rid, where)
     return df.reset_index(drop=True)
 
 

@@ -18,7 +18,24 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, check_columns, check_numeric, validate_vehicle
+from .campaign import (
+    _AMBIGUOUS_HINTS,
+    Anemometer,
+    Vehicle,
+    _fail,
+    _plain,
+    check_columns,
+    check_contiguous,
+    check_direction_codes,
+    check_numeric,
+    check_run_constants,
+    consecutive_pairs,
+    pairs_by_column,
+    run_directions,
+    run_ids_of,
+    subset_table,
+    validate_vehicle,
+)
 
 DISTANCE_REQUIRED = ("run", "distance_m", "time_s")
 DISTANCE_RUN_CONSTANT = ("direction", "pair", "mass_kg", "temperature_k", "pressure_pa")
@@ -73,7 +90,7 @@ class DistanceCampaign:
 
     @property
     def run_ids(self) -> list:
-        return [_plain(r) for r in pd.unique(self.markers["run"])]
+        return run_ids_of(self.markers)
 
     def run_table(self) -> pd.DataFrame:
         """One row per run: run, the run constants present, the number of markers, the
@@ -90,9 +107,7 @@ class DistanceCampaign:
 
     def directions(self) -> dict:
         """run id -> +1/-1 (every run +1 when the column is absent)."""
-        if "direction" not in self.markers:
-            return {r: 1 for r in self.run_ids}
-        return {_plain(r): int(d) for r, d in self.markers.groupby("run", sort=False)["direction"].first().items()}
+        return run_directions(self.markers)
 
     def masses_kg(self) -> dict:
         """run id -> the run's test mass (``[vehicle] mass_kg`` when the column is absent)."""
@@ -102,18 +117,12 @@ class DistanceCampaign:
 
     def pairs(self) -> list[tuple]:
         """Opposite-direction pairs: by the ``pair`` column, else consecutive runs in file order."""
-        if "pair" in self.markers:
-            groups = self.markers.groupby("pair", sort=False)["run"].unique()
-            return [tuple(_plain(r) for r in g) for g in groups if len(g) == 2]
-        ids = self.run_ids
-        return [(ids[i], ids[i + 1]) for i in range(0, len(ids) - 1, 2)]
+        by_column = pairs_by_column(self.markers)
+        return by_column if by_column is not None else consecutive_pairs(self.run_ids)
 
     def subset(self, run_ids) -> "DistanceCampaign":
         """The campaign restricted to some runs (order as given)."""
-        keep = self.markers[self.markers["run"].isin(list(run_ids))]
-        order = {r: i for i, r in enumerate(run_ids)}
-        keep = keep.sort_values("run", key=lambda s: s.map(order), kind="stable")
-        return DistanceCampaign(keep.reset_index(drop=True), self.vehicle, self.anemometer, self.tunnel,
+        return DistanceCampaign(subset_table(self.markers, run_ids), self.vehicle, self.anemometer, self.tunnel,
                                 self.truth, dict(self.meta))
 
 
@@ -135,17 +144,13 @@ def validate_distances(df: pd.DataFrame, where: str = "distances.csv") -> pd.Dat
         if c in cols and df[c].isna().any():
             _fail(where, c, int(np.flatnonzero(df[c].isna().to_numpy())[0]) + 1, f"missing {c}")
     check_numeric(df, [c for c in cols if c not in _TEXT_COLUMNS], _LIMITS, where)
-    if "direction" in cols and not np.isin(df["direction"].to_numpy(), (-1.0, 1.0)).all():
-        i = int(np.flatnonzero(~np.isin(df["direction"].to_numpy(), (-1.0, 1.0)))[0])
-        _fail(where, "direction", i + 1, f"direction code {df['direction'].iloc[i]:g} is not +1 or -1")
+    check_direction_codes(df, where)
     lo_v, hi_v = config.DISTANCE_SEGMENT_SPEED_RANGE_MPS
     positions = np.arange(len(df))
     for rid, idx in df.groupby("run", sort=False).indices.items():
         rid = _plain(rid)
         rows = positions[idx]
-        if np.any(np.diff(rows) != 1):
-            _fail(where, "run", int(rows[np.flatnonzero(np.diff(rows) != 1)[0] + 1]) + 1,
-                  f"the markers of run {rid!r} are not contiguous")
+        check_contiguous(rows, rid, "markers", where)
         if len(rows) < config.MIN_DISTANCE_MARKERS:
             _fail(where, "run", int(rows[0]) + 1, f"run {rid!r} passes {len(rows)} markers; at least "
                   f"{config.MIN_DISTANCE_MARKERS} are needed (its speed at the first is unknown)")
@@ -162,12 +167,7 @@ def validate_distances(df: pd.DataFrame, where: str = "distances.csv") -> pd.Dat
             i = int(rows[np.flatnonzero(out)[0] + 1])
             _fail(where, "time_s", i + 1, f"run {rid!r}: mean speed {speed[out][0]:g} m/s since the previous marker "
                   f"is outside [{lo_v:g}, {hi_v:g}] m/s (km or mm in distance_m, or ms in time_s?)")
-        for c in DISTANCE_RUN_CONSTANT:
-            if c in cols:
-                vals = df[c].to_numpy()[rows]
-                if np.any(vals != vals[0]):
-                    i = int(rows[np.flatnonzero(vals != vals[0])[0]])
-                    _fail(where, c, i + 1, f"{c} changes within run {rid!r}")
+        check_run_constants(df, rows, DISTANCE_RUN_CONSTANT, rid, where)
     return df.reset_index(drop=True)
 
 

@@ -17,7 +17,23 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import _AMBIGUOUS_HINTS, Anemometer, Vehicle, _fail, _plain, check_columns, check_numeric, validate_vehicle
+from .campaign import (
+    _AMBIGUOUS_HINTS,
+    Anemometer,
+    Vehicle,
+    _fail,
+    _plain,
+    check_columns,
+    check_contiguous,
+    check_direction_codes,
+    check_numeric,
+    check_run_constants,
+    pairs_by_column,
+    run_directions,
+    run_ids_of,
+    subset_table,
+    validate_vehicle,
+)
 
 INTERVAL_REQUIRED = ("run", "speed_start_mps", "speed_end_mps", "interval_s")
 RUN_CONSTANT_COLUMNS = ("direction", "pair", "window", "valid", "run_distance_m", "start_time_of_day_s",
@@ -78,7 +94,7 @@ class IntervalCampaign:
 
     @property
     def run_ids(self) -> list:
-        return [_plain(r) for r in pd.unique(self.intervals["run"])]
+        return run_ids_of(self.intervals)
 
     def run_table(self) -> pd.DataFrame:
         """One row per run: run, direction, pair, window, valid, band count, total time, and
@@ -94,9 +110,7 @@ class IntervalCampaign:
         return out.reset_index()
 
     def directions(self) -> dict:
-        if "direction" not in self.intervals:
-            return {r: 1 for r in self.run_ids}
-        return {_plain(r): int(d) for r, d in self.intervals.groupby("run", sort=False)["direction"].first().items()}
+        return run_directions(self.intervals)
 
     def windows(self) -> dict:
         """run id -> window label ("all" when the column is absent)."""
@@ -107,9 +121,9 @@ class IntervalCampaign:
     def pairs(self) -> list[tuple]:
         """Opposite-direction pairs: by the ``pair`` column, else consecutive runs of the same
         window with opposite directions, in file order."""
-        if "pair" in self.intervals:
-            groups = self.intervals.groupby("pair", sort=False)["run"].unique()
-            return [tuple(_plain(r) for r in g) for g in groups if len(g) == 2]
+        by_column = pairs_by_column(self.intervals)
+        if by_column is not None:
+            return by_column
         d, w = self.directions(), self.windows()
         out, waiting = [], {}
         for r in self.run_ids:
@@ -123,10 +137,7 @@ class IntervalCampaign:
 
     def subset(self, run_ids) -> "IntervalCampaign":
         """The campaign restricted to some runs (order as given)."""
-        keep = self.intervals[self.intervals["run"].isin(list(run_ids))]
-        order = {r: i for i, r in enumerate(run_ids)}
-        keep = keep.sort_values("run", key=lambda s: s.map(order), kind="stable")
-        return IntervalCampaign(keep.reset_index(drop=True), self.vehicle, self.anemometer, self.tunnel,
+        return IntervalCampaign(subset_table(self.intervals, run_ids), self.vehicle, self.anemometer, self.tunnel,
                                 self.truth, dict(self.meta))
 
 
@@ -151,9 +162,7 @@ def validate_intervals(df: pd.DataFrame, where: str = "intervals.csv") -> pd.Dat
         i = int(np.flatnonzero(drop <= 0)[0])
         _fail(where, "speed_end_mps", i + 1, "the band's end speed is not below its start speed (a coastdown "
               "decelerates)")
-    if "direction" in cols and not np.isin(df["direction"].to_numpy(), (-1.0, 1.0)).all():
-        i = int(np.flatnonzero(~np.isin(df["direction"].to_numpy(), (-1.0, 1.0)))[0])
-        _fail(where, "direction", i + 1, f"direction code {df['direction'].iloc[i]:g} is not +1 or -1")
+    check_direction_codes(df, where)
     if "valid" in cols and not np.isin(df["valid"].to_numpy(), (0.0, 1.0)).all():
         i = int(np.flatnonzero(~np.isin(df["valid"].to_numpy(), (0.0, 1.0)))[0])
         _fail(where, "valid", i + 1, "valid must be 1 (run used) or 0 (run excluded)")
@@ -161,9 +170,7 @@ def validate_intervals(df: pd.DataFrame, where: str = "intervals.csv") -> pd.Dat
     for rid, idx in df.groupby("run", sort=False).indices.items():
         rid = _plain(rid)
         rows = positions[idx]
-        if np.any(np.diff(rows) != 1):
-            _fail(where, "run", int(rows[np.flatnonzero(np.diff(rows) != 1)[0] + 1]) + 1,
-                  f"the bands of run {rid!r} are not contiguous")
+        check_contiguous(rows, rid, "bands", where)
         start = df["speed_start_mps"].to_numpy()[rows]
         end = df["speed_end_mps"].to_numpy()[rows]
         gap = np.abs(start[1:] - end[:-1]) > 1e-6
@@ -171,12 +178,7 @@ def validate_intervals(df: pd.DataFrame, where: str = "intervals.csv") -> pd.Dat
             i = int(rows[np.flatnonzero(gap)[0] + 1])
             _fail(where, "speed_start_mps", i + 1, f"run {rid!r}: a band does not start where the previous one "
                   "ended (bands must be consecutive, in falling speed)")
-        for c in RUN_CONSTANT_COLUMNS:
-            if c in cols:
-                vals = df[c].to_numpy()[rows]
-                if np.any(vals != vals[0]):
-                    i = int(rows[np.flatnonzero(vals != vals[0])[0]])
-                    _fail(where, c, i + 1, f"{c} changes within run {rid!r}")
+        check_run_constants(df, rows, RUN_CONSTANT_COLUMNS, rid, where)
     return df.reset_index(drop=True)
 
 

@@ -37,7 +37,16 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import CampaignError, _fail, _plain, check_columns, check_numeric
+from .campaign import (
+    CampaignError,
+    _fail,
+    _plain,
+    check_columns,
+    check_contiguous,
+    check_numeric,
+    check_run_constants,
+    run_ids_of,
+)
 
 SPEED_COLUMNS = ("wheel_speed_radps", "wheel_speed_mps")
 KNOWN_COLUMNS = ("run", "time_s", "wheel") + SPEED_COLUMNS
@@ -86,7 +95,7 @@ class SpindownCampaign:
 
     @property
     def run_ids(self) -> list:
-        return [_plain(r) for r in pd.unique(self.runs["run"])]
+        return run_ids_of(self.runs)
 
     @property
     def wheels(self) -> list[str]:
@@ -130,17 +139,12 @@ def validate_spindown(df: pd.DataFrame, where: str = "spindown.csv", rolling_rad
         if len(rows) < config.MIN_RUN_SAMPLES:
             _fail(where, "run", int(rows[0]) + 1,
                   f"run {rid!r} has {len(rows)} samples; at least {config.MIN_RUN_SAMPLES} are needed")
-        if np.any(np.diff(rows) != 1):
-            _fail(where, "run", int(rows[np.flatnonzero(np.diff(rows) != 1)[0] + 1]) + 1,
-                  f"the samples of run {rid!r} are not contiguous")
+        check_contiguous(rows, rid, "samples", where)
         t = t_all[rows]
         if np.any(np.diff(t) <= 0):
             i = int(rows[np.flatnonzero(np.diff(t) <= 0)[0] + 1])
             _fail(where, "time_s", i + 1, f"time does not increase within run {rid!r}")
-        w = df["wheel"].to_numpy()[rows]
-        if np.any(w != w[0]):
-            i = int(rows[np.flatnonzero(w != w[0])[0]])
-            _fail(where, "wheel", i + 1, f"wheel changes within run {rid!r}")
+        check_run_constants(df, rows, ("wheel",), rid, where)
         t_all[rows] = t - t[0]
     df["time_s"] = t_all
     return df[["run", "wheel", "time_s", "wheel_speed_mps"]].reset_index(drop=True)

@@ -48,7 +48,14 @@ from .campaign import (
     Anemometer,
     CampaignError,
     check_columns,
+    check_contiguous,
+    check_direction_codes,
     check_numeric,
+    check_run_constants,
+    consecutive_pairs,
+    pairs_by_column,
+    run_directions,
+    run_ids_of,
     Vehicle,
     _fail,
     _plain,
@@ -107,7 +114,7 @@ class SteadyCampaign:
 
     @property
     def run_ids(self) -> list:
-        return [_plain(r) for r in pd.unique(self.runs["run"])]
+        return run_ids_of(self.runs)
 
     @property
     def has_anemometer(self) -> bool:
@@ -132,17 +139,12 @@ class SteadyCampaign:
         return (self.runs["gearbox_input_force_n"] - self.runs["tractive_force_n"]).to_numpy(float)
 
     def directions(self) -> dict:
-        if "direction" not in self.runs:
-            return {r: 1 for r in self.run_ids}
-        return {_plain(r): int(g["direction"].iloc[0]) for r, g in self.runs.groupby("run", sort=False)}
+        return run_directions(self.runs)
 
     def pairs(self) -> list[tuple]:
         """Opposite-direction pairs: the ``pair`` column, else consecutive runs; unpaired runs dropped."""
-        if "pair" in self.runs:
-            groups = self.runs.groupby("pair", sort=False)["run"].unique()
-            return [tuple(_plain(r) for r in g) for g in groups if len(g) == 2]
-        ids = self.run_ids
-        return [(ids[i], ids[i + 1]) for i in range(0, len(ids) - 1, 2)]
+        by_column = pairs_by_column(self.runs)
+        return by_column if by_column is not None else consecutive_pairs(self.run_ids)
 
 
 def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_m: float | None = None
@@ -171,9 +173,7 @@ def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_
         i = int(np.flatnonzero(df["accel_mps2"].abs().to_numpy() > config.STEADY_MAX_ACCEL_MPS2)[0])
         _fail(where, "accel_mps2", i + 1, f"|dv/dt| {df['accel_mps2'].iloc[i]:g} m/s^2 above "
               f"{config.STEADY_MAX_ACCEL_MPS2:g}: not a steady-speed run (or g / km/h/s in an m/s^2 column)")
-    if "direction" in cols and not np.isin(df["direction"].to_numpy(), (-1.0, 1.0)).all():
-        i = int(np.flatnonzero(~np.isin(df["direction"].to_numpy(), (-1.0, 1.0)))[0])
-        _fail(where, "direction", i + 1, f"direction code {df['direction'].iloc[i]:g} is not +1 or -1")
+    check_direction_codes(df, where)
     if torques:
         if rolling_radius_m is None:
             _fail(where, "wheel_torque_left_nm", None, "needs [vehicle] rolling_radius_m")
@@ -184,14 +184,8 @@ def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_
     for rid, idx in df.groupby("run", sort=False).indices.items():
         rid = _plain(rid)
         rows = positions[idx]
-        if np.any(np.diff(rows) != 1):
-            _fail(where, "run", int(rows[np.flatnonzero(np.diff(rows) != 1)[0] + 1]) + 1,
-                  f"the rows of run {rid!r} are not contiguous")
-        for c in RUN_CONSTANT:
-            if c in cols:
-                vals = df[c].to_numpy()[rows]
-                if np.any(vals != vals[0]):
-                    _fail(where, c, int(rows[np.flatnonzero(vals != vals[0])[0]]) + 1, f"{c} changes within run {rid!r}")
+        check_contiguous(rows, rid, "rows", where)
+        check_run_constants(df, rows, RUN_CONSTANT, rid, where)
         if "time_s" in cols:
             t = df["time_s"].to_numpy()[rows]
             if np.any(np.diff(t) <= 0):
