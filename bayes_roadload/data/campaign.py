@@ -256,6 +256,13 @@ def check_contiguous(rows: np.ndarray, rid, what: str, where: str) -> None:
               f"the {what} of run {rid!r} are not contiguous")
 
 
+def check_time_increases(t: np.ndarray, rows: np.ndarray, rid, where: str) -> None:
+    """Refuse a run whose times ``t`` (its rows' ``time_s``) do not strictly increase."""
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        _fail(where, "time_s", int(rows[np.flatnonzero(dt <= 0)[0] + 1]) + 1, f"time does not increase within run {rid!r}")
+
+
 def check_run_constants(df: pd.DataFrame, rows: np.ndarray, columns, rid, where: str) -> None:
     """Refuse a run-level column (of ``columns`` present in ``df``) that changes within the run."""
     for c in columns:
@@ -331,11 +338,7 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
             _fail(where, "run", int(rows[0]) + 1,
                   f"run {rid!r} has {len(rows)} samples; at least {config.MIN_RUN_SAMPLES} are needed")
         check_contiguous(rows, rid, "samples", where)
-        t = df["time_s"].to_numpy()[rows]
-        dt = np.diff(t)
-        if np.any(dt <= 0):
-            i = int(rows[np.flatnonzero(dt <= 0)[0] + 1])
-            _fail(where, "time_s", i + 1, f"time does not increase within run {rid!r}")
+        check_time_increases(df["time_s"].to_numpy()[rows], rows, rid, where)
         check_run_constants(df, rows, ("direction", "pair", "mass_kg"), rid, where)
     return df.reset_index(drop=True)
 

@@ -45,6 +45,7 @@ from .campaign import (
     check_contiguous,
     check_numeric,
     check_run_constants,
+    check_time_increases,
     run_ids_of,
 )
 
@@ -141,9 +142,7 @@ def validate_spindown(df: pd.DataFrame, where: str = "spindown.csv", rolling_rad
                   f"run {rid!r} has {len(rows)} samples; at least {config.MIN_RUN_SAMPLES} are needed")
         check_contiguous(rows, rid, "samples", where)
         t = t_all[rows]
-        if np.any(np.diff(t) <= 0):
-            i = int(rows[np.flatnonzero(np.diff(t) <= 0)[0] + 1])
-            _fail(where, "time_s", i + 1, f"time does not increase within run {rid!r}")
+        check_time_increases(t, rows, rid, where)
         check_run_constants(df, rows, ("wheel",), rid, where)
         t_all[rows] = t - t[0]
     df["time_s"] = t_all

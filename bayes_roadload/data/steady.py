@@ -52,6 +52,7 @@ from .campaign import (
     check_direction_codes,
     check_numeric,
     check_run_constants,
+    check_time_increases,
     consecutive_pairs,
     pairs_by_column,
     run_directions,
@@ -188,9 +189,7 @@ def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_
         check_run_constants(df, rows, RUN_CONSTANT, rid, where)
         if "time_s" in cols:
             t = df["time_s"].to_numpy()[rows]
-            if np.any(np.diff(t) <= 0):
-                _fail(where, "time_s", int(rows[np.flatnonzero(np.diff(t) <= 0)[0] + 1]) + 1,
-                      f"time does not increase within run {rid!r}")
+            check_time_increases(t, rows, rid, where)
             if "accel_mps2" not in cols and rows.size >= 3:
                 accel[rows] = polynomial_acceleration(t, df["speed_mps"].to_numpy()[rows])
                 sources.add("polynomial (time_s)")
