@@ -11,31 +11,43 @@ returns a :class:`DistanceCampaign` for it.  One row per marker passed; the form
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import (
-    _AMBIGUOUS_HINTS,
-    Anemometer,
-    Vehicle,
-    _fail,
-    _plain,
+from .checks import (
+    UNIT_HINTS,
     check_columns,
     check_contiguous,
+    check_csv_format,
     check_direction_codes,
+    check_no_missing,
+    check_not_empty,
     check_numeric,
     check_run_constants,
     consecutive_pairs,
+    data_file,
     pairs_by_column,
+    plain_value,
+    read_truth,
+    refuse,
     run_directions,
     run_ids_of,
+    run_rows,
     subset_table,
-    validate_vehicle,
+    truth_files,
 )
+from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
+
+KIND = "distances"
+FILES = ("distances.csv",)
+DESCRIPTION = "distance-time records"
+OPTIONS: tuple[str, ...] = ()
 
 DISTANCE_REQUIRED = ("run", "distance_m", "time_s")
 DISTANCE_RUN_CONSTANT = ("direction", "pair", "mass_kg", "temperature_k", "pressure_pa")
@@ -43,7 +55,7 @@ DISTANCE_OPTIONAL = DISTANCE_RUN_CONSTANT
 DISTANCE_COLUMNS = DISTANCE_REQUIRED + DISTANCE_OPTIONAL
 _TEXT_COLUMNS = ("run", "pair")
 
-_DISTANCE_HINTS = dict(_AMBIGUOUS_HINTS, **{
+_DISTANCE_HINTS = dict(UNIT_HINTS, **{
     "distance": "distance_m (metres)",
     "distance_km": "distance_m (metres): multiply km by 1000",
     "distance_ft": "distance_m (metres): multiply feet by 0.3048",
@@ -80,7 +92,7 @@ class DistanceCampaign:
     truth: dict[str, Any] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
-    kind = "distances"
+    kind = KIND
     has_anemometer = False
     has_driveline = False
 
@@ -101,7 +113,7 @@ class DistanceCampaign:
         out["span_m"] = g["distance_m"].last() - g["distance_m"].first()
         out["span_s"] = g["time_s"].last() - g["time_s"].first()
         out["mean_speed_mps"] = out["span_m"] / out["span_s"]
-        out.index = [_plain(r) for r in out.index]
+        out.index = [plain_value(r) for r in out.index]
         out.index.name = "run"
         return out.reset_index()
 
@@ -113,7 +125,7 @@ class DistanceCampaign:
         """run id -> the run's test mass (``[vehicle] mass_kg`` when the column is absent)."""
         if "mass_kg" not in self.markers:
             return {r: float(self.vehicle.mass_kg) for r in self.run_ids}
-        return {_plain(r): float(m) for r, m in self.markers.groupby("run", sort=False)["mass_kg"].first().items()}
+        return {plain_value(r): float(m) for r, m in self.markers.groupby("run", sort=False)["mass_kg"].first().items()}
 
     def pairs(self) -> list[tuple]:
         """Opposite-direction pairs: by the ``pair`` column, else consecutive runs in file order."""
@@ -138,34 +150,30 @@ def validate_distances(df: pd.DataFrame, where: str = "distances.csv") -> pd.Dat
     """
     df = df.copy()
     cols = check_columns(df, DISTANCE_COLUMNS, DISTANCE_REQUIRED, _DISTANCE_HINTS, "a distance-time campaign", where)
-    if len(df) == 0:
-        _fail(where, None, None, "no markers")
+    check_not_empty(df, "markers", where)
     for c in _TEXT_COLUMNS:
-        if c in cols and df[c].isna().any():
-            _fail(where, c, int(np.flatnonzero(df[c].isna().to_numpy())[0]) + 1, f"missing {c}")
+        if c in cols:
+            check_no_missing(df, c, f"missing {c}", where)
     check_numeric(df, [c for c in cols if c not in _TEXT_COLUMNS], _LIMITS, where)
     check_direction_codes(df, where)
     lo_v, hi_v = config.DISTANCE_SEGMENT_SPEED_RANGE_MPS
-    positions = np.arange(len(df))
-    for rid, idx in df.groupby("run", sort=False).indices.items():
-        rid = _plain(rid)
-        rows = positions[idx]
+    for rid, rows in run_rows(df):
         check_contiguous(rows, rid, "markers", where)
         if len(rows) < config.MIN_DISTANCE_MARKERS:
-            _fail(where, "run", int(rows[0]) + 1, f"run {rid!r} passes {len(rows)} markers; at least "
+            refuse(where, "run", int(rows[0]) + 1, f"run {rid!r} passes {len(rows)} markers; at least "
                   f"{config.MIN_DISTANCE_MARKERS} are needed (its speed at the first is unknown)")
         x = df["distance_m"].to_numpy()[rows]
         t = df["time_s"].to_numpy()[rows]
         for name, d in (("distance_m", np.diff(x)), ("time_s", np.diff(t))):
             if np.any(d <= 0):
                 i = int(rows[np.flatnonzero(d <= 0)[0] + 1])
-                _fail(where, name, i + 1, f"{name} does not increase within run {rid!r} (markers in the order "
+                refuse(where, name, i + 1, f"{name} does not increase within run {rid!r} (markers in the order "
                       "passed, distances counted along the direction of travel)")
         speed = np.diff(x) / np.diff(t)
         out = (speed < lo_v) | (speed > hi_v)
         if out.any():
             i = int(rows[np.flatnonzero(out)[0] + 1])
-            _fail(where, "time_s", i + 1, f"run {rid!r}: mean speed {speed[out][0]:g} m/s since the previous marker "
+            refuse(where, "time_s", i + 1, f"run {rid!r}: mean speed {speed[out][0]:g} m/s since the previous marker "
                   f"is outside [{lo_v:g}, {hi_v:g}] m/s (km or mm in distance_m, or ms in time_s?)")
         check_run_constants(df, rows, DISTANCE_RUN_CONSTANT, rid, where)
     return df.reset_index(drop=True)
@@ -174,3 +182,22 @@ def validate_distances(df: pd.DataFrame, where: str = "distances.csv") -> pd.Dat
 def read_distances(path) -> pd.DataFrame:
     """``distances.csv`` as a table."""
     return pd.read_csv(path)
+
+
+def load(root: str | os.PathLike) -> DistanceCampaign:
+    """Load and validate a distance-time campaign directory (``distances.csv``,
+    ``vehicle.toml``, optional ``truth.json``)."""
+    root = Path(root)
+    f = data_file(root, "distances.csv")
+    vehicle, anem, tunnel, meta = read_vehicle_file(root / VEHICLE_FILE)
+    df = validate_distances(read_distances(f), str(f))
+    return DistanceCampaign(df, vehicle, anem, tunnel, read_truth(root), meta)
+
+
+def files(c: DistanceCampaign, fmt: str = "csv") -> dict[str, str]:
+    """The files of a distance-time campaign directory (name -> text), validated first:
+    ``distances.csv``, ``vehicle.toml``, ``truth.json`` when the truth is known."""
+    check_csv_format(fmt, "a distance-time campaign", "distances.csv")
+    c.markers = validate_distances(c.markers, "distances")
+    return ({"distances.csv": c.markers.to_csv(index=False, float_format="%.12g"), VEHICLE_FILE: vehicle_toml(c)}
+            | truth_files(c.truth))

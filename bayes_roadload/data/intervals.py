@@ -10,30 +10,42 @@ returns an :class:`IntervalCampaign` for it.  One row per band; the format is in
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import (
-    _AMBIGUOUS_HINTS,
-    Anemometer,
-    Vehicle,
-    _fail,
-    _plain,
+from .checks import (
+    UNIT_HINTS,
     check_columns,
     check_contiguous,
+    check_csv_format,
     check_direction_codes,
+    check_no_missing,
+    check_not_empty,
     check_numeric,
     check_run_constants,
+    data_file,
     pairs_by_column,
+    plain_value,
+    read_truth,
+    refuse,
     run_directions,
     run_ids_of,
+    run_rows,
     subset_table,
-    validate_vehicle,
+    truth_files,
 )
+from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
+
+KIND = "intervals"
+FILES = ("intervals.csv",)
+DESCRIPTION = "speed-gate interval times"
+OPTIONS: tuple[str, ...] = ()
 
 INTERVAL_REQUIRED = ("run", "speed_start_mps", "speed_end_mps", "interval_s")
 RUN_CONSTANT_COLUMNS = ("direction", "pair", "window", "valid", "run_distance_m", "start_time_of_day_s",
@@ -42,7 +54,7 @@ INTERVAL_OPTIONAL = RUN_CONSTANT_COLUMNS
 INTERVAL_COLUMNS = INTERVAL_REQUIRED + INTERVAL_OPTIONAL
 _TEXT_COLUMNS = ("run", "pair", "window")
 
-_INTERVAL_HINTS = dict(_AMBIGUOUS_HINTS, **{
+_INTERVAL_HINTS = dict(UNIT_HINTS, **{
     "speed_start_kph": "speed_start_mps (m/s): divide km/h by 3.6",
     "speed_end_kph": "speed_end_mps (m/s): divide km/h by 3.6",
     "interval": "interval_s (seconds)",
@@ -83,7 +95,7 @@ class IntervalCampaign:
     truth: dict[str, Any] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
-    kind = "intervals"
+    kind = KIND
 
     def __post_init__(self):
         self.intervals = validate_intervals(self.intervals, "intervals")
@@ -105,7 +117,7 @@ class IntervalCampaign:
         out["total_time_s"] = g["interval_s"].sum()
         out["speed_start_mps"] = g["speed_start_mps"].first()
         out["speed_end_mps"] = g["speed_end_mps"].last()
-        out.index = [_plain(r) for r in out.index]
+        out.index = [plain_value(r) for r in out.index]
         out.index.name = "run"
         return out.reset_index()
 
@@ -116,7 +128,7 @@ class IntervalCampaign:
         """run id -> window label ("all" when the column is absent)."""
         if "window" not in self.intervals:
             return {r: "all" for r in self.run_ids}
-        return {_plain(r): str(w) for r, w in self.intervals.groupby("run", sort=False)["window"].first().items()}
+        return {plain_value(r): str(w) for r, w in self.intervals.groupby("run", sort=False)["window"].first().items()}
 
     def pairs(self) -> list[tuple]:
         """Opposite-direction pairs: by the ``pair`` column, else consecutive runs of the same
@@ -146,37 +158,33 @@ def validate_intervals(df: pd.DataFrame, where: str = "intervals.csv") -> pd.Dat
     1-based over the data rows)."""
     df = df.copy()
     cols = check_columns(df, INTERVAL_COLUMNS, INTERVAL_REQUIRED, _INTERVAL_HINTS, "an interval campaign", where)
-    if len(df) == 0:
-        _fail(where, None, None, "no intervals")
+    check_not_empty(df, "intervals", where)
     for c in _TEXT_COLUMNS:
-        if c in cols and df[c].isna().any():
-            _fail(where, c, int(np.flatnonzero(df[c].isna().to_numpy())[0]) + 1, f"missing {c}")
+        if c in cols:
+            check_no_missing(df, c, f"missing {c}", where)
     if "window" in cols:
         df["window"] = df["window"].astype(str)
     check_numeric(df, [c for c in cols if c not in _TEXT_COLUMNS], _LIMITS, where)
     if (df["interval_s"] <= 0).any():
         i = int(np.flatnonzero(df["interval_s"].to_numpy() <= 0)[0])
-        _fail(where, "interval_s", i + 1, "a band time must be positive")
+        refuse(where, "interval_s", i + 1, "a band time must be positive")
     drop = df["speed_start_mps"].to_numpy() - df["speed_end_mps"].to_numpy()
     if (drop <= 0).any():
         i = int(np.flatnonzero(drop <= 0)[0])
-        _fail(where, "speed_end_mps", i + 1, "the band's end speed is not below its start speed (a coastdown "
+        refuse(where, "speed_end_mps", i + 1, "the band's end speed is not below its start speed (a coastdown "
               "decelerates)")
     check_direction_codes(df, where)
     if "valid" in cols and not np.isin(df["valid"].to_numpy(), (0.0, 1.0)).all():
         i = int(np.flatnonzero(~np.isin(df["valid"].to_numpy(), (0.0, 1.0)))[0])
-        _fail(where, "valid", i + 1, "valid must be 1 (run used) or 0 (run excluded)")
-    positions = np.arange(len(df))
-    for rid, idx in df.groupby("run", sort=False).indices.items():
-        rid = _plain(rid)
-        rows = positions[idx]
+        refuse(where, "valid", i + 1, "valid must be 1 (run used) or 0 (run excluded)")
+    for rid, rows in run_rows(df):
         check_contiguous(rows, rid, "bands", where)
         start = df["speed_start_mps"].to_numpy()[rows]
         end = df["speed_end_mps"].to_numpy()[rows]
         gap = np.abs(start[1:] - end[:-1]) > 1e-6
         if gap.any():
             i = int(rows[np.flatnonzero(gap)[0] + 1])
-            _fail(where, "speed_start_mps", i + 1, f"run {rid!r}: a band does not start where the previous one "
+            refuse(where, "speed_start_mps", i + 1, f"run {rid!r}: a band does not start where the previous one "
                   "ended (bands must be consecutive, in falling speed)")
         check_run_constants(df, rows, RUN_CONSTANT_COLUMNS, rid, where)
     return df.reset_index(drop=True)
@@ -185,3 +193,22 @@ def validate_intervals(df: pd.DataFrame, where: str = "intervals.csv") -> pd.Dat
 def read_intervals(path) -> pd.DataFrame:
     """``intervals.csv`` as a table (window labels as text)."""
     return pd.read_csv(path, dtype={"window": str})
+
+
+def load(root: str | os.PathLike) -> IntervalCampaign:
+    """Load and validate an interval campaign directory (``intervals.csv``, ``vehicle.toml``,
+    optional ``truth.json``)."""
+    root = Path(root)
+    f = data_file(root, "intervals.csv")
+    vehicle, anem, tunnel, meta = read_vehicle_file(root / VEHICLE_FILE)
+    df = validate_intervals(read_intervals(f), str(f))
+    return IntervalCampaign(df, vehicle, anem, tunnel, read_truth(root), meta)
+
+
+def files(c: IntervalCampaign, fmt: str = "csv") -> dict[str, str]:
+    """The files of an interval campaign directory (name -> text), validated first:
+    ``intervals.csv``, ``vehicle.toml``, ``truth.json`` when the truth is known."""
+    check_csv_format(fmt, "an interval campaign", "intervals.csv")
+    c.intervals = validate_intervals(c.intervals, "intervals")
+    return ({"intervals.csv": c.intervals.to_csv(index=False, float_format="%.10g"), VEHICLE_FILE: vehicle_toml(c)}
+            | truth_files(c.truth))

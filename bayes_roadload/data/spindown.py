@@ -26,9 +26,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
-import tempfile
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,17 +34,29 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import (
-    CampaignError,
-    _fail,
-    _plain,
+from .checks import (
     check_columns,
     check_contiguous,
+    check_csv_format,
+    check_min_samples,
+    check_no_missing,
+    check_not_empty,
     check_numeric,
     check_run_constants,
     check_time_increases,
+    data_file,
+    read_truth,
+    refuse,
     run_ids_of,
+    run_rows,
+    truth_files,
 )
+from .vehicle import VEHICLE_FILE, read_toml_file, toml_table, toml_value
+
+KIND = "spindown"
+FILES = ("spindown.csv",)
+DESCRIPTION = "spin-down campaigns"
+OPTIONS = ("wheel_inertia_kgm2", "rolling_radius_m")
 
 SPEED_COLUMNS = ("wheel_speed_radps", "wheel_speed_mps")
 KNOWN_COLUMNS = ("run", "time_s", "wheel") + SPEED_COLUMNS
@@ -87,7 +96,7 @@ class SpindownCampaign:
     undriven_wheels: int = 2
     truth: dict[str, Any] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
-    kind = "spindown"
+    kind = KIND
 
     def __post_init__(self):
         self.runs = validate_spindown(self.runs, "spindown", self.rolling_radius_m)
@@ -112,34 +121,27 @@ def validate_spindown(df: pd.DataFrame, where: str = "spindown.csv", rolling_rad
     cols = check_columns(df, KNOWN_COLUMNS, ("run", "time_s"), _AMBIGUOUS_HINTS, "a spin-down table", where)
     given = [c for c in SPEED_COLUMNS if c in cols]
     if not given:
-        _fail(where, "wheel_speed_radps", None, "required: wheel_speed_radps (rad/s) or wheel_speed_mps (m/s)")
+        refuse(where, "wheel_speed_radps", None, "required: wheel_speed_radps (rad/s) or wheel_speed_mps (m/s)")
     if len(given) == 2:
-        _fail(where, "wheel_speed_mps", None, "give wheel_speed_radps or wheel_speed_mps, not both (ambiguous)")
-    if len(df) == 0:
-        _fail(where, None, None, "no samples")
-    if df["run"].isna().any():
-        _fail(where, "run", int(np.flatnonzero(df["run"].isna().to_numpy())[0]) + 1, "missing run id")
+        refuse(where, "wheel_speed_mps", None, "give wheel_speed_radps or wheel_speed_mps, not both (ambiguous)")
+    check_not_empty(df, "samples", where)
+    check_no_missing(df, "run", "missing run id", where)
     check_numeric(df, ("time_s",) + tuple(given), {}, where)
     if given[0] == "wheel_speed_radps":
         if rolling_radius_m is None:
-            _fail(where, "wheel_speed_radps", None, "needs the rolling radius ([spindown] or [vehicle] "
+            refuse(where, "wheel_speed_radps", None, "needs the rolling radius ([spindown] or [vehicle] "
                                                     "rolling_radius_m) to give the tread speed")
         df["wheel_speed_mps"] = df.pop("wheel_speed_radps") * float(rolling_radius_m)
     v = df["wheel_speed_mps"].to_numpy()
     out = (v <= 0.0) | (v > config.MAX_SPEED_MPS)
     if out.any():
         i = int(np.flatnonzero(out)[0])
-        _fail(where, given[0], i + 1, f"tread speed {v[i]:g} m/s outside (0, {config.MAX_SPEED_MPS:g}] (a stopped "
+        refuse(where, given[0], i + 1, f"tread speed {v[i]:g} m/s outside (0, {config.MAX_SPEED_MPS:g}] (a stopped "
                                       "wheel, a negative value, or rpm / km/h in the column)")
     df["wheel"] = df["wheel"].astype(str) if "wheel" in cols else DEFAULT_WHEEL
-    positions = np.arange(len(df))
     t_all = df["time_s"].to_numpy().copy()
-    for rid, idx in df.groupby("run", sort=False).indices.items():
-        rid = _plain(rid)
-        rows = positions[idx]
-        if len(rows) < config.MIN_RUN_SAMPLES:
-            _fail(where, "run", int(rows[0]) + 1,
-                  f"run {rid!r} has {len(rows)} samples; at least {config.MIN_RUN_SAMPLES} are needed")
+    for rid, rows in run_rows(df):
+        check_min_samples(rows, rid, where)
         check_contiguous(rows, rid, "samples", where)
         t = t_all[rows]
         check_time_increases(t, rows, rid, where)
@@ -154,18 +156,18 @@ def validate_spindown_setup(inertia: dict[str, float], radius: float, undriven: 
     lo, hi = config.WHEEL_INERTIA_RANGE_KGM2
     for w, value in inertia.items():
         if not (math.isfinite(value) and lo <= value <= hi):
-            _fail(where, f"[spindown] wheel_inertia_kgm2 ({w})", None,
+            refuse(where, f"[spindown] wheel_inertia_kgm2 ({w})", None,
                   f"{value!r} kg m^2 is outside [{lo:g}, {hi:g}] (kg cm^2 or g m^2 in a kg m^2 key?)")
     missing = [w for w in wheels if w not in inertia]
     if missing:
-        _fail(where, "[spindown] wheel_inertia_kgm2", None,
+        refuse(where, "[spindown] wheel_inertia_kgm2", None,
               f"no inertia for wheel {missing[0]!r} (give one number, or one per wheel: {', '.join(map(str, wheels))})")
     if not (0.01 <= radius <= 2.0):
-        _fail(where, "rolling_radius_m", None, f"{radius!r} is outside [0.01, 2] m")
+        refuse(where, "rolling_radius_m", None, f"{radius!r} is outside [0.01, 2] m")
     if isinstance(undriven, bool) or int(undriven) != undriven or undriven < 1:
-        _fail(where, "[spindown] undriven_wheels", None, f"{undriven!r} is not a positive whole number")
+        refuse(where, "[spindown] undriven_wheels", None, f"{undriven!r} is not a positive whole number")
     if len(wheels) > undriven:
-        _fail(where, "[spindown] undriven_wheels", None,
+        refuse(where, "[spindown] undriven_wheels", None,
               f"{len(wheels)} wheels tested ({', '.join(map(str, wheels))}) but the vehicle has {undriven} undriven wheels")
 
 
@@ -177,14 +179,11 @@ def read_spindown_setup(vehicle_file: Path | None, *, wheel_inertia_kgm2: float 
     doc: dict = {}
     where = str(vehicle_file) if vehicle_file is not None else "arguments"
     if vehicle_file is not None and Path(vehicle_file).exists():
-        try:
-            doc = tomllib.loads(Path(vehicle_file).read_text())
-        except tomllib.TOMLDecodeError as e:
-            raise CampaignError(f"{vehicle_file}: not valid TOML ({e})") from e
+        doc = read_toml_file(vehicle_file)
     table = dict(doc.get("spindown", {}))
     for k in table:
         if k not in _SPINDOWN_KEYS:
-            _fail(where, f"[spindown] {k}", None, f"unknown key; known: {', '.join(_SPINDOWN_KEYS)}")
+            refuse(where, f"[spindown] {k}", None, f"unknown key; known: {', '.join(_SPINDOWN_KEYS)}")
     radii = {}
     if "rolling_radius_m" in table:
         radii["[spindown] rolling_radius_m"] = float(table["rolling_radius_m"])
@@ -193,19 +192,19 @@ def read_spindown_setup(vehicle_file: Path | None, *, wheel_inertia_kgm2: float 
     if rolling_radius_m is not None:
         radii["--rolling-radius-m"] = float(rolling_radius_m)
     if len(set(radii.values())) > 1:
-        _fail(where, "rolling_radius_m", None, "different rolling radii given ("
+        refuse(where, "rolling_radius_m", None, "different rolling radii given ("
               + ", ".join(f"{k} = {v:g}" for k, v in radii.items()) + "): ambiguous")
     if not radii:
-        _fail(where, "rolling_radius_m", None, "missing: give [spindown] or [vehicle] rolling_radius_m "
+        refuse(where, "rolling_radius_m", None, "missing: give [spindown] or [vehicle] rolling_radius_m "
                                                "(or --rolling-radius-m)")
     inertia = table.get("wheel_inertia_kgm2")
     if wheel_inertia_kgm2 is not None:
         if inertia is not None and (isinstance(inertia, dict) or float(inertia) != float(wheel_inertia_kgm2)):
-            _fail(where, "[spindown] wheel_inertia_kgm2", None,
+            refuse(where, "[spindown] wheel_inertia_kgm2", None,
                   f"the file gives {inertia!r} and --wheel-inertia-kgm2 {wheel_inertia_kgm2:g}: ambiguous")
         inertia = float(wheel_inertia_kgm2)
     if inertia is None:
-        _fail(where, "[spindown] wheel_inertia_kgm2", None,
+        refuse(where, "[spindown] wheel_inertia_kgm2", None,
               "missing: the wheel's polar moment of inertia (kg m^2) is needed to turn deceleration into drag")
     undriven = table.get("undriven_wheels", config.DEFAULT_UNDRIVEN_WHEELS)
     return inertia, next(iter(radii.values())), undriven, dict(doc.get("meta", {}))
@@ -218,55 +217,46 @@ def inertia_per_wheel(inertia, wheels) -> dict[str, float]:
     return {str(w): float(inertia) for w in wheels}
 
 
-def load_spindown(root: str | os.PathLike, *, wheel_inertia_kgm2: float | None = None,
-                  rolling_radius_m: float | None = None) -> SpindownCampaign:
+def load(root: str | os.PathLike, *, wheel_inertia_kgm2: float | None = None,
+         rolling_radius_m: float | None = None) -> SpindownCampaign:
     """Load and validate a spin-down campaign directory (``spindown.csv``, ``vehicle.toml``
     with ``[spindown]``, optional ``truth.json``); the arguments stand in for (or must agree
     with) the file's wheel inertia and rolling radius."""
     root = Path(root)
-    f = root / "spindown.csv"
-    if not f.exists():
-        raise CampaignError(f"{root}: spindown.csv is missing")
-    vfile = root / "vehicle.toml"
+    f = data_file(root, "spindown.csv")
+    vfile = root / VEHICLE_FILE
     inertia, radius, undriven, meta = read_spindown_setup(
         vfile if vfile.exists() else None, wheel_inertia_kgm2=wheel_inertia_kgm2, rolling_radius_m=rolling_radius_m)
     df = validate_spindown(pd.read_csv(f), str(f), radius)
     wheels = [str(w) for w in pd.unique(df["wheel"])]
     inertia = inertia_per_wheel(inertia, wheels)
     validate_spindown_setup(inertia, radius, undriven, wheels, str(vfile))
-    tfile = root / "truth.json"
-    truth = json.loads(tfile.read_text()) if tfile.exists() else None
-    return SpindownCampaign(df, inertia, radius, int(undriven), truth, meta)
+    return SpindownCampaign(df, inertia, radius, int(undriven), read_truth(root), meta)
 
 
-def write_atomically(root: str | os.PathLike, files: dict[str, str], stale: tuple[str, ...] = ()) -> Path:
-    """Write ``files`` (name -> text) into ``root`` through a temporary directory beside it,
-    removing the ``stale`` names first; nothing is written when a file fails to render."""
-    root = Path(root)
-    root.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".campaign-", dir=root.parent))
-    try:
-        for name, text in files.items():
-            (tmp / name).write_text(text)
-        root.mkdir(exist_ok=True)
-        for name in stale + tuple(files):
-            (root / name).unlink(missing_ok=True)
-        for f in tmp.iterdir():
-            shutil.move(str(f), root / f.name)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return root
+load_spindown = load
+
+
+def spindown_toml(c: SpindownCampaign) -> str:
+    """The vehicle.toml text of a spin-down campaign: ``[spindown]`` and ``[meta]``."""
+    lines = ["[spindown]", f"rolling_radius_m = {toml_value(float(c.rolling_radius_m))}",
+             f"undriven_wheels = {toml_value(int(c.undriven_wheels))}", "", "[spindown.wheel_inertia_kgm2]"]
+    lines += [f"{json.dumps(str(w))} = {toml_value(float(v))}" for w, v in c.wheel_inertia_kgm2.items()]
+    return "\n".join(lines + toml_table("meta", c.meta)) + "\n"
+
+
+def files(c: SpindownCampaign, fmt: str = "csv") -> dict[str, str]:
+    """The files of a spin-down campaign directory (name -> text), validated first:
+    ``spindown.csv`` (tread speeds in ``wheel_speed_mps``), ``vehicle.toml``, ``truth.json``
+    when the truth is known."""
+    check_csv_format(fmt, "a spin-down campaign", "spindown.csv")
+    c.runs = validate_spindown(c.runs, "spindown", c.rolling_radius_m)
+    return ({"spindown.csv": c.runs.to_csv(index=False, float_format="%.10g"), VEHICLE_FILE: spindown_toml(c)}
+            | truth_files(c.truth))
 
 
 def save_spindown(c: SpindownCampaign, path: str | os.PathLike) -> Path:
-    """Validate and write a spin-down campaign (tread speeds in ``wheel_speed_mps``)."""
-    c.runs = validate_spindown(c.runs, "spindown", c.rolling_radius_m)
-    lines = ["[spindown]", f"rolling_radius_m = {float(c.rolling_radius_m)!r}",
-             f"undriven_wheels = {int(c.undriven_wheels)}", "", "[spindown.wheel_inertia_kgm2]"]
-    lines += [f"{json.dumps(str(w))} = {float(v)!r}" for w, v in c.wheel_inertia_kgm2.items()]
-    if c.meta:
-        lines += ["", "[meta]"] + [f"{k} = {json.dumps(v)}" for k, v in c.meta.items()]
-    files = {"spindown.csv": c.runs.to_csv(index=False, float_format="%.10g"), "vehicle.toml": "\n".join(lines) + "\n"}
-    if c.truth is not None:
-        files["truth.json"] = json.dumps(c.truth, indent=2, sort_keys=True) + "\n"
-    return write_atomically(path, files, stale=("truth.json",))
+    """Validate and write a spin-down campaign directory (:func:`~bayes_roadload.data.io.save_campaign`)."""
+    from .io import save_campaign  # io imports this module: its registry lists the kinds
+
+    return save_campaign(c, path)

@@ -33,7 +33,6 @@ either is taken as steady (``accel_mps2 = 0``; :attr:`SteadyCampaign.accel_sourc
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,31 +42,39 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import (
-    _CHANNEL_LIMITS,
-    Anemometer,
-    CampaignError,
+from .checks import (
+    CHANNEL_LIMITS,
+    WHEEL_TORQUE_COLUMNS,
     check_columns,
     check_contiguous,
+    check_csv_format,
     check_direction_codes,
+    check_no_missing,
+    check_not_empty,
     check_numeric,
     check_run_constants,
     check_time_increases,
+    check_wheel_torque_pair,
     consecutive_pairs,
+    data_file,
     pairs_by_column,
+    read_truth,
+    refuse,
     run_directions,
     run_ids_of,
-    Vehicle,
-    _fail,
-    _plain,
-    read_vehicle_file,
-    validate_vehicle,
-    vehicle_toml,
+    run_rows,
+    truth_files,
+    wheel_torque_force_n,
 )
-from .spindown import write_atomically
+from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
+
+KIND = "steady"
+FILES = ("steady.csv",)
+DESCRIPTION = "steady-state torque tests"
+OPTIONS: tuple[str, ...] = ()
 
 FORCE_COLUMNS = ("tractive_force_n",)
-TORQUE_COLUMNS = ("wheel_torque_left_nm", "wheel_torque_right_nm")
+TORQUE_COLUMNS = WHEEL_TORQUE_COLUMNS
 OPTIONAL_COLUMNS = ("time_s", "accel_mps2", "airspeed_mps", "yaw_rad", "direction", "pair",
                     "temperature_k", "pressure_pa", "gearbox_input_force_n")
 KNOWN_COLUMNS = ("run", "speed_mps") + FORCE_COLUMNS + TORQUE_COLUMNS + OPTIONAL_COLUMNS
@@ -105,7 +112,7 @@ class SteadyCampaign:
     truth: dict[str, Any] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
     accel_source: str = "logged"
-    kind = "steady"
+    kind = KIND
 
     def __post_init__(self):
         self.runs, source = validate_steady(self.runs, "steady", self.vehicle.rolling_radius_m)
@@ -156,35 +163,29 @@ def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_
     cols = check_columns(df, KNOWN_COLUMNS, ("run", "speed_mps"), _AMBIGUOUS_HINTS, "a steady-state table", where)
     torques = [c for c in TORQUE_COLUMNS if c in cols]
     if "tractive_force_n" in cols and torques:
-        _fail(where, "tractive_force_n", None, "give tractive_force_n or the wheel torques, not both (ambiguous)")
-    if len(torques) == 1:
-        _fail(where, torques[0], None, "wheel torques need both the left and the right column")
+        refuse(where, "tractive_force_n", None, "give tractive_force_n or the wheel torques, not both (ambiguous)")
+    check_wheel_torque_pair(cols, where)
     if "tractive_force_n" not in cols and not torques:
-        _fail(where, "tractive_force_n", None, "required: tractive_force_n (N) or the two wheel torques (N m)")
-    if len(df) == 0:
-        _fail(where, None, None, "no samples")
-    if df["run"].isna().any():
-        _fail(where, "run", int(np.flatnonzero(df["run"].isna().to_numpy())[0]) + 1, "missing run id")
+        refuse(where, "tractive_force_n", None, "required: tractive_force_n (N) or the two wheel torques (N m)")
+    check_not_empty(df, "samples", where)
+    check_no_missing(df, "run", "missing run id", where)
     check_numeric(df, [c for c in cols if c != "run" and not (c == "pair" and not pd.api.types.is_numeric_dtype(df[c]))],
-                  _CHANNEL_LIMITS, where)
+                  CHANNEL_LIMITS, where)
     if (df["speed_mps"] <= 0).any():
-        _fail(where, "speed_mps", int(np.flatnonzero(df["speed_mps"].to_numpy() <= 0)[0]) + 1,
+        refuse(where, "speed_mps", int(np.flatnonzero(df["speed_mps"].to_numpy() <= 0)[0]) + 1,
               "a steady-state run needs a positive speed")
     if "accel_mps2" in cols and (df["accel_mps2"].abs() > config.STEADY_MAX_ACCEL_MPS2).any():
         i = int(np.flatnonzero(df["accel_mps2"].abs().to_numpy() > config.STEADY_MAX_ACCEL_MPS2)[0])
-        _fail(where, "accel_mps2", i + 1, f"|dv/dt| {df['accel_mps2'].iloc[i]:g} m/s^2 above "
+        refuse(where, "accel_mps2", i + 1, f"|dv/dt| {df['accel_mps2'].iloc[i]:g} m/s^2 above "
               f"{config.STEADY_MAX_ACCEL_MPS2:g}: not a steady-speed run (or g / km/h/s in an m/s^2 column)")
     check_direction_codes(df, where)
     if torques:
         if rolling_radius_m is None:
-            _fail(where, "wheel_torque_left_nm", None, "needs [vehicle] rolling_radius_m")
-        df["tractive_force_n"] = (df.pop("wheel_torque_left_nm") + df.pop("wheel_torque_right_nm")) / rolling_radius_m
-    positions = np.arange(len(df))
+            refuse(where, "wheel_torque_left_nm", None, "needs [vehicle] rolling_radius_m")
+        df["tractive_force_n"] = wheel_torque_force_n(df, rolling_radius_m)
     accel = np.zeros(len(df))
     sources = set()
-    for rid, idx in df.groupby("run", sort=False).indices.items():
-        rid = _plain(rid)
-        rows = positions[idx]
+    for rid, rows in run_rows(df):
         check_contiguous(rows, rid, "rows", where)
         check_run_constants(df, rows, RUN_CONSTANT, rid, where)
         if "time_s" in cols:
@@ -209,25 +210,31 @@ def polynomial_acceleration(time_s, speed_mps) -> np.ndarray:
     return c1 + 2.0 * c2 * t
 
 
-def load_steady(root: str | os.PathLike) -> SteadyCampaign:
+def load(root: str | os.PathLike) -> SteadyCampaign:
     """Load and validate a steady-state campaign directory (``steady.csv``, ``vehicle.toml``,
     optional ``truth.json``)."""
     root = Path(root)
-    f = root / "steady.csv"
-    if not f.exists():
-        raise CampaignError(f"{root}: steady.csv is missing")
-    vehicle, anem, tunnel, meta = read_vehicle_file(root / "vehicle.toml")
+    f = data_file(root, "steady.csv")
+    vehicle, anem, tunnel, meta = read_vehicle_file(root / VEHICLE_FILE)
     df, source = validate_steady(pd.read_csv(f), str(f), vehicle.rolling_radius_m)
-    tfile = root / "truth.json"
-    truth = json.loads(tfile.read_text()) if tfile.exists() else None
-    return SteadyCampaign(df, vehicle, anem, tunnel, truth, meta, accel_source=source)
+    return SteadyCampaign(df, vehicle, anem, tunnel, read_truth(root), meta, accel_source=source)
+
+
+load_steady = load
+
+
+def files(c: SteadyCampaign, fmt: str = "csv") -> dict[str, str]:
+    """The files of a steady-state campaign directory (name -> text), validated first:
+    ``steady.csv`` (with the force and the acceleration used), ``vehicle.toml``,
+    ``truth.json`` when the truth is known."""
+    check_csv_format(fmt, "a steady-state campaign", "steady.csv")
+    c.runs, _ = validate_steady(c.runs, "steady", c.vehicle.rolling_radius_m)
+    return ({"steady.csv": c.runs.to_csv(index=False, float_format="%.10g"), VEHICLE_FILE: vehicle_toml(c)}
+            | truth_files(c.truth))
 
 
 def save_steady(c: SteadyCampaign, path: str | os.PathLike) -> Path:
-    """Validate and write a steady-state campaign (``steady.csv`` with the force and the
-    acceleration used, ``vehicle.toml``, ``truth.json``)."""
-    c.runs, _ = validate_steady(c.runs, "steady", c.vehicle.rolling_radius_m)
-    files = {"steady.csv": c.runs.to_csv(index=False, float_format="%.10g"), "vehicle.toml": vehicle_toml(c)}
-    if c.truth is not None:
-        files["truth.json"] = json.dumps(c.truth, indent=2, sort_keys=True) + "\n"
-    return write_atomically(path, files, stale=("truth.json",))
+    """Validate and write a steady-state campaign directory (:func:`~bayes_roadload.data.io.save_campaign`)."""
+    from .io import save_campaign  # io imports this module: its registry lists the kinds
+
+    return save_campaign(c, path)

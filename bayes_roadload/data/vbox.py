@@ -37,7 +37,8 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from .campaign import Anemometer, CampaignError, Vehicle
+from .checks import CampaignError
+from .vehicle import Anemometer, Vehicle
 from .intervals import IntervalCampaign
 
 KPH = config.KPH_TO_MPS

@@ -1,13 +1,11 @@
-"""The campaign contract: round trip, conversions, and every refusal names file/column/row."""
-
-import json
+"""The speed-trace kind (runs.csv / runs.parquet): round trip, conversions, and every refusal names
+file/column/row."""
 
 import numpy as np
 import pandas as pd
 import pytest
 
 from bayes_roadload.data import Campaign, CampaignError, Vehicle, load_campaign, save_campaign
-from bayes_roadload.data.campaign import vehicle_toml
 
 VEHICLE_TOML = """[vehicle]
 mass_kg = 1100.0
@@ -83,25 +81,6 @@ def test_refusals_name_file_column_row(tmp_path, mutate, expected):
     assert "runs.csv" in str(e.value) and expected in str(e.value)
 
 
-@pytest.mark.parametrize(
-    "toml, expected",
-    [
-        (VEHICLE_TOML.replace("1100.0", "0.0"), "[vehicle] mass_kg"),
-        (VEHICLE_TOML.replace("1.85", "185.0"), "[vehicle] frontal_area_m2"),
-        (VEHICLE_TOML.replace("effective_mass_kg = 1130.0", ""), "[vehicle] effective_mass_kg"),
-        (VEHICLE_TOML.replace("1130.0", "1000.0"), "less than the test mass"),
-        (VEHICLE_TOML + "colour = 'red'\n", "[vehicle] colour"),
-        (VEHICLE_TOML + "[anemometer]\nairspeed_factor = 10.8\n", "[anemometer] airspeed_factor"),
-        ("[vehicle\n", "not valid TOML"),
-    ],
-)
-def test_vehicle_refusals(tmp_path, toml, expected):
-    d = write(tmp_path, runs_frame(), toml)
-    with pytest.raises(CampaignError) as e:
-        load_campaign(d)
-    assert "vehicle.toml" in str(e.value) and expected in str(e.value)
-
-
 def test_nothing_written_when_refused(tmp_path):
     df = runs_frame()
     c = Campaign(df, Vehicle(1100.0, 1130.0, 1.85))
@@ -126,17 +105,6 @@ def test_subset_and_pair_column():
     assert c.pairs() == [(1, 2), (3, 4)]
     s = c.subset([4, 3])
     assert s.run_ids == [4, 3] and s.pairs() == [(4, 3)]
-
-
-def test_vehicle_toml_is_valid_and_carries_tunnel():
-    import tomllib
-
-    c = Campaign(runs_frame(), Vehicle(1100.0, 1130.0, 1.85), tunnel={"KD": 0.614, "yaw_deg": [-5.0, 0.0, 5.0],
-                                                                       "cd": [0.41, 0.40, 0.41]},
-                 meta={"case": 14})
-    doc = tomllib.loads(vehicle_toml(c))
-    assert doc["tunnel"]["yaw_deg"] == [-5.0, 0.0, 5.0] and doc["meta"]["case"] == 14
-    assert json.dumps(doc)  # plain data
 
 
 def test_parquet_round_trip(tmp_path):

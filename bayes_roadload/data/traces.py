@@ -1,0 +1,227 @@
+"""The speed-trace campaign kind: ``runs.csv`` (or ``runs.parquet``) + ``vehicle.toml``.
+
+A campaign directory holds ``runs.csv`` (or ``runs.parquet``), ``vehicle.toml`` and, for
+simulated campaigns, ``truth.json``.  One row per sample of a coastdown run; the format is in
+``docs/data-format.md``.  Loading validates everything and raises
+:class:`~bayes_roadload.data.checks.CampaignError` naming the file, the column and the row at
+fault; saving validates first and writes nothing when the input is refused.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .. import config
+from ..physics.atmosphere import air_density_kgpm3
+from ..physics.integrate import make_run, stack_runs
+from .checks import (
+    CHANNEL_LIMITS,
+    UNIT_HINTS,
+    CampaignError,
+    check_columns,
+    check_contiguous,
+    check_direction_codes,
+    check_min_samples,
+    check_no_missing,
+    check_not_empty,
+    check_numeric,
+    check_run_constants,
+    check_time_increases,
+    check_wheel_torque_pair,
+    consecutive_pairs,
+    pairs_by_column,
+    read_truth,
+    refuse,
+    run_directions,
+    run_ids_of,
+    run_rows,
+    subset_table,
+    truth_files,
+    wheel_torque_force_n,
+)
+from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
+
+KIND = "traces"
+FILES = ("runs.csv", "runs.parquet")
+DESCRIPTION = "speed traces"
+OPTIONS: tuple[str, ...] = ()
+
+REQUIRED_COLUMNS = ("run", "time_s", "speed_mps")
+OPTIONAL_COLUMNS = (
+    "direction",
+    "pair",
+    "airspeed_mps",
+    "yaw_rad",
+    "driveline_force_n",
+    "wheel_torque_left_nm",
+    "wheel_torque_right_nm",
+    "distance_m",
+    "position_m",
+    "temperature_k",
+    "pressure_pa",
+    "mass_kg",
+)
+KNOWN_COLUMNS = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
+RUN_CONSTANT_COLUMNS = ("direction", "pair", "mass_kg")
+
+
+@dataclass
+class Campaign:
+    """A loaded, validated campaign of speed traces.
+
+    Attributes
+    ----------
+    runs : one row per sample, contract columns (wheel torques already converted to
+        ``driveline_force_n``).
+    vehicle, anemometer : from vehicle.toml.
+    tunnel : the optional ``[tunnel]`` table (KD, CD0, CL0, KL, yaw_deg, cd).
+    truth : the true parameters of a simulated campaign, else None.
+    meta : free-form provenance (e.g. the simulation case), saved in vehicle.toml ``[meta]``.
+    """
+
+    runs: pd.DataFrame
+    vehicle: Vehicle
+    anemometer: Anemometer = field(default_factory=Anemometer)
+    tunnel: dict[str, Any] | None = None
+    truth: dict[str, float] | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    kind = KIND
+
+    def __post_init__(self):
+        self.runs = validate_runs(self.runs, "runs")
+        validate_vehicle(self.vehicle, "vehicle")
+
+    @property
+    def run_ids(self) -> list:
+        """Run ids in file order, as plain Python values."""
+        return run_ids_of(self.runs)
+
+    @property
+    def has_anemometer(self) -> bool:
+        return "airspeed_mps" in self.runs and "yaw_rad" in self.runs
+
+    @property
+    def has_driveline(self) -> bool:
+        return "driveline_force_n" in self.runs
+
+    def directions(self) -> dict:
+        """run id -> +1/-1 (every run +1 when the column is absent)."""
+        return run_directions(self.runs)
+
+    def pairs(self) -> list[tuple]:
+        """Opposite-direction pairs of run ids: by the ``pair`` column when present, else
+        consecutive runs in file order.  A run left without a partner is dropped."""
+        by_column = pairs_by_column(self.runs)
+        return by_column if by_column is not None else consecutive_pairs(self.run_ids)
+
+    def subset(self, run_ids) -> "Campaign":
+        """The campaign restricted to some runs (order as given)."""
+        return Campaign(subset_table(self.runs, run_ids), self.vehicle, self.anemometer,
+                        self.tunnel, self.truth, dict(self.meta))
+
+    def to_batch(self):
+        """The runs as a padded :class:`~bayes_roadload.physics.RunBatch` (time from each
+        run's first sample) and the list of run ids in batch order.  ``meta["pad_to_samples"]``
+        pads every run to at least that many samples (studies of many same-sized campaigns then
+        share one compiled fit)."""
+        runs = []
+        v = self.vehicle
+        for rid, g in self.runs.groupby("run", sort=False):
+            t = g["time_s"].to_numpy(float)
+            pressure = g["pressure_pa"].to_numpy(float) if "pressure_pa" in g else config.REFERENCE_PRESSURE_PA
+            temp = g["temperature_k"].to_numpy(float) if "temperature_k" in g else config.REFERENCE_TEMPERATURE_K
+            direction = float(g["direction"].iloc[0]) if "direction" in g else 1.0
+            start = float(g["position_m"].iloc[0]) if "position_m" in g else 0.0
+            # a run's own test mass (several masses in one campaign): the rotating inertia, and so
+            # M_e - M, does not change with the load
+            mass = float(g["mass_kg"].iloc[0]) if "mass_kg" in g else v.mass_kg
+            runs.append(make_run(
+                t - t[0],
+                g["speed_mps"].to_numpy(float),
+                airspeed_mps=g["airspeed_mps"].to_numpy(float) if "airspeed_mps" in g else None,
+                yaw_rad=g["yaw_rad"].to_numpy(float) if "yaw_rad" in g else None,
+                driveline_force_n=g["driveline_force_n"].to_numpy(float) if "driveline_force_n" in g else None,
+                air_density_kgpm3=np.broadcast_to(np.asarray(air_density_kgpm3(pressure, temp)), t.shape),
+                temperature_k=temp,
+                direction=direction,
+                start_position_m=start,
+                mass_kg=mass,
+                effective_mass_kg=v.effective_mass_kg + (mass - v.mass_kg),
+                frontal_area_m2=v.frontal_area_m2,
+            ))
+        return stack_runs(runs, self.meta.get("pad_to_samples")), self.run_ids
+
+
+def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
+    """Check a runs table against the contract and return a normalised copy.
+
+    Rows are reported 1-based over the data rows (row 1 is the first line after the header).
+    Wheel torques are converted to ``driveline_force_n`` by the caller (:func:`load`), which
+    knows the rolling radius.
+    """
+    df = df.copy()
+    cols = check_columns(df, KNOWN_COLUMNS, REQUIRED_COLUMNS, UNIT_HINTS, "the contract", where)
+    check_not_empty(df, "samples", where)
+    check_no_missing(df, "run", "missing run id", where)
+    check_numeric(df, [c for c in cols if c != "run"], CHANNEL_LIMITS, where)
+    check_direction_codes(df, where)
+    if check_wheel_torque_pair(cols, where) and "driveline_force_n" in cols:
+        refuse(where, "driveline_force_n", None,
+               "give either driveline_force_n or the wheel torques, not both (ambiguous)")
+    for rid, rows in run_rows(df):
+        check_min_samples(rows, rid, where)
+        check_contiguous(rows, rid, "samples", where)
+        check_time_increases(df["time_s"].to_numpy()[rows], rows, rid, where)
+        check_run_constants(df, rows, RUN_CONSTANT_COLUMNS, rid, where)
+    return df.reset_index(drop=True)
+
+
+def read_runs(root: str | os.PathLike) -> tuple[pd.DataFrame, Path]:
+    """The runs table of a campaign directory as read, and its file; refused when both
+    ``runs.csv`` and ``runs.parquet`` are present or neither is."""
+    root = Path(root)
+    csv, parquet = (root / name for name in FILES)
+    if csv.exists() and parquet.exists():
+        raise CampaignError(f"{root}: both runs.csv and runs.parquet present (ambiguous)")
+    if csv.exists():
+        return pd.read_csv(csv), csv
+    if parquet.exists():
+        try:
+            return pd.read_parquet(parquet), parquet
+        except ImportError as e:  # pragma: no cover - depends on optional pyarrow
+            raise CampaignError(f"{parquet}: reading parquet needs pyarrow ({e})") from e
+    raise CampaignError(f"{root}: runs.csv (or runs.parquet) is missing")
+
+
+def load(root: str | os.PathLike) -> Campaign:
+    """Load and validate a speed-trace campaign directory (``runs.csv`` or ``runs.parquet``,
+    ``vehicle.toml``, optional ``truth.json``); wheel torques become ``driveline_force_n``
+    = (left + right) / R_r."""
+    root = Path(root)
+    df, runs_file = read_runs(root)
+    vehicle, anem, tunnel, meta = read_vehicle_file(root / VEHICLE_FILE)
+    df = validate_runs(df, str(runs_file))
+    if "wheel_torque_left_nm" in df:
+        df["driveline_force_n"] = wheel_torque_force_n(df, vehicle.rolling_radius_m)
+    return Campaign(df, vehicle, anem, tunnel, read_truth(root), meta)
+
+
+def files(c: Campaign, fmt: str = "csv") -> dict[str, str | bytes]:
+    """The files of a speed-trace campaign directory (name -> content), validated first:
+    ``runs.csv`` (``fmt="csv"``) or ``runs.parquet`` (``fmt="parquet"``), ``vehicle.toml``,
+    ``truth.json`` when the truth is known."""
+    c.runs = validate_runs(c.runs, "runs")
+    if fmt == "csv":
+        out: dict[str, str | bytes] = {"runs.csv": c.runs.to_csv(index=False, float_format="%.10g")}
+    elif fmt == "parquet":
+        out = {"runs.parquet": c.runs.to_parquet(None, index=False)}
+    else:
+        raise ValueError(f"fmt must be 'csv' or 'parquet', not {fmt!r}")
+    return out | {VEHICLE_FILE: vehicle_toml(c)} | truth_files(c.truth)

@@ -1,0 +1,170 @@
+"""``vehicle.toml``: the vehicle, its anemometer calibration and the wind-tunnel data.
+
+Every kind of campaign but the wheel spin-down (whose ``[spindown]`` table is read by
+:mod:`~bayes_roadload.data.spindown`) has a ``vehicle.toml`` with ``[vehicle]`` (SI units),
+optionally ``[anemometer]``, ``[tunnel]`` and ``[meta]``; the format is in
+``docs/data-format.md``.  Reading validates and refuses with the file's name and the key.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from .. import config
+from .checks import CampaignError, refuse
+
+VEHICLE_FILE = "vehicle.toml"
+VEHICLE_KEYS = ("mass_kg", "effective_mass_kg", "frontal_area_m2", "rolling_radius_m", "rotating_inertia_kgm2",
+                "length_m")
+ANEMOMETER_KEYS = ("airspeed_factor", "yaw_factor")
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """``[vehicle]`` of vehicle.toml, SI units.
+
+    ``effective_mass_kg`` is M_e = M + I_w / R_r^2 (eq. 2.2); it may be given directly or as
+    ``rotating_inertia_kgm2`` with ``rolling_radius_m``.
+    """
+
+    mass_kg: float
+    effective_mass_kg: float
+    frontal_area_m2: float
+    rolling_radius_m: float = 0.28
+    length_m: float = 4.5
+
+
+@dataclass(frozen=True)
+class Anemometer:
+    """``[anemometer]``: true = factor x reading (thesis section 4.7.3)."""
+
+    airspeed_factor: float = 1.0
+    yaw_factor: float = 1.0
+
+
+def validate_vehicle(v: Vehicle, where: str = VEHICLE_FILE) -> None:
+    """Refuse a mass, effective mass, frontal area or rolling radius outside its physical range."""
+    lo, hi = config.MASS_RANGE_KG
+    for key in ("mass_kg", "effective_mass_kg"):
+        val = getattr(v, key)
+        if not (math.isfinite(val) and lo <= val <= hi):
+            refuse(where, f"[vehicle] {key}", None, f"{val!r} is outside the physical range [{lo}, {hi}] kg")
+    if v.effective_mass_kg < v.mass_kg:
+        refuse(where, "[vehicle] effective_mass_kg", None,
+               f"{v.effective_mass_kg} kg is less than the test mass {v.mass_kg} kg (eq. 2.2: M_e = M + I/R^2)")
+    if v.effective_mass_kg > 1.5 * v.mass_kg:
+        refuse(where, "[vehicle] effective_mass_kg", None,
+               f"{v.effective_mass_kg} kg is more than 1.5 x the test mass: check the rotating inertia")
+    lo, hi = config.AREA_RANGE_M2
+    if not (math.isfinite(v.frontal_area_m2) and lo <= v.frontal_area_m2 <= hi):
+        refuse(where, "[vehicle] frontal_area_m2", None, f"{v.frontal_area_m2!r} is outside [{lo}, {hi}] m^2")
+    if not (0.01 <= v.rolling_radius_m <= 2.0):
+        refuse(where, "[vehicle] rolling_radius_m", None, f"{v.rolling_radius_m!r} is outside [0.01, 2] m")
+
+
+def vehicle_from_toml(doc: Mapping[str, Any], where: str) -> tuple[Vehicle, Anemometer, dict | None, dict]:
+    """(vehicle, anemometer, tunnel, meta) of a parsed vehicle.toml, validated; ``where``
+    names the file in refusals."""
+    if "vehicle" not in doc:
+        refuse(where, "[vehicle]", None, "table is missing")
+    t = dict(doc["vehicle"])
+    for k in t:
+        if k not in VEHICLE_KEYS:
+            refuse(where, f"[vehicle] {k}", None, f"unknown key; known: {', '.join(sorted(VEHICLE_KEYS))}")
+    for k in ("mass_kg", "frontal_area_m2"):
+        if k not in t:
+            refuse(where, f"[vehicle] {k}", None, "required key is missing")
+    radius = float(t.get("rolling_radius_m", 0.28))
+    if "effective_mass_kg" in t and "rotating_inertia_kgm2" in t:
+        refuse(where, "[vehicle] effective_mass_kg", None,
+               "give effective_mass_kg or rotating_inertia_kgm2, not both (ambiguous)")
+    if "effective_mass_kg" in t:
+        me = float(t["effective_mass_kg"])
+    elif "rotating_inertia_kgm2" in t:
+        if "rolling_radius_m" not in t:
+            refuse(where, "[vehicle] rolling_radius_m", None, "needed with rotating_inertia_kgm2")
+        me = float(t["mass_kg"]) + float(t["rotating_inertia_kgm2"]) / radius**2
+    else:
+        refuse(where, "[vehicle] effective_mass_kg", None,
+               "required key is missing (or give rotating_inertia_kgm2 and rolling_radius_m)")
+    vehicle = Vehicle(float(t["mass_kg"]), me, float(t["frontal_area_m2"]), radius,
+                      float(t.get("length_m", 4.5)))
+    validate_vehicle(vehicle, where)
+    a = dict(doc.get("anemometer", {}))
+    for k in a:
+        if k not in ANEMOMETER_KEYS:
+            refuse(where, f"[anemometer] {k}", None, f"unknown key; known: {', '.join(ANEMOMETER_KEYS)}")
+    anem = Anemometer(float(a.get("airspeed_factor", 1.0)), float(a.get("yaw_factor", 1.0)))
+    for k in ANEMOMETER_KEYS:
+        if not 0.5 <= getattr(anem, k) <= 2.0:
+            refuse(where, f"[anemometer] {k}", None, f"{getattr(anem, k)} is outside [0.5, 2]")
+    tunnel = doc.get("tunnel")
+    if tunnel is not None:
+        tunnel = dict(tunnel)
+        if ("yaw_deg" in tunnel) != ("cd" in tunnel):
+            refuse(where, "[tunnel]", None, "a C_D(yaw) table needs both yaw_deg and cd")
+    return vehicle, anem, tunnel, dict(doc.get("meta", {}))
+
+
+def read_toml_file(path: str | os.PathLike) -> dict:
+    """A TOML file as a dict, refused with the file's name when it is not valid TOML."""
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise CampaignError(f"{path}: not valid TOML ({e})") from e
+
+
+def read_vehicle_file(path: str | os.PathLike) -> tuple[Vehicle, Anemometer, dict | None, dict]:
+    """``vehicle.toml`` (or any file of its format) as (vehicle, anemometer, tunnel, meta),
+    validated; refused with the file's name when missing or not TOML."""
+    vfile = Path(path)
+    if not vfile.exists():
+        raise CampaignError(f"{vfile}: missing")
+    return vehicle_from_toml(read_toml_file(vfile), str(vfile))
+
+
+# --------------------------------------------------------------------------- writing
+
+def toml_value(v) -> str:
+    """A Python / numpy value (bool, number, text or a sequence of them) as TOML text."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        return repr(float(v))
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def toml_table(name: str, table: Mapping[str, Any] | None) -> list[str]:
+    """The lines of a TOML table ``[name]`` after a blank line; none for an empty table."""
+    if not table:
+        return []
+    return ["", f"[{name}]"] + [f"{k} = {toml_value(val)}" for k, val in table.items()]
+
+
+def vehicle_toml(c) -> str:
+    """The vehicle.toml text of a campaign (its ``vehicle``, ``anemometer``, ``tunnel`` and
+    ``meta``), the vehicle validated first."""
+    validate_vehicle(c.vehicle, "vehicle")
+    v = c.vehicle
+    lines = ["[vehicle]"]
+    for k in ("mass_kg", "effective_mass_kg", "frontal_area_m2", "rolling_radius_m", "length_m"):
+        lines.append(f"{k} = {toml_value(getattr(v, k))}")
+    lines += ["", "[anemometer]",
+              f"airspeed_factor = {toml_value(c.anemometer.airspeed_factor)}",
+              f"yaw_factor = {toml_value(c.anemometer.yaw_factor)}"]
+    lines += toml_table("tunnel", c.tunnel) + toml_table("meta", c.meta)
+    return "\n".join(lines) + "\n"

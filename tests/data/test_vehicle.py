@@ -1,0 +1,71 @@
+"""vehicle.toml: reading refuses with the file and the key, writing reads back the same vehicle."""
+
+import json
+import tomllib
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bayes_roadload.data import Campaign, CampaignError, Vehicle, load_campaign
+from bayes_roadload.data.vehicle import Anemometer, read_vehicle_file, vehicle_from_toml, vehicle_toml
+
+VEHICLE_TOML = """[vehicle]
+mass_kg = 1100.0
+effective_mass_kg = 1130.0
+frontal_area_m2 = 1.85
+rolling_radius_m = 0.28
+"""
+
+
+def runs_frame(n=40, runs=2):
+    t = np.arange(n) * 0.25
+    return pd.DataFrame({"run": np.repeat(np.arange(1, runs + 1), n), "time_s": np.tile(t, runs),
+                         "speed_mps": np.tile(30.0 - 0.3 * t, runs)})
+
+
+@pytest.mark.parametrize(
+    "toml, expected",
+    [
+        (VEHICLE_TOML.replace("1100.0", "0.0"), "[vehicle] mass_kg"),
+        (VEHICLE_TOML.replace("1.85", "185.0"), "[vehicle] frontal_area_m2"),
+        (VEHICLE_TOML.replace("effective_mass_kg = 1130.0", ""), "[vehicle] effective_mass_kg"),
+        (VEHICLE_TOML.replace("1130.0", "1000.0"), "less than the test mass"),
+        (VEHICLE_TOML + "colour = 'red'\n", "[vehicle] colour"),
+        (VEHICLE_TOML + "[anemometer]\nairspeed_factor = 10.8\n", "[anemometer] airspeed_factor"),
+        ("[vehicle\n", "not valid TOML"),
+    ],
+)
+def test_vehicle_refusals(tmp_path, toml, expected):
+    f = tmp_path / "vehicle.toml"
+    f.write_text(toml)
+    with pytest.raises(CampaignError) as e:
+        read_vehicle_file(f)
+    assert "vehicle.toml" in str(e.value) and expected in str(e.value)
+
+
+def test_a_campaign_refuses_its_bad_vehicle_file(tmp_path):
+    root = tmp_path / "c"
+    root.mkdir()
+    runs_frame().to_csv(root / "runs.csv", index=False)
+    (root / "vehicle.toml").write_text(VEHICLE_TOML.replace("1.85", "185.0"))
+    with pytest.raises(CampaignError, match=r"vehicle.toml, column '\[vehicle\] frontal_area_m2'"):
+        load_campaign(root)
+    (root / "vehicle.toml").unlink()
+    with pytest.raises(CampaignError, match="vehicle.toml: missing"):
+        load_campaign(root)
+
+
+def test_vehicle_toml_reads_back_and_carries_tunnel():
+    c = Campaign(runs_frame(), Vehicle(1100.0, 1130.0, 1.85, 0.3, 4.2), Anemometer(1.05, 0.95),
+                 tunnel={"KD": 0.614, "yaw_deg": [-5.0, 0.0, 5.0], "cd": [0.41, 0.40, 0.41]}, meta={"case": 14})
+    doc = tomllib.loads(vehicle_toml(c))
+    assert doc["tunnel"]["yaw_deg"] == [-5.0, 0.0, 5.0] and doc["meta"]["case"] == 14
+    assert json.dumps(doc)  # plain data
+    assert vehicle_from_toml(doc, "vehicle.toml") == (c.vehicle, c.anemometer, c.tunnel, c.meta)
+
+
+def test_rotating_inertia_gives_the_effective_mass():
+    doc = tomllib.loads(VEHICLE_TOML.replace("effective_mass_kg = 1130.0", "rotating_inertia_kgm2 = 2.352"))
+    vehicle, *_ = vehicle_from_toml(doc, "vehicle.toml")
+    assert vehicle.effective_mass_kg == pytest.approx(1100.0 + 2.352 / 0.28**2)  # eq. 2.2
