@@ -12,3 +12,4 @@ from .physics import integrate_run as integrate_run
 from .physics import simplified_model as simplified_model
 
 __version__ = "0.1.0"
+"""The package version; pyproject.toml reads it from here (the one place it is written)."""

@@ -44,14 +44,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import config
+from ..inference.spec import MODELS_DIR
 from ..physics.effects import OffsetAir
 from ..physics.integrate import integrate_batch
 from ..physics.model import DragModel, MeasuredAir
 from ..physics.residuals import _effect_terms, local_level_loglik_batch
 from ..physics.terms import TERMS
 
-LIBRARY_PATH = Path(__file__).resolve().parents[2] / "models" / "effects" / "library.toml"
-"""The candidate library shipped with the package."""
+LIBRARY_PATH = MODELS_DIR / "effects" / "library.toml"
+"""The candidate library shipped with the package (``models/effects/library.toml``)."""
 
 EFFECT_NAMES = ("track_gradient", "tyre_temperature", "airspeed_calibration", "yaw_calibration", "aero_lift",
                 "side_force_slip", "pitch_attitude", "driveline_quadratic", "tyre_speed_exponent", "spatial_wind",

@@ -48,6 +48,7 @@ with :meth:`Prior.to_numpyro`.  Parameters the file does not mention keep the mo
 
 from __future__ import annotations
 
+import importlib.resources
 import math
 import os
 import tomllib
@@ -59,8 +60,19 @@ from .. import config
 from ..physics.model import AIR_MODELS, DragModel, model_from_names
 from ..physics.terms import TERMS
 
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
-"""The repository's ``models/`` directory, where bare model names are looked up."""
+
+def _models_dir() -> Path:
+    """The model library directory: ``bayes_roadload/models`` of an installed package (package
+    data, which pyproject.toml maps from the repository's top-level ``models/``), else, for a
+    source tree imported in place (editable install, ``PYTHONPATH``), the ``models/`` beside the
+    package directory."""
+    package = Path(str(importlib.resources.files("bayes_roadload")))
+    installed = package / "models"
+    return installed if installed.is_dir() else package.parent / "models"
+
+
+MODELS_DIR = _models_dir()
+"""The directory of the model library (``models/*.toml``), where bare model names are looked up."""
 
 DRIVELINE_OPTIONS = ("auto", "none", "measured", "polynomial")
 LIFT_OPTIONS = ("tunnel", "none")
@@ -458,7 +470,7 @@ def load_model_spec(name_or_path: str | os.PathLike) -> ModelSpec:
     Parameters
     ----------
     name_or_path : str or path
-        A bare name (``"four_term"``) is looked up as ``models/<name>.toml`` in the repository
+        A bare name (``"four_term"``) is looked up as ``<name>.toml`` in the model library
         (:data:`MODELS_DIR`); anything with a directory part or a ``.toml`` suffix is a path.
 
     Raises
@@ -499,7 +511,7 @@ def with_undriven_wheels(spec: ModelSpec, au_n: float, bu_nspm: float) -> ModelS
 
 
 def available_models() -> list[str]:
-    """Names of the model files in the repository's ``models/`` directory, sorted."""
+    """Names of the model files in the model library (:data:`MODELS_DIR`), sorted."""
     if not MODELS_DIR.is_dir():
         return []
     return sorted(p.stem for p in MODELS_DIR.glob("*.toml"))
