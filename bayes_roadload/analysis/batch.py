@@ -531,12 +531,12 @@ class _Progress:
         if not self.enabled:
             return
         if self.bar is not None:
-            self.bar.set_postfix_str(f"last: {label}{' (error)' if failed else ''}", refresh=False)
+            self.bar.set_postfix_str(f"last: {label}{' (failed)' if failed else ''}", refresh=False)
             self.bar.update(1)
             return
         elapsed = time.perf_counter() - self.t0
         left = elapsed / self.done * (self.total - self.done)
-        print(f"{self.desc} {self.done}/{self.total} {label}{': error' if failed else ''} "
+        print(f"{self.desc} {self.done}/{self.total} {label}{': failed' if failed else ''} "
               f"[{_format_seconds(elapsed)} elapsed, about {_format_seconds(left)} left]",
               file=self.stream, flush=True)
 
