@@ -57,7 +57,6 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
-from distributed import Client, LocalCluster, as_completed
 from tqdm import tqdm
 
 from .. import config
@@ -445,7 +444,7 @@ def worker_environment(workers: int, cores: int | None = None) -> dict[str, str]
 
 @contextlib.contextmanager
 def batch_client(workers: int | None = None, scheduler: str | None = None, *,
-                 memory_limit: str | float | None = "auto") -> Iterator[Client | None]:
+                 memory_limit: str | float | None = "auto") -> Iterator[Any]:
     """Where a batch runs, as a context manager yielding a ``dask.distributed.Client`` (or
     ``None``) for :func:`run_batch` and :func:`batch_map`.
 
@@ -478,6 +477,8 @@ def batch_client(workers: int | None = None, scheduler: str | None = None, *,
     ``bayes_roadload`` to unpickle their first job, which enables 64-bit floats in JAX.  The
     dashboard is off and the cluster logs only errors.
     """
+    from distributed import Client, LocalCluster  # deferred: the command line starts without Dask
+
     if scheduler is not None:
         with Client(scheduler) as client:
             yield client
@@ -603,7 +604,9 @@ def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None
             on_result(result)
 
     try:
-        if isinstance(client, Client):
+        if _is_dask_client(client):
+            from distributed import as_completed
+
             futures = client.map(fn, items, pure=False)
             index = {f.key: i for i, f in enumerate(futures)}
             for future in as_completed(futures):
@@ -633,6 +636,16 @@ def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None
     if first_error:
         raise first_error[0]
     return results
+
+
+def _is_dask_client(client: Any) -> bool:
+    """Whether ``client`` is a ``distributed.Client`` (without importing Dask for None or an
+    executor)."""
+    if client is None or "distributed" not in sys.modules:
+        return False
+    from distributed import Client
+
+    return isinstance(client, Client)
 
 
 def _error_record(job: Any, exc: BaseException, tb: str) -> dict[str, Any]:
