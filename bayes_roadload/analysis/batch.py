@@ -613,10 +613,13 @@ def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None
                 i = index[future.key]
                 if future.status == "finished":
                     settle(i, future.result())
-                else:
-                    exc = future.exception()
-                    tb = "".join(traceback.format_tb(future.traceback())) if future.traceback() else ""
-                    settle(i, exc=exc, tb=f"{tb}{type(exc).__name__}: {exc}")
+                else:  # the job raised, its worker died, or it was cancelled
+                    try:
+                        exc, tb = future.exception(), future.traceback()
+                    except Exception as lost:  # noqa: BLE001 - a cancelled future has no exception to give
+                        exc, tb = lost, None
+                    text = "".join(traceback.format_tb(tb)) if tb is not None else ""
+                    settle(i, exc=exc, tb=f"{text}{type(exc).__name__}: {exc}")
                 future.release()
         elif client is None:
             for i, item in enumerate(items):

@@ -326,9 +326,10 @@ def add_batch_parser(subparsers, fit_command: Callable[[list[str]], int],
             continue
         if "--no-progress" in action.option_strings:
             quiet = ["--no-progress"]  # the batch shows its own progress bar
+        plain = action.choices is None and action.nargs != 0
         fit_group.add_argument(*action.option_strings, dest=f"fit_{action.dest}", action=_PassThrough,
                                nargs=action.nargs, choices=action.choices, type=action.type,
-                               metavar=action.metavar, help=action.help if action.help else None)
+                               metavar=action.metavar or (action.dest.upper() if plain else None), help=action.help)
     p.set_defaults(func=cmd_batch, fit_args=[], fit_command=fit_command, fit_quiet=quiet)
     return p
 
