@@ -13,7 +13,7 @@ the road load at 50 mph cover the truth, with binomial standard errors, the gate
 the time per fit.
 
 Every fit goes through :func:`bayes_roadload.analysis.batch.run_batch`; ``--workers 2`` runs
-the jobs in a pool of processes (the same door a Dask executor would use).
+the jobs on a local Dask cluster of two worker processes, ``--scheduler ADDR`` on any Dask cluster.
 
 Run::
 
@@ -45,7 +45,7 @@ from pathlib import Path
 import pandas as pd
 
 from bayes_roadload import config
-from bayes_roadload.analysis.batch import (COVERAGE_LEVELS, FitJob, SimulatedCampaign, coverage_summary, process_pool,
+from bayes_roadload.analysis.batch import (COVERAGE_LEVELS, FitJob, SimulatedCampaign, batch_client, coverage_summary,
                                            run_batch)
 from bayes_roadload.simulate import SimulationSettings, get_case
 
@@ -258,6 +258,8 @@ def main(argv=None) -> None:
     ap.add_argument("--noise", nargs="+", default=["white", "integrated"], choices=["white", "integrated"])
     ap.add_argument("--seed0", type=int, default=1000, help="seed of the first campaign")
     ap.add_argument("--workers", type=int, default=1, help="worker processes (1: sequential in this process)")
+    ap.add_argument("--scheduler", default=None, metavar="ADDR",
+                    help="address of a running Dask scheduler (default: a local cluster of --workers processes)")
     ap.add_argument("--records", type=Path, help="write every fit's record to this CSV")
     ap.add_argument("--markdown", type=Path, help="write the tables into this markdown file")
     ap.add_argument("--diagnose-walk", type=int, metavar="N",
@@ -271,13 +273,8 @@ def main(argv=None) -> None:
     jobs = make_jobs(args)
     t0 = time.perf_counter()
 
-    def progress(rec):
-        status = rec["error"] or ("pass" if rec.get("gate_pass") else f"FAIL {rec.get('gates_failed')}")
-        print(f"[{time.perf_counter() - t0:7.0f} s] {rec['name']}: {rec['time_total_s']:.0f} s, {status}",
-              file=sys.stderr, flush=True)
-
-    with process_pool(args.workers) as executor:
-        records = run_batch(jobs, executor, on_record=progress)
+    with batch_client(args.workers, args.scheduler) as client:
+        records = run_batch(jobs, client)
     wall = time.perf_counter() - t0
     if args.records:
         records.to_csv(args.records, index=False)

@@ -13,7 +13,8 @@
    8.11): pairs needed and the bias the constraint costs.
 
 A section whose CSV exists is not re-run unless named in ``--rerun``.  Every fit goes through
-:func:`bayes_roadload.analysis.batch.run_batch` (``--workers`` processes).  Prints a JSON
+:func:`bayes_roadload.analysis.batch.run_batch` (a local Dask cluster of ``--workers`` processes,
+or ``--scheduler ADDR``).  Prints a JSON
 summary of timings.
 
 Run::
@@ -36,7 +37,7 @@ import pandas as pd
 
 from bayes_roadload import config
 from bayes_roadload.analysis import planning as pl
-from bayes_roadload.analysis.batch import process_pool, run_batch
+from bayes_roadload.analysis.batch import batch_client, run_batch
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "planning.md"
@@ -79,6 +80,8 @@ def _fmt(x, digits=3):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--scheduler", default=None, metavar="ADDR",
+                    help="address of a running Dask scheduler (default: a local cluster of --workers processes)")
     ap.add_argument("--rerun", nargs="*", default=[], choices=RERUN,
                     help="recompute these sections (nuts_laplace: only the Laplace arm of the NUTS check)")
     ap.add_argument("--only", nargs="*", default=list(SECTIONS), choices=SECTIONS)
@@ -87,7 +90,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     timings = {}
     frames = {}
-    with process_pool(args.workers) as pool:
+    with batch_client(args.workers, args.scheduler) as pool:
         if "thesis" in args.only:
             t0 = time.perf_counter()
             frames["thesis"] = _cached("thesis_replay", "thesis" in args.rerun, pl.thesis_replay_table)

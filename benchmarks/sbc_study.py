@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from bayes_roadload.analysis.batch import process_pool, run_batch
+from bayes_roadload.analysis.batch import batch_client, run_batch
 from bayes_roadload.analysis.sbc import SBC_SAMPLER, sbc_jobs, sbc_markdown, sbc_tests
 
 RECORDS = Path(__file__).resolve().parents[1] / "docs" / "validation" / "sbc_records.csv"
@@ -40,6 +40,8 @@ def main(argv=None) -> int:
     ap.add_argument("--warmup", type=int, default=SBC_SAMPLER.num_warmup)
     ap.add_argument("--draws", type=int, default=SBC_SAMPLER.num_samples)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--scheduler", default=None, metavar="ADDR",
+                    help="address of a running Dask scheduler (default: a local cluster of --workers processes)")
     ap.add_argument("--seed0", type=int, default=0)
     ap.add_argument("--records", type=Path, default=RECORDS)
     args = ap.parse_args(argv)
@@ -62,11 +64,9 @@ def main(argv=None) -> int:
     def progress(rec):
         done.append(rec)
         pd.DataFrame.from_records(done).to_csv(partial, index=False)  # survives an interrupted study
-        print(f"{rec['name']}: {rec.get('error') or 'ok'} gates={'pass' if rec.get('gate_pass') else 'FAIL'} "
-              f"{rec['time_total_s']:.0f} s", file=sys.stderr, flush=True)
 
-    with process_pool(args.workers) as executor:
-        records = run_batch(jobs, executor, on_record=progress)
+    with batch_client(args.workers, args.scheduler) as client:
+        records = run_batch(jobs, client, on_record=progress)
     wall = time.perf_counter() - t0
     records.to_csv(args.records, index=False)
     partial.unlink(missing_ok=True)

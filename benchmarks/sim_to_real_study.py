@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bayes_roadload import config  # noqa: E402
-from bayes_roadload.analysis.batch import process_pool, run_batch  # noqa: E402
+from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
 from bayes_roadload.analysis.diagnose import PROOF_DESIGNS, proof_design, withheld_effect_jobs  # noqa: E402
 from bayes_roadload.analysis.effects import EFFECT_NAMES  # noqa: E402
 from bayes_roadload.analysis.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
@@ -276,6 +276,8 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", type=int, default=3, help="pairs per campaign (standard design)")
     ap.add_argument("--effects", nargs="+", default=list(EFFECT_NAMES))
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--scheduler", default=None, metavar="ADDR",
+                    help="address of a running Dask scheduler (default: a local cluster of --workers processes)")
     ap.add_argument("--names", nargs="+", default=None,
                     help="re-diagnose only these campaigns (e.g. yaw_calibration-s3 null-s1004) and replace their "
                          "rows in the design's records")
@@ -305,8 +307,8 @@ def main(argv=None) -> int:
             print(f"[{time.perf_counter() - t0:7.0f} s] {rec['name']}: top {rec.get('top')} "
                   f"supported {rec.get('supported')} error {rec.get('error')}", flush=True)
 
-        with process_pool(args.workers) as pool:
-            run_batch(jobs, pool, on_record=keep)
+        with batch_client(args.workers, args.scheduler) as client:
+            run_batch(jobs, client, on_record=keep)
     if args.replay:
         t0 = time.perf_counter()
         rep = replay(pairs=args.replay, seed=0)

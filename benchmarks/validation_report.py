@@ -11,7 +11,7 @@
 Every study's table is saved as CSV in ``docs/validation/`` (the notebook
 ``notebooks/02_validation.py`` plots them); a study whose CSV exists is not re-run unless named
 in ``--rerun``.  Every fit goes through :func:`bayes_roadload.analysis.batch.run_batch`
-(``--workers`` processes).
+(a local Dask cluster of ``--workers`` processes, or ``--scheduler ADDR``).
 
 Run::
 
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from bayes_roadload.analysis.batch import process_pool, run_batch
+from bayes_roadload.analysis.batch import batch_client, run_batch
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "validation.md"
@@ -71,7 +71,7 @@ def pooling_section(args, executor) -> str:
     def compute():
         seeds = list(range(args.pooling_seeds))
         records = run_batch(pl.pooling_jobs(seeds, (1, 4)) + pl.yaw_jobs(seeds=tuple(range(2))), executor)
-        per_pair = pl.per_pair_fits(seeds, 1, executor=executor)
+        per_pair = pl.per_pair_fits(seeds, 1, executor=None if executor is None else executor.get_executor())
         return {"pooling_records": records, "pooling_per_pair": per_pair}
 
     frames, _ = _cached(("pooling_records", "pooling_per_pair"), "pooling" in args.rerun, compute)
@@ -128,6 +128,8 @@ def main(argv=None) -> int:
     ap.add_argument("--only", nargs="*", choices=STUDIES, default=list(STUDIES))
     ap.add_argument("--rerun", nargs="*", choices=STUDIES, default=[])
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--scheduler", default=None, metavar="ADDR",
+                    help="address of a running Dask scheduler (default: a local cluster of --workers processes)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--spread-seeds", type=int, default=10)
     ap.add_argument("--pooling-seeds", type=int, default=5)
@@ -136,7 +138,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     parts, timings = [INTRO], {}
-    with process_pool(args.workers) as executor:
+    with batch_client(args.workers, args.scheduler) as executor:
         for key, (title, fn) in SECTIONS.items():
             t0 = time.perf_counter()
             body = fn(args, executor) if key in args.only else "*Not regenerated in this run.*\n"

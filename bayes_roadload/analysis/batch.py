@@ -5,17 +5,29 @@ picklable recipe for a campaign plus the fit settings -- and hands the list to
 :func:`run_batch`.  Every job is run by :func:`run_fit_job`, which returns a small, flat,
 picklable record (no draws): posterior mean, sd and equal-tailed interval ends of every free
 parameter and of the road load at 50 mph, the truth and whether each interval covers it (for
-simulated campaigns), the diagnostic gates and the timings.  :func:`run_batch` maps the jobs
-sequentially by default or through any object with an ``Executor.map``-like method
-(``concurrent.futures.ProcessPoolExecutor``, or a Dask ``Client.get_executor()``), so a study
-moves to a cluster without being touched.  :func:`coverage_summary` turns the records of a
-simulation study into interval coverage with binomial errors.
+simulated campaigns), the diagnostic gates and the timings.  :func:`coverage_summary` turns
+the records of a simulation study into interval coverage with binomial errors.
+
+Where the jobs run is chosen by one object, the Dask client of :func:`batch_client`:
+
+* ``batch_client(workers=N)``: a ``dask.distributed.LocalCluster`` of ``N`` single-threaded
+  worker processes on this machine (``N`` = the usable cores when not given);
+* ``batch_client(scheduler="tcp://host:8786")``: any running Dask cluster (its workers must
+  have ``bayes_roadload`` installed);
+* ``batch_client(workers=1)``: no cluster, the jobs run one after the other in this process
+  (the client is ``None``), as :func:`run_batch` does without a client.
+
+:func:`run_batch` (fit jobs, a DataFrame of records) and :func:`batch_map` (any picklable
+function over any picklable items) submit every item, show one progress bar with the time
+left, and collect the results as they complete; a job that raises becomes a record with
+``error`` set and never stops the others.
 
 Example
 -------
 >>> jobs = [FitJob(f"seed{s}-{noise}", SimulatedCampaign(2, pairs=1, seed=s), model="three_term",
 ...                noise=noise) for s in range(20) for noise in ("white", "integrated")]  # doctest: +SKIP
->>> records = run_batch(jobs)                       # doctest: +SKIP
+>>> with batch_client(workers=2) as client:          # doctest: +SKIP
+...     records = run_batch(jobs, client)
 >>> coverage_summary(records, by=("noise",))          # doctest: +SKIP
 
 .. note::
@@ -26,21 +38,26 @@ Example
    of finished fits stays in JAX's in-process caches (about 85-165 MB per fit), so
    :func:`run_fit_job` clears those caches once the process holds more than
    :data:`CLEAR_JAX_CACHES_ABOVE_MB`.  Jobs are independent: parallelise across processes, not
-   threads (``time_compile_s`` is counted per process).
+   threads (``time_compile_s`` is counted per process); the workers of :func:`batch_client`
+   are single-threaded processes for that reason.
 """
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import math
 import os
+import sys
 import time
 import traceback
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
+from tqdm import tqdm
 
 from .. import config
 from ..data.campaign import Campaign
@@ -398,55 +415,284 @@ def run_job(job: Any) -> dict[str, Any]:
     return job.run()
 
 
-def run_batch(jobs: Iterable[FitJob], executor: Any | None = None, *,
-              on_record: Callable[[dict[str, Any]], None] | None = None) -> pd.DataFrame:
+def usable_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the platform reports it)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except AttributeError:  # not on Linux
+        return max(os.cpu_count() or 1, 1)
+
+
+def worker_environment(workers: int, cores: int | None = None) -> dict[str, str]:
+    """Environment of the worker processes of a local cluster of ``workers`` processes.
+
+    Each worker's XLA runs single-threaded operations (``--xla_cpu_multi_thread_eigen=false
+    intra_op_parallelism_threads=1``) on ``max(cores // workers, 1)`` host devices (the
+    chains of a NUTS fit run in parallel on them), so the workers together use the machine's
+    ``cores`` once rather than each of them all of it.  Other flags of this process's
+    ``XLA_FLAGS`` are kept.
+    """
+    cores = usable_cores() if cores is None else cores
+    keep = [f for f in os.environ.get("XLA_FLAGS", "").split()
+            if not f.startswith(("--xla_force_host_platform_device_count", "--xla_cpu_multi_thread_eigen",
+                                 "intra_op_parallelism_threads"))]
+    flags = keep + [f"--xla_force_host_platform_device_count={max(cores // max(workers, 1), 1)}",
+                    "--xla_cpu_multi_thread_eigen=false", "intra_op_parallelism_threads=1"]
+    return {"XLA_FLAGS": " ".join(flags), "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+            "OPENBLAS_NUM_THREADS": "1"}
+
+
+@contextlib.contextmanager
+def batch_client(workers: int | None = None, scheduler: str | None = None, *,
+                 memory_limit: str | float | None = "auto") -> Iterator[Any]:
+    """Where a batch runs, as a context manager yielding a ``dask.distributed.Client`` (or
+    ``None``) for :func:`run_batch` and :func:`batch_map`.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Without ``scheduler``: the number of single-threaded worker processes of a
+        ``LocalCluster`` started here and closed on exit (default: :func:`usable_cores`);
+        ``workers <= 1`` starts no cluster and yields ``None``: the jobs then run one after
+        the other in this process, with the same results and no worker start-up cost.
+        With ``scheduler``: ignored (the cluster has its own workers).
+    scheduler : str, optional
+        Address of a running Dask scheduler, e.g. ``"tcp://10.0.0.5:8786"``; the client
+        connects to it and disconnects on exit, leaving the cluster running.  Its workers
+        must have ``bayes_roadload`` (the same version) installed.
+    memory_limit : str, float or None
+        Memory limit of each local worker, passed to ``LocalCluster`` (``"auto"``: the
+        machine's memory shared equally between the workers; ``None``: no limit).
+
+    Yields
+    ------
+    distributed.Client or None
+
+    Notes
+    -----
+    Local workers are spawned processes (JAX is multithreaded and does not survive
+    ``fork``) started with the environment of :func:`worker_environment` (set in this
+    process while they start: a spawned process imports this program's main module, and
+    with it JAX, before Dask applies a worker's own environment); they import
+    ``bayes_roadload`` to unpickle their first job, which enables 64-bit floats in JAX.  The
+    dashboard is off and the cluster logs only errors.
+    """
+    from distributed import Client, LocalCluster  # deferred: the command line starts without Dask
+
+    if scheduler is not None:
+        with Client(scheduler) as client:
+            yield client
+        return
+    workers = usable_cores() if workers is None else int(workers)
+    if workers <= 1:
+        yield None
+        return
+    env = worker_environment(workers)
+    with _environ(env):  # XLA reads its flags when the spawned worker first imports JAX
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                               memory_limit=memory_limit, silence_logs=logging.ERROR, env=env)
+    with cluster, Client(cluster) as client:
+        yield client
+
+
+@contextlib.contextmanager
+def _environ(values: Mapping[str, str]) -> Iterator[None]:
+    """This process's environment with ``values`` set, restored on exit (the environment that
+    processes spawned meanwhile inherit)."""
+    saved = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _format_seconds(seconds: float) -> str:
+    return tqdm.format_interval(max(seconds, 0.0))
+
+
+class _Progress:
+    """One progress bar over a batch: tqdm on a terminal, else a plain line per finished item
+    with the elapsed time and the time left (elapsed / done x remaining)."""
+
+    def __init__(self, total: int, enabled: bool, desc: str, stream=None):
+        self.total, self.done, self.enabled, self.desc = total, 0, enabled, desc
+        self.stream = sys.stderr if stream is None else stream
+        self.t0 = time.perf_counter()
+        self.bar = None
+        if enabled and total and getattr(self.stream, "isatty", lambda: False)():
+            self.bar = tqdm(total=total, desc=desc, unit="job", file=self.stream, dynamic_ncols=True)
+
+    def update(self, label: str, failed: bool = False) -> None:
+        self.done += 1
+        if not self.enabled:
+            return
+        if self.bar is not None:
+            self.bar.set_postfix_str(f"last: {label}{' (failed)' if failed else ''}", refresh=False)
+            self.bar.update(1)
+            return
+        elapsed = time.perf_counter() - self.t0
+        left = elapsed / self.done * (self.total - self.done)
+        print(f"{self.desc} {self.done}/{self.total} {label}{': failed' if failed else ''} "
+              f"[{_format_seconds(elapsed)} elapsed, about {_format_seconds(left)} left]",
+              file=self.stream, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _label(item: Any, index: int) -> str:
+    name = getattr(item, "name", None)
+    return str(name) if name is not None else f"#{index}"
+
+
+def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None = None, *,
+              progress: bool = True, desc: str = "batch",
+              on_result: Callable[[Any], None] | None = None,
+              on_error: Callable[[Any, BaseException, str], Any] | None = None) -> list[Any]:
+    """``[fn(item) for item in items]`` through the batch door, in item order.
+
+    Parameters
+    ----------
+    fn : callable
+        A picklable (module-level) function of one item.
+    items : iterable
+        Picklable items (e.g. :class:`FitJob`).
+    client : distributed.Client, object with ``map(fn, iterable)``, or None
+        ``None`` runs the items one after the other in this process; a Dask client (from
+        :func:`batch_client`) submits them all and collects the results as they complete;
+        anything else with an ``Executor.map``-like method (a
+        ``concurrent.futures.ProcessPoolExecutor``, ``Client.get_executor()``) maps them.
+    progress : bool
+        Show one progress bar with the time left (a line per finished item on stderr when it
+        is not a terminal).
+    desc : str
+        Label of the progress bar.
+    on_result : callable, optional
+        Called with every result as it arrives (partial results, checkpoints).
+    on_error : callable, optional
+        ``on_error(item, exception, traceback_text)`` returns the result that stands for a
+        failed item, and the batch goes on.  Without it the first failure is raised once the
+        items already submitted have finished (Dask) or at once (in this process, executor).
+
+    Returns
+    -------
+    list
+        The results, in the order of ``items``.
+    """
+    items = list(items)
+    bar = _Progress(len(items), progress, desc)
+    results: list[Any] = [None] * len(items)
+    first_error: list[BaseException] = []
+
+    def settle(i: int, result: Any = None, exc: BaseException | None = None, tb: str = "") -> None:
+        if exc is not None:
+            if on_error is None:
+                first_error.append(exc)
+                bar.update(_label(items[i], i), failed=True)
+                return
+            result = on_error(items[i], exc, tb)
+        results[i] = result
+        failed = exc is not None or (isinstance(result, Mapping) and result.get("error") is not None)
+        bar.update(_label(items[i], i), failed=failed)
+        if on_result is not None:
+            on_result(result)
+
+    try:
+        if _is_dask_client(client):
+            from distributed import as_completed
+
+            futures = client.map(fn, items, pure=False)
+            index = {f.key: i for i, f in enumerate(futures)}
+            for future in as_completed(futures):
+                i = index[future.key]
+                if future.status == "finished":
+                    settle(i, future.result())
+                else:  # the job raised, its worker died, or it was cancelled
+                    try:
+                        exc, tb = future.exception(), future.traceback()
+                    except Exception as lost:  # noqa: BLE001 - a cancelled future has no exception to give
+                        exc, tb = lost, None
+                    text = "".join(traceback.format_tb(tb)) if tb is not None else ""
+                    settle(i, exc=exc, tb=f"{text}{type(exc).__name__}: {exc}")
+                future.release()
+        elif client is None:
+            for i, item in enumerate(items):
+                try:
+                    result = fn(item)
+                except Exception as exc:  # noqa: BLE001 - recorded by on_error, or re-raised below
+                    if on_error is None:
+                        raise
+                    settle(i, exc=exc, tb=traceback.format_exc(limit=8))
+                else:
+                    settle(i, result)
+        else:
+            for i, result in enumerate(client.map(fn, items)):
+                settle(i, result)
+    finally:
+        bar.close()
+    if first_error:
+        raise first_error[0]
+    return results
+
+
+def _is_dask_client(client: Any) -> bool:
+    """Whether ``client`` is a ``distributed.Client`` (without importing Dask for None or an
+    executor)."""
+    if client is None or "distributed" not in sys.modules:
+        return False
+    from distributed import Client
+
+    return isinstance(client, Client)
+
+
+def _error_record(job: Any, exc: BaseException, tb: str) -> dict[str, Any]:
+    """The record of a job whose run raised (or whose worker died)."""
+    rec = _job_fields(job) if isinstance(job, FitJob) else {"name": getattr(job, "name", None)}
+    rec.update({"error": f"{type(exc).__name__}: {exc}", "traceback": tb[-4000:]})
+    return rec
+
+
+def run_batch(jobs: Iterable[FitJob], client: Any | None = None, *, progress: bool = True,
+              on_record: Callable[[dict[str, Any]], None] | None = None,
+              executor: Any | None = None) -> pd.DataFrame:
     """Run many fit jobs and collect their records, one row per job, in job order.
 
     Parameters
     ----------
     jobs : iterable of FitJob, or of other jobs with a ``run()`` method (:func:`run_job`)
-    executor : object with ``map(fn, iterable)``, optional
-        ``None`` runs the jobs one after the other in this process.  Anything with an
-        ``Executor.map``-like method is used as is: ``concurrent.futures.ProcessPoolExecutor``
-        (prefer the ``"spawn"`` or ``"forkserver"`` context: JAX is multithreaded and does not
-        survive ``fork``), a Dask ``Client.get_executor()``.  Jobs and records must then
+    client : distributed.Client, object with ``map(fn, iterable)``, or None
+        Where the jobs run (:func:`batch_map`): ``None`` one after the other in this process,
+        a Dask client of :func:`batch_client` on its workers.  Jobs and records must then
         pickle; :class:`FitJob` with a :class:`SimulatedCampaign` does.
+    progress : bool
+        One progress bar with the time left.
     on_record : callable, optional
         Called with every record as it arrives (progress, partial results).
+    executor : optional
+        Same as ``client`` (the keyword of callers written for ``concurrent.futures``).
 
     Returns
     -------
     pandas.DataFrame
-        The records of :func:`run_fit_job`.  A job that failed has ``error`` set; failures of
-        the executor itself (a worker process killed) propagate.
+        The records of :func:`run_fit_job`.  A job that failed, raised, or whose worker died
+        has ``error`` set (and ``traceback``); the other jobs' records are complete.
     """
-    jobs = list(jobs)
-    mapped = map(run_job, jobs) if executor is None else executor.map(run_job, jobs)
-    records = []
-    for rec in mapped:
-        records.append(rec)
-        if on_record is not None:
-            on_record(rec)
+    if client is not None and executor is not None:
+        raise TypeError("give client or executor, not both")
+    records = batch_map(run_job, jobs, client if client is not None else executor, progress=progress,
+                        desc="fits", on_result=on_record, on_error=_error_record)
     return pd.DataFrame.from_records(records)
 
 
 def successful(records: pd.DataFrame) -> pd.DataFrame:
     """The records of :func:`run_batch` whose job ended without an error."""
     return records[records["error"].isna()] if "error" in records else records
-
-
-def process_pool(workers: int):
-    """An executor for :func:`run_batch` as a context manager: ``workers`` processes started
-    with ``spawn`` (JAX is multithreaded and does not survive ``fork``), or ``None`` -- the jobs
-    run in this process -- for ``workers <= 1``."""
-    if workers <= 1:
-        from contextlib import nullcontext
-
-        return nullcontext(None)
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
 
 
 # --------------------------------------------------------------------------- coverage

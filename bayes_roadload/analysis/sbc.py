@@ -28,7 +28,8 @@ shifts, and the same test must fail.
 Example
 -------
 >>> jobs = sbc_jobs(100) + sbc_jobs(50, control_factor=1.05)        # doctest: +SKIP
->>> records = run_batch(jobs, executor)                                # doctest: +SKIP
+>>> with batch_client(workers=2) as client:                            # doctest: +SKIP
+...     records = run_batch(jobs, client)
 >>> sbc_tests(records)                                                 # doctest: +SKIP
 """
 

@@ -1,7 +1,7 @@
 """Tests of the batch door for many fits (:mod:`bayes_roadload.analysis.batch`).
 
-One real NUTS fit (1 pair, 100 + 100 draws: about 30 s, mostly compilation); everything else
-uses jobs that fail at once or synthetic records.
+One real NUTS fit (1 pair, 100 + 100 draws: about 30 s, mostly compilation) on a 2-worker Dask
+``LocalCluster``; everything else uses jobs that fail at once or synthetic records.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import pandas as pd
 import pytest
 
 from bayes_roadload import config
-from bayes_roadload.analysis.batch import (FitJob, SimulatedCampaign, _interval_fields, coverage_summary,
-                                           run_batch, run_fit_job)
+from bayes_roadload.analysis.batch import (FitJob, SimulatedCampaign, _interval_fields, batch_client, batch_map,
+                                           coverage_summary, run_batch, run_fit_job, worker_environment)
 
 from ..conftest import clean_case
 
@@ -42,17 +42,78 @@ def _good_job():
                   noise="white", sampler=TINY_SAMPLER, tags={"arm": "a"})
 
 
+class RaisingJob:
+    """A job whose ``run()`` raises (a job type that breaks the no-raise rule)."""
+
+    name = "raising"
+
+    def run(self):
+        raise ZeroDivisionError("bad job")
+
+
+def _worker_facts(_):
+    import os
+
+    import jax
+    import jax.numpy as jnp
+
+    return {"pid": os.getpid(), "dtype": jnp.zeros(1).dtype.name, "devices": jax.local_device_count()}
+
+
 @pytest.fixture(scope="module")
-def batch():
+def client():
+    with batch_client(workers=2) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def batch(client):
+    seen = []
+    jobs = [_good_job(), FitJob("broken", _broken_campaign, model="three_term", sampler=TINY_SAMPLER), RaisingJob()]
+    return run_batch(jobs, client, on_record=seen.append), seen
+
+
+def test_cluster_workers(client):
+    info = client.scheduler_info()["workers"]
+    assert len(info) == 2 and all(w["nthreads"] == 1 for w in info.values())
+    facts = batch_map(_worker_facts, range(4), client, progress=False)
+    # every worker computes in 64-bit and has its share of the cores as XLA host devices
+    share = int(worker_environment(2)["XLA_FLAGS"].split("device_count=")[1].split()[0])
+    assert all(f["dtype"] == "float64" and f["devices"] == share for f in facts)
+    assert all(f["pid"] != __import__("os").getpid() for f in facts)
+
+
+def test_order_kept_and_every_record_seen(batch):
+    df, seen = batch
+    assert list(df["name"]) == ["good", "broken", "raising"]
+    assert sorted(r["name"] for r in seen) == ["broken", "good", "raising"]
+
+
+def test_raising_job_is_recorded(batch):
+    df, _ = batch
+    raising = df.iloc[2]
+    assert raising["error"] == "ZeroDivisionError: bad job"
+    assert "bad job" in raising["traceback"]
+
+
+def test_executor_map_is_used():
     executor = MapOnly()
-    jobs = [_good_job(), FitJob("broken", _broken_campaign, model="three_term", sampler=TINY_SAMPLER)]
-    return run_batch(jobs, executor=executor), executor
+    jobs = [FitJob(f"broken{i}", _broken_campaign) for i in range(3)]
+    df = run_batch(jobs, executor=executor)
+    assert executor.calls == 1 and list(df["name"]) == ["broken0", "broken1", "broken2"]
+    with pytest.raises(TypeError):
+        run_batch(jobs, executor, executor=executor)
 
 
-def test_executor_is_used_and_order_kept(batch):
-    df, executor = batch
-    assert executor.calls == 1
-    assert list(df["name"]) == ["good", "broken"]
+def test_batch_map_errors_in_process(capsys):
+    assert batch_map(abs, [-1, 2], progress=False) == [1, 2]
+    with pytest.raises(TypeError):
+        batch_map(abs, ["x"], progress=False)
+    out = batch_map(abs, [-3, "x", 4], on_error=lambda item, exc, tb: type(exc).__name__)
+    assert out == [3, "TypeError", 4]
+    # not a terminal: one line per item with the count and the time left
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 3 and lines[1].startswith("batch 2/3 #1: failed") and "left]" in lines[2]
 
 
 def test_record_keys_and_values(batch):
@@ -126,13 +187,16 @@ def test_coverage_summary_counts():
     assert row["z_sd"] == pytest.approx(np.std(np.linspace(-1, 1, 20), ddof=1))
 
 
-def test_process_pool():
-    from concurrent.futures import ProcessPoolExecutor
+def test_one_worker_runs_in_process():
+    with batch_client(workers=1) as c:
+        assert c is None  # run_batch then runs the jobs in this process
 
-    from bayes_roadload.analysis.batch import process_pool
 
-    with process_pool(1) as executor:
-        assert executor is None  # run_batch then maps in this process
-    pool = process_pool(2)
-    assert isinstance(pool, ProcessPoolExecutor) and pool._mp_context.get_start_method() == "spawn"
-    pool.shutdown()
+def test_worker_environment_shares_cores(monkeypatch):
+    monkeypatch.setenv("XLA_FLAGS", "--xla_dump_to=/tmp/x --xla_force_host_platform_device_count=8")
+    env = worker_environment(3, cores=8)
+    flags = env["XLA_FLAGS"].split()
+    assert "--xla_dump_to=/tmp/x" in flags  # other flags kept
+    assert [f for f in flags if "device_count" in f] == ["--xla_force_host_platform_device_count=2"]
+    assert "intra_op_parallelism_threads=1" in flags and env["OMP_NUM_THREADS"] == "1"
+    assert "device_count=1" in worker_environment(4, cores=2)["XLA_FLAGS"]
