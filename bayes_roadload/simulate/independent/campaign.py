@@ -270,6 +270,7 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
         clock += float(trace.time_s[-1]) + float(rng.uniform(120.0, 400.0))   # turn-round
 
     runs = pd.concat(frames, ignore_index=True)
+    survey = track.survey(10.0)
     tunnel = {"KD": veh.kd_per_rad2}
     if "lift" in chosen:
         tunnel.update(CL0=veh.cl0, KL=veh.kl_per_rad2)
@@ -301,7 +302,7 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
                  "turbulence_sigma_mps": field.turbulence.sigma_mps,
                  "turbulence_length_scale_m": field.turbulence.length_scale_m},
         "track": {"length_m": length, "mean_grade": mean_grade, "rms_undulation_grade": undulation,
-                  "stations_m": track.stations_m[0::10], "elevation_m": track.elevation_m[0::10]},
+                  "survey_stations_m": survey[0], "survey_elevation_m": survey[1]},
         "runs": run_meta,
     }
     truth.update(case="independent", model="independent simulator", per_run=per_run, meta=_json_safe(meta))

@@ -192,7 +192,7 @@ def simulate_run(vehicle: TrueVehicle, cond: RunConditions, sample_times_s: np.n
         vr, psi = _relative_air(v, d, wx, wy)
         q_area = 0.5 * rho * vr**2 * area
         lift = q_area * (veh.cl0 + veh.kl_per_rad2 * psi**2)
-        grade = float(track.grade(x)) * d if track is not None else 0.0
+        grade = track.grade_at(x) * d if track is not None else 0.0
         cos_t, sin_t = 1.0 / np.sqrt(1.0 + grade**2), grade / np.sqrt(1.0 + grade**2)
         load = m * g * cos_t - lift
         rr = (veh.rr_c0 * cond.tyre_factor + veh.rr_c1_s_per_m * v + veh.rr_c2_s2_per_m2 * v**2)

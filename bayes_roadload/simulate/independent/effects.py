@@ -102,16 +102,17 @@ EFFECTS: dict[str, Effect] = {
 """Every injectable effect by name."""
 
 TYPE_B: dict[str, str] = {
-    "speed_scale": "SAE J2263 vehicle speed +-0.2 km/h, as a scale error at 115 km/h (+-0.17 %)",
-    "airspeed_factor": "SAE J2263 relative wind +-1 km/h, as a factor error at 108 km/h (+-0.93 %)",
+    "speed_scale_rel": "SAE J2263 vehicle speed +-0.2 km/h, as a scale error at 115 km/h (+-0.17 %)",
+    "airspeed_factor_rel": "SAE J2263 relative wind +-1 km/h, as a factor error at 108 km/h (+-0.93 %)",
     "yaw_offset_rad": "SAE J2263 yaw +-3 deg: offset +-1 deg ...",
-    "yaw_factor": "... and factor error +-10 % (2.5 deg at 15 deg yaw)",
+    "yaw_factor_rel": "... and factor error +-10 % (2.5 deg at 15 deg yaw)",
     "mass_kg": "SAE J1263 vehicle mass +-5 kg per axle",
-    "rotating_inertia_kgm2": "+-10 % of the rotating inertia (J2263's 1.03 M default spans +-1-1.5 % of M on M_e)",
-    "rolling_radius_m": "+-1 % (dynamic rolling radius with pressure, load, speed, wear)",
-    "temperature_k": "SAE J1263 temperature +-1 C",
-    "pressure_pa": "SAE J1263 atmospheric pressure +-0.7 kPa",
+    "rotating_inertia_rel": "+-10 % of the rotating inertia (J2263's 1.03 M default spans +-1-1.5 % of M on M_e)",
+    "rolling_radius_rel": "+-1 % (dynamic rolling radius with pressure, load, speed, wear)",
+    "temperature_bias_k": "SAE J1263 temperature +-1 C",
+    "pressure_bias_pa": "SAE J1263 atmospheric pressure +-0.7 kPa",
     "track_mean_grade": "40 CFR 1066.310: grade up to 0.02 % may be left out of the analysis",
-    "driveline_scale": "wheel-torque transducer class 0.5-1 %: +-1 %",
+    "driveline_scale_rel": "wheel-torque transducer class 0.5-1 %: +-1 %",
 }
-"""The Type B (declared-value and instrument) errors and the accuracy each is drawn inside."""
+"""The Type B (declared-value and instrument) errors, named as in ``truth.json``
+``meta.type_b_errors``, and the accuracy each is drawn inside (uniformly)."""
