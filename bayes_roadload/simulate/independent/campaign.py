@@ -52,7 +52,7 @@ def apply_effects(vehicle: TrueVehicle, effects: frozenset[str]) -> TrueVehicle:
     if "tyre_temperature_law" not in effects:
         off.update(tyre_temp_coeff_per_k=ref.ANALYSIS_TYRE_TEMPERATURE_COEFF_PER_K, tyre_temperature_law="linear")
     if "tyre_warmup" not in effects:
-        off.update(tyre_rise_k_per_mps=0.0, tyre_initial_excess_k=0.0)
+        off.update(tyre_rise_k_per_mps=0.0)
     if "driveline" not in effects:
         off.update(driveline_a_n=0.0, driveline_b_nspm=0.0, driveline_c_ns2pm2=0.0)
     return dataclasses.replace(vehicle, **off)
@@ -172,8 +172,6 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     if n_pairs < 1:
         raise ValueError("pairs must be at least 1")
     base = random_vehicle(rng, category) if vehicle is None else vehicle
-    if "tyre_warmup" in chosen:
-        base = dataclasses.replace(base, tyre_initial_excess_k=0.0)
     veh = apply_effects(base, chosen)
     rate = float(rng.choice(SAMPLE_RATES_HZ)) if sample_rate_hz is None else float(sample_rate_hz)
 

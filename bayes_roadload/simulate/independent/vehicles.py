@@ -178,7 +178,6 @@ class TrueVehicle:
     tyre_temperature_law: str          # "linear" (the GTR 15 form) or "exponential"
     tyre_tau_s: float
     tyre_rise_k_per_mps: float
-    tyre_initial_excess_k: float
     driveline_a_n: float
     driveline_b_nspm: float
     driveline_c_ns2pm2: float
@@ -225,7 +224,6 @@ def random_vehicle(rng: np.random.Generator, category: str | None = None) -> Tru
         rr_c0=r["rr_c0"], rr_c1_s_per_m=r["rr_c1_s_per_m"], rr_c2_s2_per_m2=rr_c2,
         tyre_temp_coeff_per_k=c["tyre_temp_coeff_per_k"], tyre_temperature_law="exponential",
         tyre_tau_s=c["tyre_tau_s"], tyre_rise_k_per_mps=c["tyre_rise_k_per_mps"],
-        tyre_initial_excess_k=0.0,
         driveline_a_n=r["driveline_a_n"], driveline_b_nspm=r["driveline_b_nspm"],
         driveline_c_ns2pm2=r["driveline_c_ns2pm2"],
     )
