@@ -32,6 +32,10 @@ SAMPLE_RATES_HZ = (1.0, 2.0, 4.0, 5.0, 10.0, 20.0)
 AXLES_OF = {"small_car": 2, "mid_car": 2, "suv_van": 2, "light_truck": 2, "heavy_truck": 5}
 MAX_MEAN_WIND_MPS = 16.0 / 3.6   # SAE J1263: no test with average wind above 16 km/h ...
 MAX_CROSS_WIND_MPS = 8.0 / 3.6   # ... or cross wind above 8 km/h
+YAW_LOG_LIMIT_RAD = math.radians(60.0)
+"""A run's record ends before the first sample whose yaw (true or logged) exceeds this: near the
+stop a tail wind gust can turn the relative air beyond any vane calibration (and beyond the
+contract's +-90 deg)."""
 
 
 def apply_effects(vehicle: TrueVehicle, effects: frozenset[str]) -> TrueVehicle:
@@ -257,12 +261,20 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
             row["position_m"], row["distance_m"] = trace.position_m, trace.distance_m
         if "driveline" in channels and has_driveline:
             row["driveline_force_n"] = sens.read_driveline(inst, trace.driveline_force_n, rng)
-        frames.append(pd.DataFrame(row))
+        frame = pd.DataFrame(row)
+        beyond = np.abs(trace.yaw_rad) > YAW_LOG_LIMIT_RAD
+        if "yaw_rad" in frame:
+            beyond |= np.abs(frame["yaw_rad"].to_numpy()) > YAW_LOG_LIMIT_RAD
+        kept = int(np.argmax(beyond)) if beyond.any() else n
+        if kept < 10:
+            raise RuntimeError(f"run {rid}: the relative air leaves +-60 deg yaw within 10 samples")
+        frames.append(frame.iloc[:kept])
         per_run[str(rid)] = {
             "AD": truth["AD"] + (cond.tyre_factor - 1.0) * veh.rr_c0 * gravity / ref.ANALYSIS_GRAVITY_MPS2,
             "BD": truth["BD"], "CD0": veh.cd0 * cond.cd_factor, "KD": veh.kd_per_rad2}
         run_meta.append({**dataclasses.asdict(cond), "wind_speed_mps": speed, "wind_direction_rad": heading,
-                         "samples": n, "duration_s": float(trace.time_s[-1]),
+                         "samples": kept, "duration_s": float(trace.time_s[kept - 1]),
+                         "truncated": kept < n,
                          "air_density_kgpm3": trace.air_density_kgpm3,
                          "mean_abs_yaw_rad": float(np.mean(np.abs(trace.yaw_rad)))})
         clock += float(trace.time_s[-1]) + float(rng.uniform(120.0, 400.0))   # turn-round
