@@ -58,7 +58,7 @@ DERIVED_PREFIXES = ("F50_", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
 """Summary rows that are functions of the free parameters (not sampled; no trace plot)."""
 
 PAIR_GROUPS = (("AD", "BD", "CD0"), ("CD0", "KD"), ("At", "Bt", "Ct"), ("Au", "Bu"))
-"""Coefficient groups drawn as pair plots, each when all its parameters are in the posterior."""
+"""Coefficient groups drawn as pair plots, each over its members in the posterior (two or more)."""
 
 NOISE_FREE_PREDICTION = {"speed_mps": "speed_integrated_mps"}
 """Observed quantity -> its noise-free posterior prediction (the centre of the residuals)."""
@@ -261,11 +261,16 @@ def trace_figures(fd: FitDirectory) -> list[Figure]:
 
 
 def pair_figures(fd: FitDirectory) -> list[Figure]:
-    """Pair plots of the coefficient groups present in the posterior."""
-    out = []
-    for group in PAIR_GROUPS:
-        if not fd.posterior_has(*group) or any(np.ptp(fd.idata.posterior[g].values) == 0 for g in group):
+    """Pair plots of the coefficient groups of :data:`PAIR_GROUPS`, each over the members that the
+    posterior samples (at least two)."""
+    out, drawn = [], []
+    post = fd.idata.posterior
+    for full in PAIR_GROUPS:
+        group = tuple(g for g in full if g in post and set(post[g].dims) == {"chain", "draw"}
+                      and np.ptp(post[g].values) > 0)
+        if len(group) < 2 or any(set(group) <= d for d in drawn):
             continue
+        drawn.append(set(group))
         axes = az.plot_pair(fd.idata, var_names=list(group), kind="scatter", marginals=True, show=False,
                             scatter_kwargs={"alpha": 0.3, "s": 4},
                             figsize=(2.6 * len(group), 2.6 * len(group)))
@@ -392,7 +397,7 @@ def road_load_figure(fd: FitDirectory) -> tuple[Figure | None, pd.DataFrame | No
             else:
                 a.plot(speeds, c - ref, color="black", lw=1.2, ls="--", label=label)
         groups += label.startswith("least squares per group")
-    ax.set_ylabel("road load F [N]")
+    ax.set_ylabel("F(v) [N]")
     ax.legend(fontsize=8)
     if centre is not None:
         dx.set_ylabel("F - posterior median [N]")
