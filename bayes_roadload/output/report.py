@@ -32,6 +32,7 @@ import io
 import json
 import math
 import os
+import warnings
 from pathlib import Path
 
 import matplotlib
@@ -615,6 +616,9 @@ def build_sections(fd: FitDirectory) -> list[Section]:
     fig, table = road_load_figure(fd)
     if fig is not None:
         blocks = [fig] + ([Table(table.map(fmt))] if table is not None else [])
+        if table is not None and "classical_N" not in table:
+            blocks.append(Text("No classical result in this fit directory (classical.csv, per_group.csv): "
+                               "`bayes-roadload fit --method lsq` gives the least-squares one."))
         sections.append(Section("road-load", "Road load F(v)", blocks))
     if fd.idata is not None:
         figs = residual_figures(fd)
@@ -717,7 +721,9 @@ def render_report(fit_dir: str | os.PathLike, *, campaign: str | os.PathLike | N
     The paths of ``report.html`` and ``report.md``.
     """
     fd = read_fit_directory(fit_dir, campaign)
-    sections = build_sections(fd)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", matplotlib.MatplotlibDeprecationWarning)  # raised inside ArviZ's plots
+        sections = build_sections(fd)
     model = fd.fit.get("model") or (fd.diagnostics or {}).get("model") or "?"
     title = f"bayes-roadload report: {model}, {fd.kind}, {fd.method}"
     files = fd.path / FILES_DIR

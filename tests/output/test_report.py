@@ -11,7 +11,9 @@ import warnings
 from html.parser import HTMLParser
 from pathlib import Path
 
+import arviz as az
 import matplotlib.image
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -225,6 +227,45 @@ def test_passing_gates_show_no_alert(fits, tmp_path):
 def test_refuses_a_directory_without_summary(tmp_path):
     with pytest.raises(FileNotFoundError, match="summary.csv"):
         render_report(tmp_path)
+
+
+def _summary_of(draws: dict) -> pd.DataFrame:
+    rows = []
+    for k, x in draws.items():
+        q = np.percentile(x, [2.5, 50.0, 97.5])
+        rows.append({"parameter": k, "mean": x.mean(), "sd": x.std(ddof=1), "q2.5": q[0], "q50": q[1],
+                     "q97.5": q[2], "r_hat": 1.0, "ess_bulk": 400.0, "ess_tail": 400.0})
+    return pd.DataFrame(rows)
+
+
+def test_channel_fit_without_predictive(tmp_path):
+    """A fit directory as a spin-down writes it (Au, Bu draws, classical.csv with a ``total`` row,
+    no posterior predictive): the curve Au + Bu v (v in m/s) with its bands beside the classical
+    line, a pair plot Au-Bu, and a note instead of residuals."""
+    rng = np.random.default_rng(5)
+    draws = {"Au": rng.normal(3.2, 0.1, (2, 300)), "Bu": rng.normal(0.23, 0.01, (2, 300))}
+    az.from_dict(posterior=draws).to_netcdf(str(tmp_path / "posterior.nc"))
+    _summary_of({k: v.ravel() for k, v in draws.items()}).to_csv(tmp_path / "summary.csv", index=False)
+    (tmp_path / "diagnostics.json").write_text(json.dumps(
+        {"kind": "spindown", "model": "undriven_spindown", "chains": 2, "draws_per_chain": 300,
+         "gates": {"divergences": True}, "failed": [], "pass": True, "divergences": 0,
+         "thresholds": {"max_divergences": 0}}))
+    classical = pd.DataFrame({"wheel": ["front_left", "total"], "Au": [1.6, 3.1], "Au_se": [0.1, 0.1],
+                              "Bu": [0.12, 0.24], "Bu_se": [0.01, 0.01]})
+    classical.to_csv(tmp_path / "classical.csv", index=False)
+    page = parse(render_report(tmp_path)[0])
+    assert set(page.sections) == {"header", "gates", "posterior", "trace", "pairs", "road-load", "residuals",
+                                  "table-classical"}
+    assert (tmp_path / FILES_DIR / "pair_Au_Bu.png").is_file()
+    assert "no posterior predictive" in (tmp_path / "report.md").read_text()
+    (table,) = page.sections["road-load"]
+    assert table[0] == ["speed_kph", "posterior_q2.5_N", "posterior_q50_N", "posterior_q97.5_N", "classical_N"]
+    for row in table[1:]:
+        w = float(row[0]) / 3.6  # km/h -> m/s
+        curve = draws["Au"].ravel() + draws["Bu"].ravel() * w
+        for cell, q in zip(row[1:4], np.percentile(curve, [2.5, 50.0, 97.5])):
+            assert float(cell) == pytest.approx(q, rel=PRINT_RTOL)
+        assert float(row[4]) == pytest.approx(3.1 + 0.24 * w, rel=PRINT_RTOL)
 
 
 # ----------------------------------------------------------------------------- headless browser
