@@ -578,8 +578,8 @@ def validity_section(fd: FitDirectory) -> Section | None:
     s = Section("validity", "Validity flags")
     flag = tuple(v["rejected"].astype(bool)) if "rejected" in v else None
     if flag is not None:
-        s.blocks.append(Text(f"{sum(flag)} of {len(v)} runs rejected.", alert=False))
-    s.blocks.append(Table(v.map(fmt) if hasattr(v, "map") else v, flag))
+        s.blocks.append(Text(f"{sum(flag)} of {len(v)} runs rejected (highlighted)."))
+    s.blocks.append(Table(v.map(fmt), flag))
     return s
 
 
