@@ -63,6 +63,16 @@ class Standard:
     min_runs_per_direction: int = 1
     min_pairs: int = 0
     precision_pct: float | None = None
+    air_density_kgpm3: float | None = None
+    cda_yaw_deg: float | None = None
+
+    @property
+    def density_kgpm3(self) -> float:
+        """The aerodynamic reference density: the standard's own figure when it states one,
+        else p / (R T) at its reference conditions."""
+        if self.air_density_kgpm3 is not None:
+            return self.air_density_kgpm3
+        return air_density(self.temperature_k, self.pressure_pa)
 
 
 STANDARDS: dict[str, Standard] = {
@@ -74,10 +84,13 @@ STANDARDS: dict[str, Standard] = {
                       max_mean_wind_mps=16.0 * config.KPH_TO_MPS, max_mean_crosswind_mps=8.0 * config.KPH_TO_MPS,
                       ambient_range_k=(278.15, 308.15), min_runs_per_direction=1),
     "cfr1066": Standard("cfr1066", "40 CFR 1066.310 / 1037.528 (heavy vehicles, CdA)", 293.15, 98_210.0, "US",
-                        "cda", mass_factor=J2263_MASS_FACTOR, min_runs_per_direction=8),
+                        "cda", mass_factor=J2263_MASS_FACTOR, min_runs_per_direction=8,
+                        air_density_kgpm3=1.17, cda_yaw_deg=4.5),
 }
 """Per standard.  J1263's reference conditions are taken equal to J2263's (not verified);
-40 CFR 1066.310 follows J1263 / J2263, hence their conditions and mass convention."""
+40 CFR 1066.310 follows J1263 / J2263 (hence their temperature and mass convention), states a
+reference air density of 1.17 kg/m^3 for its drag coefficient, and 40 CFR 1037.305(a)(4) adjusts
+each run's drag area to +-4.5 deg yaw for the wind-averaged CdA."""
 
 
 def get_standard(name: str | Standard) -> Standard:
@@ -95,11 +108,13 @@ def air_density(temperature_k: float, pressure_pa: float) -> float:
 
 
 def to_conditions(samples: Mapping[str, np.ndarray], temperature_k: float, pressure_pa: float, *,
-                  mass_scale: float = 1.0) -> dict[str, np.ndarray]:
+                  mass_scale: float = 1.0, air_density_kgpm3: float | None = None) -> dict[str, np.ndarray]:
     """F0/F1/F2 draws (reference conditions) at other ambient conditions and effective mass
-    (module docstring); same keys and units."""
+    (module docstring); same keys and units.  ``air_density_kgpm3`` overrides p / (R T) for
+    the aerodynamic term."""
     tyre = 1.0 - config.TYRE_TEMPERATURE_COEFF_PER_K * (temperature_k - config.REFERENCE_TEMPERATURE_K)
-    aero = air_density(temperature_k, pressure_pa) / REFERENCE_AIR_DENSITY_KGPM3
+    rho = air_density(temperature_k, pressure_pa) if air_density_kgpm3 is None else air_density_kgpm3
+    aero = rho / REFERENCE_AIR_DENSITY_KGPM3
     f0, f1, f2 = (np.asarray(samples[k], float).reshape(-1) for k in COEFFICIENTS)
     return {"F0_N": f0 * tyre * mass_scale, "F1_N_per_kph": f1 * tyre * mass_scale,
             "F2_N_per_kph2": f2 * aero * mass_scale}
@@ -151,7 +166,9 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
             raise ValueError(f"{std.name}: the mass convention M_e = {std.mass_factor} x M needs mass_kg "
                              "and the fit's effective_mass_kg (or rotating_inertia_known=True)")
         scale = std.mass_factor * mass_kg / effective_mass_kg
-    c = to_conditions(samples, std.temperature_k, std.pressure_pa, mass_scale=scale)
+    c = to_conditions(samples, std.temperature_k, std.pressure_pa, mass_scale=scale,
+                      air_density_kgpm3=std.density_kgpm3)
+    yaw_deg = std.cda_yaw_deg if yaw_deg is None else yaw_deg
     rows = []
     if std.units == "SI_kph":
         rows += [_row("f0", "N", c["F0_N"]), _row("f1", "N/(km/h)", c["F1_N_per_kph"]),
@@ -160,9 +177,9 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
         a, b, cc = to_us_units(c["F0_N"], c["F1_N_per_kph"], c["F2_N_per_kph2"])
         rows += [_row("A", "lbf", a), _row("B", "lbf/mph", b), _row("C", "lbf/mph^2", cc)]
     if std.result == "cda":
-        rows.append(_row("CdA_zero_yaw", "m^2", drag_area_m2(c["F2_N_per_kph2"],
-                                                            air_density(std.temperature_k, std.pressure_pa))))
+        rows.append(_row("CdA_zero_yaw", "m^2", drag_area_m2(c["F2_N_per_kph2"], std.density_kgpm3)))
         if yaw_deg is not None and frontal_area_m2 is not None and "CD0" in samples and "KD" in samples:
+            # C_D(psi) = CD0 + KD psi^2 (eq. 2.31) is even in psi: the mean over +-psi is its value at psi
             psi = math.radians(yaw_deg)
             cda = frontal_area_m2 * (np.asarray(samples["CD0"], float) + np.asarray(samples["KD"], float) * psi**2)
             rows.append(_row(f"CdA_yaw_{yaw_deg:g}deg", "m^2", cda))

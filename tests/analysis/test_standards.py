@@ -78,6 +78,11 @@ def test_cda_by_hand():
     assert res.loc["CdA_zero_yaw", "mean"] == pytest.approx(2 * 0.03 * 12.96 / RHO_REF, rel=1e-12)
     # CdA(psi) = A (CD0 + KD psi^2) = 2 (0.35 + 0.6 (4.5 pi/180)^2) = 0.707401
     assert res.loc["CdA_yaw_4.5deg", "mean"] == pytest.approx(2 * (0.35 + 0.6 * math.radians(4.5) ** 2), rel=1e-12)
+    # 40 CFR 1066.310's reference density 1.17 kg/m^3 sets C: 0.03 * 1.17 / rho_ref * 1.609344^2 / 4.44822
+    assert res.loc["C", "mean"] == pytest.approx(0.03 * 1.17 / RHO_REF * 1.609344**2 / 4.44822, rel=1e-12)
+    # the standard's yaw (+-4.5 deg wind-averaged) is the default
+    default = standard_result(d, "cfr1066", rotating_inertia_known=True, frontal_area_m2=2.0)
+    assert "CdA_yaw_4.5deg" in set(default["quantity"])
 
 
 def test_unknown_standard_is_refused():
