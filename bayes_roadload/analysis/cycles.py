@@ -115,9 +115,12 @@ def _row(quantity: str, unit: str, x: np.ndarray) -> dict:
 
 
 def variance_shares(coef: np.ndarray, draws: np.ndarray) -> np.ndarray:
-    """``S_k = c_k Cov(f_k, W) / Var(W)`` for the linear functional W = draws @ coef (sum 1)."""
+    """``S_k = c_k Cov(f_k, W) / Var(W)`` for the linear functional W = draws @ coef (sum 1;
+    NaN when W has no spread)."""
     w = draws @ coef
     cov = np.cov(np.column_stack([draws, w]), rowvar=False)
+    if not cov[-1, -1] > 0:  # a posterior without spread: no share to give
+        return np.full(coef.shape, np.nan)
     return coef * cov[:-1, -1] / cov[-1, -1]
 
 
@@ -164,7 +167,8 @@ def predict_speed_trace(samples: Mapping[str, np.ndarray], effective_mass_kg: fl
     Coefficients at other ambient conditions come from
     :func:`~bayes_roadload.analysis.standards.to_conditions`.
 
-    Returns ``time_s, mean_kph, q2.5_kph, q50_kph, q97.5_kph`` (NaN once a draw has stopped).
+    Returns ``time_s, mean_kph, q2.5_kph, q50_kph, q97.5_kph`` over the draws still moving,
+    up to the time the last draw stops.
     """
     f = _draws(samples)
     kph = 1.0 / config.KPH_TO_MPS
@@ -189,9 +193,11 @@ def predict_speed_trace(samples: Mapping[str, np.ndarray], effective_mass_kg: fl
     if power_w == 0.0:
         stopped = np.maximum.accumulate(speed < v_end_kph, axis=0)
         speed = np.where(stopped, np.nan, speed)
-    with warnings.catch_warnings():  # all-NaN rows once every draw has stopped
+    moving = ~np.all(np.isnan(speed), axis=1)
+    speed = speed[moving]  # rows after every draw has stopped are dropped
+    with warnings.catch_warnings():  # rows where some draws have stopped
         warnings.simplefilter("ignore", RuntimeWarning)
-        return pd.DataFrame({"time_s": np.arange(n) * dt_s, "mean_kph": np.nanmean(speed, axis=1),
+        return pd.DataFrame({"time_s": np.arange(n)[moving] * dt_s, "mean_kph": np.nanmean(speed, axis=1),
                              "q2.5_kph": np.nanquantile(speed, 0.025, axis=1),
                              "q50_kph": np.nanquantile(speed, 0.5, axis=1),
                              "q97.5_kph": np.nanquantile(speed, 0.975, axis=1)})

@@ -17,14 +17,19 @@ treated as exact; its own fit error is reported as ``parasitic`` residual sd).
 
 from __future__ import annotations
 
+import json
+import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 
 from .. import config
+from ..data.dyno import DynoCoastdown, load_dyno
 from .cycles import COEFFICIENTS
+from .standards import load_draws
 
 DYNO_TOLERANCE_N = 10.0
 """Tolerance on |measured - target| load at each check speed (N); not verified against GTR 15."""
@@ -148,3 +153,38 @@ def adjust_dyno(target, run_coastdown: Callable[[np.ndarray], pd.DataFrame], ine
     parasitic = meas - current
     return DynoResult(current, parasitic, pd.DataFrame(rows), checks, bool(checks["pass"].all()),
                       carry_posterior(draws, parasitic) if draws is not None else None)
+
+
+def run_dyno(target: str | os.PathLike | Mapping[str, np.ndarray], dyno: str | os.PathLike | DynoCoastdown, *,
+             tolerance_n: float = DYNO_TOLERANCE_N, out_dir: str | os.PathLike | None = None) -> DynoResult:
+    """``bayes-roadload dyno TARGET_FIT_DIR DYNO_COASTDOWN --out DIR``: set coefficients from the
+    target fit's posterior draws and one measured dynamometer coastdown directory
+    (:func:`set_from_coastdown`).  With ``out_dir``: ``dyno_set.csv`` (set coefficients'
+    posterior, parasitic losses), ``dyno_checks.csv`` and ``dyno.json``."""
+    draws = load_draws(target) if isinstance(target, (str, os.PathLike)) else target
+    d = load_dyno(dyno) if isinstance(dyno, (str, os.PathLike)) else dyno
+    res = set_from_coastdown(draws, d.runs, d.set_coefficients, d.inertia_kg, tolerance_n=tolerance_n)
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        res.summary().to_csv(out / "dyno_set.csv", index=False)
+        res.checks.to_csv(out / "dyno_checks.csv", index=False)
+        (out / "dyno.json").write_text(json.dumps({
+            "inertia_kg": d.inertia_kg, "set_used": list(d.set_coefficients),
+            "set_next": [float(x) for x in res.set_coefficients],
+            "parasitic": [float(x) for x in res.parasitic_coefficients],
+            "parasitic_truth": None if d.parasitic_truth is None else list(d.parasitic_truth),
+            "tolerance_n": tolerance_n, "within_tolerance": res.converged}, indent=2) + "\n")
+    return res
+
+
+def format_dyno(res: DynoResult) -> str:
+    """Plain-text set coefficients (mean [2.5 %, 97.5 %]), parasitic losses and the check verdict."""
+    lines = []
+    for _, r in res.summary().iterrows():
+        band = "" if np.isnan(r["sd"]) else f" [{r['q2.5']:.5g}, {r['q97.5']:.5g}]"
+        lines.append(f"  {r['quantity']:<12} {r['mean']:12.5g} {r['unit']:<12}{band}")
+    worst = float(np.abs(res.checks["error_n"]).max())
+    lines.append(f"  measured vs target: worst {worst:.3g} N, tolerance {res.checks['tolerance_n'].iloc[0]:g} N: "
+                 + ("within" if res.converged else "OUTSIDE (run the coastdown again with the new set)"))
+    return "\n".join(lines)

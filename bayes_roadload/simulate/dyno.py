@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
+from ..data.dyno import DynoCoastdown
 
 
 def simulate_dyno_coastdown(set_coefficients: Sequence[float], parasitic_coefficients: Sequence[float],
@@ -51,3 +52,12 @@ def simulate_dyno_coastdown(set_coefficients: Sequence[float], parasitic_coeffic
     if speed_noise_mps > 0:
         speed = speed + np.random.default_rng(seed).normal(0.0, speed_noise_mps, speed.size)
     return pd.DataFrame({"time_s": np.asarray(ts), "speed_mps": speed})
+
+
+def simulate_dyno(set_coefficients: Sequence[float], parasitic_coefficients: Sequence[float], inertia_kg: float,
+                  **kwargs) -> DynoCoastdown:
+    """A dynamometer coastdown directory's content (:class:`~bayes_roadload.data.dyno.DynoCoastdown`)
+    with the true parasitic losses recorded; ``kwargs`` go to :func:`simulate_dyno_coastdown`."""
+    runs = simulate_dyno_coastdown(set_coefficients, parasitic_coefficients, inertia_kg, **kwargs)
+    return DynoCoastdown(runs, float(inertia_kg), tuple(float(x) for x in set_coefficients),
+                         tuple(float(x) for x in parasitic_coefficients))

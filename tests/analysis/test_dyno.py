@@ -4,9 +4,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bayes_roadload.analysis.dyno import (adjust_dyno, measured_load_coefficients, set_from_coastdown,
+from bayes_roadload.analysis.dyno import (adjust_dyno, measured_load_coefficients, run_dyno, set_from_coastdown,
                                           tolerance_checks)
-from bayes_roadload.simulate.dyno import simulate_dyno_coastdown
+from bayes_roadload.data.dyno import save_dyno
+from bayes_roadload.simulate.dyno import simulate_dyno, simulate_dyno_coastdown
 
 PARASITIC = (40.0, 0.3, 0.004)   # N, N/(km/h), N/(km/h)^2
 TARGET = (120.0, 0.6, 0.035)
@@ -85,3 +86,16 @@ def test_tolerance_checks_by_hand():
 def test_coastdown_table_needs_its_columns():
     with pytest.raises(ValueError, match="speed_mps"):
         measured_load_coefficients(pd.DataFrame({"time_s": [0.0, 1.0]}), INERTIA)
+
+
+def test_run_dyno_from_files_recovers_the_recorded_truth(tmp_path):
+    used = (100.0, 0.8, 0.025)
+    save_dyno(simulate_dyno(used, PARASITIC, INERTIA, dt_s=DT), tmp_path / "dyno")
+    draws = {"F0_N": np.full(5, TARGET[0]), "F1_N_per_kph": np.full(5, TARGET[1]),
+             "F2_N_per_kph2": np.full(5, TARGET[2])}
+    res = run_dyno(draws, tmp_path / "dyno", out_dir=tmp_path / "out")
+    speeds = np.arange(20.0, 121.0, 10.0)
+    got = res.parasitic_coefficients
+    err = (got[0] - PARASITIC[0]) + (got[1] - PARASITIC[1]) * speeds + (got[2] - PARASITIC[2]) * speeds**2
+    assert np.abs(err).max() <= _truncation_bound_n(np.add(used, PARASITIC))
+    assert (tmp_path / "out" / "dyno_set.csv").is_file() and (tmp_path / "out" / "dyno.json").is_file()
