@@ -25,6 +25,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
+from scipy.signal import savgol_filter
 
 from .. import config
 from ..data.dyno import DynoCoastdown, load_dyno
@@ -37,18 +38,32 @@ DYNO_CHECK_SPEEDS_KPH = (20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0, 100.0, 
 
 
 def measured_load_coefficients(coastdown: pd.DataFrame, inertia_kg: float, *,
-                               v_min_kph: float = 10.0, v_max_kph: float = 130.0) -> np.ndarray:
+                               v_min_kph: float = 10.0, v_max_kph: float = 130.0,
+                               smoothing_s: float = 0.0) -> np.ndarray:
     """(a N, b N/(km/h), c N/(km/h)^2) of ``F = -M dv/dt`` over a coastdown table
-    ``time_s, speed_mps`` (central differences, least squares on 1, V, V^2 within the range)."""
+    ``time_s, speed_mps``: least squares on 1, V, V^2 within the speed range, the deceleration
+    from central differences, or with ``smoothing_s`` > 0 (uniform sampling) from a cubic
+    Savitzky-Golay derivative over a window of that length (for noisy speed)."""
     for col in ("time_s", "speed_mps"):
         if col not in coastdown:
             raise ValueError(f"dynamometer coastdown: missing column {col} (needs time_s, speed_mps)")
     t = coastdown["time_s"].to_numpy(float)
     v = coastdown["speed_mps"].to_numpy(float)
-    force = -inertia_kg * np.gradient(v, t)
-    vk = v / config.KPH_TO_MPS
+    half = 1
+    if smoothing_s > 0:
+        dt = np.diff(t)
+        if not np.allclose(dt, dt[0], rtol=1e-6):
+            raise ValueError("dynamometer coastdown: smoothing needs uniformly sampled time_s")
+        half = max(2, int(round(smoothing_s / dt[0] / 2)))
+        dvdt = savgol_filter(v, 2 * half + 1, 3, deriv=1, delta=dt[0])
+        vs = savgol_filter(v, 2 * half + 1, 3)
+    else:
+        dvdt, vs = np.gradient(v, t), v
+    force = -inertia_kg * dvdt
+    vk = vs / config.KPH_TO_MPS
     keep = (vk >= v_min_kph) & (vk <= v_max_kph)
-    keep[[0, -1]] = False  # one-sided differences at the ends
+    keep[:half] = False  # edge windows are one-sided
+    keep[-half:] = False
     design = np.column_stack([np.ones(keep.sum()), vk[keep], vk[keep] ** 2])
     return np.linalg.lstsq(design, force[keep], rcond=None)[0]
 

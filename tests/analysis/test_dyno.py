@@ -3,6 +3,7 @@
 import numpy as np
 import pandas as pd
 import pytest
+from scipy.signal import savgol_coeffs
 
 from bayes_roadload.analysis.dyno import (adjust_dyno, measured_load_coefficients, run_dyno, set_from_coastdown,
                                           tolerance_checks)
@@ -99,3 +100,22 @@ def test_run_dyno_from_files_recovers_the_recorded_truth(tmp_path):
     err = (got[0] - PARASITIC[0]) + (got[1] - PARASITIC[1]) * speeds + (got[2] - PARASITIC[2]) * speeds**2
     assert np.abs(err).max() <= _truncation_bound_n(np.add(used, PARASITIC))
     assert (tmp_path / "out" / "dyno_set.csv").is_file() and (tmp_path / "out" / "dyno.json").is_file()
+
+
+def test_smoothed_derivative_recovers_losses_from_a_noisy_coastdown():
+    """Speed noise 0.02 m/s at 10 Hz, 5 s cubic Savitzky-Golay window: the derivative's noise sd is
+    sigma * ||h|| (h the filter's derivative coefficients); a load error at one speed is at most
+    ~ M sd_deriv / sqrt(n / window) (about n / window independent windows), 5 such sds allowed."""
+    total = np.add(TARGET, PARASITIC)
+    cd = simulate_dyno_coastdown((0.0, 0.0, 0.0), total, INERTIA, dt_s=DT, speed_noise_mps=0.02, seed=11)
+    meas = measured_load_coefficients(cd, INERTIA, smoothing_s=5.0)
+    window = 2 * round(5.0 / DT / 2) + 1
+    sd_deriv = 0.02 * np.linalg.norm(savgol_coeffs(window, 3, deriv=1, delta=DT))
+    bound = 5 * INERTIA * sd_deriv / np.sqrt(len(cd) / window)
+    speeds = np.arange(20.0, 121.0, 10.0)
+    err = (meas[0] - total[0]) + (meas[1] - total[1]) * speeds + (meas[2] - total[2]) * speeds**2
+    assert np.abs(err).max() <= bound
+    # and it is a real improvement over central differences on the same noisy trace
+    raw = measured_load_coefficients(cd, INERTIA)
+    err_raw = (raw[0] - total[0]) + (raw[1] - total[1]) * speeds + (raw[2] - total[2]) * speeds**2
+    assert np.abs(err).max() < np.abs(err_raw).max()
