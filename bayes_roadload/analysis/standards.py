@@ -1,0 +1,308 @@
+"""The road-load result in the terms of a test standard, and the standard's checks on a campaign.
+
+One table, :data:`STANDARDS`, says per standard its reference conditions, units, mass
+convention, wind limits, run counts and precision criterion.  The facts and their sources are
+in ``docs/standards.md``; a value marked "not verified" there is a placeholder, not a clause.
+
+From the project's reference road load (F0, F1, F2 at 100 kPa / 293.2 K in N and km/h, see
+:mod:`bayes_roadload.physics.roadload`) to a standard's conditions, draw by draw:
+
+* aerodynamic term (all of f2, still air): ``f2' = f2 rho(T', p') / rho(T_ref, p_ref)``
+  with ``rho = p / (R T)`` (:func:`~bayes_roadload.physics.atmosphere.air_density_kgpm3`);
+* tyre term (f0, f1): ``f' = f [1 - K_T (T' - T_ref)]`` (eq. 2.38, K_T = 0.0086 /K), applied to
+  the whole of f0 and f1 (the driveline and undriven-wheel shares are not split off);
+* mass convention: a coastdown measures ``F = -M_e dv/dt``, so every coefficient scales by
+  ``M_e(standard) / M_e(fit)`` (J2263: ``M_e = 1.03 M`` when the rotating inertia is unknown);
+* units: 1 lbf = 4.44822 N, 1 mph = 1.609344 km/h:
+  ``A = f0 / 4.44822``, ``B = f1 1.609344 / 4.44822``, ``C = f2 1.609344^2 / 4.44822``;
+* drag area: ``CdA = 2 f2 3.6^2 / rho`` (m^2; f2 in N/(km/h)^2).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import pandas as pd
+
+from .. import config
+from ..data.campaign import Campaign
+from ..physics.atmosphere import REFERENCE_AIR_DENSITY_KGPM3
+from .cycles import COEFFICIENTS
+from .regulation import gtr15_precision
+
+LBF_N = 4.44822
+MPH_KPH = 1.609344
+J2263_MASS_FACTOR = 1.03
+
+
+@dataclass(frozen=True)
+class Standard:
+    """A test standard's conventions (SI inside; ``units`` names the reported units).
+
+    ``mass_factor``: M_e = factor x test mass when the rotating inertia is unknown (None: the
+    fit's M_e is kept).  Wind limits in m/s (None: no limit applied).  ``min_runs_per_direction``
+    and ``min_pairs`` are the run counts checked; ``precision_pct`` the GTR 15 statistical
+    precision limit when the standard uses it.
+    """
+
+    name: str
+    title: str
+    temperature_k: float
+    pressure_pa: float
+    units: str  # "SI_kph" (N, km/h) or "US" (lbf, mph)
+    result: str  # "coefficients" or "cda"
+    mass_factor: float | None = None
+    max_mean_wind_mps: float | None = None
+    max_mean_crosswind_mps: float | None = None
+    ambient_range_k: tuple[float, float] | None = None
+    min_runs_per_direction: int = 1
+    min_pairs: int = 0
+    precision_pct: float | None = None
+    air_density_kgpm3: float | None = None
+    cda_yaw_deg: float | None = None
+
+    @property
+    def density_kgpm3(self) -> float:
+        """The aerodynamic reference density: the standard's own figure when it states one,
+        else p / (R T) at its reference conditions."""
+        if self.air_density_kgpm3 is not None:
+            return self.air_density_kgpm3
+        return air_density(self.temperature_k, self.pressure_pa)
+
+
+STANDARDS: dict[str, Standard] = {
+    "gtr15": Standard("gtr15", "UN GTR 15 (WLTP) Annex 4", 293.15, 100_000.0, "SI_kph", "coefficients",
+                      min_pairs=config.MIN_REGULATION_PAIRS, precision_pct=config.GTR_PRECISION_PCT),
+    "j2263": Standard("j2263", "SAE J2263 (on-board anemometry)", 293.15, 98_210.0, "US", "coefficients",
+                      mass_factor=J2263_MASS_FACTOR, min_runs_per_direction=1),
+    "j1263": Standard("j1263", "SAE J1263 (stationary wind station)", 293.15, 98_210.0, "US", "coefficients",
+                      max_mean_wind_mps=16.0 * config.KPH_TO_MPS, max_mean_crosswind_mps=8.0 * config.KPH_TO_MPS,
+                      ambient_range_k=(278.15, 308.15), min_runs_per_direction=1),
+    "cfr1066": Standard("cfr1066", "40 CFR 1066.310 / 1037.528 (heavy vehicles, CdA)", 293.15, 98_210.0, "US",
+                        "cda", mass_factor=J2263_MASS_FACTOR, min_runs_per_direction=8,
+                        air_density_kgpm3=1.17, cda_yaw_deg=4.5),
+}
+"""Per standard.  J1263's reference conditions are taken equal to J2263's (not verified);
+40 CFR 1066.310 follows J1263 / J2263 (hence their temperature and mass convention), states a
+reference air density of 1.17 kg/m^3 for its drag coefficient, and 40 CFR 1037.305(a)(4) adjusts
+each run's drag area to +-4.5 deg yaw for the wind-averaged CdA."""
+
+
+def get_standard(name: str | Standard) -> Standard:
+    if isinstance(name, Standard):
+        return name
+    key = str(name).lower()
+    if key not in STANDARDS:
+        raise ValueError(f"unknown standard {name!r}: choose from {', '.join(STANDARDS)}")
+    return STANDARDS[key]
+
+
+def air_density(temperature_k: float, pressure_pa: float) -> float:
+    """rho = p / (R T), kg/m^3 (same law as physics.atmosphere, for plain floats)."""
+    return pressure_pa / (config.GAS_CONSTANT_AIR_J_PER_KG_K * temperature_k)
+
+
+def to_conditions(samples: Mapping[str, np.ndarray], temperature_k: float, pressure_pa: float, *,
+                  mass_scale: float = 1.0, air_density_kgpm3: float | None = None) -> dict[str, np.ndarray]:
+    """F0/F1/F2 draws (reference conditions) at other ambient conditions and effective mass
+    (module docstring); same keys and units.  ``air_density_kgpm3`` overrides p / (R T) for
+    the aerodynamic term."""
+    tyre = 1.0 - config.TYRE_TEMPERATURE_COEFF_PER_K * (temperature_k - config.REFERENCE_TEMPERATURE_K)
+    rho = air_density(temperature_k, pressure_pa) if air_density_kgpm3 is None else air_density_kgpm3
+    aero = rho / REFERENCE_AIR_DENSITY_KGPM3
+    f0, f1, f2 = (np.asarray(samples[k], float).reshape(-1) for k in COEFFICIENTS)
+    return {"F0_N": f0 * tyre * mass_scale, "F1_N_per_kph": f1 * tyre * mass_scale,
+            "F2_N_per_kph2": f2 * aero * mass_scale}
+
+
+def to_us_units(f0_n, f1_n_per_kph, f2_n_per_kph2):
+    """(A lbf, B lbf/mph, C lbf/mph^2) from (f0 N, f1 N/(km/h), f2 N/(km/h)^2)."""
+    return (np.asarray(f0_n) / LBF_N, np.asarray(f1_n_per_kph) * MPH_KPH / LBF_N,
+            np.asarray(f2_n_per_kph2) * MPH_KPH**2 / LBF_N)
+
+
+def drag_area_m2(f2_n_per_kph2, air_density_kgpm3: float):
+    """CdA = 2 f2 3.6^2 / rho (m^2)."""
+    return 2.0 * np.asarray(f2_n_per_kph2) * 3.6**2 / air_density_kgpm3
+
+
+def _row(quantity, unit, x) -> dict:
+    x = np.asarray(x, float).reshape(-1)
+    return {"quantity": quantity, "unit": unit, "mean": float(x.mean()),
+            "sd": float(x.std(ddof=1)) if x.size > 1 else math.nan,
+            "q2.5": float(np.quantile(x, 0.025)), "q97.5": float(np.quantile(x, 0.975))}
+
+
+def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard, *,
+                    mass_kg: float | None = None, effective_mass_kg: float | None = None,
+                    rotating_inertia_known: bool = False, frontal_area_m2: float | None = None,
+                    yaw_deg: float | None = None) -> pd.DataFrame:
+    """The standard's result quantities with posterior mean, sd, 2.5 and 97.5 % points.
+
+    Parameters
+    ----------
+    samples : draws of ``F0_N, F1_N_per_kph, F2_N_per_kph2`` at the project's reference
+        conditions (from :func:`load_draws`); ``CD0`` and ``KD`` draws, when present, give
+        CdA at ``yaw_deg``.
+    standard : a key of :data:`STANDARDS` or a :class:`Standard`.
+    mass_kg, effective_mass_kg : the test mass and the M_e the fit used; with
+        ``rotating_inertia_known`` False and a standard with a ``mass_factor``, coefficients are
+        rescaled to M_e = factor x mass_kg.
+    frontal_area_m2, yaw_deg : for CdA(yaw) = A (CD0 + KD yaw^2).
+
+    Returns
+    -------
+    DataFrame ``standard, quantity, unit, mean, sd, q2.5, q97.5``.
+    """
+    std = get_standard(standard)
+    scale = 1.0
+    if std.mass_factor is not None and not rotating_inertia_known:
+        if mass_kg is None or effective_mass_kg is None:
+            raise ValueError(f"{std.name}: the mass convention M_e = {std.mass_factor} x M needs mass_kg "
+                             "and the fit's effective_mass_kg (or rotating_inertia_known=True)")
+        scale = std.mass_factor * mass_kg / effective_mass_kg
+    c = to_conditions(samples, std.temperature_k, std.pressure_pa, mass_scale=scale,
+                      air_density_kgpm3=std.density_kgpm3)
+    yaw_deg = std.cda_yaw_deg if yaw_deg is None else yaw_deg
+    rows = []
+    if std.units == "SI_kph":
+        rows += [_row("f0", "N", c["F0_N"]), _row("f1", "N/(km/h)", c["F1_N_per_kph"]),
+                 _row("f2", "N/(km/h)^2", c["F2_N_per_kph2"])]
+    else:
+        a, b, cc = to_us_units(c["F0_N"], c["F1_N_per_kph"], c["F2_N_per_kph2"])
+        rows += [_row("A", "lbf", a), _row("B", "lbf/mph", b), _row("C", "lbf/mph^2", cc)]
+    if std.result == "cda":
+        rows.append(_row("CdA_zero_yaw", "m^2", drag_area_m2(c["F2_N_per_kph2"], std.density_kgpm3)))
+        if yaw_deg is not None and frontal_area_m2 is not None and "CD0" in samples and "KD" in samples:
+            # C_D(psi) = CD0 + KD psi^2 (eq. 2.31) is even in psi: the mean over +-psi is its value at psi
+            psi = math.radians(yaw_deg)
+            cda = frontal_area_m2 * (np.asarray(samples["CD0"], float) + np.asarray(samples["KD"], float) * psi**2)
+            rows.append(_row(f"CdA_yaw_{yaw_deg:g}deg", "m^2", cda))
+    out = pd.DataFrame(rows)
+    out.insert(0, "standard", std.name)
+    return out
+
+
+def _check(rule: str, value, limit, passed: bool, unit: str = "") -> dict:
+    return {"rule": rule, "value": value, "limit": limit, "unit": unit, "pass": bool(passed)}
+
+
+def wind_per_run(campaign: Campaign) -> pd.DataFrame:
+    """Per run: mean head-wind and mean |cross-wind| (m/s) from the on-board airspeed and yaw
+    (calibrated by the campaign's anemometer factors): head = v_r cos(psi) - v, cross = v_r sin(psi)."""
+    rows = []
+    for rid, g in campaign.runs.groupby("run", sort=False):
+        vr = g["airspeed_mps"].to_numpy(float) * campaign.anemometer.airspeed_factor
+        psi = g["yaw_rad"].to_numpy(float) * campaign.anemometer.yaw_factor
+        head = vr * np.cos(psi) - g["speed_mps"].to_numpy(float)
+        cross = vr * np.sin(psi)
+        rows.append({"run": rid, "head_mps": float(head.mean()), "cross_mps": float(np.abs(cross.mean())),
+                     "wind_mps": float(np.hypot(head.mean(), cross.mean()))})
+    return pd.DataFrame(rows)
+
+
+def standard_checks(campaign: Campaign, standard: str | Standard) -> pd.DataFrame:
+    """The standard's checks on the campaign, one row each: ``standard, rule, value, limit,
+    unit, pass``.  Run counts per direction, opposite-direction pairs, GTR 15 statistical
+    precision per reference speed (:func:`~bayes_roadload.analysis.regulation.gtr15_precision`),
+    mean wind and cross-wind per run (worst run reported), ambient temperature range."""
+    std = get_standard(standard)
+    runs = campaign.runs
+    rows = []
+    directions = campaign.directions()
+    counts = pd.Series(list(directions.values())).value_counts()
+    for d in (1, -1):
+        n = int(counts.get(d, 0))
+        rows.append(_check(f"runs in direction {d:+d}", n, std.min_runs_per_direction,
+                           n >= std.min_runs_per_direction, "runs"))
+    if std.min_pairs:
+        n_pairs = len(campaign.pairs())
+        rows.append(_check("opposite-direction pairs", n_pairs, std.min_pairs, n_pairs >= std.min_pairs, "pairs"))
+    if std.precision_pct is not None and "pair" in runs:
+        for r in gtr15_precision(campaign, limit_pct=std.precision_pct).itertuples():
+            rows.append(_check(f"statistical precision at {r.speed_kph:g} km/h", r.precision_pct, r.limit_pct,
+                               bool(r.precision_pct <= r.limit_pct), "%"))  # pair count: own row
+    if (std.max_mean_wind_mps is not None or std.max_mean_crosswind_mps is not None) and campaign.has_anemometer:
+        wind = wind_per_run(campaign)
+        if std.max_mean_wind_mps is not None:
+            worst = float(wind["wind_mps"].max())
+            rows.append(_check("mean wind speed (worst run)", worst, std.max_mean_wind_mps,
+                               worst <= std.max_mean_wind_mps, "m/s"))
+        if std.max_mean_crosswind_mps is not None:
+            worst = float(wind["cross_mps"].max())
+            rows.append(_check("mean cross-wind (worst run)", worst, std.max_mean_crosswind_mps,
+                               worst <= std.max_mean_crosswind_mps, "m/s"))
+    if std.ambient_range_k is not None and "temperature_k" in runs:
+        lo, hi = std.ambient_range_k
+        t = runs["temperature_k"].to_numpy(float)
+        rows.append(_check("ambient temperature min", float(t.min()), lo, t.min() >= lo, "K"))
+        rows.append(_check("ambient temperature max", float(t.max()), hi, t.max() <= hi, "K"))
+    out = pd.DataFrame(rows, columns=["rule", "value", "limit", "unit", "pass"])
+    out.insert(0, "standard", std.name)
+    return out
+
+
+def load_draws(fit_dir: str | Path) -> dict[str, np.ndarray]:
+    """Flattened posterior draws of a NUTS fit directory (``posterior.nc``): the road-load
+    coefficients and every scalar parameter."""
+    import arviz as az  # heavy; only needed when reading a fit directory
+
+    path = Path(fit_dir) / "posterior.nc"
+    if not path.is_file():
+        raise ValueError(f"{fit_dir}: no posterior.nc (a NUTS fit directory from `bayes-roadload fit`)")
+    post = az.from_netcdf(str(path)).posterior
+    out = {}
+    for name, da in post.data_vars.items():
+        if da.ndim == 2:  # chain, draw
+            out[str(name)] = np.asarray(da.values, float).reshape(-1)
+    missing = [k for k in COEFFICIENTS if k not in out]
+    if missing:
+        raise ValueError(f"{path}: posterior lacks {', '.join(missing)}")
+    return out
+
+
+def run_standard(source: str | Path | Mapping[str, np.ndarray], standard: str | Standard, *,
+                 campaign: Campaign | None = None, mass_kg: float | None = None,
+                 effective_mass_kg: float | None = None, rotating_inertia_known: bool = False,
+                 frontal_area_m2: float | None = None, yaw_deg: float | None = None,
+                 out_dir: str | Path | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Result and checks of ``standard`` for a fit directory (or draws) and its campaign.
+    The vehicle's masses and frontal area default to the campaign's.  With ``out_dir``, writes
+    ``standard_result.csv``, ``standard_checks.csv`` and ``standard.json``."""
+    std = get_standard(standard)
+    draws = load_draws(source) if isinstance(source, (str, Path)) else source
+    if campaign is not None:
+        mass_kg = campaign.vehicle.mass_kg if mass_kg is None else mass_kg
+        effective_mass_kg = campaign.vehicle.effective_mass_kg if effective_mass_kg is None else effective_mass_kg
+        frontal_area_m2 = campaign.vehicle.frontal_area_m2 if frontal_area_m2 is None else frontal_area_m2
+    result = standard_result(draws, std, mass_kg=mass_kg, effective_mass_kg=effective_mass_kg,
+                             rotating_inertia_known=rotating_inertia_known, frontal_area_m2=frontal_area_m2,
+                             yaw_deg=yaw_deg)
+    checks = standard_checks(campaign, std) if campaign is not None else \
+        pd.DataFrame(columns=["standard", "rule", "value", "limit", "unit", "pass"])
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        result.to_csv(out / "standard_result.csv", index=False)
+        checks.to_csv(out / "standard_checks.csv", index=False)
+        (out / "standard.json").write_text(json.dumps({
+            "standard": std.name, "title": std.title, "temperature_k": std.temperature_k,
+            "pressure_pa": std.pressure_pa, "units": std.units, "mass_factor": std.mass_factor,
+            "rotating_inertia_known": rotating_inertia_known, "pass": bool(checks["pass"].all())}, indent=2) + "\n")
+    return result, checks
+
+
+def format_standard(result: pd.DataFrame, checks: pd.DataFrame) -> str:
+    """Plain-text table of the result (mean [2.5 %, 97.5 %]) and the checks."""
+    lines = []
+    for _, r in result.iterrows():
+        lines.append(f"  {r['quantity']:<16} {r['mean']:12.5g} {r['unit']:<12} [{r['q2.5']:.5g}, {r['q97.5']:.5g}]")
+    for _, r in checks.iterrows():
+        verdict = "pass" if r["pass"] else "FAIL"
+        lines.append(f"  {verdict}  {r['rule']:<40} {r['value']:10.4g} (limit {r['limit']:g} {r['unit']})")
+    return "\n".join(lines)

@@ -1,0 +1,1 @@
+"""Drive-cycle speed tables (package data; sources in README.md)."""

@@ -1,0 +1,26 @@
+"""predict: cycle work and the trace of a manoeuvre at other conditions or mass."""
+
+import numpy as np
+import pytest
+
+from bayes_roadload.analysis.predict import format_cycle_work, run_predict
+
+
+def _draws():
+    return {"F0_N": np.full(6, 300.0), "F1_N_per_kph": np.zeros(6), "F2_N_per_kph2": np.zeros(6)}
+
+
+def test_coastdown_at_other_temperature_and_mass_by_hand(tmp_path):
+    """f0 = 300 N at 293.2 K; at 283.2 K the tyre factor is 1 - 0.0086 (283.2 - 293.2) = 1.086 and
+    with M_e 1500 + 150 kg, f0 scales by 1650/1500 (tyre load ~ mass): F = 300*1.086*1.1 N,
+    decel F/1650 = 0.19548 m/s^2, so from 72 km/h (20 m/s) at t = 50 s: 20 - 9.774 m/s."""
+    work, shares, trace = run_predict(_draws(), "hwfet", effective_mass_kg=1500.0, temperature_k=283.2,
+                                      mass_kg_change=150.0, v0_kph=72.0, duration_s=80.0, out_dir=tmp_path)
+    decel = 300.0 * 1.086 * 1.1 / 1650.0
+    row = trace.loc[np.isclose(trace["time_s"], 50.0)].iloc[0]
+    assert row["mean_kph"] == pytest.approx((20.0 - decel * 50.0) * 3.6, abs=1e-6)
+    # reference-condition work over HWFET: 300 N x its distance (kJ/km = N)
+    assert work.set_index("quantity").loc["road_load_work_per_km", "mean"] == pytest.approx(300.0, rel=1e-12)
+    assert (tmp_path / "predicted_trace.csv").is_file()
+    assert "hwfet road-load work" in format_cycle_work(work, shares)
+    assert shares["variance_share"].isna().all()  # constant draws: no variance to share

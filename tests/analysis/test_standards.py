@@ -1,0 +1,145 @@
+"""Standard results (reference conditions, units, mass convention, CdA) and checks."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from bayes_roadload.analysis.standards import (STANDARDS, get_standard, run_standard, standard_checks,
+                                               standard_result, to_us_units)
+from bayes_roadload.data.campaign import Campaign, Vehicle
+
+R = 287.05
+RHO_REF = 100_000.0 / (R * 293.2)  # project reference: 100 kPa, 293.2 K
+
+
+def _draws(n=4001, seed=0):
+    rng = np.random.default_rng(seed)
+    return {"F0_N": rng.normal(100.0, 3.0, n), "F1_N_per_kph": rng.normal(0.5, 0.05, n),
+            "F2_N_per_kph2": rng.normal(0.03, 0.001, n)}
+
+
+def test_us_units_by_hand():
+    """1 lbf = 4.44822 N, 1 mph = 1.609344 km/h: 100 N = 22.4809 lbf; 0.5 N/(km/h) =
+    0.804672/4.44822 = 0.180898 lbf/mph; 0.03 N/(km/h)^2 = 0.0776996/4.44822 = 0.0174676."""
+    a, b, c = to_us_units(100.0, 0.5, 0.03)
+    assert a == pytest.approx(22.4809, abs=1e-4)
+    assert b == pytest.approx(0.180898, abs=1e-6)
+    assert c == pytest.approx(0.0174676, abs=1e-7)
+
+
+def test_gtr15_coefficients_by_hand():
+    """GTR 15: 20 C, 100 kPa.  Tyre factor 1 - 0.0086 (293.15 - 293.2) = 1.00043 on f0, f1;
+    density ratio 293.2/293.15 on f2; no mass rescaling."""
+    d = _draws()
+    res = standard_result(d, "gtr15").set_index("quantity")
+    tyre = 1 - 0.0086 * (293.15 - 293.2)
+    assert res.loc["f0", "mean"] == pytest.approx(d["F0_N"].mean() * tyre, rel=1e-12)
+    assert res.loc["f1", "mean"] == pytest.approx(d["F1_N_per_kph"].mean() * tyre, rel=1e-12)
+    assert res.loc["f2", "mean"] == pytest.approx(d["F2_N_per_kph2"].mean() * 293.2 / 293.15, rel=1e-12)
+    assert res.loc["f0", "q2.5"] == pytest.approx(np.quantile(d["F0_N"] * tyre, 0.025), rel=1e-12)
+    assert res.loc["f0", "unit"] == "N"
+
+
+def test_j2263_reference_conditions_and_mass_convention_by_hand():
+    """J2263: 20 C, 98.21 kPa, lbf and mph, M_e = 1.03 M.  With M = 1100 kg and the fit's
+    M_e = 1130 kg every force scales by 1.03*1100/1130 = 1.0026549; f2 by rho(98.21 kPa, 293.15 K)
+    / rho_ref = 0.9821 * 293.2/293.15."""
+    d = _draws()
+    res = standard_result(d, "j2263", mass_kg=1100.0, effective_mass_kg=1130.0).set_index("quantity")
+    scale = 1.03 * 1100.0 / 1130.0
+    tyre = 1 - 0.0086 * (293.15 - 293.2)
+    aero = 0.9821 * 293.2 / 293.15
+    assert res.loc["A", "mean"] == pytest.approx(d["F0_N"].mean() * tyre * scale / 4.44822, rel=1e-12)
+    assert res.loc["B", "mean"] == pytest.approx(d["F1_N_per_kph"].mean() * tyre * scale * 1.609344 / 4.44822,
+                                                 rel=1e-12)
+    assert res.loc["C", "mean"] == pytest.approx(d["F2_N_per_kph2"].mean() * aero * scale * 1.609344**2 / 4.44822,
+                                                 rel=1e-12)
+    assert res.loc["C", "unit"] == "lbf/mph^2"
+    known = standard_result(d, "j2263", rotating_inertia_known=True).set_index("quantity")
+    assert res.loc["A", "mean"] / known.loc["A", "mean"] == pytest.approx(scale, rel=1e-12)
+
+
+def test_mass_convention_needs_the_masses():
+    with pytest.raises(ValueError, match="1.03"):
+        standard_result(_draws(), "j2263")
+
+
+def test_cda_by_hand():
+    """CdA = 2 f2 3.6^2 / rho at the standard's conditions; f2 itself was scaled to that density,
+    so CdA = 2 * 0.03 * 12.96 / rho_ref = 0.65445 m^2 (times the mass scaling, here 1)."""
+    d = {k: np.full(11, v) for k, v in (("F0_N", 100.0), ("F1_N_per_kph", 0.5), ("F2_N_per_kph2", 0.03))}
+    d["CD0"] = np.full(11, 0.35)
+    d["KD"] = np.full(11, 0.6)
+    res = standard_result(d, "cfr1066", rotating_inertia_known=True, frontal_area_m2=2.0, yaw_deg=4.5)
+    res = res.set_index("quantity")
+    assert res.loc["CdA_zero_yaw", "mean"] == pytest.approx(2 * 0.03 * 12.96 / RHO_REF, rel=1e-12)
+    # CdA(psi) = A (CD0 + KD psi^2) = 2 (0.35 + 0.6 (4.5 pi/180)^2) = 0.707401
+    assert res.loc["CdA_yaw_4.5deg", "mean"] == pytest.approx(2 * (0.35 + 0.6 * math.radians(4.5) ** 2), rel=1e-12)
+    # 40 CFR 1066.310's reference density 1.17 kg/m^3 sets C: 0.03 * 1.17 / rho_ref * 1.609344^2 / 4.44822
+    assert res.loc["C", "mean"] == pytest.approx(0.03 * 1.17 / RHO_REF * 1.609344**2 / 4.44822, rel=1e-12)
+    # the standard's yaw (+-4.5 deg wind-averaged) is the default
+    default = standard_result(d, "cfr1066", rotating_inertia_known=True, frontal_area_m2=2.0)
+    assert "CdA_yaw_4.5deg" in set(default["quantity"])
+
+
+def test_unknown_standard_is_refused():
+    with pytest.raises(ValueError, match="gtr15"):
+        get_standard("iso9999")
+    assert set(STANDARDS) == {"gtr15", "j2263", "j1263", "cfr1066"}
+
+
+def _run(run, pair, direction, decel, head_mps=0.0, v0=35.0, dt=0.5):
+    t = np.arange(0.0, (v0 - 4.0) / decel, dt)
+    v = v0 - decel * t
+    return pd.DataFrame({"run": run, "pair": pair, "direction": direction, "time_s": t, "speed_mps": v,
+                         "airspeed_mps": v + head_mps, "yaw_rad": 0.0, "temperature_k": 290.0})
+
+
+def _campaign(decels, head_mps=0.0):
+    runs = pd.concat([_run(i + 1, i // 2 + 1, 1 if i % 2 == 0 else -1, d, head_mps) for i, d in enumerate(decels)],
+                     ignore_index=True)
+    return Campaign(runs, Vehicle(mass_kg=1500.0, frontal_area_m2=2.0, effective_mass_kg=1540.0))
+
+
+def test_gtr15_checks_count_pairs_and_precision():
+    """Three pairs at 0.50/0.52, 0.49/0.51, 0.50/0.50 m/s^2: 3 runs each way, 3 pairs (>= 3), and the
+    precision at 50 km/h = t(0.975, 2) s / (sqrt 3 mean) of the pairs' harmonic-mean band times."""
+    decels = [0.50, 0.52, 0.49, 0.51, 0.50, 0.50]
+    chk = standard_checks(_campaign(decels), "gtr15").set_index("rule")
+    assert chk.loc["runs in direction +1", "value"] == 3 and chk.loc["runs in direction -1", "value"] == 3
+    assert chk.loc["opposite-direction pairs", "pass"]
+    pair_t = [2.0 / (decels[i] / (10 / 3.6) + decels[i + 1] / (10 / 3.6)) for i in (0, 2, 4)]
+    expected = stats.t.ppf(0.975, 2) * np.std(pair_t, ddof=1) / math.sqrt(3) / np.mean(pair_t) * 100
+    row = chk.loc["statistical precision at 50 km/h"]
+    assert row["value"] == pytest.approx(expected, rel=1e-9)
+    assert row["pass"] == (expected <= 3.0)
+
+
+def test_j1263_wind_limit_by_hand():
+    """Head-wind 5 m/s = 18 km/h > 16 km/h: fails; 4 m/s = 14.4 km/h passes; ambient 290 K in 5-35 C."""
+    decels = [0.5, 0.5]
+    windy = standard_checks(_campaign(decels, head_mps=5.0), "j1263").set_index("rule")
+    assert windy.loc["mean wind speed (worst run)", "value"] == pytest.approx(5.0, abs=1e-9)
+    assert not windy.loc["mean wind speed (worst run)", "pass"]
+    calm = standard_checks(_campaign(decels, head_mps=4.0), "j1263").set_index("rule")
+    assert calm.loc["mean wind speed (worst run)", "pass"]
+    assert calm.loc["mean cross-wind (worst run)", "value"] == pytest.approx(0.0, abs=1e-12)
+    assert calm.loc["ambient temperature min", "pass"] and calm.loc["ambient temperature max", "pass"]
+
+
+def test_cfr1066_requires_eight_runs_each_way():
+    chk = standard_checks(_campaign([0.5] * 6), "cfr1066").set_index("rule")
+    assert chk.loc["runs in direction +1", "limit"] == 8
+    assert not chk.loc["runs in direction +1", "pass"]
+
+
+def test_run_standard_writes_its_files(tmp_path):
+    c = _campaign([0.50, 0.52, 0.49, 0.51, 0.50, 0.50])
+    res, chk = run_standard(_draws(), "j2263", campaign=c, out_dir=tmp_path)
+    assert (tmp_path / "standard_result.csv").is_file() and (tmp_path / "standard.json").is_file()
+    # masses from the campaign's vehicle: scale 1.03 * 1500 / 1540
+    direct = standard_result(_draws(), "j2263", mass_kg=1500.0, effective_mass_kg=1540.0)
+    np.testing.assert_allclose(res["mean"], direct["mean"], rtol=1e-12)

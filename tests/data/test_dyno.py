@@ -1,0 +1,24 @@
+"""Dynamometer coastdown directory: round trip and refusals."""
+
+import pytest
+
+from bayes_roadload.data.dyno import load_dyno, save_dyno
+from bayes_roadload.simulate.dyno import simulate_dyno
+
+
+def test_round_trip_keeps_setup_and_truth(tmp_path):
+    d = simulate_dyno((100.0, 0.8, 0.025), (35.0, 0.25, 0.003), 1150.0)
+    save_dyno(d, tmp_path / "dyno")
+    back = load_dyno(tmp_path / "dyno")
+    assert back.inertia_kg == 1150.0
+    assert back.set_coefficients == (100.0, 0.8, 0.025)
+    assert back.parasitic_truth == (35.0, 0.25, 0.003)
+    assert back.runs["speed_mps"].to_numpy() == pytest.approx(d.runs["speed_mps"].to_numpy(), rel=1e-9)
+
+
+def test_missing_set_coefficients_are_refused(tmp_path):
+    d = simulate_dyno((100.0, 0.8, 0.025), (35.0, 0.25, 0.003), 1150.0)
+    save_dyno(d, tmp_path)
+    (tmp_path / "dyno.toml").write_text("[dyno]\ninertia_kg = 1150.0\n")
+    with pytest.raises(ValueError, match="set_coefficients"):
+        load_dyno(tmp_path)
