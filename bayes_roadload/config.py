@@ -129,8 +129,6 @@ THESIS_DRIVELINE = {"At": 21.0, "Bt": 2.09, "Ct": -0.02}
 THESIS_DRIVELINE_ON_LOAD = {"At": 36.3, "Bt": 0.0, "Ct": 0.0}
 """On-load (steady-state) driveline loss, thesis table 7.9: weighted averages of five sets, A_t 36.3 N
 (standard error 2.2), B_t 0.0 N s/m (0.11); C_t not fitted (straight line, section 5.5.2)."""
-THESIS_DRIVELINE_OFF_LOAD_LOW_WIND = {"At": 17.03, "Bt": 1.59}
-"""Off-load (coastdown) driveline loss of the initial study's low-wind coastdowns, thesis table 7.8."""
 THESIS_UNDRIVEN = {"Au": 3.24, "Bu": 0.232}
 THESIS_UNDRIVEN_PER_WHEEL = {
     "nearside": {"Aw": (1.76, 1.58, 1.55), "Bw": (0.117, 0.123, 0.125), "mean": (1.66, 0.121)},
@@ -161,8 +159,6 @@ coefficients of the coastdowns (low wind, high wind, the set of 24) and of the f
 sets (table 7.6), with their test-to-test standard deviations in %.  The text: steady state gives
 AD ~10 % higher, BD ~12 % lower, the aerodynamic term 4.5 % higher and the total drag at 50 mph
 4.5 % higher (tyres transmitting torque, section 2.3.1.6); both within 2.5 % of the tunnel C_D0."""
-THESIS_STEADY_F50_DIFFERENCE_PCT = 4.5
-"""Total drag at 50 mph, steady state above coastdown (thesis section 7.7; not in table 7.11)."""
 THESIS_TUNNEL_TABLE = {
     "yaw_deg": [-25.0, -20.0, -15.0, -10.0, -5.0, 0.0, 5.0, 10.0, 15.0, 20.0, 25.0],
     "cd": [0.491, 0.468, 0.455, 0.422, 0.412, 0.401, 0.409, 0.426, 0.456, 0.481, 0.486],

@@ -31,9 +31,9 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_roadload import config  # noqa: E402
 from bayes_roadload.analysis.batch import process_pool, run_batch  # noqa: E402
-from bayes_roadload.analysis.diagnose import PROOF_DESIGNS, proof_design, withheld_effect_jobs  # noqa: E402
 from bayes_roadload.analysis.effects import EFFECT_NAMES  # noqa: E402
-from bayes_roadload.analysis.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
+from studies.proof_suite import PROOF_DESIGNS, proof_design, withheld_effect_jobs  # noqa: E402
+from studies.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
 
 OUT = ROOT / "docs" / "sim_to_real"
 
@@ -238,7 +238,7 @@ def markdown(by_design: dict[str, pd.DataFrame], args_text: str) -> str:
     if rp.exists():
         rep = pd.read_csv(rp)
         lines += ["", "## Thesis replay: which effects reproduce the track's spreads", "",
-                  f"`analysis.replay.replay`: {int(rep['pairs'].iloc[0])} pairs at the thesis' conditions (cases 14-17 in "
+                  f"`studies.replay.replay`: {int(rep['pairs'].iloc[0])} pairs at the thesis' conditions (cases 14-17 in "
                   "turn: 2-3 m/s head and cross wind, the comprehensive model, anemometer and vehicle dynamics, "
                   "table 6.6 noise), each pair with the effect at a size drawn from the range below, each pair "
                   "fitted by the thesis' 3-term least squares (K_D fixed); spread = std over pairs, % of the mean "

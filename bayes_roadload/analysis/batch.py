@@ -391,7 +391,7 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
 
 def run_job(job: Any) -> dict[str, Any]:
     """Run one job of any kind: a :class:`FitJob` through :func:`run_fit_job`, any other job
-    (e.g. :class:`~bayes_roadload.analysis.diagnose.DiagnoseJob`) by its ``run()`` method,
+    (e.g. the proof suite's ``studies.proof_suite.DiagnoseJob``) by its ``run()`` method,
     which must return a flat, picklable record and never raise for a failure inside the job."""
     if isinstance(job, FitJob):
         return run_fit_job(job)

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from bayes_roadload import config
-from bayes_roadload.analysis.thesis_study import (
+from studies.thesis_study import (
     FREE,
     PARAMETERS,
     PUBLISHED,
