@@ -47,6 +47,10 @@ from .. import config
 from ..data.campaign import Campaign
 from .batch import FitJob, interval_key, quantile_key, successful
 
+QUANTITY_UNITS: dict[str, str] = {**config.PARAMETER_UNITS, "F50_N": "N", "F50_tyre_N": "N", "F0_N": "N",
+                                  "F2_N_per_kph2": "N/(km/h)^2"}
+"""Units of the quantities a planning target may name (absolute targets are in these units)."""
+
 PLAN_QUANTITIES = ("AD", "BD", "CD0", "KD", "At", "Bt", "Ct", "F50_N", "F50_tyre_N", "F0_N", "F2_N_per_kph2")
 """Quantities a target may name: coefficients (when the fitted model frees them) and road-load
 figures at reference conditions (:data:`~bayes_roadload.inference.results.DERIVED`)."""
@@ -82,7 +86,7 @@ class Target:
 
     @property
     def unit(self) -> str:
-        return "%" if self.relative else config.QUANTITY_UNITS.get(self.quantity, "SI")
+        return "%" if self.relative else QUANTITY_UNITS.get(self.quantity, "SI")
 
     def __str__(self) -> str:
         return f"{self.quantity}={self.value:g}{'%' if self.relative else ''}"

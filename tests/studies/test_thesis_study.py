@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bayes_roadload import config
+from bayes_roadload import thesis
 from studies.thesis_study import (
     FREE,
     PARAMETERS,
@@ -27,7 +27,7 @@ from studies.thesis_study import (
     spread_table,
 )
 
-TRUTH = config.THESIS_COEFFICIENTS
+TRUTH = thesis.THESIS_COEFFICIENTS
 
 
 @pytest.fixture(scope="module")
