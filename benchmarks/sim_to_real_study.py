@@ -1,7 +1,7 @@
 """The withheld-effect proof suite of the sim-to-real diagnosis (issue 6).
 
 For every effect of the library, campaigns are simulated with the effect present
-(``bayes_roadload.analysis.diagnose.withheld_campaign``: ``--design standard``, thesis case 9
+(``studies.proof_suite.withheld_campaign``: ``--design standard``, thesis case 9
 conditions at a plausible size; ``--design identifying``, the library's ``[proof.identifying]``
 campaign), analysed with a model that withholds it, and diagnosed; null controls have no added
 effect.  Every diagnosis goes through the batch door (``analysis.batch.run_batch`` with
@@ -135,7 +135,7 @@ def confusion(records: pd.DataFrame, by: str = "top") -> pd.DataFrame:
 DESIGN_TEXT = {
     "standard": ("Each campaign is thesis case 9 conditions (2 m/s head and cross wind, Dryden turbulence, table 6.6 "
                  "measurement noise, the 'basic' drag model with lift), {pairs} pairs, with one effect added at a "
-                 "plausible size (`analysis.diagnose.withheld_campaign`)"),
+                 "plausible size (`studies.proof_suite.withheld_campaign`)"),
     "identifying": ("Each campaign is the library's `[proof.identifying]` design (`models/effects/library.toml`): "
                     "what the effects' *needs* ask of a track test -- {pairs} pairs, {head:g} m/s head and {cross:g} m/s "
                     "cross wind with case 9's turbulence and noise, the pairs at test masses {masses} kg in turn (a "
