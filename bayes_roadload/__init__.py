@@ -1,10 +1,12 @@
 """bayes-roadload: road load from coastdown tests, with honest uncertainty.
 
 Layers: :mod:`physics` (pure JAX) -> :mod:`simulate` -> :mod:`inference` -> :mod:`analysis`
--> :mod:`data` / :mod:`cli`.  Importing the package enables 64-bit floats in JAX.
+-> :mod:`data` / :mod:`cli`.  Importing the package enables 64-bit floats in JAX and one XLA
+host device per CPU core, for parallel chains (:mod:`bayes_roadload._jax`).
 """
 
-from . import config as config  # enables x64 first
+from . import _jax  # noqa: F401 -- first: sets XLA_FLAGS and x64 before any JAX computation
+from . import config as config
 from .physics import DragModel as DragModel
 from .physics import full_model as full_model
 from .physics import integrate_batch as integrate_batch

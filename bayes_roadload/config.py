@@ -1,24 +1,17 @@
-"""Every default of the package, in one place.
+"""Physical constants and the package's numerical settings.
 
-Physical constants and the reference conditions of the thesis (Passmore 1990, section 2 and
-``ROADLOAD_MODEL.md``), the parameter names of the data contract with their units and O(1)
-scales, and the default settings of the integrator and of the samplers.  Other modules import
-from here rather than writing literals of their own.
+Physical constants and the reference conditions of the thesis (Passmore 1990, section 2.2.1.3),
+the parameter names of the data contract with their units and O(1) scales, the data
+importers' plausibility limits, and the settings of the integrator, of the samplers, of the
+quality gates and of the estimators and checks whose settings more than one module shares.
+A constant used by one module only is defined in that module; the thesis' published values are
+in :mod:`bayes_roadload.thesis`.  Importing this module has no side effects (JAX is configured
+by :mod:`bayes_roadload._jax`).
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
-
-# Chains run in parallel on the CPU cores: XLA must be told before its backend starts.
-if "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
-                               + f" --xla_force_host_platform_device_count={max(os.cpu_count() or 1, 1)}").strip()
-
-import jax  # noqa: E402
-
-jax.config.update("jax_enable_x64", True)
 
 # --- physical constants -------------------------------------------------------------------
 GRAVITY_MPS2 = 9.81
@@ -106,80 +99,6 @@ PARAMETER_SCALES: dict[str, float] = {
 """Typical magnitude of each parameter: optimisers and samplers work on ``value / scale`` so
 that every unknown is O(1)."""
 
-# --- the thesis test vehicle and simulation inputs (tables 6.3-6.6, section 3) --------------
-THESIS_VEHICLE = {
-    "mass_kg": 1100.0,
-    "effective_mass_kg": 1130.0,
-    "frontal_area_m2": 1.85,
-    "rolling_radius_m": 0.28,
-    "length_m": 4.5,
-}
-THESIS_COEFFICIENTS = {"AD": 0.01, "BD": 2.0e-4, "CD0": 0.4, "KD": 0.614}
-THESIS_FULL_MODEL = {
-    "CL0": 0.273,
-    "KL": 3.64,
-    "KS": 2.4,
-    "Cy": 25_000.0,
-    "Kalpha": 0.9,
-    # alpha = (M l_p / k_p) dv/dt with M = 1100 kg, l_p = 0.55 m (C of G height, reconstructed),
-    # k_p = 60e3 N m/rad.
-    "pitch_gain": 1100.0 * 0.55 / 60e3,
-}
-THESIS_DRIVELINE = {"At": 21.0, "Bt": 2.09, "Ct": -0.02}
-THESIS_DRIVELINE_ON_LOAD = {"At": 36.3, "Bt": 0.0, "Ct": 0.0}
-"""On-load (steady-state) driveline loss, thesis table 7.9: weighted averages of five sets, A_t 36.3 N
-(standard error 2.2), B_t 0.0 N s/m (0.11); C_t not fitted (straight line, section 5.5.2)."""
-THESIS_DRIVELINE_OFF_LOAD_LOW_WIND = {"At": 17.03, "Bt": 1.59}
-"""Off-load (coastdown) driveline loss of the initial study's low-wind coastdowns, thesis table 7.8."""
-THESIS_UNDRIVEN = {"Au": 3.24, "Bu": 0.232}
-THESIS_UNDRIVEN_PER_WHEEL = {
-    "nearside": {"Aw": (1.76, 1.58, 1.55), "Bw": (0.117, 0.123, 0.125), "mean": (1.66, 0.121)},
-    "offside": {"Aw": (1.57, 1.58, 1.58), "Bw": (0.109, 0.115, 0.121), "mean": (1.58, 0.114)},
-}
-"""Thesis table 7.10, undriven (rear) wheel spin-downs, three tests per wheel: A (N) and B (N s/m) of
-each test and the table's means (as printed: the nearside A tests as transcribed average 1.63, not
-1.66; the totals use the printed means).  Vehicle totals ``THESIS_UNDRIVEN``: A_u = 3.24 N (std
-0.155, 4.8 %), B_u = 0.232 N s/m (std 0.012, 5.1 %; the printed means add up to 0.235)."""
-THESIS_UNDRIVEN_SD = {"Au": 0.155, "Bu": 0.012}
-"""Table 7.10's "total std. dev." of A_u and B_u."""
-THESIS_WHEEL_INERTIA_KGM2 = 0.59
-"""Polar moment of inertia of one wheel of the thesis car *(reconstructed: the transcript gives
-none; M_e - M = 30 kg over four wheels at R_r = 0.28 m, drivetrain inertia neglected)*."""
-THESIS_TABLE_7_11 = {
-    "coastdown_low_wind": {"AD": 0.0094, "BD": 0.231e-3, "CD0": 0.386},
-    "coastdown_high_wind": {"AD": 0.0103, "BD": 0.260e-3, "CD0": 0.384},
-    "coastdown_set_of_24": {"AD": 0.0098, "BD": 0.233e-3, "CD0": 0.391},
-    "steady_state": {"AD": 0.0110, "BD": 0.208e-3, "CD0": 0.410},
-    "wind_tunnel": {"CD0": 0.401},
-    "std_pct": {"coastdown_low_wind": {"AD": 5.5, "BD": 31.4, "CD0": 8.3},
-                "coastdown_high_wind": {"AD": 6.2, "BD": 31.2, "CD0": 9.6},
-                "coastdown_set_of_24": {"AD": 4.9, "BD": 27.3, "CD0": 6.4},
-                "steady_state": {"AD": 7.6, "BD": 131.7, "CD0": 12.9}},
-}
-"""Thesis table 7.11, "Summary of initial study results", transcribed from the transcript: mean
-coefficients of the coastdowns (low wind, high wind, the set of 24) and of the five steady-state
-sets (table 7.6), with their test-to-test standard deviations in %.  The text: steady state gives
-AD ~10 % higher, BD ~12 % lower, the aerodynamic term 4.5 % higher and the total drag at 50 mph
-4.5 % higher (tyres transmitting torque, section 2.3.1.6); both within 2.5 % of the tunnel C_D0."""
-THESIS_STEADY_F50_DIFFERENCE_PCT = 4.5
-"""Total drag at 50 mph, steady state above coastdown (thesis section 7.7; not in table 7.11)."""
-THESIS_TUNNEL_TABLE = {
-    "yaw_deg": [-25.0, -20.0, -15.0, -10.0, -5.0, 0.0, 5.0, 10.0, 15.0, 20.0, 25.0],
-    "cd": [0.491, 0.468, 0.455, 0.422, 0.412, 0.401, 0.409, 0.426, 0.456, 0.481, 0.486],
-    "cs": [-1.121, -0.873, -0.627, -0.415, -0.208, -0.013, 0.186, 0.387, 0.595, 0.841, 1.101],
-    "cl": [0.654, 0.629, 0.515, 0.407, 0.317, 0.273, 0.297, 0.383, 0.530, 0.667, 0.662],
-}
-
-# --- the thesis simulation study (tables 6.4-6.6; reconstructions marked in the simulator) ---
-THESIS_WIND = {"scale_length_m": 30.0, "turbulence_ratio": 0.4, "bandwidth_hz": 1.0}
-"""Dryden scale length of head and cross wind, sigma / mean wind, noise band DC-1 Hz (table 6.4)."""
-THESIS_SENSORS = {"cup_distance_constant_m": 1.5, "vane_damping_ratio": 0.4, "vane_damped_wavelength_m": 5.0}
-"""Cup anemometer and yaw vane characteristics (table 6.5, section 3 of the reference)."""
-THESIS_MEASUREMENT_NOISE = {"speed_mps": 0.05, "airspeed_mps": 0.05, "yaw_rad": 0.01, "driveline_force_n": 1.0}
-"""Standard deviations of the measurement noise (table 6.6; driveline: this project's choice)."""
-THESIS_SYSTEM_NOISE = {"AD": 1.0e-4, "BD": 1.0e-5, "CD0": 5.0e-3}
-"""Standard deviations of the system noise on the coefficients (table 6.6)."""
-
 # --- data validation limits -----------------------------------------------------------------
 MAX_SPEED_MPS = 100.0
 MIN_RUN_SAMPLES = 10
@@ -193,10 +112,7 @@ SPEED_50MPH_MPS = 50.0 * MPH_TO_MPS
 ROADLOAD_FIT_SPEEDS_KPH = tuple(float(v) for v in range(15, 120, 5))
 """Speeds (km/h) at which F = F0 + F1 v + F2 v^2 is fitted through the still-air road load."""
 
-# --- speed-gate interval times (physics.intervals, data.vbox, inference.intervals) -------------
-INTERVAL_QUADRATURE_NODES = 8
-"""Gauss-Legendre nodes per speed band for t = integral M_e / F(v) dv (exact to ~1e-13 relative
-on a 5 km/h band of a quadratic road load, tested against appendix D)."""
+# --- speed-gate interval times (data.vbox, inference.intervals, simulate.intervals) -------------
 VBOX_DEFAULT_GATES_KPH = {
     5: ((95.0, 90.0, 85.0, 80.0, 75.0, 70.0),),
     3: ((50.0, 45.0, 40.0, 35.0),),
@@ -234,21 +150,13 @@ INTERVAL_NOISE_PRIOR_SHAPES = {"sigma_gate_s": 4.0, "run_decel_sd_mps2": 2.0, "b
 on the Ioniq exports the band noise dominates and the gate error is barely identified (posterior
 0.008-0.18 s with shape 2, its upper tail mixing too slowly for the tail-ESS gate)."""
 
-# --- distance-time records (data.distances, physics.distances, inference.distances) ------------
+# --- distance-time records (data.distances, inference.distances, simulate.distances) ----------
 MIN_DISTANCE_MARKERS = 3
 """Fewest markers a distance-time run may pass: its speed at the first marker is unknown, so two
 markers (one segment time) only determine that speed."""
 DISTANCE_SEGMENT_SPEED_RANGE_MPS = (0.1, MAX_SPEED_MPS)
 """Accepted mean speed between two consecutive markers of a run (m/s); outside it the units are
 wrong (km or mm in ``distance_m``, ms in ``time_s``)."""
-DISTANCE_RK4_SUBSTEPS = 4
-"""RK4 steps (in distance) between two consecutive markers: on 100 m marker spacing from 30 m/s
-the passing times agree with the closed form of a quadratic road load to ~1e-9 s over 1300 m
-(tested; 8 steps: 1e-10 s, 2 steps: 2e-8 s), far below any timing error (a light gate's ~1 ms);
-the error grows as the fourth power of the step (500 m spacing: ~1e-6 s)."""
-DISTANCE_MIN_SPEED_MPS = 0.05
-"""Floor of the speed in the distance-domain ODE (dv/dx = a / v, dt/dx = 1 / v): keeps a draw
-whose vehicle would stop before the last marker finite (its times then are merely very long)."""
 DISTANCE_NOISE_PRIORS = {
     "sigma_gate_s": 0.05,            # mean of the Gamma(4) prior of one marker-passing timing error (s)
     "run_decel_sd_mps2": 0.005,      # mean of the Gamma(2) prior of a run's deceleration offset (m/s^2)
@@ -414,13 +322,9 @@ hierarchical spin-down fit, Gamma(2) priors (~6 % and ~4 % of table 7.10's value
 three tests per wheel scatter by 0.02-0.11 N and 0.003-0.006 N s/m)."""
 DEFAULT_UNDRIVEN_WHEELS = 2
 """Undriven wheels of a two-axle vehicle with one driven axle (``[spindown] undriven_wheels``)."""
-SPINDOWN_SIMULATION = {"v0_mps": 31.0, "v_end_mps": 3.0, "sample_rate_hz": 4.0, "speed_noise_mps": 0.02}
-"""Simulated spin-downs: released at ~70 mph tread speed (the thesis' maximum test speed), logged at
-4 Hz until the tread speed falls to 3 m/s, wheel-speed noise 0.02 m/s (a toothed-wheel pickup;
-the coastdown speed channel's 0.05 m/s of table 6.6 is an upper bound)."""
 
 
-# Steady-state torque tests (bayes_roadload.data.steady, inference.steady, simulate.steady)
+# Steady-state torque tests (bayes_roadload.data.steady, inference.steady)
 STEADY_MAX_ACCEL_MPS2 = 0.5
 """Largest |dv/dt| of a steady-speed sample: beyond it the run is not steady (or the column holds
 g or km/h/s); the inertial correction M_e dv/dt is then no longer a small correction."""
@@ -431,14 +335,6 @@ magnitude above the coastdown's, section 7.4); ``run_force_sd_n`` mean of the Ga
 run's constant force offset (gusts averaged over the run, tyre temperature, the driver; vanishes at
 0, no funnel); ``pair_wind_mps`` normal scale of the latent along-track wind of an
 opposite-direction pair when no anemometer was fitted."""
-STEADY_SIMULATION = {"speeds_mph": (20.0, 30.0, 40.0, 50.0, 60.0, 70.0), "duration_s": 30.0,
-                     "sample_rate_hz": 1.0, "force_noise_n": 15.0, "run_force_sd_n": 8.0,
-                     "accel_sd_mps2": 0.02, "speed_noise_mps": 0.05, "driveline_noise_n": 10.0}
-"""Simulated steady-state groups (thesis section 5.1.3: 20-70 mph in 10 mph steps, both
-directions): each run held ``duration_s`` at its set speed with a constant drift of sd
-``accel_sd_mps2`` (the driver holds the throttle, section 5.4.1), logged at ``sample_rate_hz``;
-torque-meter noise ``force_noise_n`` per sample and a run offset of sd ``run_force_sd_n``; the
-gearbox input force carries the on-load driveline loss plus ``driveline_noise_n`` noise."""
 
 
 # Run validity (bayes_roadload.analysis.validity)
@@ -489,16 +385,6 @@ Gaussian speed noise the filter flags 1.3 % of the samples on average (at most 2
 traces of 400 samples: the local MAD of 21 samples is itself noisy), on the simulated campaigns
 of the tests 0.5-2.9 %."""
 
-# Studies of many fits (bayes_roadload.analysis.batch)
-COVERAGE_LEVELS = (0.5, 0.9, 0.95)
-"""Central posterior interval levels recorded for every quantity (and checked for coverage)."""
-
-CLEAR_JAX_CACHES_ABOVE_MB = 4096.0
-"""Resident memory (MB) above which :func:`bayes_roadload.analysis.batch.run_fit_job` clears JAX's compilation caches after a
-job.  Clearing after every job would bound the memory at ~1.2 GB but costs 5-8 s per later fit
-(the shared pieces are recompiled); never clearing grows by 85-165 MB per fit."""
-
-
 # MAP + Laplace fits of studies (bayes_roadload.inference.laplace)
 LAPLACE_DRAWS = 2000
 """Draws per MAP + Laplace fit (proposals of the importance-sampling correction)."""
@@ -520,11 +406,7 @@ LAPLACE_MAX_PARETO_K = 0.7
 Vehtari et al. 2024: the corrected estimates are then unreliable)."""
 
 
-# Test planning (bayes_roadload.analysis.planning) and the regulation checks
-QUANTITY_UNITS: dict[str, str] = {**PARAMETER_UNITS, "F50_N": "N", "F50_tyre_N": "N", "F0_N": "N",
-                                  "F2_N_per_kph2": "N/(km/h)^2"}
-"""Units of the quantities a planning target may name (absolute targets are in these units)."""
-
+# Test planning (bayes_roadload.analysis.planning, the simulator and the plan command)
 MAX_LOGGED_YAW_RAD = 1.5
 """Largest |yaw| a simulated future run logs (the simulator's ``max_yaw_rad``; the data contract
 holds |yaw| <= pi/2)."""
@@ -546,28 +428,8 @@ PLAN_PAIRS = (1, 2, 3, 4, 6, 8, 12, 16, 24)
 PLAN_SIMULATIONS = 40
 """Future campaigns simulated per number of pairs (the assurance's binomial sd is <= 0.08)."""
 
-EEC_PRECISION_PCT = 2.0
-"""EEC coastdown acceptance (thesis appendix A): t s / (sqrt(n) X) <= 2 % at 95 %, X the mean
-total road load at the reference speed over the n pairs and s their standard deviation."""
 
-GTR_PRECISION_PCT = 3.0
-"""GTR 15 (WLTP, Annex 4) coastdown statistical precision: p_j = h s_j / (sqrt(n) dt_j) <= 3 %
-at every reference speed v_j, dt_j the pairs' mean coastdown time from v_j + 5 to v_j - 5 km/h
-(harmonic mean of the two directions of a pair), h = t(0.975, n - 1)."""
-
-GTR_SPEED_HALF_BAND_KPH = 5.0
-"""Half width of the GTR 15 coastdown-time speed band around each reference speed (km/h)."""
-
-GTR_REFERENCE_SPEEDS_KPH = (20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0, 100.0, 110.0, 120.0, 130.0)
-"""GTR 15 reference speeds (km/h); those inside every run's speed range are checked."""
-
-MIN_REGULATION_PAIRS = 3
-"""GTR 15 needs at least three pairs."""
-
-REGULATION_MAX_PAIRS = 200
-"""Largest number of pairs searched for the pairs a failing criterion still needs."""
-
-# Sim-to-real diagnosis (bayes_roadload.analysis.diagnose, issue 6)
+# Sim-to-real diagnosis (bayes_roadload.analysis.diagnose, diagnose_intervals)
 @dataclass(frozen=True)
 class DiagnosisConfig:
     """Thresholds of the sim-to-real diagnosis.

@@ -1,8 +1,7 @@
 """Planning study: regenerates ``docs/planning.md`` (and ``docs/planning/*.csv``).
 
 1. ``thesis``: the thesis' planning tables 8.6, 8.8, 8.10 replayed from their summary numbers
-   (table 8.3, 8.7, 8.9 spreads of 18 pairs) beside ours (:func:`~bayes_roadload.analysis.
-   planning.thesis_replay_table`).
+   (table 8.3, 8.7, 8.9 spreads of 18 pairs) beside ours (:func:`studies.planning_report.thesis_replay_table`).
 2. ``simulated``: the same pilot (3-term, table 8.3) through the full machinery: future
    campaigns at thesis case 14 conditions, run-to-run spreads from the pilot, hierarchical
    MAP + Laplace refits.
@@ -35,11 +34,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bayes_roadload import config
-from bayes_roadload.analysis import planning as pl
-from bayes_roadload.analysis.batch import batch_client, run_batch
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bayes_roadload import config  # noqa: E402
+from bayes_roadload.analysis import planning as pl  # noqa: E402
+from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
+from studies import planning_report as report  # noqa: E402
+from studies.thesis_tables import THESIS_PILOT_PAIRS  # noqa: E402
 DOC = ROOT / "docs" / "planning.md"
 DATA = ROOT / "docs" / "planning"
 SECTIONS = ("thesis", "simulated", "nuts", "yaw", "constrained")
@@ -93,11 +95,11 @@ def main(argv=None) -> int:
     with batch_client(args.workers, args.scheduler) as pool:
         if "thesis" in args.only:
             t0 = time.perf_counter()
-            frames["thesis"] = _cached("thesis_replay", "thesis" in args.rerun, pl.thesis_replay_table)
+            frames["thesis"] = _cached("thesis_replay", "thesis" in args.rerun, report.thesis_replay_table)
             timings["thesis_s"] = time.perf_counter() - t0
         if "simulated" in args.only or "nuts" in args.only:
-            pilot = pl.population_from_pilot(THESIS_3TERM, {"AD": 4.3, "BD": 23.1, "CD0": 4.3}, 18, _conditions(),
-                                             "three_term", seed=1)
+            pilot = pl.population_from_pilot(THESIS_3TERM, {"AD": 4.3, "BD": 23.1, "CD0": 4.3}, THESIS_PILOT_PAIRS,
+                                             _conditions(), "three_term", seed=1)
         if "simulated" in args.only:
             t0 = time.perf_counter()
             frames["simulated"] = _cached("simulated_records", "simulated" in args.rerun, lambda: run_batch(
@@ -156,7 +158,7 @@ def main(argv=None) -> int:
 
 
 def markdown(frames: dict) -> str:
-    return "\n".join(pl.planning_markdown(frames)) + "\n"
+    return "\n".join(report.planning_markdown(frames)) + "\n"
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """The withheld-effect proof suite of the sim-to-real diagnosis (issue 6).
 
 For every effect of the library, campaigns are simulated with the effect present
-(``bayes_roadload.analysis.diagnose.withheld_campaign``: ``--design standard``, thesis case 9
+(``studies.proof_suite.withheld_campaign``: ``--design standard``, thesis case 9
 conditions at a plausible size; ``--design identifying``, the library's ``[proof.identifying]``
 campaign), analysed with a model that withholds it, and diagnosed; null controls have no added
 effect.  Every diagnosis goes through the batch door (``analysis.batch.run_batch`` with
@@ -31,9 +31,9 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_roadload import config  # noqa: E402
 from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
-from bayes_roadload.analysis.diagnose import PROOF_DESIGNS, proof_design, withheld_effect_jobs  # noqa: E402
 from bayes_roadload.analysis.effects import EFFECT_NAMES  # noqa: E402
-from bayes_roadload.analysis.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
+from studies.proof_suite import PROOF_DESIGNS, proof_design, withheld_effect_jobs  # noqa: E402
+from studies.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
 
 OUT = ROOT / "docs" / "sim_to_real"
 
@@ -135,7 +135,7 @@ def confusion(records: pd.DataFrame, by: str = "top") -> pd.DataFrame:
 DESIGN_TEXT = {
     "standard": ("Each campaign is thesis case 9 conditions (2 m/s head and cross wind, Dryden turbulence, table 6.6 "
                  "measurement noise, the 'basic' drag model with lift), {pairs} pairs, with one effect added at a "
-                 "plausible size (`analysis.diagnose.withheld_campaign`)"),
+                 "plausible size (`studies.proof_suite.withheld_campaign`)"),
     "identifying": ("Each campaign is the library's `[proof.identifying]` design (`models/effects/library.toml`): "
                     "what the effects' *needs* ask of a track test -- {pairs} pairs, {head:g} m/s head and {cross:g} m/s "
                     "cross wind with case 9's turbulence and noise, the pairs at test masses {masses} kg in turn (a "
@@ -238,7 +238,7 @@ def markdown(by_design: dict[str, pd.DataFrame], args_text: str) -> str:
     if rp.exists():
         rep = pd.read_csv(rp)
         lines += ["", "## Thesis replay: which effects reproduce the track's spreads", "",
-                  f"`analysis.replay.replay`: {int(rep['pairs'].iloc[0])} pairs at the thesis' conditions (cases 14-17 in "
+                  f"`studies.replay.replay`: {int(rep['pairs'].iloc[0])} pairs at the thesis' conditions (cases 14-17 in "
                   "turn: 2-3 m/s head and cross wind, the comprehensive model, anemometer and vehicle dynamics, "
                   "table 6.6 noise), each pair with the effect at a size drawn from the range below, each pair "
                   "fitted by the thesis' 3-term least squares (K_D fixed); spread = std over pairs, % of the mean "

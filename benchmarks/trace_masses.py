@@ -24,6 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bayes_roadload import config  # noqa: E402
+from bayes_roadload import thesis  # noqa: E402
 from bayes_roadload.inference.nuts import fit_nuts  # noqa: E402
 from bayes_roadload.inference.results import summary_table, to_inference_data, diagnostics  # noqa: E402
 from bayes_roadload.simulate import get_case, simulate_campaign  # noqa: E402
@@ -52,7 +53,7 @@ def one(seed: int, masses, model: str = "three_term") -> dict:
 
 
 def main(seeds=(11, 12, 13)):
-    out = {"truth": {k: config.THESIS_COEFFICIENTS[k] for k in ("AD", "BD", "CD0")}}
+    out = {"truth": {k: thesis.THESIS_COEFFICIENTS[k] for k in ("AD", "BD", "CD0")}}
     for seed in seeds:
         out[f"seed {seed}"] = {label: one(seed, masses) for label, masses in MASSES.items()}
         print(json.dumps({f"seed {seed}": out[f"seed {seed}"]}), flush=True)

@@ -21,6 +21,7 @@ import time
 import warnings
 
 from bayes_roadload import config
+from bayes_roadload import thesis
 from bayes_roadload.inference.nuts import fit_nuts
 from bayes_roadload.inference.results import summary_table, to_inference_data
 from bayes_roadload.inference.spindown import classical_spindown, fit_spindown_nuts, spindown_derived
@@ -105,7 +106,7 @@ def main() -> None:
     result = {"spindown": spindown_study(args.seeds, sampler),
               "spindown_test_scatter": spindown_scatter_study(args.seeds, sampler),
               "steady_vs_coastdown": steady_study(args.seeds, args.case, args.coast_pairs, sampler),
-              "truth": {**config.THESIS_COEFFICIENTS}, "case": args.case, "wall_s": round(time.perf_counter() - t0, 1)}
+              "truth": {**thesis.THESIS_COEFFICIENTS}, "case": args.case, "wall_s": round(time.perf_counter() - t0, 1)}
     print(json.dumps(result, indent=1, default=float))
 
 

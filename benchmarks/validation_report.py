@@ -1,12 +1,12 @@
 """Validation report: regenerates ``docs/validation.md`` from the four validation studies.
 
 1. Thesis tables 6.8 / 6.9: the 19 cases of table 6.7, classical per-pair fits, beside the
-   published values (:mod:`bayes_roadload.analysis.thesis_study`).
+   published values (:mod:`studies.thesis_study`).
 2. Pooling: cases 14-19 fitted jointly with NUTS against one pair at a time, and K_D's
    identifiability against the mean |yaw| (:mod:`bayes_roadload.analysis.pooling`).
 3. Simulation-based calibration with its negative control (:mod:`bayes_roadload.analysis.sbc`;
    the fits are run by ``benchmarks/sbc_study.py``, whose records this script reads).
-4. Anemometer calibration, thesis 6.6 (:mod:`bayes_roadload.analysis.calibration`).
+4. Anemometer calibration, thesis 6.6 (:mod:`studies.calibration`).
 
 Every study's table is saved as CSV in ``docs/validation/`` (the notebook
 ``notebooks/02_validation.py`` plots them); a study whose CSV exists is not re-run unless named
@@ -30,9 +30,12 @@ from pathlib import Path
 
 import pandas as pd
 
-from bayes_roadload.analysis.batch import batch_client, run_batch
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
+from studies import calibration as cal  # noqa: E402
+from studies import thesis_study as ts  # noqa: E402
 DOC = ROOT / "docs" / "validation.md"
 DATA = ROOT / "docs" / "validation"
 STUDIES = ("thesis", "pooling", "sbc", "calibration")
@@ -55,8 +58,6 @@ def _cached(names, rerun: bool, compute):
 
 
 def thesis_section(args, executor) -> str:
-    from bayes_roadload.analysis import thesis_study as ts
-
     def compute():
         return {"thesis_cases": ts.case_table(seed=args.seed),
                 "thesis_spread": ts.spread_table(seeds=range(args.spread_seeds))}
@@ -98,8 +99,6 @@ def sbc_section(args, executor) -> str:
 
 
 def calibration_section(args, executor) -> str:
-    from bayes_roadload.analysis import calibration as cal
-
     def compute():
         return {"calibration": cal.calibration_study(seeds=range(args.calibration_seeds), scale=(1.0, 1.01),
                                                      executor=executor)}

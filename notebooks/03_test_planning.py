@@ -30,6 +30,7 @@
 
 # %%
 import os
+import sys
 import warnings
 from pathlib import Path
 
@@ -40,10 +41,14 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from bayes_roadload.analysis import planning as pl
-from bayes_roadload.simulate import simulate_campaign
-
 HERE = Path.cwd() if "__file__" not in globals() else Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))  # the studies package sits beside bayes_roadload, outside the wheel
+
+from bayes_roadload.analysis import planning as pl  # noqa: E402
+from bayes_roadload.simulate import simulate_campaign  # noqa: E402
+from studies.planning_report import thesis_replay_table  # noqa: E402
+from studies.thesis_tables import THESIS_TARGETS_PCT  # noqa: E402
+
 DATA = Path(os.environ.get("BR_PLANNING_DIR", HERE.parent / "docs" / "planning"))
 OUT = Path(os.environ.get("BR_OUT", "."))
 tables = {p.stem: pd.read_csv(p) for p in sorted(DATA.glob("*.csv"))}
@@ -55,7 +60,7 @@ print("study tables:", ", ".join(tables) or "none (run benchmarks/planning_study
 # population's.  Ours: the spread's uncertainty kept, and the future campaign's own t-interval.
 
 # %%
-replay = pl.thesis_replay_table(simulations=4000)
+replay = thesis_replay_table(simulations=4000)
 t86 = replay[replay["table"].str.startswith("8.6")]
 fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
 for ax, q in zip(axes, ("AD", "F50_N")):
@@ -63,7 +68,7 @@ for ax, q in zip(axes, ("AD", "F50_N")):
     ax.plot(g["n_pairs"], g["published"], "ks--", label="thesis table 8.6")
     ax.plot(g["n_pairs"], g["median_half_width"], "o-", label="ours: median")
     ax.fill_between(g["n_pairs"], g["q10_half_width"], g["q90_half_width"], alpha=0.2, label="ours: 10-90 %")
-    ax.axhline(pl.THESIS_TARGETS_PCT[q], color="r", lw=0.8)
+    ax.axhline(THESIS_TARGETS_PCT[q], color="r", lw=0.8)
     ax.set(xscale="log", yscale="log", xlabel="pairs", ylabel="95 % half-width (% of mean)", title=q)
     ax.legend(fontsize=8)
 fig.tight_layout()

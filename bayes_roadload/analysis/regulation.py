@@ -28,7 +28,28 @@ from scipy import stats
 from .. import config
 from ..data.campaign import Campaign
 
-MAX_PAIRS = config.REGULATION_MAX_PAIRS
+EEC_PRECISION_PCT = 2.0
+"""EEC coastdown acceptance (thesis appendix A): t s / (sqrt(n) X) <= 2 % at 95 %, X the mean
+total road load at the reference speed over the n pairs and s their standard deviation."""
+
+GTR_PRECISION_PCT = 3.0
+"""GTR 15 (WLTP, Annex 4) coastdown statistical precision: p_j = h s_j / (sqrt(n) dt_j) <= 3 %
+at every reference speed v_j, dt_j the pairs' mean coastdown time from v_j + 5 to v_j - 5 km/h
+(harmonic mean of the two directions of a pair), h = t(0.975, n - 1)."""
+
+GTR_SPEED_HALF_BAND_KPH = 5.0
+"""Half width of the GTR 15 coastdown-time speed band around each reference speed (km/h)."""
+
+GTR_REFERENCE_SPEEDS_KPH = (20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0, 100.0, 110.0, 120.0, 130.0)
+"""GTR 15 reference speeds (km/h); those inside every run's speed range are checked."""
+
+MIN_REGULATION_PAIRS = 3
+"""GTR 15 needs at least three pairs."""
+
+REGULATION_MAX_PAIRS = 200
+"""Largest number of pairs searched for the pairs a failing criterion still needs."""
+
+MAX_PAIRS = REGULATION_MAX_PAIRS
 
 
 def _band_time(t: np.ndarray, v: np.ndarray, high: float, low: float) -> float:
@@ -50,8 +71,8 @@ def _band_time(t: np.ndarray, v: np.ndarray, high: float, low: float) -> float:
     return t_low - t_high
 
 
-def coastdown_times(campaign: Campaign, speeds_kph: Sequence[float] = config.GTR_REFERENCE_SPEEDS_KPH,
-                    half_band_kph: float = config.GTR_SPEED_HALF_BAND_KPH) -> pd.DataFrame:
+def coastdown_times(campaign: Campaign, speeds_kph: Sequence[float] = GTR_REFERENCE_SPEEDS_KPH,
+                    half_band_kph: float = GTR_SPEED_HALF_BAND_KPH) -> pd.DataFrame:
     """Each run's coastdown time (s) through each reference speed's band: rows = runs (``run``,
     ``pair``), columns = reference speeds in km/h."""
     rows = []
@@ -125,7 +146,7 @@ def _criterion_row(criterion: str, speed_kph: float, values: np.ndarray, limit_p
 
 
 def gtr15_precision(campaign: Campaign, speeds_kph: Sequence[float] | None = None, *,
-                    limit_pct: float = config.GTR_PRECISION_PCT,
+                    limit_pct: float = GTR_PRECISION_PCT,
                     assurance: float = config.PLAN_ASSURANCE) -> pd.DataFrame:
     """GTR 15 statistical precision at each reference speed spanned by every run (module
     docstring).  Columns: ``criterion`` ("GTR15"), ``speed_kph``, ``n_pairs``, ``mean`` and
@@ -133,7 +154,7 @@ def gtr15_precision(campaign: Campaign, speeds_kph: Sequence[float] | None = Non
     ``pass``, ``extra_pairs``, ``extra_pairs_assured``."""
     if "pair" not in campaign.runs:
         raise ValueError("GTR 15 works on opposite-direction pairs: the campaign needs a `pair` column")
-    times = coastdown_times(campaign, speeds_kph or config.GTR_REFERENCE_SPEEDS_KPH)
+    times = coastdown_times(campaign, speeds_kph or GTR_REFERENCE_SPEEDS_KPH)
     speeds = [c for c in times.columns if isinstance(c, float) and times[c].notna().all()]
     rows = []
     for s in speeds:
@@ -142,11 +163,11 @@ def gtr15_precision(campaign: Campaign, speeds_kph: Sequence[float] | None = Non
             if len(g) == 2:
                 per_pair.append(2.0 / (1.0 / g[s]).sum())  # harmonic mean of the two directions
         rows.append(_criterion_row("GTR15", s, np.asarray(per_pair, float), limit_pct,
-                                   config.MIN_REGULATION_PAIRS, assurance))
+                                   MIN_REGULATION_PAIRS, assurance))
     return pd.DataFrame(rows)
 
 
-def eec_precision(campaign: Campaign, model: str = "three_term", *, limit_pct: float = config.EEC_PRECISION_PCT,
+def eec_precision(campaign: Campaign, model: str = "three_term", *, limit_pct: float = EEC_PRECISION_PCT,
                   assurance: float = config.PLAN_ASSURANCE) -> pd.DataFrame:
     """EEC criterion on the total road load at 50 mph (reference conditions) from each pair's
     classical least-squares fit with ``model`` (module docstring); one row like

@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
+from .. import thesis
 from ..physics.integrate import integrate_batch, make_run, stack_runs
 from ..physics.model import simplified_model
 
@@ -66,13 +67,13 @@ class SensitivitySettings:
     sample_rate_hz: float = 4.0
     relative_change: float = 0.01
     nominal: dict = field(default_factory=lambda: {
-        **config.THESIS_COEFFICIENTS,
-        "CL0": config.THESIS_FULL_MODEL["CL0"],
-        "KL": config.THESIS_FULL_MODEL["KL"],
+        **thesis.THESIS_COEFFICIENTS,
+        "CL0": thesis.THESIS_FULL_MODEL["CL0"],
+        "KL": thesis.THESIS_FULL_MODEL["KL"],
     })
-    mass_kg: float = config.THESIS_VEHICLE["mass_kg"]
-    effective_mass_kg: float = config.THESIS_VEHICLE["effective_mass_kg"]
-    frontal_area_m2: float = config.THESIS_VEHICLE["frontal_area_m2"]
+    mass_kg: float = thesis.THESIS_VEHICLE["mass_kg"]
+    effective_mass_kg: float = thesis.THESIS_VEHICLE["effective_mass_kg"]
+    frontal_area_m2: float = thesis.THESIS_VEHICLE["frontal_area_m2"]
     substeps: int = 4
 
 

@@ -33,7 +33,7 @@ from .. import config
 from ..data.campaign import Campaign
 from ..physics.atmosphere import REFERENCE_AIR_DENSITY_KGPM3
 from .cycles import COEFFICIENTS
-from .regulation import gtr15_precision
+from .regulation import GTR_PRECISION_PCT, MIN_REGULATION_PAIRS, gtr15_precision
 
 LBF_N = 4.44822
 MPH_KPH = 1.609344
@@ -77,7 +77,7 @@ class Standard:
 
 STANDARDS: dict[str, Standard] = {
     "gtr15": Standard("gtr15", "UN GTR 15 (WLTP) Annex 4", 293.15, 100_000.0, "SI_kph", "coefficients",
-                      min_pairs=config.MIN_REGULATION_PAIRS, precision_pct=config.GTR_PRECISION_PCT),
+                      min_pairs=MIN_REGULATION_PAIRS, precision_pct=GTR_PRECISION_PCT),
     "j2263": Standard("j2263", "SAE J2263 (on-board anemometry)", 293.15, 98_210.0, "US", "coefficients",
                       mass_factor=J2263_MASS_FACTOR, min_runs_per_direction=1),
     "j1263": Standard("j1263", "SAE J1263 (stationary wind station)", 293.15, 98_210.0, "US", "coefficients",

@@ -102,6 +102,7 @@ import numpyro
 import numpyro.distributions as dist
 
 from .. import config
+from .. import thesis
 from ..data.campaign import Campaign
 from ..physics.integrate import RunBatch, integrate_batch, integrate_batch_forward_sensitivity
 from ..physics.model import DragModel
@@ -166,8 +167,8 @@ class FitProblem:
     pooling: str = "pooled"
     noise: str = "integrated"
     robust: bool = False
-    mass_kg: float = config.THESIS_VEHICLE["mass_kg"]
-    frontal_area_m2: float = config.THESIS_VEHICLE["frontal_area_m2"]
+    mass_kg: float = thesis.THESIS_VEHICLE["mass_kg"]
+    frontal_area_m2: float = thesis.THESIS_VEHICLE["frontal_area_m2"]
     driveline_curve: tuple[float, float, float] = (0.0, 0.0, 0.0)
     initial: dict[str, Any] = field(default_factory=dict)
     gradients: str = "forward"

@@ -39,7 +39,7 @@ Meaning of the ``[model]`` switches (resolved against a campaign by :meth:`Model
     ``"wind"`` (a steady wind as parameters ``head_wind_mps``, ``cross_wind_mps``) force one.
 
 The ``aero_drag_table`` term takes its C_D(yaw) table from the campaign's ``[tunnel]``
-``yaw_deg`` / ``cd`` when present, else the thesis table (config.THESIS_TUNNEL_TABLE).
+``yaw_deg`` / ``cd`` when present, else the thesis table (:data:`bayes_roadload.thesis.THESIS_TUNNEL_TABLE`).
 
 Priors are in physical (SI) units; the Bayesian layer turns them into numpyro distributions
 with :meth:`Prior.to_numpyro`.  Parameters the file does not mention keep the model defaults
@@ -57,6 +57,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from .. import config
+from .. import thesis
 from ..physics.model import AIR_MODELS, DragModel, model_from_names
 from ..physics.terms import TERMS
 
@@ -286,9 +287,10 @@ class ModelSpec:
         driveline = self.resolve_driveline(campaign)
         if driveline != "none":
             names.append(f"driveline_{driveline}")
-        if "aero_drag_table" in names and "yaw_deg" in tunnel and "cd" in tunnel:
-            options["aero_drag_table"] = {"yaw_deg": tuple(float(x) for x in tunnel["yaw_deg"]),
-                                          "cd": tuple(float(x) for x in tunnel["cd"])}
+        if "aero_drag_table" in names:
+            table = tunnel if "yaw_deg" in tunnel and "cd" in tunnel else thesis.THESIS_TUNNEL_TABLE
+            options["aero_drag_table"] = {"yaw_deg": tuple(float(x) for x in table["yaw_deg"]),
+                                          "cd": tuple(float(x) for x in table["cd"])}
         air = self.resolve_air(campaign)
         model = model_from_names(names, air=air, **options)
 

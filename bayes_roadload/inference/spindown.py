@@ -39,6 +39,7 @@ import numpyro.distributions as dist
 import pandas as pd
 
 from .. import config
+from ..thesis import THESIS_UNDRIVEN, THESIS_UNDRIVEN_SD
 from ..physics.spindown import equivalent_mass_kg, spindown_interval_drag_n, spindown_speed_mps
 from .spec import ModelSpec, Prior, load_model_spec
 
@@ -240,9 +241,9 @@ def table_7_10_comparison(summary: pd.DataFrame, truth: dict | None = None) -> p
     s = summary.set_index("parameter")
     rows = []
     for k in TOTALS:
-        thesis = config.THESIS_UNDRIVEN[k]
+        thesis = THESIS_UNDRIVEN[k]
         row = {"parameter": k, "mean": s.loc[k, "mean"], "q2.5": s.loc[k, "q2.5"], "q97.5": s.loc[k, "q97.5"],
-               "thesis_table_7_10": thesis, "thesis_sd": config.THESIS_UNDRIVEN_SD[k],
+               "thesis_table_7_10": thesis, "thesis_sd": THESIS_UNDRIVEN_SD[k],
                "difference_pct": 100.0 * (s.loc[k, "mean"] - thesis) / thesis}
         if truth and isinstance(truth.get(k), (int, float)):
             row["truth"] = truth[k]

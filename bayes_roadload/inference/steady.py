@@ -46,6 +46,7 @@ import numpyro.distributions as dist
 import pandas as pd
 
 from .. import config
+from ..thesis import THESIS_TABLE_7_11
 from ..physics.atmosphere import air_density_kgpm3
 from ..physics.model import DragModel, StillAir, WindAir
 from ..physics.roadload import road_load_summary
@@ -330,9 +331,9 @@ def compare_with_coastdown(steady: pd.DataFrame, coastdown: pd.DataFrame,
     """Steady state against coastdown in the spirit of thesis table 7.11: for each quantity both
     posterior means, sds and 95 % intervals, the difference (steady - coastdown) in % of the
     coastdown and in combined sds, and the thesis' figures (table 7.11: the coastdown "set of
-    24" and the steady-state column, ``config.THESIS_TABLE_7_11``)."""
+    24" and the steady-state column, ``THESIS_TABLE_7_11``)."""
     s, c = steady.set_index("parameter"), coastdown.set_index("parameter")
-    thesis = config.THESIS_TABLE_7_11
+    thesis = THESIS_TABLE_7_11
     rows = []
     for k in names:
         if k not in s.index or k not in c.index:

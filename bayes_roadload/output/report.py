@@ -48,6 +48,7 @@ import pandas as pd  # noqa: E402
 from .. import __version__, config  # noqa: E402
 from ..data.campaign import read_vehicle_file  # noqa: E402
 from ..inference.results import REMEDIES  # noqa: E402
+from ..analysis.regulation import GTR_REFERENCE_SPEEDS_KPH  # noqa: E402
 from ..physics.atmosphere import REFERENCE_AIR_DENSITY_KGPM3  # noqa: E402
 
 HTML_NAME = "report.html"
@@ -411,7 +412,7 @@ def road_load_figure(fd: FitDirectory) -> tuple[Figure | None, pd.DataFrame | No
     figure = Figure("road_load", "Road load F(v)", _png(fig),
                     "posterior median with 50 % and 95 % bands beside the classical result; below, "
                     "the same as differences from the posterior median")
-    ref = np.array([s for s in config.GTR_REFERENCE_SPEEDS_KPH if s <= speeds[-1]])
+    ref = np.array([s for s in GTR_REFERENCE_SPEEDS_KPH if s <= speeds[-1]])
     rows = {"speed_kph": ref}
     if post is not None and ref.size:
         _, d = _posterior_curve(fd, ref)

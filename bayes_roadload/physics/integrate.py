@@ -341,12 +341,15 @@ def make_run(
     temperature_k=None,
     direction=1.0,
     start_position_m=0.0,
-    mass_kg=config.THESIS_VEHICLE["mass_kg"],
-    effective_mass_kg=config.THESIS_VEHICLE["effective_mass_kg"],
-    frontal_area_m2=config.THESIS_VEHICLE["frontal_area_m2"],
+    mass_kg,
+    effective_mass_kg,
+    frontal_area_m2,
 ) -> RunBatch:
     """Build a single-run :class:`RunBatch` from arrays, filling absent channels with
-    still air at reference conditions."""
+    still air at reference conditions.
+
+    The vehicle is required: ``mass_kg`` M (kg), ``effective_mass_kg`` M_e, the mass plus the
+    rotating inertia (kg, eq. 2.5) and ``frontal_area_m2`` A (m^2)."""
     from .atmosphere import air_density_kgpm3 as rho
 
     t = jnp.asarray(time_s, float)

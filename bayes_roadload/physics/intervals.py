@@ -8,7 +8,7 @@ is
 and the distance covered on the way ``integral v / (-a(v)) dv`` (the speed-trap model of seed
 002 and the closed form of appendix D for a quadratic F, :func:`~bayes_roadload.physics.
 integrate.quadratic_coastdown_time`).  Both are evaluated by Gauss-Legendre quadrature over the
-speed with a fixed number of nodes (``config.INTERVAL_QUADRATURE_NODES``): 1/F is smooth and
+speed with a fixed number of nodes (``INTERVAL_QUADRATURE_NODES``): 1/F is smooth and
 far from zero over a speed band, so 8 nodes are exact to ~1e-13 relative on a 5 km/h band of a
 quadratic road load (tested against appendix D), pure JAX and differentiable in every
 parameter.
@@ -30,9 +30,12 @@ from typing import Mapping, NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from .. import config
 from .model import DragModel, MeasuredAir
 from .terms import Conditions
+
+INTERVAL_QUADRATURE_NODES = 8
+"""Gauss-Legendre nodes per speed band for t = integral M_e / F(v) dv (exact to ~1e-13 relative
+on a 5 km/h band of a quadratic road load, tested against appendix D)."""
 
 Array = jnp.ndarray
 
@@ -58,7 +61,7 @@ class IntervalBands(NamedTuple):
     frontal_area_m2: Array
 
 
-def gauss_legendre(n: int = config.INTERVAL_QUADRATURE_NODES) -> tuple[np.ndarray, np.ndarray]:
+def gauss_legendre(n: int = INTERVAL_QUADRATURE_NODES) -> tuple[np.ndarray, np.ndarray]:
     """Nodes on [-1, 1] and weights of the n-point Gauss-Legendre rule (numpy constants)."""
     return np.polynomial.legendre.leggauss(int(n))
 
@@ -87,7 +90,7 @@ def _node_conditions(bands: IntervalBands, v: Array, model: DragModel, p: Mappin
 
 
 def interval_times(model: DragModel, params: Mapping[str, Array], bands: IntervalBands,
-                   n_nodes: int = config.INTERVAL_QUADRATURE_NODES) -> dict[str, Array]:
+                   n_nodes: int = INTERVAL_QUADRATURE_NODES) -> dict[str, Array]:
     """Time, distance and force sensitivity of every band (Gauss-Legendre in the speed).
 
     Parameters

@@ -8,7 +8,7 @@ in the acceleration; :meth:`DragModel.acceleration_mps2` solves that exactly.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar, Mapping
+from typing import ClassVar, Mapping, Sequence
 
 import jax.numpy as jnp
 
@@ -158,7 +158,7 @@ class DragModel:
 
 
 def simplified_model(*, driveline: str = "none", undriven: bool = False, lift: bool = False,
-                     tunnel_table: bool = False, air: str = "measured") -> DragModel:
+                     tunnel_table: Mapping[str, Sequence[float]] | None = None, air: str = "measured") -> DragModel:
     """The thesis' analysis model (eq. 2.49): tyres + driveline + undriven wheels + aero.
 
     Parameters
@@ -168,7 +168,8 @@ def simplified_model(*, driveline: str = "none", undriven: bool = False, lift: b
         A_t + B_t v + C_t v^2; "none" leaves the driveline loss lumped into the tyre terms.
     undriven : include A_u + B_u v.
     lift : include tyre unloading by lift (C_L known from the tunnel, as in thesis ch. 6).
-    tunnel_table : C_D(psi) from the tunnel table instead of C_D0 + K_D psi^2.
+    tunnel_table : ``{"yaw_deg": [...], "cd": [...]}``, C_D(psi) from this wind-tunnel table
+        (:class:`~bayes_roadload.physics.terms.AeroDragTable`) instead of C_D0 + K_D psi^2.
     air : {"measured", "still", "wind"}
     """
     terms: list[Term] = [TyreRolling()]
@@ -182,12 +183,16 @@ def simplified_model(*, driveline: str = "none", undriven: bool = False, lift: b
         raise ValueError(f"driveline must be 'none', 'measured' or 'polynomial', not {driveline!r}")
     if undriven:
         terms.append(UndrivenWheels())
-    terms.append(AeroDragTable() if tunnel_table else AeroDrag())
+    if tunnel_table is None:
+        terms.append(AeroDrag())
+    else:
+        terms.append(AeroDragTable(yaw_deg=tuple(float(x) for x in tunnel_table["yaw_deg"]),
+                                   cd=tuple(float(x) for x in tunnel_table["cd"])))
     return DragModel(tuple(terms), AIR_MODELS[air]())
 
 
-def full_model(*, driveline: str = "none", undriven: bool = False, tunnel_table: bool = False,
-               air: str = "measured") -> DragModel:
+def full_model(*, driveline: str = "none", undriven: bool = False,
+               tunnel_table: Mapping[str, Sequence[float]] | None = None, air: str = "measured") -> DragModel:
     """The complete drag function (eq. 2.48): the simplified model plus lift unloading,
     side-force slip and pitch attitude (thesis eq. 6.2 when driveline/undriven are off)."""
     base = simplified_model(driveline=driveline, undriven=undriven, lift=True,

@@ -163,14 +163,17 @@ class AeroDrag(Term):
 class AeroDragTable(Term):
     """Aerodynamic drag with C_D(psi) from a wind-tunnel table, linearly interpolated:
     C_D = C_D0 + [C_D,table(psi) - C_D,table(0)], so C_D0 stays the fitted zero-yaw value and
-    the table gives the shape (thesis case 13).  Yaw outside the table is held at its ends."""
+    the table gives the shape (thesis case 13).  Yaw outside the table is held at its ends.
+
+    ``yaw_deg`` (deg, strictly increasing) and ``cd`` (-) are the table; there is no default
+    table (the thesis' is :data:`bayes_roadload.thesis.THESIS_TUNNEL_TABLE`)."""
 
     name: ClassVar[str] = "aero_drag_table"
     defaults: ClassVar[Mapping[str, float]] = {"CD0": 0.4}
     speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "2.26 with a tabulated C_D(psi)"
-    yaw_deg: tuple[float, ...] = tuple(config.THESIS_TUNNEL_TABLE["yaw_deg"])
-    cd: tuple[float, ...] = tuple(config.THESIS_TUNNEL_TABLE["cd"])
+    yaw_deg: tuple[float, ...]
+    cd: tuple[float, ...]
 
     def __post_init__(self):
         if len(self.yaw_deg) != len(self.cd) or len(self.yaw_deg) < 2:
@@ -236,10 +239,11 @@ class DrivelineMeasured(Term):
 @register_term
 @dataclass(frozen=True)
 class DrivelinePolynomial(Term):
-    """Driveline off-load loss A_t + B_t v + C_t v^2 (eq. 2.14, 2.15)."""
+    """Driveline off-load loss A_t + B_t v + C_t v^2 (eq. 2.14, 2.15); no loss unless the
+    coefficients are given or fitted."""
 
     name: ClassVar[str] = "driveline_polynomial"
-    defaults: ClassVar[Mapping[str, float]] = dict(config.THESIS_DRIVELINE)
+    defaults: ClassVar[Mapping[str, float]] = {"At": 0.0, "Bt": 0.0, "Ct": 0.0}
     equation: ClassVar[str] = "2.14, 2.15"
 
     def force_n(self, p: Params, c: Conditions) -> Array:
@@ -250,10 +254,11 @@ class DrivelinePolynomial(Term):
 @register_term
 @dataclass(frozen=True)
 class UndrivenWheels(Term):
-    """Undriven wheel bearing and brake loss A_u + B_u v (eq. 2.16)."""
+    """Undriven wheel bearing and brake loss A_u + B_u v (eq. 2.16); no loss unless the
+    coefficients are given or fitted."""
 
     name: ClassVar[str] = "undriven_wheels"
-    defaults: ClassVar[Mapping[str, float]] = dict(config.THESIS_UNDRIVEN)
+    defaults: ClassVar[Mapping[str, float]] = {"Au": 0.0, "Bu": 0.0}
     speed_affine: ClassVar[bool] = True
     equation: ClassVar[str] = "2.16"
 

@@ -45,6 +45,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
+from .. import thesis
 from ..data.campaign import Campaign, Vehicle
 from ..physics.atmosphere import air_density_kgpm3
 from ..physics.model import DragModel, full_model, simplified_model
@@ -57,11 +58,11 @@ from .sensors import (DEFAULT_SENSORS, SensorConfig, rk4_step, second_order_rate
 Array = jnp.ndarray
 
 _THESIS_VEHICLE = Vehicle(
-    mass_kg=config.THESIS_VEHICLE["mass_kg"],
-    effective_mass_kg=config.THESIS_VEHICLE["effective_mass_kg"],
-    frontal_area_m2=config.THESIS_VEHICLE["frontal_area_m2"],
-    rolling_radius_m=config.THESIS_VEHICLE["rolling_radius_m"],
-    length_m=config.THESIS_VEHICLE["length_m"],
+    mass_kg=thesis.THESIS_VEHICLE["mass_kg"],
+    effective_mass_kg=thesis.THESIS_VEHICLE["effective_mass_kg"],
+    frontal_area_m2=thesis.THESIS_VEHICLE["frontal_area_m2"],
+    rolling_radius_m=thesis.THESIS_VEHICLE["rolling_radius_m"],
+    length_m=thesis.THESIS_VEHICLE["length_m"],
 )
 
 
@@ -149,19 +150,19 @@ class SimulationSettings:
     scale_length_cross_m: float = wind_mod.SCALE_LENGTH_M
     turbulence_ratio: float = wind_mod.TURBULENCE_RATIO
     turbulence_reference: Literal["component", "total"] = "component"
-    wind_bandwidth_hz: float | None = config.THESIS_WIND["bandwidth_hz"]
-    speed_noise_mps: float = config.THESIS_MEASUREMENT_NOISE["speed_mps"]
-    airspeed_noise_mps: float = config.THESIS_MEASUREMENT_NOISE["airspeed_mps"]
-    yaw_noise_rad: float = config.THESIS_MEASUREMENT_NOISE["yaw_rad"]
-    driveline_noise_n: float = config.THESIS_MEASUREMENT_NOISE["driveline_force_n"]
-    system_noise_std: Mapping[str, float] = field(default_factory=lambda: dict(config.THESIS_SYSTEM_NOISE))
+    wind_bandwidth_hz: float | None = thesis.THESIS_WIND["bandwidth_hz"]
+    speed_noise_mps: float = thesis.THESIS_MEASUREMENT_NOISE["speed_mps"]
+    airspeed_noise_mps: float = thesis.THESIS_MEASUREMENT_NOISE["airspeed_mps"]
+    yaw_noise_rad: float = thesis.THESIS_MEASUREMENT_NOISE["yaw_rad"]
+    driveline_noise_n: float = thesis.THESIS_MEASUREMENT_NOISE["driveline_force_n"]
+    system_noise_std: Mapping[str, float] = field(default_factory=lambda: dict(thesis.THESIS_SYSTEM_NOISE))
     system_noise_mode: Literal["band_limited", "per_run"] = "band_limited"
-    system_noise_bandwidth_hz: float = config.THESIS_WIND["bandwidth_hz"]
+    system_noise_bandwidth_hz: float = thesis.THESIS_WIND["bandwidth_hz"]
     speed_decimals: int = 5
     max_yaw_rad: float = config.MAX_LOGGED_YAW_RAD
-    coefficients: Mapping[str, float] = field(default_factory=lambda: dict(config.THESIS_COEFFICIENTS))
-    full_model_params: Mapping[str, float] = field(default_factory=lambda: dict(config.THESIS_FULL_MODEL))
-    driveline_params: Mapping[str, float] = field(default_factory=lambda: dict(config.THESIS_DRIVELINE))
+    coefficients: Mapping[str, float] = field(default_factory=lambda: dict(thesis.THESIS_COEFFICIENTS))
+    full_model_params: Mapping[str, float] = field(default_factory=lambda: dict(thesis.THESIS_FULL_MODEL))
+    driveline_params: Mapping[str, float] = field(default_factory=lambda: dict(thesis.THESIS_DRIVELINE))
     sensors: SensorConfig = DEFAULT_SENSORS
     vehicle: Vehicle = _THESIS_VEHICLE
     extra_terms: tuple = ()
@@ -200,7 +201,7 @@ def case_model(case: SimulationCase | str, *, driveline: bool = False) -> DragMo
     elif name == "comp":
         model = full_model()
     elif name == "table":
-        model = simplified_model(lift=True, tunnel_table=True)
+        model = simplified_model(lift=True, tunnel_table=thesis.THESIS_TUNNEL_TABLE)
     else:
         raise ValueError(f"unknown model {name!r}; expected 'basic', 'comp' or 'table'")
     return model.with_terms(DrivelinePolynomial()) if driveline else model
@@ -578,6 +579,6 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
     tunnel = {"KD": float(settings.coefficients["KD"]),
               "CL0": float(settings.full_model_params["CL0"]),
               "KL": float(settings.full_model_params["KL"]),
-              "yaw_deg": list(config.THESIS_TUNNEL_TABLE["yaw_deg"]),
-              "cd": list(config.THESIS_TUNNEL_TABLE["cd"])}
+              "yaw_deg": list(thesis.THESIS_TUNNEL_TABLE["yaw_deg"]),
+              "cd": list(thesis.THESIS_TUNNEL_TABLE["cd"])}
     return Campaign(runs_df, settings.vehicle, tunnel=tunnel, truth=truth, meta=meta)

@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import config
+from .. import thesis
 
 Array = jnp.ndarray
 
@@ -56,9 +56,9 @@ class SensorConfig:
     (:attr:`bayes_roadload.data.Vehicle.length_m`), passed separately to :func:`sensor_rates`.
     """
 
-    cup_distance_constant_m: float = config.THESIS_SENSORS["cup_distance_constant_m"]
-    vane_damping_ratio: float = config.THESIS_SENSORS["vane_damping_ratio"]
-    vane_damped_wavelength_m: float = config.THESIS_SENSORS["vane_damped_wavelength_m"]
+    cup_distance_constant_m: float = thesis.THESIS_SENSORS["cup_distance_constant_m"]
+    vane_damping_ratio: float = thesis.THESIS_SENSORS["vane_damping_ratio"]
+    vane_damped_wavelength_m: float = thesis.THESIS_SENSORS["vane_damped_wavelength_m"]
 
     def __post_init__(self):
         if not 0.0 < self.vane_damping_ratio < 1.0:
@@ -74,7 +74,7 @@ class SensorConfig:
 
 
 DEFAULT_SENSORS = SensorConfig()
-VEHICLE_LENGTH_M = config.THESIS_VEHICLE["length_m"]
+VEHICLE_LENGTH_M = thesis.THESIS_VEHICLE["length_m"]
 """Vehicle length of the thesis simulation (table 6.5), for the admittance time constant."""
 
 

@@ -8,30 +8,35 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from .. import config
+from .. import thesis
 from ..data.spindown import SpindownCampaign
 from ..physics.spindown import equivalent_mass_kg, spindown_speed_mps
+
+SPINDOWN_SIMULATION = {"v0_mps": 31.0, "v_end_mps": 3.0, "sample_rate_hz": 4.0, "speed_noise_mps": 0.02}
+"""Simulated spin-downs: released at ~70 mph tread speed (the thesis' maximum test speed), logged at
+4 Hz until the tread speed falls to 3 m/s, wheel-speed noise 0.02 m/s (a toothed-wheel pickup;
+the coastdown speed channel's 0.05 m/s of table 6.6 is an upper bound)."""
 
 
 @dataclass(frozen=True)
 class SpindownSettings:
-    """Release speed, end speed, logging rate and noise (defaults ``config.SPINDOWN_SIMULATION``)."""
+    """Release speed, end speed, logging rate and noise (defaults ``SPINDOWN_SIMULATION``)."""
 
-    v0_mps: float = config.SPINDOWN_SIMULATION["v0_mps"]
-    v_end_mps: float = config.SPINDOWN_SIMULATION["v_end_mps"]
-    sample_rate_hz: float = config.SPINDOWN_SIMULATION["sample_rate_hz"]
-    speed_noise_mps: float = config.SPINDOWN_SIMULATION["speed_noise_mps"]
+    v0_mps: float = SPINDOWN_SIMULATION["v0_mps"]
+    v_end_mps: float = SPINDOWN_SIMULATION["v_end_mps"]
+    sample_rate_hz: float = SPINDOWN_SIMULATION["sample_rate_hz"]
+    speed_noise_mps: float = SPINDOWN_SIMULATION["speed_noise_mps"]
 
 
 def thesis_wheels() -> dict[str, tuple[float, float]]:
     """Per-wheel (A_w, B_w): the means printed in thesis table 7.10 (nearside 1.66 / 0.121,
     offside 1.58 / 0.114; totals 3.24 N, 0.235 N s/m)."""
-    return {w: tuple(float(x) for x in t["mean"]) for w, t in config.THESIS_UNDRIVEN_PER_WHEEL.items()}
+    return {w: tuple(float(x) for x in t["mean"]) for w, t in thesis.THESIS_UNDRIVEN_PER_WHEEL.items()}
 
 
 def simulate_spindown(wheels: dict[str, tuple[float, float]] | None = None, *, tests_per_wheel: int = 3,
-                      wheel_inertia_kgm2: float = config.THESIS_WHEEL_INERTIA_KGM2,
-                      rolling_radius_m: float = config.THESIS_VEHICLE["rolling_radius_m"],
+                      wheel_inertia_kgm2: float = thesis.THESIS_WHEEL_INERTIA_KGM2,
+                      rolling_radius_m: float = thesis.THESIS_VEHICLE["rolling_radius_m"],
                       undriven_wheels: int | None = None, seed: int = 0,
                       settings: SpindownSettings = SpindownSettings(),
                       test_sd: tuple[float, float] = (0.0, 0.0)) -> SpindownCampaign:

@@ -1,6 +1,6 @@
 """Simulated steady-state torque tests (thesis sections 5.1.3, 5.4, 7.4).
 
-A group of runs at the steady speeds of ``config.STEADY_SIMULATION`` (20-70 mph), each speed
+A group of runs at the steady speeds of ``STEADY_SIMULATION`` (20-70 mph), each speed
 driven in both directions (one opposite-direction pair per speed and repetition).  The vehicle
 holds its set speed with a small constant drift (the driver fixes the throttle, section 5.4.1)
 through a frozen Dryden wind field of a table 6.7 case shared by the pair's two runs
@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
+from .. import thesis
 from ..data.steady import SteadyCampaign
 from ..physics.atmosphere import air_density_kgpm3
 from ..physics.terms import Conditions
@@ -28,19 +29,28 @@ from . import wind as wind_mod
 from .campaign import DEFAULT_SETTINGS, SimulationSettings, _relative_air, _rng, case_model, true_parameters
 from .cases import SimulationCase, get_case
 
+STEADY_SIMULATION = {"speeds_mph": (20.0, 30.0, 40.0, 50.0, 60.0, 70.0), "duration_s": 30.0,
+                     "sample_rate_hz": 1.0, "force_noise_n": 15.0, "run_force_sd_n": 8.0,
+                     "accel_sd_mps2": 0.02, "speed_noise_mps": 0.05, "driveline_noise_n": 10.0}
+"""Simulated steady-state groups (thesis section 5.1.3: 20-70 mph in 10 mph steps, both
+directions): each run held ``duration_s`` at its set speed with a constant drift of sd
+``accel_sd_mps2`` (the driver holds the throttle, section 5.4.1), logged at ``sample_rate_hz``;
+torque-meter noise ``force_noise_n`` per sample and a run offset of sd ``run_force_sd_n``; the
+gearbox input force carries the on-load driveline loss plus ``driveline_noise_n`` noise."""
+
 
 @dataclass(frozen=True)
 class SteadySettings:
-    """Steady speeds, run duration, logging rate and noise (defaults ``config.STEADY_SIMULATION``)."""
+    """Steady speeds, run duration, logging rate and noise (defaults ``STEADY_SIMULATION``)."""
 
-    speeds_mph: tuple[float, ...] = config.STEADY_SIMULATION["speeds_mph"]
-    duration_s: float = config.STEADY_SIMULATION["duration_s"]
-    sample_rate_hz: float = config.STEADY_SIMULATION["sample_rate_hz"]
-    force_noise_n: float = config.STEADY_SIMULATION["force_noise_n"]
-    run_force_sd_n: float = config.STEADY_SIMULATION["run_force_sd_n"]
-    accel_sd_mps2: float = config.STEADY_SIMULATION["accel_sd_mps2"]
-    speed_noise_mps: float = config.STEADY_SIMULATION["speed_noise_mps"]
-    driveline_noise_n: float = config.STEADY_SIMULATION["driveline_noise_n"]
+    speeds_mph: tuple[float, ...] = STEADY_SIMULATION["speeds_mph"]
+    duration_s: float = STEADY_SIMULATION["duration_s"]
+    sample_rate_hz: float = STEADY_SIMULATION["sample_rate_hz"]
+    force_noise_n: float = STEADY_SIMULATION["force_noise_n"]
+    run_force_sd_n: float = STEADY_SIMULATION["run_force_sd_n"]
+    accel_sd_mps2: float = STEADY_SIMULATION["accel_sd_mps2"]
+    speed_noise_mps: float = STEADY_SIMULATION["speed_noise_mps"]
+    driveline_noise_n: float = STEADY_SIMULATION["driveline_noise_n"]
 
 
 def simulate_steady(case: int | SimulationCase | None = 9, pairs: int = 1, seed: int = 0, *,
@@ -50,7 +60,7 @@ def simulate_steady(case: int | SimulationCase | None = 9, pairs: int = 1, seed:
     (table 6.7; default 9: 2 m/s head and cross wind; ``None``: still air), truth = the case's
     coefficients (table 6.3).  Runs 2k-1 (+) and 2k (-) form pair k.  With ``gearbox_input`` the
     gearbox input force is logged too: wheel force + the on-load driveline loss A_t + B_t v of
-    thesis table 7.9 (``config.THESIS_DRIVELINE_ON_LOAD``) + ``driveline_noise_n`` noise."""
+    thesis table 7.9 (``thesis.THESIS_DRIVELINE_ON_LOAD``) + ``driveline_noise_n`` noise."""
     sc = get_case(case if case is not None else 1) if not isinstance(case, SimulationCase) else case
     head, cross = (sc.head_wind_mps, sc.cross_wind_mps) if case is not None else (0.0, 0.0)
     model = case_model(sc)
@@ -87,7 +97,7 @@ def simulate_steady(case: int | SimulationCase | None = 9, pairs: int = 1, seed:
                 cols = {"run": run, "time_s": t, "speed_mps": v + rng.normal(0.0, settings.speed_noise_mps, n),
                         "tractive_force_n": force, "direction": d, "pair": pair}
                 if gearbox_input:
-                    on = config.THESIS_DRIVELINE_ON_LOAD
+                    on = thesis.THESIS_DRIVELINE_ON_LOAD
                     cols["gearbox_input_force_n"] = (force + on["At"] + on["Bt"] * v
                                                      + rng.normal(0.0, settings.driveline_noise_n, n))
                 if anemometer:
@@ -97,7 +107,7 @@ def simulate_steady(case: int | SimulationCase | None = 9, pairs: int = 1, seed:
     truth = {k: float(params[k]) for k in ("AD", "BD", "CD0", "KD")}
     truth.update({k: float(v) for k, v in params.items()})
     if gearbox_input:
-        truth.update({f"{k}_on_load": float(v) for k, v in config.THESIS_DRIVELINE_ON_LOAD.items()})
+        truth.update({f"{k}_on_load": float(v) for k, v in thesis.THESIS_DRIVELINE_ON_LOAD.items()})
     truth.update({"case": sc.number if case is not None else None, "model": sc.model,
                   "sigma_force_n": settings.force_noise_n, "run_force_sd_n": settings.run_force_sd_n})
     tunnel = {"KD": float(simulation.coefficients["KD"]), "CL0": float(simulation.full_model_params["CL0"]),

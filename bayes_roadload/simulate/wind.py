@@ -35,14 +35,14 @@ from typing import Literal
 
 import numpy as np
 
-from .. import config
+from .. import thesis
 
 Component = Literal["longitudinal", "lateral"]
 
 # Defaults of the wind model (thesis table 6.4).
-SCALE_LENGTH_M = config.THESIS_WIND["scale_length_m"]
+SCALE_LENGTH_M = thesis.THESIS_WIND["scale_length_m"]
 """Dryden scale length of both components, L_wh = L_wx = 30 m (table 6.4)."""
-TURBULENCE_RATIO = config.THESIS_WIND["turbulence_ratio"]
+TURBULENCE_RATIO = thesis.THESIS_WIND["turbulence_ratio"]
 """sigma / mean wind (table 6.4)."""
 WIND_GRID_STEP_M = 0.25
 """Spatial step of the synthesised field (m): 4 points per metre, far finer than L."""

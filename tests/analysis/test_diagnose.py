@@ -1,6 +1,6 @@
 """The sim-to-real diagnosis end to end: the CLI contract on a campaign with a withheld track
-gradient, a null control, and (slow) more nulls and non-identifiable effects through the batch
-door."""
+gradient (built by the proof suite, ``studies/proof_suite.py``), a null control, and the claim
+rules."""
 
 import json
 import math
@@ -9,10 +9,11 @@ import warnings
 import pytest
 
 from bayes_roadload import config
-from bayes_roadload.analysis.diagnose import DiagnoseJob, diagnose, withheld_campaign
+from bayes_roadload.analysis.diagnose import diagnose
 from bayes_roadload.analysis.effects import EFFECT_NAMES
 from bayes_roadload.cli import main
 from bayes_roadload.data import save_campaign
+from studies.proof_suite import withheld_campaign
 
 CANDIDATE_KEYS = {"effect", "rank", "supported", "delta_elpd", "gap_before", "gap_after", "shrink_pct"}
 
@@ -89,24 +90,6 @@ def test_a_null_control_claims_nothing():
     assert d.result["gap"]["spread_excess"] < 1.0 + 3.0 / math.sqrt(2 * 9)
 
 
-@pytest.mark.slow
-def test_null_controls_and_a_confounded_effect_through_the_batch_door():
-    from bayes_roadload.analysis.batch import run_batch
-
-    jobs = []
-    for effect, seed in ((None, 1001), (None, 1002), ("aero_lift", 1), ("mass_error", 1)):
-        factory, model = withheld_campaign(effect, seed, pairs=3)
-        jobs.append(DiagnoseJob(f"{effect}-{seed}", factory, model, tags={"true_effect": str(effect)}))
-    rec = run_batch(jobs).set_index("name")
-    assert rec["error"].isna().all()
-    # nulls: nothing may be claimed at the stated threshold
-    assert (rec.loc[["None-1001", "None-1002"], "top"] == "none").all()
-    # lift unloading looks like a C_D0 change, an effective-mass error like a rescaling of the
-    # coefficients: neither may be claimed as another effect
-    for name, effect in (("aero_lift-1", "aero_lift"), ("mass_error-1", "mass_error")):
-        assert rec.loc[name, "top"] in ("none", effect)
-
-
 def test_a_claim_needs_a_margin_over_every_other_candidate():
     from bayes_roadload.analysis.diagnose import select_effects
 
@@ -167,64 +150,6 @@ def test_a_rival_with_the_same_signature_blocks_a_claim(monkeypatch):
     e = entries()
     chosen = dg.select_effects(None, e, {}, cfg)
     assert chosen[0] == "mass_error" and e[0]["supported"]
-
-
-def test_the_identifying_design_is_the_library_table():
-    from bayes_roadload.analysis.diagnose import Distorted, proof_design
-    from bayes_roadload.analysis.pooling import CombinedCampaign
-
-    plan = proof_design("identifying")
-    assert proof_design("standard") == {}
-    factory, model = withheld_campaign("side_force_slip", seed=3, design="identifying")
-    assert model == "three_term" and isinstance(factory, CombinedCampaign)
-    parts = factory.parts
-    # the pairs split over the start speeds, every part at the design's masses and winds
-    assert sum(p.pairs for p in parts) == plan["pairs"]
-    assert [p.settings.start_speed_mps for p in parts] == plan["start_speeds_mps"]
-    assert all(p.masses_kg == tuple(plan["masses_kg"]) for p in parts)
-    assert all(p.case.cross_wind_mps == plan["cross_wind_mps"] for p in parts)
-    assert len({p.seed for p in parts}) == len(parts)
-    # the effect at its size factor times the plausible size of the standard design
-    std, _ = withheld_campaign("side_force_slip", seed=3)
-    ratio = parts[0].settings.extra_params["side_slip_coeff_per_n"] / std.settings.extra_params["side_slip_coeff_per_n"]
-    assert ratio == pytest.approx(plan["size_factor"]["side_force_slip"])
-    mass, _ = withheld_campaign("mass_error", seed=3, design="identifying")
-    assert isinstance(mass, Distorted) and mass.effective_mass_factor == pytest.approx(1.03)
-
-
-def test_proof_design_refuses_unknown_keys_and_effects(tmp_path):
-    from bayes_roadload.analysis.diagnose import proof_design
-
-    bad = tmp_path / "lib.toml"
-    bad.write_text("[proof.identifying]\npairs = 4\nsun_angle_deg = 3\n")
-    with pytest.raises(ValueError, match="sun_angle_deg"):
-        proof_design("identifying", bad)
-    bad.write_text("[proof.identifying.size_factor]\nwarp_drive = 2\n")
-    with pytest.raises(ValueError, match="warp_drive"):
-        proof_design("identifying", bad)
-    with pytest.raises(ValueError, match="unknown proof design"):
-        proof_design("lavish")
-
-
-def test_a_distorted_yaw_reading_ends_the_run_at_the_logged_limit():
-    import numpy as np
-    import pandas as pd
-
-    from bayes_roadload.analysis.diagnose import Distorted
-    from bayes_roadload.data import Campaign, Vehicle
-
-    t = np.arange(0.0, 10.0, 0.25)
-    yaw = np.linspace(0.0, 1.45, t.size)          # within the limit as logged
-    runs = pd.DataFrame({"run": np.repeat([1, 2], t.size), "time_s": np.tile(t, 2),
-                         "speed_mps": np.tile(30.0 - t, 2), "direction": np.repeat([1, -1], t.size),
-                         "airspeed_mps": np.tile(31.0 - t, 2), "yaw_rad": np.concatenate([yaw, -yaw / 2])})
-    c = Campaign(runs, Vehicle(mass_kg=1100.0, effective_mass_kg=1130.0, frontal_area_m2=1.85))
-    d = Distorted(lambda: c, yaw_factor=0.869)()
-    r1 = d.runs[d.runs["run"] == 1]
-    # true = 0.869 x reading: readings grow by 1 / 0.869 and run 1 stops before the limit
-    assert r1["yaw_rad"].abs().max() <= config.MAX_LOGGED_YAW_RAD
-    assert len(r1) == int(np.sum(yaw / 0.869 <= config.MAX_LOGGED_YAW_RAD))
-    assert len(d.runs[d.runs["run"] == 2]) == t.size
 
 
 def test_a_lead_made_by_one_run_is_not_a_claim(monkeypatch):

@@ -7,8 +7,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from bayes_roadload import config
-from bayes_roadload.analysis.regulation import _band_time, coastdown_times, gtr15_precision, pairs_needed
+from bayes_roadload.analysis.regulation import GTR_PRECISION_PCT, _band_time, coastdown_times, gtr15_precision, pairs_needed
 from bayes_roadload.data.campaign import Campaign, Vehicle
 
 
@@ -40,7 +39,7 @@ def test_gtr_precision_follows_the_formula():
     pair_t = [2.0 / (decels[i] / (10 / 3.6) + decels[i + 1] / (10 / 3.6)) for i in (0, 2, 4)]
     expected = stats.t.ppf(0.975, 2) * np.std(pair_t, ddof=1) / math.sqrt(3) / np.mean(pair_t) * 100
     assert row["n_pairs"] == 3 and row["precision_pct"] == pytest.approx(expected, rel=1e-9)
-    assert row["pass"] == (expected <= config.GTR_PRECISION_PCT)
+    assert row["pass"] == (expected <= GTR_PRECISION_PCT)
 
 
 def test_failing_criterion_asks_for_more_pairs():
@@ -50,8 +49,8 @@ def test_failing_criterion_asks_for_more_pairs():
         pytest.fail(f"expected a failure, precision {row['precision_pct']}")
     n = row["n_pairs"] + row["extra_pairs"]
     spread = 100 * row["sd"] / row["mean"]
-    assert stats.t.ppf(0.975, n - 1) * spread / math.sqrt(n) <= config.GTR_PRECISION_PCT
-    assert stats.t.ppf(0.975, n - 2) * spread / math.sqrt(n - 1) > config.GTR_PRECISION_PCT
+    assert stats.t.ppf(0.975, n - 1) * spread / math.sqrt(n) <= GTR_PRECISION_PCT
+    assert stats.t.ppf(0.975, n - 2) * spread / math.sqrt(n - 1) > GTR_PRECISION_PCT
     # keeping the spread's uncertainty asks for at least as many
     assert row["extra_pairs_assured"] >= row["extra_pairs"]
 

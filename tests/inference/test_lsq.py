@@ -12,15 +12,17 @@ import pandas as pd
 import pytest
 
 from bayes_roadload import config
+from bayes_roadload import thesis
 from bayes_roadload.data import Campaign, Vehicle
 from bayes_roadload.inference import LsqSettings, fit_lsq, format_lsq_table, load_model_spec, weighted_mean, write_lsq_outputs
 from bayes_roadload.inference.lsq import SUMMARY_COLUMNS, between_group_spread
 from bayes_roadload.physics import integrate_batch, make_run, simplified_model, stack_runs
 from bayes_roadload.physics.atmosphere import REFERENCE_AIR_DENSITY_KGPM3
 
-TRUTH = dict(config.THESIS_COEFFICIENTS)  # AD 0.01, BD 2e-4, CD0 0.4, KD 0.614
+TRUTH = dict(thesis.THESIS_COEFFICIENTS)  # AD 0.01, BD 2e-4, CD0 0.4, KD 0.614
 TUNNEL = {"KD": 0.614, "CL0": 0.273, "KL": 3.64}
 COEFFS = ("AD", "BD", "CD0", "KD")
+VEHICLE = {k: thesis.THESIS_VEHICLE[k] for k in ("mass_kg", "effective_mass_kg", "frontal_area_m2")}
 
 
 def steady_wind_campaign(winds, *, n_samples=401, v0_mps=31.0):
@@ -37,7 +39,7 @@ def steady_wind_campaign(winds, *, n_samples=401, v0_mps=31.0):
     signs = [(s * h, s * x) for h, x in winds for s in (1.0, -1.0)]
     head = np.array([h for h, _ in signs])
     cross = np.array([x for _, x in signs])
-    batch = stack_runs([make_run(t, np.full_like(t, v0_mps))] * len(signs))
+    batch = stack_runs([make_run(t, np.full_like(t, v0_mps), **VEHICLE)] * len(signs))
     p = {**TRUTH, "CL0": TUNNEL["CL0"], "KL": TUNNEL["KL"]}
     v_wind = jax.jit(lambda h, x: integrate_batch(
         simplified_model(lift=True, air="wind"), {**p, "head_wind_mps": h, "cross_wind_mps": x}, batch)[0])
@@ -45,13 +47,14 @@ def steady_wind_campaign(winds, *, n_samples=401, v0_mps=31.0):
     along = v + head[:, None]
     airspeed = np.sqrt(along**2 + cross[:, None] ** 2)
     yaw = np.arctan2(cross[:, None], along)
-    logged = stack_runs([make_run(t, v[i], airspeed_mps=airspeed[i], yaw_rad=yaw[i]) for i in range(len(signs))])
+    logged = stack_runs([make_run(t, v[i], airspeed_mps=airspeed[i], yaw_rad=yaw[i], **VEHICLE)
+                         for i in range(len(signs))])
     vm = np.asarray(jax.jit(lambda b: integrate_batch(simplified_model(lift=True, air="measured"), p, b)[0])(logged))
     frames = [pd.DataFrame({"run": i + 1, "pair": i // 2, "direction": 1.0 if i % 2 == 0 else -1.0,
                             "time_s": t, "speed_mps": vm[i], "airspeed_mps": airspeed[i], "yaw_rad": yaw[i]})
               for i in range(len(signs))]
-    vehicle = Vehicle(config.THESIS_VEHICLE["mass_kg"], config.THESIS_VEHICLE["effective_mass_kg"],
-                      config.THESIS_VEHICLE["frontal_area_m2"])
+    vehicle = Vehicle(thesis.THESIS_VEHICLE["mass_kg"], thesis.THESIS_VEHICLE["effective_mass_kg"],
+                      thesis.THESIS_VEHICLE["frontal_area_m2"])
     return Campaign(pd.concat(frames, ignore_index=True), vehicle, tunnel=dict(TUNNEL), truth=dict(TRUTH))
 
 
@@ -195,7 +198,7 @@ def test_measured_initial_speed_understates_the_errors(two_pairs):
 
 def test_derived_road_load_figures(clean_fits):
     result = clean_fits["pair"]
-    m, a, v = config.THESIS_VEHICLE["mass_kg"], config.THESIS_VEHICLE["frontal_area_m2"], config.SPEED_50MPH_MPS
+    m, a, v = thesis.THESIS_VEHICLE["mass_kg"], thesis.THESIS_VEHICLE["frontal_area_m2"], config.SPEED_50MPH_MPS
 
     def parts(v):  # eq. 6.1 in still air at the reference density: tyres with lift, aero
         qa = 0.5 * REFERENCE_AIR_DENSITY_KGPM3 * a * v**2

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bayes_roadload import config
+from bayes_roadload.thesis import THESIS_COEFFICIENTS, THESIS_DRIVELINE, THESIS_TUNNEL_TABLE
 from bayes_roadload.data import Anemometer, Campaign, Vehicle
 from bayes_roadload.inference import ModelSpecError, available_models, load_model_spec
 from bayes_roadload.inference.spec import MODELS_DIR, Prior
@@ -46,7 +46,7 @@ def test_required_model_files_exist_and_load():
             d = prior.to_numpyro()
             assert math.isfinite(float(d.log_prob(prior.center))), (name, p)
             # weakly informative: the thesis' value is within 2 prior scales of the centre
-            thesis = {**config.THESIS_COEFFICIENTS, **config.THESIS_DRIVELINE}[p]
+            thesis = {**THESIS_COEFFICIENTS, **THESIS_DRIVELINE}[p]
             assert abs(thesis - prior.loc) <= 2 * prior.scale, (name, p)
 
 
@@ -100,7 +100,7 @@ def test_tunnel_values_fallbacks_and_tables():
     assert term.yaw_deg == (-20.0, 0.0, 20.0) and term.cd == (0.47, 0.40, 0.47)
     model, _, _ = load_model_spec("tunnel_table").build(make_campaign(tunnel=None))
     (term,) = [t for t in model.terms if t.name == "aero_drag_table"]
-    assert list(term.cd) == config.THESIS_TUNNEL_TABLE["cd"]
+    assert list(term.cd) == THESIS_TUNNEL_TABLE["cd"]
 
 
 def test_auto_driveline_and_air():

@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 import scipy.stats
 
-from bayes_roadload import config
+from bayes_roadload import thesis
 from bayes_roadload.inference.steady import (
     build_steady_problem,
     classical_steady,
@@ -81,7 +81,7 @@ def test_comparison_table_follows_table_7_11():
     assert t.loc["CD0", "thesis_steady"] == 0.410 and t.loc["CD0", "thesis_coastdown"] == 0.391
     assert t.loc["AD", "thesis_difference_pct"] == pytest.approx(100 * (0.0110 - 0.0098) / 0.0098)
     assert np.isnan(t.loc["F50_N", "thesis_difference_pct"])
-    assert config.THESIS_TABLE_7_11["std_pct"]["steady_state"]["BD"] == 131.7
+    assert thesis.THESIS_TABLE_7_11["std_pct"]["steady_state"]["BD"] == 131.7
 
 
 def test_a_driveline_model_is_refused():

@@ -11,6 +11,7 @@ from bayes_roadload.physics import effects as fx
 from bayes_roadload.physics.terms import AeroDrag, PitchAttitude, SideForceSlip, TyreRolling
 
 RHO = 1.19
+VEHICLE = {"mass_kg": 1100.0, "effective_mass_kg": 1130.0, "frontal_area_m2": 1.85}
 
 
 def conditions(**kw):
@@ -126,9 +127,10 @@ def test_the_integrator_feeds_the_reading_rate_to_the_cup_lag():
     base = DragModel((TyreRolling(), AeroDrag()))
     p = {"AD": 0.01, "BD": 2e-4, "CD0": 0.4, "KD": 0.6, "cup_lag_m": d}
     with_lag = base.with_terms(fx.AnemometerLag())
-    v_lag, _ = integrate_run(with_lag, p, make_run(t, v, airspeed_mps=a_m), v0_mps=30.0)
-    v_cor, _ = integrate_run(base, p, make_run(t, v, airspeed_mps=a_m + d / a_m * np.asarray(rate)), v0_mps=30.0)
-    v_none, _ = integrate_run(base, p, make_run(t, v, airspeed_mps=a_m), v0_mps=30.0)
+    v_lag, _ = integrate_run(with_lag, p, make_run(t, v, airspeed_mps=a_m, **VEHICLE), v0_mps=30.0)
+    v_cor, _ = integrate_run(base, p, make_run(t, v, airspeed_mps=a_m + d / a_m * np.asarray(rate), **VEHICLE),
+                             v0_mps=30.0)
+    v_none, _ = integrate_run(base, p, make_run(t, v, airspeed_mps=a_m, **VEHICLE), v0_mps=30.0)
     effect = np.max(np.abs(np.asarray(v_cor) - np.asarray(v_none)))
     assert effect > 1e-4                                               # the lag matters
     assert np.max(np.abs(np.asarray(v_lag) - np.asarray(v_cor))) < 0.01 * effect

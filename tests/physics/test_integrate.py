@@ -19,6 +19,7 @@ from bayes_roadload.physics import (
 )
 
 M, ME, AREA = 1100.0, 1130.0, 1.85
+VEHICLE = {"mass_kg": M, "effective_mass_kg": ME, "frontal_area_m2": AREA}
 RHO = float(air_density_kgpm3())
 COEF = {"AD": 0.01, "BD": 2.0e-4, "CD0": 0.4, "KD": 0.614}
 
@@ -27,10 +28,19 @@ def quadratic_abc(p=COEF):
     return M * config.GRAVITY_MPS2 * p["AD"], M * config.GRAVITY_MPS2 * p["BD"], 0.5 * RHO * AREA * p["CD0"]
 
 
+def test_make_run_needs_the_vehicle():
+    """No default vehicle: a run without its mass, effective mass and area is refused."""
+    t = np.arange(0.0, 1.0, 0.25)
+    with pytest.raises(TypeError, match="mass_kg"):
+        make_run(t, np.full_like(t, 30.0))
+    run = make_run(t, np.full_like(t, 30.0), **VEHICLE)
+    assert (float(run.mass_kg), float(run.effective_mass_kg), float(run.frontal_area_m2)) == (M, ME, AREA)
+
+
 def test_closed_form_appendix_d():
     """Still air, F = a + b v + c v^2: RK4 at the thesis' 4 Hz matches appendix D to < 1e-9."""
     t = np.arange(0.0, 110.0, 0.25)
-    run = make_run(t, np.full_like(t, 31.3))
+    run = make_run(t, np.full_like(t, 31.3), **VEHICLE)
     v, s = integrate_run(simplified_model(air="still"), COEF, run)
     a, b, c = quadratic_abc()
     exact = quadratic_coastdown_speed(t, 31.3, a, b, c, ME)
@@ -52,13 +62,13 @@ def test_fourth_order_convergence(stride):
     p = dict(COEF, head_wind_mps=2.0, cross_wind_mps=3.0)
     t_end = 96.0
     fine = np.arange(0.0, t_end + 0.1, 0.25)
-    v_ref = np.asarray(integrate_run(model, p, make_run(fine, np.full_like(fine, 31.0)), 31.0,
+    v_ref = np.asarray(integrate_run(model, p, make_run(fine, np.full_like(fine, 31.0), **VEHICLE), 31.0,
                                      IntegratorConfig_(64))[0])[::16]  # every 4 s
     errors = []
     for h in (4.0, 2.0, 1.0, 0.5):
         dt = h / stride
         t = np.arange(0.0, t_end + dt / 2, dt)
-        v = np.asarray(integrate_run(model, p, make_run(t, np.full_like(t, 31.0)), 31.0,
+        v = np.asarray(integrate_run(model, p, make_run(t, np.full_like(t, 31.0), **VEHICLE), 31.0,
                                      config.IntegratorConfig(stride=stride))[0])
         errors.append(np.max(np.abs(v[:: int(4.0 / dt)] - v_ref)))
     orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
@@ -73,11 +83,11 @@ def IntegratorConfig_(substeps):
 
 def test_substeps_agree_with_finer_grid():
     t = np.arange(0.0, 20.0, 0.25)
-    run = make_run(t, np.full_like(t, 30.0))
+    run = make_run(t, np.full_like(t, 30.0), **VEHICLE)
     model = simplified_model(air="still")
     coarse = integrate_run(model, COEF, run, integrator=IntegratorConfig_(4))[0]
     fine_t = np.arange(0.0, 20.0 - 0.25 + 1e-9, 0.0625)
-    fine = integrate_run(model, COEF, make_run(fine_t, np.full_like(fine_t, 30.0)))[0]
+    fine = integrate_run(model, COEF, make_run(fine_t, np.full_like(fine_t, 30.0), **VEHICLE))[0]
     np.testing.assert_allclose(coarse, fine[::4], rtol=1e-12)
 
 
@@ -88,11 +98,11 @@ def test_inputs_interpolated_at_half_steps():
     t = np.arange(0.0, 30.0, 0.5)
     yaw = 0.02 * t
     v = np.full_like(t, 30.0)
-    run = make_run(t, v, airspeed_mps=v, yaw_rad=yaw)
+    run = make_run(t, v, airspeed_mps=v, yaw_rad=yaw, **VEHICLE)
     a = integrate_run(model, COEF, run)[0]
     tf = np.arange(0.0, 29.5 + 1e-9, 0.25)
     b = integrate_run(model, COEF, make_run(tf, np.full_like(tf, 30.0), airspeed_mps=np.full_like(tf, 30.0),
-                                            yaw_rad=0.02 * tf), integrator=IntegratorConfig_(1))[0]
+                                            yaw_rad=0.02 * tf, **VEHICLE), integrator=IntegratorConfig_(1))[0]
     # the coarse run holds 2 RK4 stages at the midpoint; the fine run 1 step per half: both
     # integrate the same smooth forcing, agreement to RK4 accuracy at these step sizes
     np.testing.assert_allclose(a, b[::2], rtol=1e-9)
@@ -103,8 +113,8 @@ def test_padding_and_per_run_parameters():
     parameter of shape [R] is applied per run."""
     model = simplified_model(air="still")
     t1, t2 = np.arange(0.0, 50.0, 0.25), np.arange(0.0, 80.0, 0.25)
-    r1 = make_run(t1, np.full_like(t1, 25.0), direction=1.0)
-    r2 = make_run(t2, np.full_like(t2, 31.0), direction=-1.0)
+    r1 = make_run(t1, np.full_like(t1, 25.0), direction=1.0, **VEHICLE)
+    r2 = make_run(t2, np.full_like(t2, 31.0), direction=-1.0, **VEHICLE)
     batch = stack_runs([r1, r2])
     assert batch.time_s.shape == (2, t2.size)
     assert int(batch.mask[0].sum()) == t1.size and bool(batch.mask[1].all())
@@ -126,7 +136,7 @@ def test_gradient_matches_finite_differences(name):
     rng = np.random.default_rng(3)
     yaw = 0.1 * np.sin(0.2 * t) + 0.01 * rng.standard_normal(t.size)
     v_meas = np.asarray(quadratic_coastdown_speed(t, 31.0, *quadratic_abc(), ME)) + 0.05 * rng.standard_normal(t.size)
-    run = make_run(t, v_meas, airspeed_mps=v_meas + 2.0, yaw_rad=yaw)
+    run = make_run(t, v_meas, airspeed_mps=v_meas + 2.0, yaw_rad=yaw, **VEHICLE)
     scale = config.PARAMETER_SCALES[name]
 
     def loss(x):
@@ -143,7 +153,8 @@ def test_gradient_matches_finite_differences(name):
 def test_batch_is_jittable_and_differentiable():
     model = simplified_model()
     t = np.arange(0.0, 20.0, 0.25)
-    batch = stack_runs([make_run(t, np.full_like(t, 30.0), yaw_rad=0.05), make_run(t[:50], np.full(50, 28.0))])
+    batch = stack_runs([make_run(t, np.full_like(t, 30.0), yaw_rad=0.05, **VEHICLE),
+                        make_run(t[:50], np.full(50, 28.0), **VEHICLE)])
     f = jax.jit(lambda cd: integrate_batch(model, dict(COEF, CD0=cd), batch)[0].sum())
     assert np.isfinite(f(0.4))
     assert float(jax.grad(f)(0.4)) < 0.0  # more drag, lower speeds
@@ -160,7 +171,7 @@ def test_forward_sensitivity_gradient_equals_reverse_mode():
     for n, d in ((80, 1.0), (60, -1.0), (90, 1.0)):
         t = np.arange(n) * 0.25
         runs.append(make_run(t, 30.0 - 0.2 * t + 0.05 * rng.standard_normal(n), airspeed_mps=32.0 - 0.2 * t,
-                             yaw_rad=0.05 * np.sin(t), direction=d))
+                             yaw_rad=0.05 * np.sin(t), direction=d, **VEHICLE))
     batch = stack_runs(runs)
     fixed = {"KD": 0.614}
     weights = jnp.asarray(rng.standard_normal(batch.time_s.shape)) * batch.mask
@@ -192,7 +203,7 @@ def test_two_interval_steps_keep_every_input(n_samples):
     rng = np.random.default_rng(4)
     t = np.arange(n_samples) * 0.25
     drive = 40.0 + rng.normal(0.0, 30.0, t.size)
-    run = make_run(t, np.full_like(t, 30.0), driveline_force_n=drive)
+    run = make_run(t, np.full_like(t, 30.0), driveline_force_n=drive, **VEHICLE)
     model = simplified_model(driveline="measured", air="still")
     one = np.asarray(integrate_run(model, COEF, run, integrator=config.IntegratorConfig(stride=1))[0])
     two = np.asarray(integrate_run(model, COEF, run, integrator=config.IntegratorConfig(stride=2))[0])
@@ -216,7 +227,7 @@ def test_linear_equation_of_motion_is_solved_in_parallel_with_the_same_result():
         t = np.arange(n) * 0.25
         air = 30.0 - 0.08 * t + rng.normal(0, 0.3, n)
         runs.append(make_run(t, 31.0 - 0.08 * t, airspeed_mps=air, yaw_rad=rng.normal(0.05, 0.05, n),
-                             driveline_force_n=40 + rng.normal(0, 20, n)))
+                             driveline_force_n=40 + rng.normal(0, 20, n), **VEHICLE))
     batch = stack_runs(runs)
     seq = config.IntegratorConfig(stride=2, parallel=False)
     par = config.IntegratorConfig(stride=2, parallel=True)

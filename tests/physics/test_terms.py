@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from bayes_roadload import config
+from bayes_roadload import config, thesis
 from bayes_roadload.physics import TERMS, Conditions, DragModel, air_density_kgpm3, full_model, simplified_model
 from bayes_roadload.physics import terms as T
 
@@ -66,12 +66,24 @@ def test_gradient_reverses_with_direction_and_profile():
 
 
 def test_tunnel_table_keeps_cd0_at_zero_yaw():
-    t = T.AeroDragTable()
+    t = T.AeroDragTable(yaw_deg=tuple(thesis.THESIS_TUNNEL_TABLE["yaw_deg"]), cd=tuple(thesis.THESIS_TUNNEL_TABLE["cd"]))
     c0 = conditions(yaw_rad=0.0)
     assert float(t.force_n({"CD0": 0.4}, c0)) == pytest.approx(0.5 * 1.2 * 27.0**2 * 1.85 * 0.4)
     c10 = conditions(yaw_rad=np.deg2rad(10.0))
     cd10 = 0.4 + 0.426 - 0.401
     assert float(t.force_n({"CD0": 0.4}, c10)) == pytest.approx(0.5 * 1.2 * 27.0**2 * 1.85 * cd10)
+
+
+def test_no_term_falls_back_to_the_thesis_vehicle():
+    """The tunnel table must be given, and the driveline and undriven-wheel losses are zero
+    until given or fitted (not the thesis car's)."""
+    with pytest.raises(TypeError):
+        T.AeroDragTable()
+    assert set(T.DrivelinePolynomial.defaults.values()) == {0.0}
+    assert set(T.UndrivenWheels.defaults.values()) == {0.0}
+    assert simplified_model(tunnel_table=None).term_names[-1] == "aero_drag"
+    table = simplified_model(tunnel_table={"yaw_deg": [-10.0, 0.0, 10.0], "cd": [0.5, 0.4, 0.5]}).terms[-1]
+    assert table.yaw_deg == (-10.0, 0.0, 10.0) and table.cd == (0.5, 0.4, 0.5)
 
 
 def test_pitch_implicit_solve_is_exact():

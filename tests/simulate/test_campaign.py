@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bayes_roadload import config
+from bayes_roadload import thesis
 from bayes_roadload.data import Campaign, load_campaign, save_campaign
 from bayes_roadload.physics import full_model, integrate_batch, simplified_model
 from bayes_roadload.simulate import SimulationSettings, get_case, simulate_campaign
@@ -29,8 +29,8 @@ def test_contract_columns_vehicle_and_tunnel(case14):
     v = c.vehicle
     assert (v.mass_kg, v.effective_mass_kg, v.frontal_area_m2, v.length_m) == (1100.0, 1130.0, 1.85, 4.5)
     assert c.tunnel["KD"] == 0.614 and c.tunnel["CL0"] == 0.273 and c.tunnel["KL"] == 3.64
-    assert c.tunnel["yaw_deg"] == config.THESIS_TUNNEL_TABLE["yaw_deg"]
-    assert c.tunnel["cd"] == config.THESIS_TUNNEL_TABLE["cd"]
+    assert c.tunnel["yaw_deg"] == thesis.THESIS_TUNNEL_TABLE["yaw_deg"]
+    assert c.tunnel["cd"] == thesis.THESIS_TUNNEL_TABLE["cd"]
 
 
 def test_runs_alternate_in_pairs(case14):
@@ -61,11 +61,11 @@ def test_sampling_speed_range_and_rounding(case14):
 
 def test_truth_and_meta(case14):
     truth = case14.truth
-    for k, val in config.THESIS_COEFFICIENTS.items():
+    for k, val in thesis.THESIS_COEFFICIENTS.items():
         assert truth[k] == val
     assert truth["case"] == 14 and truth["model"] == "comp"
     for k in ("KS", "Cy", "Kalpha", "pitch_gain", "CL0", "KL"):
-        assert truth[k] == config.THESIS_FULL_MODEL[k]
+        assert truth[k] == thesis.THESIS_FULL_MODEL[k]
     assert "At" not in truth
     per_run = truth["per_run"]
     assert sorted(per_run) == ["1", "2", "3", "4"]
@@ -105,7 +105,7 @@ def _truth_params(campaign, model):
 @pytest.mark.parametrize("case, model", [
     (6, simplified_model(lift=True)),                      # eq. 6.1, spatially varying wind
     (12, full_model()),                                    # eq. 6.2 (slip and pitch)
-    (13, simplified_model(lift=True, tunnel_table=True)),  # tunnel C_D(psi)
+    (13, simplified_model(lift=True, tunnel_table=thesis.THESIS_TUNNEL_TABLE)),  # tunnel C_D(psi)
 ])
 def test_fitter_physics_reproduces_steady_wind_runs(case, model):
     # Noise-free, no dynamics, mean wind only: integrating the logged 4 Hz channels with the
@@ -134,7 +134,7 @@ def test_driveline_channel_is_the_truth_physics():
     # for a noise-free case: the fitter's measured-driveline model reproduces the speed.
     c = simulate_campaign(2, pairs=1, seed=0, driveline=True, settings=STEADY)
     assert "driveline_force_n" in c.runs
-    assert {c.truth[k] for k in ("At", "Bt", "Ct")} == set(config.THESIS_DRIVELINE.values())
+    assert {c.truth[k] for k in ("At", "Bt", "Ct")} == set(thesis.THESIS_DRIVELINE.values())
     v = c.runs["speed_mps"].to_numpy()
     f = c.runs["driveline_force_n"].to_numpy()
     assert np.all((f > 25) & (f < 90))  # 21 + 2.09 v - 0.02 v^2 for 5 < v < 31.3
@@ -221,7 +221,7 @@ def test_ground_frame_convention_and_band_limit():
     winds = [generate_wind_field(2.0, 2.0, rng, track_length_m=raw.track_length_m,
                                  margin_m=raw.wind_margin_m) for _ in range(2)]
     model = simplified_model(lift=True)
-    params = [dict(config.THESIS_COEFFICIENTS)] * 2
+    params = [dict(thesis.THESIS_COEFFICIENTS)] * 2
     for settings, exact in ((raw, True), (SimulationSettings(), False)):
         runs = simulate_true_runs(model, params, winds, [1, -1], dynamics=False, settings=settings)
         for d, w, r in zip((1, -1), winds, runs):

@@ -1,4 +1,4 @@
-"""The anemometer-calibration study (:mod:`bayes_roadload.analysis.calibration`).
+"""The anemometer-calibration study (:mod:`studies.calibration`).
 
 Default tests: the campaign factory, the least-squares arms (their two exact identities) and
 the NUTS rows from a synthetic batch record.  The full study with NUTS is marked slow.
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bayes_roadload.analysis.batch import SimulatedCampaign
-from bayes_roadload.analysis.calibration import (
+from studies.calibration import (
     ANALYSES,
     STUDY_COLUMNS,
     AirspeedScaled,

@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bayes_roadload import config
-from bayes_roadload.analysis.thesis_study import (
+from bayes_roadload import thesis
+from studies.thesis_study import (
     FREE,
     PARAMETERS,
     PUBLISHED,
@@ -27,7 +27,7 @@ from bayes_roadload.analysis.thesis_study import (
     spread_table,
 )
 
-TRUTH = config.THESIS_COEFFICIENTS
+TRUTH = thesis.THESIS_COEFFICIENTS
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,7 @@
 
 import pytest
 
-from bayes_roadload.analysis.replay import THESIS_TRACK_SPREAD_PCT, replay
+from studies.replay import THESIS_TRACK_SPREAD_PCT, replay
 
 
 @pytest.mark.slow

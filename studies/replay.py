@@ -22,8 +22,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..physics import effects as pe
-from ..physics.terms import Gradient
+from bayes_roadload.analysis.batch import SimulatedCampaign
+from bayes_roadload.inference.lsq import fit_lsq
+from bayes_roadload.physics import effects as pe
+from bayes_roadload.physics.terms import Gradient
+from bayes_roadload.simulate import SimulationSettings, get_case
+
+from .proof_suite import Distorted
 
 THESIS_TRACK_SPREAD_PCT = {"AD": 4.3, "BD": 23.1, "CD0": 4.3}
 """Test-to-test std of the 3-term coefficients over 18 track pairs (thesis table 8.3), %."""
@@ -51,9 +56,6 @@ _TERMS = {"track_gradient": Gradient, "tyre_temperature": pe.TyreTemperatureTran
 
 def pair_factory(effect: str | None, size: float, seed: int, case: int):
     """A one-pair campaign factory at ``case`` conditions with ``effect`` at ``size``."""
-    from ..simulate import SimulationSettings, get_case
-    from .batch import SimulatedCampaign
-    from .diagnose import Distorted
 
     sc = get_case(case)
     settings = SimulationSettings()
@@ -80,7 +82,6 @@ def replay(effects=(None,) + tuple(REPLAY_SIZES), pairs: int = 18, seed: int = 0
     """Per-pair 3-term spreads of the thesis' programme with each effect (None: the thesis'
     simulation alone).  Returns one row per effect: ``effect``, ``pairs`` (fitted),
     ``spread_pct_AD/BD/CD0``, ``mean_AD/BD/CD0`` and the thesis' track spreads."""
-    from ..inference.lsq import fit_lsq
 
     rows = []
     for effect in effects:

@@ -41,9 +41,12 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from .. import config
-from ..data.campaign import Anemometer, Campaign
-from .batch import FitJob, SimulatedCampaign, quantile_key, run_batch, successful
+from bayes_roadload import config
+from bayes_roadload.analysis.batch import FitJob, SimulatedCampaign, quantile_key, run_batch, successful
+from bayes_roadload.data.campaign import Anemometer, Campaign
+from bayes_roadload.inference.bayes import airspeed_pair_ratios, calibration_pairs
+from bayes_roadload.inference.lsq import Z95, fit_lsq
+from bayes_roadload.inference.spec import load_model_spec
 
 LEVEL = 0.95
 """Central interval level of the study's intervals and in-interval flags."""
@@ -126,7 +129,6 @@ def pair_calibration(campaign: Campaign) -> pd.DataFrame:
         airspeed reading, without the yaw cosine: biased high in reading, low in factor,
         under cross-wind), ``mean_yaw_rad`` (of the calibrated yaw over the pair's samples).
     """
-    from ..inference.bayes import airspeed_pair_ratios, calibration_pairs
 
     if not campaign.has_anemometer:
         raise ValueError("pair_calibration: the campaign logs no airspeed_mps / yaw_rad")
@@ -172,7 +174,6 @@ def _fill(row: dict[str, Any], name: str, estimate: float, low: float, high: flo
 def _fill_fixed(row: dict[str, Any], campaign: Campaign, model: str, free: Sequence[str]) -> None:
     """Estimate columns of the parameters ``model`` fixes: their fixed values on ``campaign``
     (no interval), against the campaign's truth."""
-    from ..inference.spec import load_model_spec
 
     _, fixed, _ = load_model_spec(model).build(campaign)
     truth = campaign.truth or {}
@@ -185,8 +186,6 @@ def _lsq_rows(campaign: Campaign, models: Sequence[str], seed: int, scale: float
               pairs: int) -> list[dict[str, Any]]:
     """The classical arms on one campaign: per-pair least squares with the campaign's factor
     and with the factor from the campaign's own pair ratios."""
-    from ..inference.lsq import Z95, fit_lsq
-    from ..inference.spec import load_model_spec
 
     truth = campaign.truth or {}
     true_factor = truth.get("airspeed_factor")

@@ -92,8 +92,8 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 import pandas as pd
 
-from ..inference.lsq import LsqSettings, between_group_spread, fit_lsq
-from ..simulate import CASES, SimulationCase, get_case, simulate_campaign
+from bayes_roadload.inference.lsq import LsqSettings, between_group_spread, fit_lsq
+from bayes_roadload.simulate import CASES, SimulationCase, get_case, simulate_campaign
 
 PARAMETERS = ("AD", "BD", "CD0", "KD")
 """The coefficients of tables 6.8 and 6.9 (SI: B_D in s/m)."""
