@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .spindown import write_atomically
+from .checks import write_atomically
 
 
 @dataclass
