@@ -184,10 +184,13 @@ def integrate_run(
         raise ValueError(f"stride must be 1, or 2 with substeps = 1 (got stride {stride}, substeps {m})")
 
     def rhs(y, t, uu):
+        v, s = y
+        if model.speed_affine:  # linear in v: no runaway, and the parallel solution stays equal
+            c = _conditions(model, p, run, v, s, t, uu)
+            return jnp.stack([model.acceleration_mps2(p, c, run.effective_mass_kg), v])
         # eq. 5.4 holds while the vehicle moves: a vehicle that has stopped stays stopped (the
         # resisting forces, seen at v >= 0, cannot drive it backwards, where a drag quadratic in
         # the ground speed would grow without bound)
-        v, s = y
         moving = jnp.maximum(v, 0.0)
         c = _conditions(model, p, run, moving, s, t, uu)
         a = model.acceleration_mps2(p, c, run.effective_mass_kg)
