@@ -84,6 +84,9 @@ def test_fd_hessian_matches_the_exact_hessian(small_campaign):
     post = unconstrained_posterior(problem, initial_values(problem, small_campaign))
     m = find_map(problem, {}, posterior=post)
     assert m.success and m.min_eigenvalue > 0
+    # a well-posed campaign needs none of the guards, and says so
+    assert m.diagnostics() == {"map_method": "trust-exact", "map_fallback": "", "hessian_regularised": False,
+                               "n_eigenvalues_clipped": 0, "hessian_step": 1e-4}
     exact_post = unconstrained_posterior(dataclasses.replace(problem, gradients="reverse"), m.constrained)
     y = np.asarray(jax.flatten_util.ravel_pytree(m.z)[0]) / post.scale
 
