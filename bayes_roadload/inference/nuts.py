@@ -6,7 +6,10 @@
    space and divided by a diagonal scale so every unknown is O(1), is minimised by a
    trust-region Newton method (``scipy.optimize.minimize``, ``trust-exact``) with exact JAX
    gradients and a Hessian by central differences of them that exploits the run structure
-   (:func:`fd_hessian`: its cost does not grow with the number of runs).
+   (:func:`fd_hessian`: its cost does not grow with the number of runs).  Non-finite values
+   are guarded (:func:`newton_map`): rejected steps, a smaller difference step, a fallback to
+   L-BFGS-B, eigenvalue clipping, all recorded in :class:`MapResult`; a failure names the
+   stage, the run or parameter and a remedy (:class:`~bayes_roadload.errors.FitStageError`).
 3. **Laplace.** With L L^T the inverse Hessian at the MAP, NUTS runs on whitened coordinates
    ``x = x_MAP + L u`` in which the posterior is close to a standard normal, and the chains
    start from independent draws of that approximation.  On this posterior (AD, BD, CD0
@@ -38,6 +41,7 @@ from scipy.optimize import minimize
 
 from .. import config
 from ..data.campaign import Campaign
+from ..errors import FitStageError, stage
 from .bayes import (
     FitProblem,
     build_problem,
@@ -69,6 +73,13 @@ class MapResult:
     time_s : wall time of the optimisation (including compilation).
     min_eigenvalue : smallest eigenvalue of the Hessian in scaled coordinates (before any
         clipping); <= 0 means the MAP is not a strict local optimum.
+    map_method : the optimiser whose optimum is kept, ``"trust-exact"`` or ``"L-BFGS-B"``.
+    map_fallback : why the fallback optimiser or Hessian estimate was used; "" when not.
+    hessian_regularised : eigenvalues of the Hessian were clipped, or the Hessian was replaced
+        by the L-BFGS-B estimate, to make the Laplace covariance positive definite.
+    n_eigenvalues_clipped : how many eigenvalues were clipped (:func:`laplace_covariance`).
+    hessian_step : difference step of the final Hessian (:func:`finite_hessian`; 0 when it
+        was replaced).
     """
 
     z: dict[str, Any]
@@ -81,6 +92,17 @@ class MapResult:
     neg_log_posterior: float
     time_s: float
     min_eigenvalue: float
+    map_method: str = "trust-exact"
+    map_fallback: str = ""
+    hessian_regularised: bool = False
+    n_eigenvalues_clipped: int = 0
+    hessian_step: float = 1e-4
+
+    def diagnostics(self) -> dict[str, Any]:
+        """The optimiser's and the Hessian's guards, for ``diagnostics.json``."""
+        return {"map_method": self.map_method, "map_fallback": self.map_fallback,
+                "hessian_regularised": bool(self.hessian_regularised),
+                "n_eigenvalues_clipped": int(self.n_eigenvalues_clipped), "hessian_step": float(self.hessian_step)}
 
 
 @dataclass
@@ -306,30 +328,188 @@ def fd_hessian(grad_fn, y: np.ndarray, run_index: np.ndarray, step: float = 1e-4
     return 0.5 * (h + h.T)
 
 
+class _NonFiniteHessian(ArithmeticError):
+    """The finite-difference Hessian at an iterate holds inf or NaN at every step tried."""
+
+
+def _coordinate_names(z: dict[str, Any]) -> list[str]:
+    """Names of the flat unconstrained coordinates (ravel order of ``z``): ``site`` or
+    ``site[i]``."""
+    names: list[str] = []
+    for name in sorted(z):  # ravel_pytree flattens a dict in sorted key order
+        size = int(np.size(z[name]))
+        names += [name] if np.ndim(z[name]) == 0 else [f"{name}[{i}]" for i in range(size)]
+    return names
+
+
+def finite_hessian(grad_fn, y: np.ndarray, run_index: np.ndarray,
+                   steps: tuple[float, ...] = (1e-4, 1e-6)) -> tuple[np.ndarray, float]:
+    """:func:`fd_hessian` at the first of ``steps`` that gives a finite matrix; returns the
+    Hessian and the step used.  Raises :class:`_NonFiniteHessian` when none does (the
+    gradient is not finite next to ``y``)."""
+    for step in steps:
+        with np.errstate(all="ignore"):
+            h = fd_hessian(grad_fn, y, run_index, step=step)
+        if np.all(np.isfinite(h)):
+            return h, step
+    raise _NonFiniteHessian(f"the Hessian by central differences is not finite at steps {steps}")
+
+
+def laplace_covariance(hmat: np.ndarray, floor: float = 1e-8) -> tuple[np.ndarray, float, int]:
+    """Inverse of a symmetric Hessian with its eigenvalues clipped from below at ``floor``
+    times the largest (at least ``floor``): the Laplace covariance of a MAP that is not a
+    strict optimum in every direction stays positive definite, with the flat directions
+    given a wide (not infinite) spread.  Returns the covariance, the smallest eigenvalue
+    before clipping and the number of eigenvalues clipped."""
+    eigval, eigvec = np.linalg.eigh(0.5 * (hmat + hmat.T))
+    low = floor * max(float(eigval.max()), 1.0)
+    clipped = np.maximum(eigval, low)
+    return (eigvec / clipped) @ eigvec.T, float(eigval.min()), int(np.sum(eigval < low))
+
+
+def _name_of(names: list[str] | None, j: int) -> str:
+    return names[j] if names is not None and j < len(names) else f"coordinate {j}"
+
+
 def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *,
-               max_iter: int = 200) -> dict[str, Any]:
+               max_iter: int = 200, names: list[str] | None = None) -> dict[str, Any]:
     """Trust-region Newton (``scipy.optimize.minimize``, ``trust-exact``) on O(1)-scaled
-    coordinates ``y`` with the exact gradient ``g`` and the Hessian by :func:`fd_hessian`.
+    coordinates ``y`` with the exact gradient ``g`` and the Hessian by :func:`fd_hessian`,
+    guarded against non-finite values.
 
-    Returns a dict: ``y`` (the optimum, scaled), ``cov`` (the Laplace covariance of the
-    unscaled vector ``y * scale``: inverse Hessian, eigenvalues clipped at ``1e-8`` of the
-    largest), ``success`` (converged, or the largest |gradient| below ``1e-3``), ``n_iter``,
-    ``message``, ``grad_max``, ``fun``, ``min_eigenvalue`` (of the scaled Hessian, before
-    clipping).
+    * The objective is +inf wherever it, or its gradient, is not finite, so the optimisers
+      reject such a step and shrink it (the integrated speed of an extreme trial point can
+      overflow while the start is fine).
+    * A Hessian that is not finite at an iterate is retried at a smaller difference step
+      (:func:`finite_hessian`); when that fails too, or trust-exact raises, the MAP falls back
+      to L-BFGS-B on the same objective from the best point found so far.
+    * The Laplace covariance is the inverse Hessian at the optimum with eigenvalues clipped
+      (:func:`laplace_covariance`); if that Hessian is not finite either, the L-BFGS-B
+      inverse-Hessian estimate is used.
+
+    Parameters
+    ----------
+    f, g : objective and its gradient on the scaled vector.
+    y0 : scaled start.
+    run_index : run of each coordinate (-1 shared), for :func:`fd_hessian`.
+    scale : the coordinates' scale (``x = y * scale``).
+    max_iter : iteration limit of each optimiser.
+    names : names of the coordinates (:func:`_coordinate_names`), for error messages.
+
+    Returns
+    -------
+    dict with ``y`` (the optimum, scaled), ``cov`` (the Laplace covariance of the unscaled
+    vector ``y * scale``), ``success`` (converged, or the largest |gradient| below ``1e-3``),
+    ``n_iter``, ``message``, ``grad_max``, ``fun``, ``min_eigenvalue`` (of the scaled
+    Hessian, before clipping), ``map_method`` (the optimiser whose result is kept:
+    ``"trust-exact"`` or ``"L-BFGS-B"``), ``map_fallback`` (why the fallback ran, "" when it
+    did not), ``hessian_step`` (difference step of the final Hessian; 0 when the L-BFGS-B
+    estimate replaced it), ``n_eigenvalues_clipped`` and ``hessian_regularised`` (any
+    eigenvalue clipped, or the Hessian replaced).
+
+    Raises
+    ------
+    FitStageError
+        (stage ``"map"``) when the objective or its gradient is not finite at the start,
+        naming the first non-finite coordinate, or no finite optimum is found.
     """
-    def hess(y):
-        return fd_hessian(g, y, run_index)
+    y0 = np.asarray(y0, float)
+    best = {"y": y0.copy(), "f": math.inf}
+    last: dict[bytes, tuple[float, np.ndarray]] = {}
 
-    res = minimize(lambda y: float(f(y)), np.asarray(y0, float), jac=lambda y: np.asarray(g(y)), hess=hess,
-                   method="trust-exact", options={"maxiter": max_iter, "gtol": 1e-6})
-    hmat = hess(res.x)
-    eigval, eigvec = np.linalg.eigh(hmat)
-    clipped = np.maximum(eigval, 1e-8 * max(eigval.max(), 1.0))
-    cov_y = (eigvec / clipped) @ eigvec.T
-    grad_max = float(np.max(np.abs(np.asarray(g(res.x)))))
-    return {"y": res.x, "cov": cov_y * np.outer(scale, scale), "success": bool(res.success) or grad_max < 1e-3,
-            "n_iter": int(res.nit), "message": str(res.message), "grad_max": grad_max, "fun": float(res.fun),
-            "min_eigenvalue": float(eigval.min())}
+    def evaluate(y) -> tuple[float, np.ndarray]:
+        """Value and gradient at ``y``; (+inf, 0) where either is not finite.  The last point
+        is cached (scipy asks for the value and the gradient at the same point in turn)."""
+        y = np.asarray(y, float)
+        key = y.tobytes()
+        if key not in last:
+            with np.errstate(all="ignore"):
+                v, d = float(f(y)), np.asarray(g(y), float)
+            ok = math.isfinite(v) and bool(np.all(np.isfinite(d)))
+            last.clear()
+            last[key] = (v, d) if ok else (math.inf, np.zeros_like(y))
+            if ok and v < best["f"]:
+                best.update(y=y.copy(), f=v)
+        return last[key]
+
+    def fun(y):
+        return evaluate(y)[0]
+
+    def jac(y):
+        return evaluate(y)[1]
+
+    f0 = float(f(y0))
+    g0 = np.asarray(g(y0), float)
+    if not math.isfinite(f0):
+        raise FitStageError("map", f"the log posterior is not finite at the least-squares start ({f0})",
+                            remedy="check the campaign for runs whose speed does not decrease; "
+                                   "--method lsq shows the start")
+    bad = np.flatnonzero(~np.isfinite(g0))
+    if bad.size:
+        j = int(bad[0])
+        run = int(run_index[j]) if run_index[j] >= 0 else None
+        raise FitStageError("map", f"the gradient of the log posterior is not finite at the start "
+                            f"({bad.size} coordinates)", parameter=_name_of(names, j), run=run,
+                            remedy="check that run's channels; fix the parameter in the model file or "
+                                   "give it a prior that excludes the boundary")
+
+    def penalised(y):  # L-BFGS-B's line search needs finite values: a wall above the best
+        v, d = evaluate(y)
+        return (v, d) if math.isfinite(v) else (best["f"] + 1e6 * (1.0 + abs(best["f"])), d)
+
+    def hess(y):
+        return finite_hessian(g, y, run_index)[0]
+
+    method, fallback, n_iter, message = "trust-exact", "", 0, ""
+    res = None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            res = minimize(fun, y0, jac=jac, hess=hess, method="trust-exact",
+                           options={"maxiter": max_iter, "gtol": 1e-6})
+        y, n_iter, message = np.asarray(res.x, float), int(res.nit), str(res.message)
+        if not math.isfinite(float(res.fun)):
+            raise _NonFiniteHessian("trust-exact ended at a non-finite objective")
+    except (_NonFiniteHessian, np.linalg.LinAlgError, ValueError) as e:
+        fallback = f"trust-exact failed ({type(e).__name__}: {e}); L-BFGS-B from the best point"
+    lbfgs_inv = None
+    if fallback:
+        method = "L-BFGS-B"
+        for _ in range(20):  # a line search that ends on the wall stops early: restart from the best
+            start_f = best["f"]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                res = minimize(penalised, best["y"], jac=True, method="L-BFGS-B",
+                               options={"maxiter": 20 * max_iter, "gtol": 1e-8, "ftol": 1e-15, "maxcor": 30})
+            n_iter += int(res.nit)
+            if not best["f"] < start_f or float(np.max(np.abs(evaluate(best["y"])[1]))) < 1e-6:
+                break
+        y, message = np.asarray(best["y"], float), str(res.message)
+        lbfgs_inv = res.hess_inv.todense() if hasattr(res, "hess_inv") else None
+        if not math.isfinite(float(res.fun)):
+            raise FitStageError("map", "no finite optimum of the log posterior was found (trust-region Newton "
+                                "and L-BFGS-B both failed)")
+    fval = float(f(y))
+    grad = np.asarray(g(y), float)
+    grad_max = float(np.max(np.abs(grad))) if np.all(np.isfinite(grad)) else math.inf
+    try:
+        hmat, step = finite_hessian(g, y, run_index, steps=(1e-4, 1e-6, 1e-3))
+        cov_y, min_eig, n_clipped = laplace_covariance(hmat)
+        replaced = False
+    except (_NonFiniteHessian, np.linalg.LinAlgError):
+        if lbfgs_inv is None:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                r2 = minimize(penalised, y, jac=True, method="L-BFGS-B", options={"maxiter": max_iter, "maxcor": 30})
+            lbfgs_inv = r2.hess_inv.todense()
+        cov_y, min_eig_inv, n_clipped = laplace_covariance(np.linalg.inv(0.5 * (lbfgs_inv + lbfgs_inv.T)))
+        min_eig, step, replaced = min_eig_inv, 0.0, True
+        fallback = (fallback + "; " if fallback else "") + "Hessian not finite at the optimum: L-BFGS-B estimate"
+    converged = bool(res is not None and res.success and method == "trust-exact")
+    return {"y": y, "cov": cov_y * np.outer(scale, scale), "success": converged or grad_max < 1e-3,
+            "n_iter": n_iter, "message": message, "grad_max": grad_max, "fun": fval,
+            "min_eigenvalue": min_eig, "map_method": method, "map_fallback": fallback, "hessian_step": step,
+            "n_eigenvalues_clipped": n_clipped, "hessian_regularised": bool(n_clipped > 0 or replaced)}
 
 
 def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200,
@@ -345,19 +525,23 @@ def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200,
     same-shaped campaigns.
     """
     t0 = time.perf_counter()
-    post = posterior or unconstrained_posterior(problem, init)
-    scale = post.scale
+    with stage("map"):
+        post = posterior or unconstrained_posterior(problem, init)
+        scale = post.scale
 
-    def objective(y):
-        return post.potential_fn(post.unravel(y * scale))
+        def objective(y):
+            return post.potential_fn(post.unravel(y * scale))
 
-    res = newton_map(jax.jit(objective), jax.jit(jax.grad(objective)), post.flat0 / scale, post.run_index, scale,
-                     max_iter=max_iter)
-    z_map = post.unravel(jnp.asarray(res["y"] * scale))
-    return MapResult(z=z_map, constrained=post.postprocess_fn(z_map), cov=res["cov"], success=res["success"],
+        res = newton_map(jax.jit(objective), jax.jit(jax.grad(objective)), post.flat0 / scale, post.run_index,
+                         scale, max_iter=max_iter, names=_coordinate_names(post.z0))
+        z_map = post.unravel(jnp.asarray(res["y"] * scale))
+        constrained = post.postprocess_fn(z_map)
+    return MapResult(z=z_map, constrained=constrained, cov=res["cov"], success=res["success"],
                      n_iter=res["n_iter"], grad_max=res["grad_max"], message=res["message"],
                      neg_log_posterior=res["fun"], time_s=time.perf_counter() - t0,
-                     min_eigenvalue=res["min_eigenvalue"])
+                     min_eigenvalue=res["min_eigenvalue"], map_method=res["map_method"],
+                     map_fallback=res["map_fallback"], hessian_regularised=res["hessian_regularised"],
+                     n_eigenvalues_clipped=res["n_eigenvalues_clipped"], hessian_step=res["hessian_step"])
 
 
 def _chain_method(num_chains: int) -> str:

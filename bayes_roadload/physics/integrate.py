@@ -185,9 +185,16 @@ def integrate_run(
 
     def rhs(y, t, uu):
         v, s = y
-        c = _conditions(model, p, run, v, s, t, uu)
+        if model.speed_affine:  # linear in v: no runaway, and the parallel solution stays equal
+            c = _conditions(model, p, run, v, s, t, uu)
+            return jnp.stack([model.acceleration_mps2(p, c, run.effective_mass_kg), v])
+        # eq. 5.4 holds while the vehicle moves: a vehicle that has stopped stays stopped (the
+        # resisting forces, seen at v >= 0, cannot drive it backwards, where a drag quadratic in
+        # the ground speed would grow without bound)
+        moving = jnp.maximum(v, 0.0)
+        c = _conditions(model, p, run, moving, s, t, uu)
         a = model.acceleration_mps2(p, c, run.effective_mass_kg)
-        return jnp.stack([a, v])
+        return jnp.stack([jnp.where(v > 0.0, a, 0.0), moving])
 
     def rk4(y, ta, h, ua, um, ub):
         k1 = rhs(y, ta, ua)

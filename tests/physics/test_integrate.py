@@ -241,3 +241,26 @@ def test_linear_equation_of_motion_is_solved_in_parallel_with_the_same_result():
         return lambda c: jnp.sum(integrate_batch(model, dict(p, CD0=c), batch, integrator=cfg)[0] ** 2)
 
     assert float(jax.grad(loss(par))(0.4)) == pytest.approx(float(jax.grad(loss(seq))(0.4)), rel=1e-10)
+
+
+def test_a_stopped_vehicle_stays_stopped_in_still_air():
+    """Still air (drag quadratic in the ground speed): a trace integrated past v = 0 used to
+    run away to -inf (NaN).  The speed now stays at or just below 0 (one RK4 step's
+    overshoot: |a| h <= 0.2 m/s^2 x 0.5 s here) with finite gradients."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from bayes_roadload.physics.integrate import integrate_run, make_run
+    from bayes_roadload.physics.model import DragModel, StillAir
+    from bayes_roadload.physics.terms import AeroDrag, TyreRolling
+
+    model = DragModel(terms=(TyreRolling(), AeroDrag()), air=StillAir())
+    t = np.arange(0.0, 400.0, 0.25)
+    run = make_run(t, np.full(t.shape, 3.0))
+    p = {"AD": 0.02, "BD": 2e-4, "CD0": 0.4, "KD": 0.6}
+    v, s = integrate_run(model, p, run, 3.0)
+    assert bool(jnp.all(jnp.isfinite(v))) and float(v[-1]) > -0.1 and float(v[200]) < 0.5
+    assert np.all(np.diff(np.asarray(s)) >= 0.0)  # distance never goes backwards
+    grad = jax.grad(lambda cd: integrate_run(model, dict(p, CD0=cd), run, 3.0)[0].sum())(0.4)
+    assert np.isfinite(float(grad))

@@ -1,0 +1,48 @@
+"""Fast subset of the robustness suite (tests/robustness/draws.py; the long run is
+benchmarks/robustness.py): a few valid draws fitted through the command line end in a written
+fit, invalid ones in a clean refusal."""
+
+import pytest
+
+from .draws import INVALID, draw, run_draw
+
+# draws picked for speed: least squares on one or two pairs (one without anemometer, coasting
+# down to 0.5 m/s), and one NUTS fit of a one-pair steady-state campaign
+VALID_SEEDS = (26, 30, 48, 46)
+
+
+@pytest.mark.parametrize("seed", VALID_SEEDS)
+def test_a_valid_draw_ends_in_a_written_fit(seed, tmp_path):
+    d = draw(seed)
+    rec = run_draw(d, tmp_path)
+    assert rec["outcome"] in ("fitted", "gates_failed"), rec
+
+
+@pytest.mark.parametrize("how", INVALID)
+def test_an_invalid_draw_is_refused_cleanly(how, tmp_path):
+    # start 31 m/s: km/h read as m/s then exceeds the 100 m/s limit (below 27.8 m/s it does not:
+    # test_kph_in_a_mps_column_below_the_speed_limit_is_not_detected)
+    d = dict(draw(1000, invalid=True), invalid=how, pairs=1, method="lsq", model="three_term", rate_hz=2.0,
+             start_speed_mps=31.0)
+    rec = run_draw(d, tmp_path)
+    assert rec["outcome"] == "refused", rec
+    assert "runs.csv" in rec["message"] or how == "missing_time", rec  # the message names the file
+
+
+@pytest.mark.xfail(strict=True, reason="a known gap: km/h logged in speed_mps is refused only above 100 m/s "
+                   "(config.MAX_SPEED_MPS); a 97 km/h start read as 97 m/s is accepted")
+def test_kph_in_a_mps_column_below_the_speed_limit_is_not_detected(tmp_path):
+    d = dict(draw(1000, invalid=True), invalid="kph_in_mps", pairs=1, method="lsq", model="three_term",
+             rate_hz=2.0, start_speed_mps=27.0)
+    assert run_draw(d, tmp_path)["outcome"] == "refused"
+
+
+@pytest.mark.slow
+def test_speed_only_suv_campaign_with_driveline_channel_fits(tmp_path):
+    """The reported case: a 1950 kg SUV, 0.5 m/s cross wind, driveline channel logged, 6 pairs,
+    airspeed and yaw removed, ``fit --method nuts --model three_term``: a written fit."""
+    d = dict(draw(0), kind="traces", vehicle="suv", pairs=6, head_wind_mps=0.0, cross_wind_mps=0.5,
+             rate_hz=4.0, start_speed_mps=31.3, stop_speed_mps=5.0, dynamics=True, measurement_noise=True,
+             system_noise=True, drop_anemometer=True, driveline=True, model="three_term", method="nuts")
+    rec = run_draw(d, tmp_path)
+    assert rec["outcome"] in ("fitted", "gates_failed"), rec
