@@ -1,0 +1,8 @@
+"""Output: the fit directory of every data kind (:mod:`.fitdir`)."""
+
+from .fitdir import FIT_FILES as FIT_FILES
+from .fitdir import FitDir as FitDir
+from .fitdir import fit_record as fit_record
+from .fitdir import is_fit_dir as is_fit_dir
+from .fitdir import read_fit_dir as read_fit_dir
+from .fitdir import write_fit_dir as write_fit_dir
