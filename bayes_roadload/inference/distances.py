@@ -37,7 +37,6 @@ import jax.numpy as jnp
 import numpy as np
 import numpyro
 import numpyro.distributions as dist
-import pandas as pd
 
 from .. import config
 from ..data.distances import DistanceCampaign
