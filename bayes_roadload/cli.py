@@ -21,10 +21,16 @@ EXIT_REFUSED = 2
 EXIT_GATES_FAILED = 3
 
 
+def _no_markers(args) -> None:
+    if args.markers is not None or args.timing_sd is not None:
+        raise ValueError("--markers / --timing-sd time simulated coastdowns past markers (--kind coastdown)")
+
+
 def _simulate_spindown(args) -> int:
     from .data.spindown import save_spindown
     from .simulate.spindown import simulate_spindown
 
+    _no_markers(args)
     campaign = simulate_spindown(tests_per_wheel=args.pairs, seed=args.seed)
     out = save_spindown(campaign, args.out)
     print(f"spin-down: {len(campaign.run_ids)} runs of wheels {', '.join(campaign.wheels)}, "
@@ -36,6 +42,7 @@ def _simulate_steady(args) -> int:
     from .data.steady import save_steady
     from .simulate.steady import simulate_steady
 
+    _no_markers(args)
     campaign = simulate_steady(args.case, pairs=args.pairs, seed=args.seed)
     out = save_steady(campaign, args.out)
     print(f"steady state: {len(campaign.run_ids)} runs, {len(campaign.runs)} samples -> {out}")
@@ -76,8 +83,6 @@ SIMULATIONS = {"coastdown": _simulate_coastdown, "spindown": _simulate_spindown,
 
 
 def _cmd_simulate(args) -> int:
-    if args.kind not in ("coastdown",) and (args.markers is not None or args.timing_sd is not None):
-        raise ValueError("--markers / --timing-sd time simulated coastdowns past markers (--kind coastdown)")
     return SIMULATIONS[args.kind](args)
 
 
