@@ -21,29 +21,38 @@ EXIT_REFUSED = 2
 EXIT_GATES_FAILED = 3
 
 
-def _cmd_simulate(args) -> int:
+def _no_markers(args) -> None:
+    if args.markers is not None or args.timing_sd is not None:
+        raise ValueError("--markers / --timing-sd time simulated coastdowns past markers (--kind coastdown)")
+
+
+def _simulate_spindown(args) -> int:
+    from .data.spindown import save_spindown
+    from .simulate.spindown import simulate_spindown
+
+    _no_markers(args)
+    campaign = simulate_spindown(tests_per_wheel=args.pairs, seed=args.seed)
+    out = save_spindown(campaign, args.out)
+    print(f"spin-down: {len(campaign.run_ids)} runs of wheels {', '.join(campaign.wheels)}, "
+          f"{len(campaign.runs)} samples -> {out}")
+    return 0
+
+
+def _simulate_steady(args) -> int:
+    from .data.steady import save_steady
+    from .simulate.steady import simulate_steady
+
+    _no_markers(args)
+    campaign = simulate_steady(args.case, pairs=args.pairs, seed=args.seed)
+    out = save_steady(campaign, args.out)
+    print(f"steady state: {len(campaign.run_ids)} runs, {len(campaign.runs)} samples -> {out}")
+    return 0
+
+
+def _simulate_coastdown(args) -> int:
     from .data import save_campaign
     from .simulate import simulate_campaign
 
-    if args.kind != "coastdown" and (args.markers is not None or args.timing_sd is not None):
-        raise ValueError("--markers / --timing-sd time simulated coastdowns past markers (--kind coastdown)")
-    if args.kind == "spindown":
-        from .data.spindown import save_spindown
-        from .simulate.spindown import simulate_spindown
-
-        campaign = simulate_spindown(tests_per_wheel=args.pairs, seed=args.seed)
-        out = save_spindown(campaign, args.out)
-        print(f"spin-down: {len(campaign.run_ids)} runs of wheels {', '.join(campaign.wheels)}, "
-              f"{len(campaign.runs)} samples -> {out}")
-        return 0
-    if args.kind == "steady":
-        from .data.steady import save_steady
-        from .simulate.steady import simulate_steady
-
-        campaign = simulate_steady(args.case, pairs=args.pairs, seed=args.seed)
-        out = save_steady(campaign, args.out)
-        print(f"steady state: {len(campaign.run_ids)} runs, {len(campaign.runs)} samples -> {out}")
-        return 0
     if args.case is None:
         raise ValueError("simulate: --case is required for coastdowns (see `cases`)")
     campaign = simulate_campaign(args.case, pairs=args.pairs, seed=args.seed, driveline=args.driveline,
@@ -67,6 +76,14 @@ def _cmd_simulate(args) -> int:
     out = save_campaign(campaign, args.out, fmt=args.format)
     print(f"case {args.case}: {n} runs ({args.pairs} pairs{masses}), {len(campaign.runs)} samples -> {out}")
     return 0
+
+
+SIMULATIONS = {"coastdown": _simulate_coastdown, "spindown": _simulate_spindown, "steady": _simulate_steady}
+"""``simulate --kind``: what each choice simulates."""
+
+
+def _cmd_simulate(args) -> int:
+    return SIMULATIONS[args.kind](args)
 
 
 def _parse_markers(values: list[str]) -> list[float]:
@@ -93,133 +110,28 @@ def _sampler(args):
                                 precondition="none" if args.no_precondition else "laplace")
 
 
-def _fit_nuts(campaign, args, out: Path, campaign_path=None):
-    from .inference.nuts import fit_nuts
-    from .inference.results import format_posterior_table, truth_derived, write_nuts_outputs
+def _fit_options(args, runs=None):
+    """The options of ``fit`` a data kind sees (:class:`~bayes_roadload.inference.kinds.FitOptions`)."""
+    from .inference.kinds import FitOptions
 
-    fit = fit_nuts(campaign, args.model, pooling=args.pooling, noise=args.noise, robust=args.robust,
-                   sampler=_sampler(args))
-    summary, diag = write_nuts_outputs(fit, out)
-    (out / "fit.json").write_text(json.dumps({
-        "model": fit.problem.spec.name, "model_file": fit.problem.spec.source,
-        "free": list(fit.problem.free), "pooling": args.pooling, "noise": args.noise, "robust": bool(args.robust),
-        "undriven": ({k: fit.problem.fixed[k] for k in ("Au", "Bu")} if "undriven_wheels" in fit.problem.spec.terms
-                     else None),
-        "campaign": None if campaign_path is None else str(Path(campaign_path).resolve())}, indent=2) + "\n")
-    truth = dict(campaign.truth or {}, **truth_derived(fit.problem, campaign.truth))
-    return summary, diag, format_posterior_table(summary, diag, truth or None), truth
+    return FitOptions(method=args.method, pooling=args.pooling, noise=args.noise, robust=bool(args.robust),
+                      validity=args.validity, steady_wind=args.steady_wind, compare=args.compare,
+                      undriven=bool(args.undriven), sampler=_sampler(args), runs=runs)
 
 
-def _fit_intervals(campaign, args, out: Path) -> int:
-    from .analysis.validity import format_validity, interval_validity
-    from .inference.intervals import fit_intervals_nuts, write_interval_outputs
-    from .inference.results import format_posterior_table, truth_derived
-
-    if args.method != "nuts":
-        raise ValueError("an interval campaign (intervals.csv) is fitted by --method nuts only")
-    if args.pooling != "pooled" or args.robust or args.noise != "integrated":
-        raise ValueError("an interval campaign has its own likelihood (gate timing, band noise, run effect): "
-                         "--pooling, --noise and --robust do not apply")
-    model = _model_for(args, "split_f0_f2")
-    mode = args.validity or "reject"
-    validity = interval_validity(campaign)
-    runs = list(validity["run"]) if mode == "report" else list(validity.loc[~validity["rejected"], "run"])
-    print(format_validity(validity) + (" (reported only: every run fitted)" if mode == "report" else ""))
-    fit = fit_intervals_nuts(campaign, model, sampler=_sampler(args), runs=runs)
-    summary, diag = write_interval_outputs(fit, out, validity=validity)
-    truth = dict(campaign.truth or {}, **truth_derived(fit.problem, campaign.truth))
-    print(format_posterior_table(summary, diag, truth or None))
-    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, validity.csv, diagnostics.json")
-    return 0 if diag["pass"] else EXIT_GATES_FAILED
-
-
-def _only_nuts_options(args, kind: str, pooling: bool = False) -> None:
-    if args.method != "nuts":
-        raise ValueError(f"a {kind} campaign is fitted by --method nuts only")
-    if (args.pooling != "pooled" and not pooling) or args.robust or args.noise != "integrated" or args.validity:
-        raise ValueError(f"a {kind} campaign has its own likelihood: "
-                         + ("" if pooling else "--pooling, ") + "--noise, --robust and --validity do not apply")
-
-
-def _fit_spindown(campaign, args, out: Path) -> int:
+def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None):
+    """NUTS fit of a campaign of kind ``entry``, its fit directory (:func:`~bayes_roadload.output.
+    write_fit_dir`) and the posterior table against the truth of a simulated campaign."""
     from .inference.results import format_posterior_table
-    from .inference.spindown import fit_spindown_nuts, write_spindown_outputs
+    from .output import fit_record, write_fit_dir
 
-    _only_nuts_options(args, "spin-down", pooling=True)
-    if args.undriven:
-        raise ValueError("--undriven feeds a spin-down result into coastdown or steady-state fits; a spin-down "
-                         "campaign is what gives it")
-    fit = fit_spindown_nuts(campaign, args.model or "undriven_spindown", pooling=args.pooling, sampler=_sampler(args))
-    summary, diag, comparison = write_spindown_outputs(fit, out, campaign)
-    truth = campaign.truth or {}
-    flat = {k: v for k, v in truth.items() if isinstance(v, (int, float))}
-    for site in ("Au_wheel", "Bu_wheel"):
-        flat.update({f"{site}[{w}]": v for w, v in truth.get(site, {}).items()})
-    if {"Au", "Bu"} <= set(flat):
-        from . import config
-
-        flat["F50_undriven_N"] = flat["Au"] + flat["Bu"] * config.SPEED_50MPH_MPS
-    print(format_posterior_table(summary, diag, flat or None))
-    print("\nAgainst thesis table 7.10 (A_u = 3.24 N, B_u = 0.232 N s/m):")
-    for _, r in comparison.iterrows():
-        print(f"  {r['parameter']}: {r['mean']:.4g} [{r['q2.5']:.4g}, {r['q97.5']:.4g}]  thesis "
-              f"{r['thesis_table_7_10']:.4g} +- {r['thesis_sd']:.3g}  ({r['difference_pct']:+.1f} %)")
-    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, diagnostics.json, table_7_10.csv, "
-          "classical.csv")
-    return 0 if diag["pass"] else EXIT_GATES_FAILED
-
-
-def _fit_steady(campaign, args, out: Path) -> int:
-    import pandas as pd
-
-    from .inference.results import format_posterior_table
-    from .inference.steady import (build_steady_problem, compare_with_coastdown, fit_steady_nuts, resolve_wind,
-                                   write_steady_outputs)
-
-    _only_nuts_options(args, "steady-state")
-    wind = resolve_wind(campaign, args.steady_wind)
-    model = _model_for(args, "four_term" if wind == "measured" else "three_term")
-    cd_file = Path(args.compare) / "summary.csv" if args.compare else None
-    if cd_file is not None and not cd_file.is_file():
-        raise FileNotFoundError(f"{cd_file}: --compare takes the output directory of a coastdown `fit`")
-    build_steady_problem(campaign, model, wind=wind)  # refuses a model that does not apply, before sampling
-    fit = fit_steady_nuts(campaign, model, wind=wind, sampler=_sampler(args))
-    summary, diag = write_steady_outputs(fit, out, campaign)
-    truth = {k: v for k, v in (campaign.truth or {}).items() if isinstance(v, (int, float))}
-    if truth:
-        from .inference.results import truth_derived
-
-        truth.update(truth_derived(fit.problem, truth))
-    print(format_posterior_table(summary, diag, truth or None))
-    print(f"relative air: {wind}; acceleration: {campaign.accel_source}")
-    written = ["posterior.nc", "summary.csv", "diagnostics.json"] + (["classical.csv"] if (out / "classical.csv").exists() else [])
-    if cd_file is not None:
-        table = compare_with_coastdown(summary, pd.read_csv(cd_file))
-        table.to_csv(out / "comparison.csv", index=False)
-        written.append("comparison.csv")
-        print("\nsteady state against coastdown (thesis table 7.11: steady AD +12 %, BD -11 %, CD0 +4.9 %):")
-        for _, r in table.iterrows():
-            print(f"  {r['parameter']:<6} coastdown {r['coastdown_mean']:.4g} +- {r['coastdown_sd']:.2g}   steady "
-                  f"{r['steady_mean']:.4g} +- {r['steady_sd']:.2g}   {r['difference_pct']:+.1f} % "
-                  f"({r['difference_z']:+.1f} sd)")
-    print(f"\nwrote {', '.join(written)} in {out}")
-    return 0 if diag["pass"] else EXIT_GATES_FAILED
-
-
-def _fit_distances(campaign, args, out: Path) -> int:
-    from .inference.distances import DEFAULT_MODEL, fit_distances_nuts, write_distance_outputs
-    from .inference.results import format_posterior_table, truth_derived
-
-    _only_nuts_options(args, "distance-time")
-    fit = fit_distances_nuts(campaign, _model_for(args, DEFAULT_MODEL), sampler=_sampler(args))
-    summary, diag = write_distance_outputs(fit, out)
-    masses = sorted(set(campaign.masses_kg().values()))
-    print(f"{len(campaign.run_ids)} runs at {', '.join(f'{m:g}' for m in masses)} kg, "
-          f"{len(campaign.markers)} marker passings")
-    truth = dict(campaign.truth or {}, **truth_derived(fit.problem, campaign.truth))
-    print(format_posterior_table(summary, diag, truth or None))
-    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, diagnostics.json")
-    return 0 if diag["pass"] else EXIT_GATES_FAILED
+    fit = entry.fit(campaign, spec, options)
+    report = entry.report(fit, campaign)
+    tables = entry.extras(fit, campaign, report.summary, options)
+    written = write_fit_dir(report, out, record=fit_record(fit, campaign_path), extras=tables)
+    truth = fit.problem.truth_values(campaign.truth)
+    return fit, report, tables, written, truth, format_posterior_table(report.summary, report.diagnostics,
+                                                                       truth or None)
 
 
 def _undriven_values(arg: str) -> tuple[float, float]:
@@ -248,7 +160,7 @@ def _model_for(args, default: str):
     from .inference.spec import load_model_spec, with_undriven_wheels
 
     spec = args.model if not isinstance(args.model, (str, type(None))) else load_model_spec(args.model or default)
-    if getattr(args, "undriven", None):
+    if args.undriven:
         spec = with_undriven_wheels(spec, *_undriven_values(args.undriven))
     return spec
 
@@ -268,83 +180,86 @@ def _load_for_fit(args):
     return load_campaign(root)
 
 
+def _validity(entry, campaign, args, out: Path):
+    """Run validity (``--validity``, or the kind's default): the table, printed and written to
+    ``validity.csv``, and the runs to fit (None: all)."""
+    from .analysis.validity import format_validity, validity_table
+
+    mode = args.validity or entry.validity_default
+    if mode is None:
+        return None
+    validity = validity_table(campaign, args.wind_limits)
+    print(format_validity(validity) + (" (reported only: every run fitted)" if mode == "report" else ""))
+    out.mkdir(parents=True, exist_ok=True)
+    validity.to_csv(out / "validity.csv", index=False)
+    if mode == "report":
+        return list(validity["run"])
+    keep = [r for r, bad in zip(validity["run"], validity["rejected"]) if not bad]
+    if not keep:
+        raise ValueError("every run was rejected by the validity checks (validity.csv)")
+    return keep
+
+
 def _cmd_fit(args) -> int:
+    from .inference.kinds import kind_of
     from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table, write_lsq_outputs
-    from .inference.spec import load_model_spec
 
     campaign = _load_for_fit(args)
     out = Path(args.out)
-    kind = getattr(campaign, "kind", "traces")
-    if kind == "intervals":
-        return _fit_intervals(campaign, args, out)
-    if kind == "distances":
-        return _fit_distances(campaign, args, out)
-    if kind == "spindown":
-        return _fit_spindown(campaign, args, out)
-    if kind == "steady":
-        return _fit_steady(campaign, args, out)
-    spec = _model_for(args, "four_term")
-    if args.validity:
-        from .analysis.validity import format_validity, trace_validity
-
-        validity = trace_validity(campaign, args.wind_limits)
-        print(format_validity(validity))
-        out.mkdir(parents=True, exist_ok=True)
-        validity.to_csv(out / "validity.csv", index=False)
-        if args.validity == "reject":
-            keep = [r for r, bad in zip(validity["run"], validity["rejected"]) if not bad]
-            if not keep:
-                raise ValueError("every run was rejected by the validity checks (validity.csv)")
-            campaign = campaign.subset(keep)
+    entry = kind_of(campaign)
+    options = _fit_options(args)
+    entry.check_options(options)
+    spec = _model_for(args, entry.default_model(campaign, options))
+    runs = _validity(entry, campaign, args, out)
     if args.method == "lsq":
         if args.pooling == "hierarchical":
             raise SystemExit("error: least squares has no hierarchical model; use --method nuts --pooling "
                              "hierarchical, or --method lsq --grouping run for one classical fit per run")
+        if runs is not None and runs != list(campaign.run_ids):
+            campaign = campaign.subset(runs)
         result = fit_lsq(campaign, spec, grouping=args.grouping,
                          settings=LsqSettings(initial_speed=args.initial_speed))
         write_lsq_outputs(result, out)
         print(format_lsq_table(result, campaign.truth))
         print(f"\nwrote {out / 'summary.csv'}, per_group.csv, fit.json")
         return 0
-    args.model = spec
-    summary, diag, table, _ = _fit_nuts(campaign, args, out, args.campaign)
+    for line in entry.preamble(campaign):
+        print(line)
+    fit, report, tables, written, _, table = _fit_and_write(entry, campaign, spec, _fit_options(args, runs), out,
+                                                            args.campaign)
     print(table)
-    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, runs_summary.csv, diagnostics.json, fit.json")
-    return 0 if diag["pass"] else EXIT_GATES_FAILED
+    for line in entry.notes(fit, campaign, tables):
+        print(line)
+    written += ["validity.csv"] if runs is not None else []
+    print(f"\nwrote {out / written[0]}, {', '.join(written[1:])}")
+    return 0 if report.diagnostics["pass"] else EXIT_GATES_FAILED
 
 
 def _cmd_fit_driveline(args) -> int:
-    from . import config
     from .data import load_campaign
-    from .inference.driveline import fit_driveline_nuts, write_driveline_outputs
+    from .inference.driveline import driveline_report, fit_driveline_nuts
+    from .inference.kinds import kind_of
     from .inference.results import format_posterior_table
+    from .output import fit_record, write_fit_dir
 
     campaign = load_campaign(args.campaign)
-    if getattr(campaign, "kind", "traces") not in ("traces", "steady"):
+    if kind_of(campaign).driveline_channel is None:
         raise ValueError(f"{args.campaign}: fit-driveline needs a speed-trace campaign (runs.csv) that logs "
                          "driveline_force_n or the two wheel torques (off-load), or a steady-state campaign "
                          "(steady.csv) that logs gearbox_input_force_n (on-load)")
     out = Path(args.out)
     fit = fit_driveline_nuts(campaign, args.model, sampler=_sampler(args))
-    summary, diag = write_driveline_outputs(fit, out)
-    truth = dict(campaign.truth or {})
-    if getattr(campaign, "kind", "traces") == "steady":  # the on-load loss has its own truth
-        truth = {k[:-len("_on_load")]: v for k, v in truth.items() if k.endswith("_on_load")}
-    if all(isinstance(truth.get(k), (int, float)) for k in ("At", "Bt", "Ct")):
-        v = config.SPEED_50MPH_MPS
-        truth["F50_driveline_N"] = truth["At"] + truth["Bt"] * v + truth["Ct"] * v**2
-    print(format_posterior_table(summary, diag, truth or None))
-    print(f"\nwrote {out / 'posterior.nc'}, summary.csv, diagnostics.json")
-    return 0 if diag["pass"] else EXIT_GATES_FAILED
+    report = driveline_report(fit, campaign)
+    written = write_fit_dir(report, out, record=fit_record(fit, args.campaign))
+    truth = fit.problem.truth_values(campaign.truth)
+    print(format_posterior_table(report.summary, report.diagnostics, truth or None))
+    print(f"\nwrote {out / written[0]}, {', '.join(written[1:])}")
+    return 0 if report.diagnostics["pass"] else EXIT_GATES_FAILED
 
 
-def _diagnose_intervals(campaign, args) -> int:
+def _diagnose_band_times(campaign, spec, args) -> int:
     from .analysis.diagnose_intervals import diagnose_intervals, write_interval_diagnosis
-    from .inference.spec import load_model_spec
 
-    from .inference.distances import DEFAULT_MODEL
-
-    spec = load_model_spec(args.model or ("split_f0_f2" if campaign.kind == "intervals" else DEFAULT_MODEL))
     diag = diagnose_intervals(campaign, spec, sampler=_sampler(args))
     path = write_interval_diagnosis(diag, args.out)
     gap = diag.result["gap"]
@@ -358,18 +273,9 @@ def _diagnose_intervals(campaign, args) -> int:
     return 0
 
 
-def _cmd_diagnose(args) -> int:
+def _diagnose_traces(campaign, spec, args) -> int:
     from .analysis.diagnose import diagnose, write_diagnosis
-    from .data import load_campaign
-    from .inference.spec import load_model_spec
 
-    campaign = load_campaign(args.campaign)
-    if getattr(campaign, "kind", "traces") in ("intervals", "distances"):
-        return _diagnose_intervals(campaign, args)
-    if getattr(campaign, "kind", "traces") in ("spindown", "steady"):
-        raise ValueError(f"{args.campaign}: the sim-to-real diagnosis works on coastdowns (speed traces, interval "
-                         f"times or distance-time records), not on a {campaign.kind} campaign")
-    spec = load_model_spec(args.model or "three_term")
     diag = diagnose(campaign, spec)
     path = write_diagnosis(diag, args.out)
     gap = diag.result["gap"]
@@ -386,9 +292,29 @@ def _cmd_diagnose(args) -> int:
     return 0
 
 
+DIAGNOSES = {"traces": _diagnose_traces, "band_times": _diagnose_band_times}
+"""The diagnosis families of :attr:`~bayes_roadload.inference.kinds.KindEntry.diagnosis`."""
+
+
+def _cmd_diagnose(args) -> int:
+    from .data import load_campaign
+    from .inference.kinds import kind_of
+    from .inference.spec import load_model_spec
+
+    campaign = load_campaign(args.campaign)
+    entry = kind_of(campaign)
+    if entry.diagnosis is None:
+        raise ValueError(f"{args.campaign}: the sim-to-real diagnosis works on coastdowns (speed traces, interval "
+                         f"times or distance-time records), not on a {entry.name} campaign")
+    spec = load_model_spec(args.model or entry.diagnosis_model)
+    return DIAGNOSES[entry.diagnosis](campaign, spec, args)
+
+
 def _cmd_demo(args) -> int:
     from .data import save_campaign
+    from .inference.kinds import KINDS, FitOptions
     from .inference.lsq import fit_lsq, write_lsq_outputs
+    from .inference.spec import load_model_spec
     from .simulate import get_case, simulate_campaign
 
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bayes-roadload-demo-"))
@@ -405,7 +331,11 @@ def _cmd_demo(args) -> int:
     print(f"Fitting model {args.model}: classical per-pair least squares, then NUTS over all runs jointly ...")
     lsq = fit_lsq(campaign, args.model, grouping="pair")
     write_lsq_outputs(lsq, out / "fit_lsq")
-    summary, diag, table, truth = _fit_nuts(campaign, args, out / "fit_nuts", out / "campaign")
+    _, report, _, _, truth, table = _fit_and_write(
+        KINDS["traces"], campaign, load_model_spec(args.model),
+        FitOptions(pooling=args.pooling, noise=args.noise, robust=bool(args.robust), sampler=_sampler(args)),
+        out / "fit_nuts", out / "campaign")
+    summary, diag = report.summary, report.diagnostics
     post = summary.set_index("parameter")
     print()
     print(f"{'quantity':<15}{'truth':>10}   {'least squares: mean +- SE':<27}{'posterior: mean [95 % interval]'}")
@@ -426,36 +356,26 @@ def _plan_population(args, out: Path):
     """The population a plan draws from: a fit directory's posterior, or a NUTS fit of a campaign."""
     from .analysis.planning import population_from_fit, population_from_samples
     from .data import load_campaign
+    from .inference.nuts import fit_nuts
+    from .inference.results import trace_report
+    from .output import fit_record, is_fit_dir, read_fit_dir, write_fit_dir
 
     src = Path(args.source)
-    if (src / "posterior.nc").is_file():
-        import arviz as az
-
-        meta_file = src / "fit.json"
-        if not meta_file.is_file():
-            raise ValueError(f"{src}: a fit directory needs the fit.json written by `bayes-roadload fit` (model, "
-                             "campaign); refit the campaign or give the campaign directory")
-        meta = json.loads(meta_file.read_text())
-        if not meta.get("campaign"):
-            raise ValueError(f"{meta_file}: no campaign path recorded; give the campaign directory instead")
-        campaign = load_campaign(meta["campaign"])
-        post = az.from_netcdf(str(src / "posterior.nc")).posterior
-        samples = {k: post[k].values for k in post.data_vars}
-        model = meta["model_file"] if meta.get("model_file") and Path(meta["model_file"]).is_file() else meta["model"]
-        diag_file = src / "diagnostics.json"
-        if diag_file.is_file() and not json.loads(diag_file.read_text()).get("pass", True):
+    if is_fit_dir(src):
+        source = read_fit_dir(src)
+        campaign = load_campaign(source.record["campaign"])
+        if not source.passed:
             print(f"!! the source fit {src} FAILED its diagnostic gates: the plan draws from a posterior that is "
                   "not trustworthy; refit with more draws (see `fit`)")
-        return population_from_samples(samples, meta["free"], model, campaign,
-                                       source=f"{meta['pooling']} fit {src}"), campaign
+        return population_from_samples(source.samples, source.record["free"], source.model, campaign,
+                                       source=f"{source.record['pooling']} fit {src}"), campaign
     campaign = load_campaign(src)
     print(f"Fitting {src} ({campaign.runs['run'].nunique()} runs) with model {args.model}, {args.pooling} "
           "pooling, to draw the future campaigns from ...")
-    from .inference.nuts import fit_nuts
-    from .inference.results import write_nuts_outputs
-
     fit = fit_nuts(campaign, args.model, pooling=args.pooling, sampler=_sampler(args))
-    _, diag = write_nuts_outputs(fit, out / "fit")
+    report = trace_report(fit, campaign)
+    write_fit_dir(report, out / "fit", record=fit_record(fit, src))
+    diag = report.diagnostics
     if not diag["pass"]:
         print(f"!! the source fit FAILED its gates ({', '.join(diag['failed'])}): the plan below draws from a "
               "posterior that is not trustworthy; refit with more draws (see `fit`)")
@@ -616,7 +536,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.set_defaults(func=_cmd_demo, pooling="pooled", noise="integrated", robust=False)
 
     s = sub.add_parser("simulate", help="simulate a campaign of a thesis table 6.7 case")
-    s.add_argument("--kind", choices=("coastdown", "spindown", "steady"), default="coastdown",
+    s.add_argument("--kind", choices=tuple(SIMULATIONS), default="coastdown",
                    help="coastdown runs (runs.csv), undriven-wheel spin-downs (spindown.csv, thesis table 7.10 "
                         "wheels) or steady-state torque tests (steady.csv, the case's winds)")
     s.add_argument("--case", type=int, default=None, help="1-19, thesis table 6.7 (see `cases`); required for "

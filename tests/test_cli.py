@@ -129,7 +129,7 @@ def test_fit_hierarchical_writes_tau_rows_and_run_rows(campaign_dir, tmp_path, c
 def test_pooling_option_reaches_the_fit(campaign_dir, tmp_path, monkeypatch):
     """``--pooling hierarchical`` (and the noise options) are handed to the NUTS fit; least
     squares refuses the option instead of ignoring it."""
-    import bayes_roadload.inference.nuts as nuts
+    import bayes_roadload.inference.kinds as kinds
 
     seen = {}
 
@@ -137,7 +137,7 @@ def test_pooling_option_reaches_the_fit(campaign_dir, tmp_path, monkeypatch):
         seen.update(kwargs)
         raise RuntimeError("stop here")
 
-    monkeypatch.setattr(nuts, "fit_nuts", fake_fit)
+    monkeypatch.setattr(kinds, "fit_nuts", fake_fit)   # the speed-trace fit of the kind registry
     with pytest.raises(RuntimeError, match="stop here"):
         main(["fit", str(campaign_dir), "--model", "three_term", "--pooling", "hierarchical", "--noise", "white",
               "--no-progress", "--out", str(tmp_path / "h")])

@@ -172,26 +172,19 @@ def _shrink(before: Mapping[str, float], after: Mapping[str, float]) -> dict[str
 
 
 def _fit(campaign, spec, sampler, runs):
+    """NUTS fit of an interval or distance-time campaign through its kind's entry
+    (:data:`~bayes_roadload.inference.kinds.KINDS`), with its report and PSIS-LOO."""
     import arviz as az
 
-    from ..inference.intervals import fit_intervals_nuts, summary_table, to_inference_data
-    from ..inference.results import SUMMARY_COLUMNS, diagnostics
+    from ..inference.kinds import FitOptions, kind_of
 
-    import pandas as pd
-
+    entry = kind_of(campaign)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        if getattr(campaign, "kind", None) == "distances":
-            from ..inference.distances import fit_distances_nuts
-
-            fit = fit_distances_nuts(campaign, spec, sampler=sampler, runs=runs)
-        else:
-            fit = fit_intervals_nuts(campaign, spec, sampler=sampler, runs=runs)
-        idata = to_inference_data(fit)
-        summary = summary_table(fit, idata)
-        diag = diagnostics(fit, idata, summary, runs=pd.DataFrame(columns=list(SUMMARY_COLUMNS)))
-        loo = az.loo(idata, var_name=fit.problem.observed_name)
-    return fit, idata, summary, diag, loo
+        fit = entry.fit(campaign, spec, FitOptions(sampler=sampler, runs=runs))
+        report = entry.report(fit, campaign)
+        loo = az.loo(report.idata, var_name=fit.problem.observed_name)
+    return fit, report.idata, report.summary, report.diagnostics, loo
 
 
 def diagnose_intervals(campaign, model: Any = "split_f0_f2", *, library: Mapping[str, fx.Effect] | None = None,

@@ -93,6 +93,16 @@ class Effect:
     def parameters(self) -> tuple[str, ...]:
         return tuple(self.prior_sd)
 
+    @property
+    def per_run(self) -> bool:
+        """Kind "run": one value of each parameter per run (a run-to-run variation)."""
+        return self.kind == "run"
+
+    @property
+    def relative_air(self) -> bool:
+        """Kind "air": parameters of the relative air (identified with anemometer data only)."""
+        return self.kind == "air"
+
 
 def load_library(path: str | Path = LIBRARY_PATH) -> dict[str, Effect]:
     """Read the candidate library (``models/effects/library.toml``); refuses unknown effect
@@ -186,7 +196,7 @@ def super_model(base: DragModel, library: Mapping[str, Effect]) -> tuple[DragMod
     measured = isinstance(base.air, MeasuredAir)
     for e in library.values():
         available[e.name] = None
-        if e.kind == "air" and not measured:
+        if e.relative_air and not measured:
             available[e.name] = "needs logged airspeed_mps and yaw_rad (the model uses no measured air)"
             continue
         for t in e.terms:
@@ -224,7 +234,7 @@ def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effe
         if available[e.name] is not None:
             continue
         values.update(e.fixed)
-        if e.kind == "run":
+        if e.per_run:
             cols = tuple(p for p in e.parameters if p in problem.free)
             if not cols:
                 available[e.name] = "the model frees none of its coefficients"
@@ -366,7 +376,7 @@ def model_columns(lin: Linearisation, effects: tuple[str, ...], library: Mapping
     for name in effects:
         e = library[name]
         for p in lin.effects[name]:
-            if e.kind == "run":
+            if e.per_run:
                 own.append(p)
                 own_prior.append(1.0 / e.prior_sd[p] ** 2)
             elif p not in shared:
@@ -387,7 +397,7 @@ def n_added_parameters(lin: Linearisation, effects: tuple[str, ...], library: Ma
     k = 0
     for name in effects:
         e = library[name]
-        k += len(lin.effects[name]) * (lin.n_runs - 1 if e.kind == "run" else 1)
+        k += len(lin.effects[name]) * (lin.n_runs - 1 if e.per_run else 1)
     return k
 
 
@@ -508,7 +518,7 @@ def distinct_share(lin: Linearisation, effect: str, rival: str, library: Mapping
     parameters fitted, as a share of that left with the coefficients alone; the largest over
     its parameters (1: nothing in common, 0: the rival mimics it entirely).  Run effects and
     effects without shared parameters give 1 (they are told apart by other means)."""
-    if library[effect].kind == "run" or library[rival].kind == "run":
+    if library[effect].per_run or library[rival].per_run:
         return 1.0
     sol = fit_effects(lin, (effect, rival), library)
     names = [lin.columns[j] for j in sol.shared]
@@ -531,7 +541,7 @@ def identifiability(lin: Linearisation, effect: str, library: Mapping[str, Effec
     covariance) and the contraction of its prior (1 - posterior var / prior var).  Run effects
     are per run and need no such check (returned empty)."""
     e = library[effect]
-    if e.kind == "run":
+    if e.per_run:
         return {}
     sol = fit_effects(lin, (effect,), library)
     shared_names = [lin.columns[j] for j in sol.shared]

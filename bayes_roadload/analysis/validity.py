@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
+from ..data import IntervalCampaign
 
 MAD_TO_SD = 1.4826
 """Scale of the median absolute deviation to a normal standard deviation."""
@@ -143,7 +144,7 @@ def trace_validity(campaign, limits: str = config.DEFAULT_WIND_LIMITS, k: float 
 
 def validity_table(campaign, limits: str = config.DEFAULT_WIND_LIMITS) -> pd.DataFrame:
     """:func:`interval_validity` or :func:`trace_validity` by the campaign's kind."""
-    if getattr(campaign, "kind", "traces") == "intervals":
+    if isinstance(campaign, IntervalCampaign):
         return interval_validity(campaign)
     return trace_validity(campaign, limits)
 

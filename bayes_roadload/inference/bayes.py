@@ -112,6 +112,7 @@ from ..physics.residuals import (
     local_level_loglik_batch,
     local_level_loglik_effects,
 )
+from .problem import road_load_draws, road_load_truth
 from .spec import ModelSpec, Prior, load_model_spec
 
 POOLINGS = ("pooled", "hierarchical")
@@ -187,6 +188,35 @@ class FitProblem:
     @property
     def n_runs(self) -> int:
         return len(self.run_ids)
+
+    kind = "traces"
+
+    @property
+    def numpyro_model(self):
+        return coastdown_model
+
+    @property
+    def hessian_runs(self) -> int:
+        return self.n_runs
+
+    def settings(self) -> dict[str, Any]:
+        """pooling, noise, robust; with undriven wheels (eq. 2.16) their known ``Au``, ``Bu``."""
+        out: dict[str, Any] = {"pooling": self.pooling, "noise": self.noise, "robust": self.robust}
+        if "undriven_wheels" in self.spec.terms:
+            out["undriven"] = {k: self.fixed[k] for k in ("Au", "Bu")}
+        return out
+
+    def postprocess(self, samples: dict[str, np.ndarray], seed: int) -> dict[str, np.ndarray]:
+        """The run-level coefficients of a hierarchical fit (:func:`draw_run_effects`)."""
+        return draw_run_effects(self, samples, seed=seed)
+
+    def derived(self, samples: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Road load at reference conditions (:func:`~.problem.road_load_draws`; the hierarchical
+        model's population-mean coefficients), with the measured driveline loss."""
+        return road_load_draws(self, samples, driveline_curve=self.driveline_curve)
+
+    def truth_values(self, truth: dict | None) -> dict[str, float]:
+        return dict(truth or {}, **road_load_truth(self, truth, driveline_curve=self.driveline_curve))
 
     @property
     def calibrated(self) -> bool:

@@ -25,7 +25,7 @@ steady one along the track, a head wind for direction +1 and a tail wind for -1)
 Sampling, outputs and gates are those of the interval fit (MAP -> Laplace whitening -> NUTS ->
 gates, :func:`~bayes_roadload.inference.nuts.sample_problem`; ``posterior.nc`` with the
 replicated segment times, ``summary.csv``, ``runs_summary.csv``, ``diagnostics.json``:
-:func:`~bayes_roadload.inference.intervals.write_interval_outputs`).
+:func:`~bayes_roadload.inference.intervals.interval_report`).
 """
 
 from __future__ import annotations
@@ -37,7 +37,6 @@ import jax.numpy as jnp
 import numpy as np
 import numpyro
 import numpyro.distributions as dist
-import pandas as pd
 
 from .. import config
 from ..data.distances import DistanceCampaign
@@ -45,7 +44,10 @@ from ..physics.atmosphere import air_density_kgpm3
 from ..physics.distances import MarkerRuns, segment_times
 from ..physics.intervals import check_speed_domain
 from ..physics.model import DragModel
-from .intervals import NOISE_SITES, run_log_likelihood, sample_coefficients_and_noise, write_interval_outputs
+from .bayes import default_prior
+from .intervals import NOISE_SITES, interval_report, run_log_likelihood, sample_coefficients_and_noise
+from .nuts import sample_problem
+from .problem import road_load_draws, road_load_truth
 from .spec import ModelSpec, Prior, load_model_spec
 
 DEFAULT_MODEL = "three_term"
@@ -87,11 +89,6 @@ class DistanceProblem:
     mass_kg: float
     frontal_area_m2: float
     initial: dict[str, Any] = field(default_factory=dict)
-    driveline_curve: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    pooling: str = "pooled"
-    noise: str = "distance-time"
-    robust: bool = False
-    varying: tuple = ()
 
     kind = "distances"
     observed_name = "segment_time_s"
@@ -100,6 +97,23 @@ class DistanceProblem:
     @property
     def n_runs(self) -> int:
         return len(self.run_ids)
+
+    @property
+    def hessian_runs(self) -> int:
+        return self.n_runs
+
+    def settings(self) -> dict[str, Any]:
+        return {"pooling": "pooled", "noise": "distance-time", "robust": False}
+
+    def postprocess(self, samples: dict[str, Any], seed: int) -> dict[str, Any]:
+        return {}
+
+    def derived(self, samples: dict[str, Any]) -> dict[str, Any]:
+        """Road load at reference conditions (:func:`~.problem.road_load_draws`)."""
+        return road_load_draws(self, samples)
+
+    def truth_values(self, truth: dict | None) -> dict[str, float]:
+        return dict(truth or {}, **road_load_truth(self, truth))
 
     @property
     def numpyro_model(self):
@@ -112,6 +126,11 @@ class DistanceProblem:
     @property
     def observed_runs(self):
         return self.observed_segments_s
+
+    def run_columns(self) -> dict[str, Any]:
+        """The columns that identify each run in ``runs_summary.csv`` (its test mass)."""
+        return {"run": list(self.run_ids), "direction": np.asarray(self.directions).astype(int),
+                "mass_kg": np.asarray(self.run_masses_kg)}
 
     def parameters(self, sample: dict[str, Any]) -> dict[str, Any]:
         """The drag-model parameters of one draw, per run where they depend on it: a steady
@@ -147,8 +166,6 @@ def build_distance_problem(campaign: DistanceCampaign, spec: ModelSpec | str = D
                          "channels")
     model, fixed, free = spec.build(campaign)
     check_speed_domain(model)
-    from .bayes import default_prior
-
     priors = {p: spec.priors.get(p) or default_prior(p, model) for p in free}
     runs = list(campaign.run_ids if runs is None else runs)
     if not runs:
@@ -207,15 +224,12 @@ def fit_distances_nuts(campaign: DistanceCampaign, spec: ModelSpec | str = DEFAU
                        sampler: config.SamplerConfig = config.DEFAULT_SAMPLER, runs=None):
     """MAP, Laplace whitening and NUTS (:mod:`~bayes_roadload.inference.nuts`) on the
     distance-time model.  Returns a :class:`~bayes_roadload.inference.nuts.NutsFit`."""
-    from .nuts import sample_problem
-
     problem = build_distance_problem(campaign, spec, runs=runs)
     return sample_problem(problem, problem.initial, sampler, campaign.truth)
 
 
-def write_distance_outputs(fit, out_dir, *, gates: config.Gates = config.DEFAULT_GATES) -> tuple[pd.DataFrame, dict]:
-    """posterior.nc (observed and replicated ``segment_time_s``, per-run ``v0_mps``),
-    summary.csv, runs_summary.csv (each run's mass, speed at the first marker, and observed
-    total time against its 95 % predictive interval), diagnostics.json: the interval fit's
-    outputs and gates (:func:`~bayes_roadload.inference.intervals.write_interval_outputs`)."""
-    return write_interval_outputs(fit, out_dir, gates=gates)
+distance_report = interval_report
+"""The report of a distance-time fit: that of the interval fit
+(:func:`~bayes_roadload.inference.intervals.interval_report`; ``posterior.nc`` with observed and
+replicated ``segment_time_s`` and per-run ``v0_mps``, ``runs_summary.csv`` with each run's mass,
+speed at the first marker and observed total time against its 95 % predictive interval)."""

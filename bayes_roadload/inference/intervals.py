@@ -33,9 +33,7 @@ goes through the same MAP -> Laplace whitening -> NUTS -> gates as the trace fit
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import arviz as az
@@ -57,6 +55,10 @@ from ..physics.intervals import (
     interval_times,
 )
 from ..physics.model import DragModel
+from .bayes import default_prior
+from .nuts import sample_problem
+from .problem import road_load_draws, road_load_truth
+from .results import DERIVED, SUMMARY_COLUMNS, FitReport, _rows, diagnostics, inference_data
 from .spec import ModelSpec, Prior, load_model_spec
 
 NOISE_SITES = ("sigma_gate_s", "band_noise_s_per_sqrt_s", "run_decel_sd_mps2")
@@ -97,11 +99,6 @@ class IntervalProblem:
     mass_kg: float
     frontal_area_m2: float
     initial: dict[str, Any] = field(default_factory=dict)
-    driveline_curve: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    pooling: str = "pooled"
-    noise: str = "interval"
-    robust: bool = False
-    varying: tuple = ()
 
     kind = "intervals"
     observed_name = "interval_s"
@@ -110,6 +107,23 @@ class IntervalProblem:
     @property
     def n_runs(self) -> int:
         return len(self.run_ids)
+
+    @property
+    def hessian_runs(self) -> int:
+        return self.n_runs
+
+    def settings(self) -> dict[str, Any]:
+        return {"pooling": "pooled", "noise": "interval", "robust": False}
+
+    def postprocess(self, samples: dict[str, Any], seed: int) -> dict[str, Any]:
+        return {}
+
+    def derived(self, samples: dict[str, Any]) -> dict[str, Any]:
+        """Road load at reference conditions (:func:`~.problem.road_load_draws`)."""
+        return road_load_draws(self, samples)
+
+    def truth_values(self, truth: dict | None) -> dict[str, float]:
+        return dict(truth or {}, **road_load_truth(self, truth))
 
     @property
     def numpyro_model(self):
@@ -124,6 +138,11 @@ class IntervalProblem:
     def observed_runs(self):
         """[R, K] observed band times (0 on padding)."""
         return jnp.where(self.mask, _per_run(self, self.observed_s), 0.0)
+
+    def run_columns(self) -> dict[str, Any]:
+        """The columns that identify each run in ``runs_summary.csv``."""
+        return {"run": list(self.run_ids), "window": list(self.windows),
+                "direction": np.asarray(self.directions).astype(int)}
 
     def run_times(self, sample: dict[str, Any]):
         """[R, K] model band times of one draw and their sensitivity to a constant extra
@@ -145,8 +164,6 @@ def build_interval_problem(campaign: IntervalCampaign, spec: ModelSpec | str = "
         raise ValueError(f"model {spec.name!r} uses measured air; interval times carry no anemometer channels")
     model, fixed, free = spec.build(campaign)
     check_speed_domain(model)
-    from .bayes import default_prior
-
     priors = {p: spec.priors.get(p) or default_prior(p, model) for p in free}
     df = campaign.intervals
     if runs is None:
@@ -249,8 +266,6 @@ def fit_intervals_nuts(campaign: IntervalCampaign, spec: ModelSpec | str = "spli
                        sampler: config.SamplerConfig = config.DEFAULT_SAMPLER, runs=None):
     """MAP, Laplace whitening and NUTS (:mod:`~bayes_roadload.inference.nuts`) on the interval
     model.  Returns a :class:`~bayes_roadload.inference.nuts.NutsFit`."""
-    from .nuts import sample_problem
-
     problem = build_interval_problem(campaign, spec, runs=runs)
     return sample_problem(problem, problem.initial, sampler, campaign.truth)
 
@@ -299,36 +314,22 @@ def log_likelihood_per_run(problem: IntervalProblem, samples: dict[str, np.ndarr
 
 def to_inference_data(fit) -> az.InferenceData:
     """posterior (contract names, derived road load), log_likelihood per run, observed and
-    replicated band times."""
-    from .results import derived_quantities
-
+    replicated band times (:func:`~bayes_roadload.inference.results.inference_data`)."""
     p = fit.problem
     name = p.observed_name
-    posterior = dict(fit.samples)
-    posterior.update(derived_quantities(fit))
     pred = predictive_band_times(p, fit.samples, n_draws=fit.sampler.posterior_predictive_draws)
     chains = fit.sampler.num_chains
     per_chain = pred["interval_s"].shape[0] // chains
     rep = pred["interval_s"][:per_chain * chains].reshape((chains, per_chain) + pred["interval_s"].shape[1:])
     runs = [str(r) for r in p.run_ids]
     k = np.asarray(p.mask).shape[1]
-    per_run_sites = [s for s in posterior if np.ndim(posterior[s]) == 3 and np.shape(posterior[s])[2] == p.n_runs]
-    return az.from_dict(
-        posterior=posterior,
-        posterior_predictive={name: rep},
-        log_likelihood={name: log_likelihood_per_run(p, fit.samples)},
-        observed_data={name: observed_band_times(p)},
-        sample_stats={"diverging": fit.stats["diverging"].astype(bool), "tree_depth": fit.stats["tree_depth"],
-                      "n_steps": fit.stats["num_steps"], "energy": fit.stats["energy"],
-                      "acceptance_rate": fit.stats["accept_prob"]},
-        coords={"run": runs, "band": np.arange(k)},
-        dims={name: ["run", "band"], **{s: ["run"] for s in per_run_sites}},
-    )
+    per_run_sites = [s for s in fit.samples if np.ndim(fit.samples[s]) == 3 and np.shape(fit.samples[s])[2] == p.n_runs]
+    return inference_data(fit, predictive={name: rep}, log_likelihood={name: log_likelihood_per_run(p, fit.samples)},
+                          observed={name: observed_band_times(p)}, coords={"run": runs, "band": np.arange(k)},
+                          dims={name: ["run", "band"], **{s: ["run"] for s in per_run_sites}})
 
 
 def summary_table(fit, idata) -> pd.DataFrame:
-    from .results import DERIVED, _rows
-
     names = list(fit.problem.free) + list(NOISE_SITES) + list(DERIVED)
     return _rows(idata, names)
 
@@ -341,39 +342,22 @@ def run_predictions(fit, idata) -> pd.DataFrame:
     rep = np.asarray(idata.posterior_predictive[p.observed_name])
     tot = np.nansum(rep, axis=-1).reshape(-1, p.n_runs)
     lo, hi = np.percentile(tot, [2.5, 97.5], axis=0)
-    table = {"run": list(p.run_ids)}
-    if hasattr(p, "windows"):
-        table["window"] = list(p.windows)
-    table["direction"] = np.asarray(p.directions).astype(int)
-    for site in ("mass_kg", "v0_mps"):   # distance-time problems: each run's mass, its speed at the first marker
-        if site == "mass_kg" and hasattr(p, "run_masses_kg"):
-            table["mass_kg"] = np.asarray(p.run_masses_kg)
-        elif site in fit.samples:
-            draws = np.asarray(fit.samples[site]).reshape(-1, p.n_runs)
-            table[f"{site}_mean"], table[f"{site}_sd"] = draws.mean(axis=0), draws.std(axis=0, ddof=1)
+    table = p.run_columns()
+    if "v0_mps" in fit.samples:   # distance-time problems: each run's speed at the first marker
+        draws = np.asarray(fit.samples["v0_mps"]).reshape(-1, p.n_runs)
+        table["v0_mps_mean"], table["v0_mps_sd"] = draws.mean(axis=0), draws.std(axis=0, ddof=1)
     table.update({"observed_time_s": obs, "predicted_mean_s": tot.mean(axis=0), "predicted_q2.5": lo,
                   "predicted_q97.5": hi, "inside_95": (obs >= lo) & (obs <= hi)})
     return pd.DataFrame(table)
 
 
-def write_interval_outputs(fit, out_dir, *, gates: config.Gates = config.DEFAULT_GATES,
-                           validity: pd.DataFrame | None = None) -> tuple[pd.DataFrame, dict]:
-    """posterior.nc, summary.csv, runs_summary.csv, diagnostics.json (and validity.csv) of an
-    interval fit; the diagnostics and gates are those of :func:`~bayes_roadload.inference.
-    results.diagnostics`."""
-    from .results import SUMMARY_COLUMNS, diagnostics
-
-    out = Path(out_dir)
+def interval_report(fit, campaign=None, *, gates: config.Gates = config.DEFAULT_GATES) -> FitReport:
+    """The report of an interval (or distance-time) fit: posterior with replicated times,
+    summary, ``runs_summary.csv`` rows (:func:`run_predictions`) and the gates of
+    :func:`~bayes_roadload.inference.results.diagnostics` over the sampled quantities."""
     idata = to_inference_data(fit)
     summary = summary_table(fit, idata)
     diag = diagnostics(fit, idata, summary, gates, runs=pd.DataFrame(columns=list(SUMMARY_COLUMNS)))
-    diag["kind"] = getattr(fit.problem, "kind", "intervals")
+    diag["kind"] = fit.problem.kind
     diag["runs_fitted"] = fit.problem.n_runs
-    out.mkdir(parents=True, exist_ok=True)
-    idata.to_netcdf(str(out / "posterior.nc"))
-    summary.to_csv(out / "summary.csv", index=False)
-    run_predictions(fit, idata).to_csv(out / "runs_summary.csv", index=False)
-    if validity is not None:
-        validity.to_csv(out / "validity.csv", index=False)
-    (out / "diagnostics.json").write_text(json.dumps(diag, indent=2) + "\n")
-    return summary, diag
+    return FitReport(idata, summary, run_predictions(fit, idata), diag)

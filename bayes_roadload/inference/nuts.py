@@ -45,11 +45,10 @@ from ..errors import FitStageError, stage
 from .bayes import (
     FitProblem,
     build_problem,
-    coastdown_model,
-    draw_run_effects,
     linearise_run_effects,
     run_effect_means,
 )
+from .problem import Problem
 from .lsq import fit_lsq
 from .spec import ModelSpec
 
@@ -114,7 +113,7 @@ class NutsFit:
     ([chain, draw]).
     """
 
-    problem: FitProblem
+    problem: Problem
     samples: dict[str, np.ndarray]
     stats: dict[str, np.ndarray]
     map: MapResult | None
@@ -123,14 +122,14 @@ class NutsFit:
     truth: dict | None = None
 
 
-def _site_scales(problem: FitProblem, z: dict[str, Any]) -> dict[str, Any]:
+def _site_scales(problem: Problem, z: dict[str, Any]) -> dict[str, Any]:
     """O(1) scaling of each unconstrained site: real-valued coefficients by their typical
     magnitude (config.PARAMETER_SCALES), initial speeds by 0.05 m/s, log-transformed
     positive sites by 1."""
     scales = {}
     for name, value in z.items():
         s = 1.0
-        prior = problem.priors.get(name)
+        prior = problem.priors.get(name)  # the coefficients' priors (sites without one are nuisances)
         if name in problem.free and prior is not None and prior.dist == "normal" and prior.low is None and prior.high is None:
             s = config.PARAMETER_SCALES.get(name, 1.0)
         elif name == "v0_mps":
@@ -197,7 +196,7 @@ def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, flo
     v0, sigma = first.copy(), np.full(r, 0.05)
     if start is not None:
         init.update({k: float(v) for k, v in start.items() if k in problem.free})
-    elif getattr(problem, "latent_wind", False):
+    elif problem.latent_wind:
         return _latent_wind_start(problem, campaign, init, first)
     else:
         try:
@@ -237,7 +236,7 @@ class Posterior:
 
     Attributes
     ----------
-    problem : the fit problem.
+    problem : the fit problem (:class:`~bayes_roadload.inference.problem.Problem`).
     z0 : unconstrained starting values (dict of sites).
     potential_fn : dict of unconstrained sites -> potential energy.
     postprocess_fn : unconstrained sites -> constrained sites and deterministic sites.
@@ -247,7 +246,7 @@ class Posterior:
         sparsity the finite-difference Hessian exploits.
     """
 
-    problem: FitProblem
+    problem: Problem
     z0: dict[str, Any]
     potential_fn: Any
     postprocess_fn: Any
@@ -260,30 +259,23 @@ class Posterior:
         return np.asarray(ravel_pytree(self.z0)[0])
 
 
-def numpyro_model_of(problem) -> Any:
-    """The numpyro model function of a problem: its ``numpyro_model`` when it has one (e.g. an
-    :class:`~bayes_roadload.inference.intervals.IntervalProblem`), else the coastdown model of
-    speed traces.  Every such problem goes through the same MAP, Laplace whitening, NUTS and
-    gates."""
-    return getattr(problem, "numpyro_model", coastdown_model)
-
-
-def site_layout(problem: FitProblem, z0: dict[str, Any]) -> tuple[Any, np.ndarray, np.ndarray]:
+def site_layout(problem: Problem, z0: dict[str, Any]) -> tuple[Any, np.ndarray, np.ndarray]:
     """Of the unconstrained sites ``z0``: the flat vector's ``unravel``, its O(1) ``scale``
-    (:func:`_site_scales`) and ``run_index`` (the run of each coordinate, -1 for shared ones)."""
+    (:func:`_site_scales`) and ``run_index`` (the run of each coordinate, -1 for shared ones;
+    the problem's :attr:`~bayes_roadload.inference.problem.Problem.hessian_runs`)."""
     _, unravel = ravel_pytree(z0)
     scale = np.asarray(ravel_pytree(_site_scales(problem, z0))[0])
-    r = problem.n_runs
+    r = problem.hessian_runs
     run_of = {k: (np.arange(r) if np.shape(v) == (r,) and r > 1 else np.full(np.size(v), -1))
               for k, v in z0.items()}
     run_index = np.asarray(ravel_pytree({k: jnp.asarray(v) for k, v in run_of.items()})[0]).astype(int)
     return unravel, scale, run_index
 
 
-def unconstrained_posterior(problem: FitProblem, init: dict[str, Any]) -> Posterior:
+def unconstrained_posterior(problem: Problem, init: dict[str, Any]) -> Posterior:
     """numpyro's potential of ``problem``, starting at the constrained values ``init``."""
     info, potential_fn, postprocess_fn, _ = initialize_model(
-        jax.random.PRNGKey(0), numpyro_model_of(problem), model_args=(problem,),
+        jax.random.PRNGKey(0), problem.numpyro_model, model_args=(problem,),
         init_strategy=init_to_value(values=init), validate_grad=False)
     z0 = info.z
     unravel, scale, run_index = site_layout(problem, z0)
@@ -548,7 +540,21 @@ def _chain_method(num_chains: int) -> str:
     return "parallel" if jax.local_device_count() >= num_chains > 1 else "sequential"
 
 
-def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
+def collect_warmup(mcmc: MCMC) -> None:
+    """Make ``mcmc.run`` keep the warm-up draws as well as the samples, so that warm-up and
+    sampling run as one compiled program (``mcmc.warmup`` then ``mcmc.run`` compiles the
+    sampler twice) and the warm-up's share of the leapfrog steps can be measured.
+
+    numpyro has no public option for this: this is the one use of its private
+    ``MCMC._set_collection_params(lower, upper, collection_size, phase)`` (numpyro 0.22).
+    ``tests/inference/test_nuts.py::test_collect_warmup_keeps_every_draw`` checks the signature
+    and the effect against the installed numpyro and fails on an upgrade that changes either.
+    """
+    total = mcmc.num_warmup + mcmc.num_samples
+    mcmc._set_collection_params(0, total, total)
+
+
+def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
              map_result: MapResult | None = None, posterior: Posterior | None = None) -> NutsFit:
     """Sample the posterior of ``problem`` with NUTS.
 
@@ -584,7 +590,7 @@ def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFA
         if sampler.num_chains == 1:
             init_params = init_params[0]
     else:
-        kernel = NUTS(numpyro_model_of(problem), target_accept_prob=sampler.target_accept, max_tree_depth=sampler.max_tree_depth)
+        kernel = NUTS(problem.numpyro_model, target_accept_prob=sampler.target_accept, max_tree_depth=sampler.max_tree_depth)
         init_params = None
     args = () if sampler.precondition == "laplace" else (problem,)
     # Warm-up and sampling in one compiled program (``mcmc.warmup`` then ``mcmc.run`` compiles
@@ -593,8 +599,7 @@ def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFA
     mcmc = MCMC(kernel, num_warmup=sampler.num_warmup, num_samples=sampler.num_samples,
                 num_chains=sampler.num_chains, chain_method=_chain_method(sampler.num_chains),
                 progress_bar=sampler.progress_bar)
-    total = sampler.num_warmup + sampler.num_samples
-    mcmc._set_collection_params(0, total, total)  # collect the warm-up too (numpyro 0.22, pinned)
+    collect_warmup(mcmc)
     t0 = time.perf_counter()
     mcmc.run(key, *args, init_params=init_params, extra_fields=fields)
     raw = jax.block_until_ready(mcmc.get_samples(group_by_chain=True))
@@ -612,7 +617,7 @@ def run_nuts(problem: FitProblem, *, sampler: config.SamplerConfig = config.DEFA
         samples = {k: np.asarray(v) for k, v in constrained.items()}
     else:
         samples = {k: np.asarray(v) for k, v in raw.items()}
-    samples.update(draw_run_effects(problem, samples, seed=sampler.seed))
+    samples.update(problem.postprocess(samples, seed=sampler.seed))
     extra["tree_depth"] = np.ceil(np.log2(extra["num_steps"] + 1.0)).astype(int)
     return NutsFit(problem=problem, samples=samples, stats=extra, map=map_result, sampler=sampler,
                    timings={"warmup_s": warm_share * elapsed, "sampling_s": (1.0 - warm_share) * elapsed})
@@ -640,11 +645,11 @@ def fit_nuts(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling
     return sample_problem(problem, init, sampler, campaign.truth)
 
 
-def sample_problem(problem, init: dict[str, Any], sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
+def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
                    truth: dict | None = None) -> NutsFit:
     """MAP from the constrained starting values ``init`` (with the Laplace preconditioning),
-    then NUTS (:func:`run_nuts`) on any problem whose numpyro model :func:`numpyro_model_of`
-    knows; the fit's ``truth`` is ``truth``."""
+    then NUTS (:func:`run_nuts`) on any :class:`~bayes_roadload.inference.problem.Problem`;
+    the fit's ``truth`` is ``truth``."""
     map_result = post = None
     if sampler.precondition == "laplace":
         post = unconstrained_posterior(problem, init)

@@ -20,10 +20,8 @@ Outputs of ``bayes-roadload fit --method nuts --out DIR``:
 
 from __future__ import annotations
 
-import json
 import math
-import os
-from pathlib import Path
+from dataclasses import dataclass
 
 import arviz as az
 import jax
@@ -32,13 +30,12 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from ..physics.roadload import road_load_summary
 from .bayes import FitProblem, integrated_speed, run_log_likelihood
 from .nuts import NutsFit
+from .problem import ROAD_LOAD_DERIVED, road_load_truth
 
 SUMMARY_COLUMNS = ("parameter", "mean", "sd", "q2.5", "q50", "q97.5", "r_hat", "ess_bulk", "ess_tail")
-DERIVED = ("F50_N", "F50_tyre_N", "F50_aero_N", "F50_driveline_N", "F50_undriven_N",
-           "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
+DERIVED = ROAD_LOAD_DERIVED
 NOISE_SITES = ("q_mps_per_sqrt_s", "student_df", "sigma_driveline_n", "airspeed_calibration_sd")
 
 
@@ -51,18 +48,10 @@ def _unflat(x: np.ndarray, chains: int) -> np.ndarray:
 
 
 def derived_quantities(fit: NutsFit) -> dict[str, np.ndarray]:
-    """Road load at reference conditions for every draw ([chain, draw] arrays).  For the
-    hierarchical model the population-mean coefficients are used."""
-    p = fit.problem
-    chains = fit.samples[p.free[0]].shape[0] if p.free else 1
-    free = {k: jnp.asarray(_flat(fit.samples[k])) for k in p.free}
-
-    def one(values):
-        params = dict(p.fixed, **values)
-        return road_load_summary(p.model, params, p.mass_kg, p.frontal_area_m2, driveline_curve=p.driveline_curve)
-
-    out = jax.jit(jax.vmap(one))(free)
-    return {k: _unflat(np.asarray(out[k]), chains) for k in DERIVED}
+    """The derived quantities of every draw ([chain, draw] arrays): the problem's
+    :meth:`~bayes_roadload.inference.problem.Problem.derived` (road load at reference conditions
+    for a drag model; the hierarchical model's population-mean coefficients)."""
+    return fit.problem.derived(fit.samples)
 
 
 def _draw_dicts(fit: NutsFit, idx: np.ndarray) -> dict[str, jnp.ndarray]:
@@ -108,14 +97,42 @@ def log_likelihood_per_run(fit: NutsFit) -> np.ndarray:
     return _unflat(np.asarray(ll), chains)
 
 
+def sample_stats(fit: NutsFit) -> dict[str, np.ndarray]:
+    """The sampler statistics of ``posterior.nc`` ([chain, draw] each)."""
+    return {"diverging": fit.stats["diverging"].astype(bool), "tree_depth": fit.stats["tree_depth"],
+            "n_steps": fit.stats["num_steps"], "energy": fit.stats["energy"],
+            "acceptance_rate": fit.stats["accept_prob"]}
+
+
+def inference_data(fit: NutsFit, *, derived: dict[str, np.ndarray] | None = None,
+                   observed: dict[str, np.ndarray] | None = None, constant: dict[str, np.ndarray] | None = None,
+                   log_likelihood: dict[str, np.ndarray] | None = None,
+                   predictive: dict[str, np.ndarray] | None = None,
+                   coords: dict | None = None, dims: dict | None = None) -> az.InferenceData:
+    """The one builder of a fit's ArviZ InferenceData, for every data kind: ``posterior`` (the
+    draws and the ``derived`` quantities, default the problem's
+    :meth:`~bayes_roadload.inference.problem.Problem.derived`), ``sample_stats``
+    (:func:`sample_stats`) and the optional groups; ``dims`` / ``coords`` name the extra axes
+    (dims of absent variables are dropped)."""
+    posterior = dict(fit.samples)
+    posterior.update(fit.problem.derived(fit.samples) if derived is None else derived)
+    groups: dict = {"posterior": posterior, "sample_stats": sample_stats(fit)}
+    present = set(posterior)
+    for name, group in (("observed_data", observed), ("constant_data", constant),
+                        ("log_likelihood", log_likelihood), ("posterior_predictive", predictive)):
+        if group is not None:
+            groups[name] = group
+            present |= set(group)
+    dims = {k: v for k, v in (dims or {}).items() if k in present}
+    return az.from_dict(**groups, coords=coords or None, dims=dims or None)
+
+
 def to_inference_data(fit: NutsFit, *, predictive: bool = True) -> az.InferenceData:
-    """The fit as ArviZ InferenceData (see the module docstring)."""
+    """The fit of speed traces as ArviZ InferenceData (see the module docstring)."""
     p = fit.problem
     runs = [str(r) for r in p.run_ids]
     n = p.batch.time_s.shape[1]
-    posterior = dict(fit.samples)
-    dims = {k: ["run"] for k, v in posterior.items() if v.ndim == 3 and v.shape[2] == p.n_runs}
-    posterior.update(derived_quantities(fit))
+    dims = {k: ["run"] for k, v in fit.samples.items() if v.ndim == 3 and v.shape[2] == p.n_runs}
     mask = np.asarray(p.batch.mask)
     observed = {"speed_mps": np.where(mask, np.asarray(p.batch.speed_mps), np.nan)}
     constant = {
@@ -128,25 +145,10 @@ def to_inference_data(fit: NutsFit, *, predictive: bool = True) -> az.InferenceD
     trace_dims = ["run", "sample"]
     all_dims = dict(dims, speed_mps=trace_dims, speed_integrated_mps=trace_dims, time_s=trace_dims,
                     airspeed_mps=trace_dims, yaw_rad=trace_dims, driveline_force_n=trace_dims, direction=["run"])
-    stats = {
-        "diverging": fit.stats["diverging"].astype(bool),
-        "tree_depth": fit.stats["tree_depth"],
-        "n_steps": fit.stats["num_steps"],
-        "energy": fit.stats["energy"],
-        "acceptance_rate": fit.stats["accept_prob"],
-    }
-    groups = dict(
-        posterior=posterior,
-        log_likelihood={"speed_mps": log_likelihood_per_run(fit)},
-        observed_data=observed,
-        constant_data=constant,
-        sample_stats=stats,
-        coords={"run": runs, "sample": np.arange(n)},
-        dims=dict(all_dims, **{"speed_mps": trace_dims}),
-    )
-    if predictive:
-        groups["posterior_predictive"] = posterior_predictive(fit)
-    idata = az.from_dict(**groups)
+    idata = inference_data(fit, observed=observed, constant=constant,
+                           log_likelihood={"speed_mps": log_likelihood_per_run(fit)},
+                           predictive=posterior_predictive(fit) if predictive else None,
+                           coords={"run": runs, "sample": np.arange(n)}, dims=all_dims)
     idata.log_likelihood["speed_mps"] = idata.log_likelihood["speed_mps"].rename({"speed_mps_dim_0": "run"}) \
         if "speed_mps_dim_0" in idata.log_likelihood.dims else idata.log_likelihood["speed_mps"]
     return idata
@@ -214,9 +216,7 @@ def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
     out = {
         "method": "nuts",
         "model": fit.problem.spec.name,
-        "pooling": fit.problem.pooling,
-        "noise": fit.problem.noise,
-        "robust": fit.problem.robust,
+        **fit.problem.settings(),
         "chains": chains,
         "draws_per_chain": int(idata.posterior.sizes["draw"]),
         "divergences": div,
@@ -246,16 +246,11 @@ def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
     return out
 
 
-def truth_derived(problem: FitProblem, truth: dict | None) -> dict[str, float]:
-    """The derived road-load quantities at the true coefficients (simulated campaigns)."""
-    if not truth:
-        return {}
-    values = {k: float(truth[k]) for k in problem.free if isinstance(truth.get(k), (int, float))}
-    if len(values) != len(problem.free):
-        return {}
-    out = road_load_summary(problem.model, dict(problem.fixed, **values), problem.mass_kg, problem.frontal_area_m2,
-                            driveline_curve=problem.driveline_curve)
-    return {k: float(v) for k, v in out.items()}
+def truth_derived(problem, truth: dict | None) -> dict[str, float]:
+    """The derived road-load quantities at the true coefficients (simulated campaigns) of a
+    problem with a drag model (:func:`~bayes_roadload.inference.problem.road_load_truth`)."""
+    curve = problem.driveline_curve if isinstance(problem, FitProblem) else (0.0, 0.0, 0.0)
+    return road_load_truth(problem, truth, driveline_curve=curve)
 
 
 REMEDIES = {
@@ -298,61 +293,55 @@ def format_posterior_table(summary: pd.DataFrame, diag: dict, truth: dict | None
     return "\n".join(lines)
 
 
-def write_nuts_outputs(fit: NutsFit, out_dir: str | os.PathLike, *,
-                       gates: config.Gates = config.DEFAULT_GATES) -> tuple[pd.DataFrame, dict]:
-    """Write posterior.nc, summary.csv, runs_summary.csv and diagnostics.json."""
-    out = Path(out_dir)
+@dataclass
+class FitReport:
+    """Everything a fit directory holds (:func:`bayes_roadload.output.write_fit_dir`).
+
+    Attributes
+    ----------
+    idata : ``posterior.nc``.
+    summary : ``summary.csv`` (:data:`SUMMARY_COLUMNS`).
+    runs : ``runs_summary.csv``; None for a kind without per-run rows.
+    diagnostics : ``diagnostics.json`` (:func:`diagnostics`, the gates).
+    """
+
+    idata: az.InferenceData
+    summary: pd.DataFrame
+    runs: pd.DataFrame | None
+    diagnostics: dict
+
+
+def trace_report(fit: NutsFit, campaign=None, *, gates: config.Gates = config.DEFAULT_GATES) -> FitReport:
+    """The report of a fit of speed traces: posterior with replicated traces, summary, per-run
+    rows (initial speed, noise, run-level coefficients) and the gates over all of them."""
     idata = to_inference_data(fit)
     summary = summary_table(fit, idata)
     runs = run_table(fit, idata)
-    diag = diagnostics(fit, idata, summary, gates, runs=runs)
-    out.mkdir(parents=True, exist_ok=True)
-    idata.to_netcdf(str(out / "posterior.nc"))
-    summary.to_csv(out / "summary.csv", index=False)
-    runs.to_csv(out / "runs_summary.csv", index=False)
-    (out / "diagnostics.json").write_text(json.dumps(diag, indent=2) + "\n")
-    return summary, diag
+    return FitReport(idata, summary, runs, diagnostics(fit, idata, summary, gates, runs=runs))
 
 
 def channel_inference_data(fit: NutsFit, *, derived: dict[str, np.ndarray] | None = None,
                            observed: dict[str, np.ndarray] | None = None, dims: dict | None = None,
                            coords: dict | None = None) -> az.InferenceData:
     """ArviZ data of a fit that has no speed-trace model (a measured channel, a wheel spin-down,
-    steady-state forces): ``posterior`` (the draws and ``derived`` [chain, draw, ...]
-    quantities), ``observed_data``, ``sample_stats``; ``dims`` / ``coords`` name the extra axes
-    (e.g. ``{"v0_mps": ["run"]}``, ``{"run": [...]}``)."""
-    posterior = dict(fit.samples)
-    posterior.update(derived or {})
-    stats = {"diverging": fit.stats["diverging"].astype(bool), "tree_depth": fit.stats["tree_depth"],
-             "n_steps": fit.stats["num_steps"], "energy": fit.stats["energy"],
-             "acceptance_rate": fit.stats["accept_prob"]}
-    dims = {k: v for k, v in (dims or {}).items() if k in posterior or k in (observed or {})}
-    return az.from_dict(posterior=posterior, observed_data=observed or {}, sample_stats=stats,
-                        coords=coords or None, dims=dims or None)
+    steady-state forces): :func:`inference_data` with ``posterior`` (the draws and ``derived``
+    [chain, draw, ...] quantities), ``observed_data`` and ``sample_stats``."""
+    return inference_data(fit, derived=derived or {}, observed=observed or {}, coords=coords, dims=dims)
 
 
-def write_channel_outputs(fit: NutsFit, out_dir: str | os.PathLike, names: list[str], *, kind: str,
-                          derived: dict[str, np.ndarray] | None = None,
-                          observed: dict[str, np.ndarray] | None = None, run_sites: tuple[str, ...] = (),
-                          dims: dict | None = None, coords: dict | None = None,
-                          gates: config.Gates = config.DEFAULT_GATES,
-                          extra: dict | None = None) -> tuple[pd.DataFrame, dict]:
-    """``posterior.nc``, ``summary.csv`` (rows ``names`` then ``derived``), ``runs_summary.csv``
-    (the ``run_sites``, when any) and ``diagnostics.json`` of a fit without a speed-trace model,
-    with the gates of :func:`diagnostics` over every sampled quantity; ``kind`` (and ``extra``)
-    are recorded in the diagnostics."""
-    out = Path(out_dir)
+def channel_report(fit: NutsFit, names: list[str], *, kind: str, observed: dict[str, np.ndarray] | None = None,
+                   run_sites: tuple[str, ...] = (), dims: dict | None = None, coords: dict | None = None,
+                   gates: config.Gates = config.DEFAULT_GATES, extra: dict | None = None) -> FitReport:
+    """The report of a fit without a speed-trace model: summary rows ``names`` then the
+    problem's derived quantities, per-run rows of the ``run_sites`` (None when there are none),
+    the gates of :func:`diagnostics` over every sampled quantity; ``kind`` (and ``extra``) are
+    recorded in the diagnostics."""
+    derived = fit.problem.derived(fit.samples)
     idata = channel_inference_data(fit, derived=derived, observed=observed, dims=dims, coords=coords)
-    summary = _rows(idata, list(names) + list(derived or {}))
+    summary = _rows(idata, list(names) + list(derived))
     runs = _rows(idata, [k for k in run_sites if k in idata.posterior]) if run_sites else \
         pd.DataFrame(columns=list(SUMMARY_COLUMNS))
     diag = diagnostics(fit, idata, summary, gates, runs=runs)
     diag["kind"] = kind
     diag.update(extra or {})
-    out.mkdir(parents=True, exist_ok=True)
-    idata.to_netcdf(str(out / "posterior.nc"))
-    summary.to_csv(out / "summary.csv", index=False)
-    if run_sites:
-        runs.to_csv(out / "runs_summary.csv", index=False)
-    (out / "diagnostics.json").write_text(json.dumps(diag, indent=2) + "\n")
-    return summary, diag
+    return FitReport(idata, summary, runs if run_sites else None, diag)

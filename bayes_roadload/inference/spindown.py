@@ -41,6 +41,8 @@ import pandas as pd
 from .. import config
 from ..thesis import THESIS_UNDRIVEN, THESIS_UNDRIVEN_SD
 from ..physics.spindown import equivalent_mass_kg, spindown_interval_drag_n, spindown_speed_mps
+from .nuts import sample_problem
+from .results import FitReport, channel_report
 from .spec import ModelSpec, Prior, load_model_spec
 
 WHEEL_SITES = ("Au_wheel", "Bu_wheel")
@@ -65,15 +67,37 @@ class SpindownProblem:
     initial: dict[str, Any] = field(default_factory=dict)
     free: tuple[str, ...] = WHEEL_SITES
     pooling: str = "pooled"
-    noise: str = "white"
-    robust: bool = False
-    varying: tuple = ()
+
+    kind = "spindown"
 
     @property
     def n_runs(self) -> int:
+        return len(self.run_ids)
+
+    @property
+    def hessian_runs(self) -> int:
         # 0: every coordinate is treated as shared by the finite-difference Hessian (the
         # per-wheel sites couple the runs of one wheel; the problems are small)
         return 0
+
+    def settings(self) -> dict[str, Any]:
+        return {"pooling": self.pooling, "noise": "white", "robust": False}
+
+    def postprocess(self, samples: dict[str, Any], seed: int) -> dict[str, Any]:
+        return {}
+
+    def derived(self, samples: dict[str, Any]) -> dict[str, Any]:
+        return spindown_derived(samples)
+
+    def truth_values(self, truth: dict | None) -> dict[str, float]:
+        """Scalar truths, the per-wheel ``Au_wheel[w]``, ``Bu_wheel[w]`` and ``F50_undriven_N``."""
+        truth = truth or {}
+        flat = {k: v for k, v in truth.items() if isinstance(v, (int, float))}
+        for site in WHEEL_SITES:
+            flat.update({f"{site}[{w}]": v for w, v in truth.get(site, {}).items()})
+        if {"Au", "Bu"} <= set(flat):
+            flat["F50_undriven_N"] = flat["Au"] + flat["Bu"] * config.SPEED_50MPH_MPS
+        return flat
 
     @property
     def n_wheels(self) -> int:
@@ -202,8 +226,6 @@ def fit_spindown_nuts(campaign, spec: ModelSpec | str = "undriven_spindown", *, 
                       sampler: config.SamplerConfig = config.DEFAULT_SAMPLER):
     """MAP, Laplace whitening, NUTS and gates (:func:`~bayes_roadload.inference.nuts.sample_problem`)
     on the spin-down model.  Returns a :class:`~bayes_roadload.inference.nuts.NutsFit`."""
-    from .nuts import sample_problem
-
     problem = build_spindown_problem(campaign, spec, pooling=pooling)
     return sample_problem(problem, problem.initial, sampler, campaign.truth)
 
@@ -252,32 +274,27 @@ def table_7_10_comparison(summary: pd.DataFrame, truth: dict | None = None) -> p
     return pd.DataFrame(rows)
 
 
-def write_spindown_outputs(fit, out_dir, campaign=None, *, gates: config.Gates = config.DEFAULT_GATES):
-    """``posterior.nc``, ``summary.csv`` (Au, Bu, F50_undriven_N, Au_wheel[w], Bu_wheel[w],
-    sigma), ``runs_summary.csv`` (v0_mps, sigma_mps per run), ``diagnostics.json``,
-    ``table_7_10.csv`` (:func:`table_7_10_comparison`) and, with the campaign,
-    ``classical.csv`` (:func:`classical_spindown`)."""
-    from pathlib import Path
-
-    from .results import write_channel_outputs
-
+def spindown_report(fit, campaign=None, *, gates: config.Gates = config.DEFAULT_GATES) -> FitReport:
+    """The report of a spin-down fit: summary (Au, Bu, Au_wheel[w], Bu_wheel[w], the spreads
+    of a hierarchical fit, F50_undriven_N), per-run rows (v0_mps, sigma_mps, and Au_run, Bu_run
+    when hierarchical) and the gates."""
     p = fit.problem
     observed = np.where(np.asarray(p.mask), np.asarray(p.speed_mps), np.nan)
     hier = p.pooling == "hierarchical"
     names = list(TOTALS) + list(WHEEL_SITES) + (["tau_Au_wheel", "tau_Bu_wheel"] if hier else [])
     run_sites = ("v0_mps", "sigma_mps") + (("Au_run", "Bu_run") if hier else ())
-    summary, diag = write_channel_outputs(
-        fit, out_dir, names, kind="spindown", derived=spindown_derived(fit.samples),
-        observed={"wheel_speed_mps": observed}, run_sites=run_sites,
+    return channel_report(
+        fit, names, kind="spindown", observed={"wheel_speed_mps": observed}, run_sites=run_sites,
         dims={"Au_wheel": ["wheel"], "Bu_wheel": ["wheel"], "v0_mps": ["run"], "sigma_mps": ["run"],
               "Au_run": ["run"], "Bu_run": ["run"],
               "wheel_speed_mps": ["run", "sample"]},
         coords={"wheel": list(p.wheels), "run": [str(r) for r in p.run_ids]}, gates=gates,
         extra={"wheels": list(p.wheels), "undriven_wheels": p.undriven_wheels, "pooling": p.pooling,
                "totals_scaled_from_tested_wheels": p.total_scale != 1.0})
-    out = Path(out_dir)
-    comparison = table_7_10_comparison(summary, fit.truth)
-    comparison.to_csv(out / "table_7_10.csv", index=False)
-    if campaign is not None:
-        classical_spindown(campaign).to_csv(out / "classical.csv", index=False)
-    return summary, diag, comparison
+
+
+def spindown_extras(fit, campaign, summary: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """The extra tables of a spin-down fit directory: ``table_7_10.csv``
+    (:func:`table_7_10_comparison`) and ``classical.csv`` (:func:`classical_spindown`)."""
+    return {"table_7_10.csv": table_7_10_comparison(summary, fit.truth),
+            "classical.csv": classical_spindown(campaign)}

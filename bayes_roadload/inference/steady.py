@@ -51,6 +51,9 @@ from ..physics.atmosphere import air_density_kgpm3
 from ..physics.model import DragModel, StillAir, WindAir
 from ..physics.roadload import road_load_summary
 from ..physics.terms import Conditions
+from .nuts import sample_problem
+from .problem import road_load_truth
+from .results import FitReport, channel_report
 from .spec import ModelSpec, Prior, load_model_spec
 
 NOISE_SITES = ("sigma_force_n", "run_force_sd_n")
@@ -79,17 +82,30 @@ class SteadyProblem:
     mass_kg: float
     frontal_area_m2: float
     initial: dict[str, Any] = field(default_factory=dict)
-    pooling: str = "pooled"
-    noise: str = "run_offset"
-    robust: bool = False
-    varying: tuple = ()
-    driveline_curve: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    kind = "steady"
 
     @property
-    def n_runs(self) -> int:
+    def hessian_runs(self) -> int:
         # 0: the finite-difference Hessian treats every coordinate as shared (the pair winds
         # couple two runs each; the problems are small)
         return 0
+
+    def settings(self) -> dict[str, Any]:
+        return {"pooling": "pooled", "noise": "run_offset", "robust": False}
+
+    def postprocess(self, samples: dict[str, Any], seed: int) -> dict[str, Any]:
+        return {}
+
+    def derived(self, samples: dict[str, Any]) -> dict[str, Any]:
+        return steady_derived(self, samples)
+
+    def truth_values(self, truth: dict | None) -> dict[str, float]:
+        """Scalar truths and the road load at the true coefficients."""
+        values = {k: v for k, v in (truth or {}).items() if isinstance(v, (int, float))}
+        if values:
+            values.update(road_load_truth(self, values))
+        return values
 
     @property
     def numpyro_model(self):
@@ -254,8 +270,6 @@ def fit_steady_nuts(campaign, spec: ModelSpec | str = "four_term", *, wind: str 
                     sampler: config.SamplerConfig = config.DEFAULT_SAMPLER):
     """MAP, Laplace whitening, NUTS and gates on the steady-state model; a
     :class:`~bayes_roadload.inference.nuts.NutsFit`."""
-    from .nuts import sample_problem
-
     problem = build_steady_problem(campaign, spec, wind=wind)
     return sample_problem(problem, problem.initial, sampler, campaign.truth)
 
@@ -304,26 +318,25 @@ def classical_steady(campaign, *, averaged: bool = True) -> pd.DataFrame:
                          "se": [se[0] / mg, se[1] / mg, se[2] / half_rho_a], "points": len(per_run)})
 
 
-def write_steady_outputs(fit, out_dir, campaign=None, *, gates: config.Gates = config.DEFAULT_GATES):
-    """``posterior.nc``, ``summary.csv`` (free coefficients, noise, derived road load),
-    ``runs_summary.csv`` (the pair winds, when latent), ``diagnostics.json`` and, with the
-    campaign, ``classical.csv`` (:func:`classical_steady`, opposite directions averaged, when the
-    campaign has pairs)."""
-    from pathlib import Path
-
-    from .results import write_channel_outputs
-
+def steady_report(fit, campaign=None, *, gates: config.Gates = config.DEFAULT_GATES) -> FitReport:
+    """The report of a steady-state fit: summary (free coefficients, noise, derived road
+    load), per-run rows of the pair winds (when latent; None otherwise) and the gates."""
     p = fit.problem
     run_sites = ("head_wind_mps",) if p.wind == "pair" else ()
-    summary, diag = write_channel_outputs(
-        fit, out_dir, list(p.free) + list(NOISE_SITES), kind="steady", derived=steady_derived(p, fit.samples),
+    return channel_report(
+        fit, list(p.free) + list(NOISE_SITES), kind="steady",
         observed={"tractive_force_n": np.asarray(p.force_n)}, run_sites=run_sites,
         dims={"head_wind_mps": ["pair"]}, coords={"pair": [str(k) for k in p.pair_ids]} if run_sites else None,
         gates=gates, extra={"wind": p.wind, "runs": len(p.run_ids), "samples": int(np.size(p.force_n)),
-                            "accel_source": getattr(campaign, "accel_source", None)})
-    if campaign is not None and "direction" in campaign.runs and campaign.pairs():
-        classical_steady(campaign).to_csv(Path(out_dir) / "classical.csv", index=False)
-    return summary, diag
+                            "accel_source": None if campaign is None else campaign.accel_source})
+
+
+def steady_extras(fit, campaign, summary: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """``classical.csv`` (:func:`classical_steady`, opposite directions averaged) when the
+    campaign has pairs."""
+    if "direction" in campaign.runs and campaign.pairs():
+        return {"classical.csv": classical_steady(campaign)}
+    return {}
 
 
 def compare_with_coastdown(steady: pd.DataFrame, coastdown: pd.DataFrame,

@@ -1,3 +1,10 @@
-"""Outputs of a fit: the files of a fit directory and the report rendered from them."""
+"""Output: the fit directory of every data kind (:mod:`.fitdir`) and the report rendered from it
+(:mod:`.report`)."""
 
+from .fitdir import FIT_FILES as FIT_FILES
+from .fitdir import FitDir as FitDir
+from .fitdir import fit_record as fit_record
+from .fitdir import is_fit_dir as is_fit_dir
+from .fitdir import read_fit_dir as read_fit_dir
+from .fitdir import write_fit_dir as write_fit_dir
 from .report import render_report as render_report

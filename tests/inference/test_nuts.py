@@ -237,3 +237,28 @@ def test_coordinate_names_follow_the_ravel_order():
     names = _coordinate_names(z)
     lookup = {"AD": 3.0, "sigma_mps[0]": 1.0, "sigma_mps[1]": 2.0, "v0_mps[0]": 4.0, "v0_mps[1]": 5.0}
     assert [lookup[n] for n in names] == list(flat)
+def test_collect_warmup_keeps_every_draw():
+    """``nuts.collect_warmup`` is the one use of numpyro's private ``_set_collection_params``:
+    this fails on a numpyro upgrade that renames it, changes its parameters or stops it from
+    keeping the warm-up draws (then ``run_nuts`` would misreport the warm-up / sampling split
+    and drop real draws)."""
+    import inspect
+
+    import jax
+    import numpyro
+    import numpyro.distributions as dist
+    from numpyro.infer import MCMC, NUTS
+
+    from bayes_roadload.inference.nuts import collect_warmup
+
+    params = list(inspect.signature(MCMC._set_collection_params).parameters)
+    assert params == ["self", "lower", "upper", "collection_size", "phase"], params
+
+    def model():
+        numpyro.sample("x", dist.Normal(0.0, 1.0))
+
+    mcmc = MCMC(NUTS(model), num_warmup=7, num_samples=5, num_chains=1, progress_bar=False)
+    collect_warmup(mcmc)
+    mcmc.run(jax.random.PRNGKey(0), extra_fields=("num_steps",))
+    assert mcmc.get_samples()["x"].shape == (12,)
+    assert mcmc.get_extra_fields()["num_steps"].shape == (12,)

@@ -11,16 +11,18 @@ from bayes_roadload.inference.results import (
     SUMMARY_COLUMNS,
     posterior_predictive,
     to_inference_data,
+    trace_report,
     truth_derived,
-    write_nuts_outputs,
 )
+from bayes_roadload.output import write_fit_dir
 
 
 @pytest.fixture(scope="module")
 def outputs(pooled_fit, tmp_path_factory):
     out = tmp_path_factory.mktemp("nuts")
-    summary, diag = write_nuts_outputs(pooled_fit, out)
-    return out, summary, diag
+    report = trace_report(pooled_fit)
+    write_fit_dir(report, out)
+    return out, report.summary, report.diagnostics
 
 
 def test_files_and_columns(outputs):

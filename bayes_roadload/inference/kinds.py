@@ -1,0 +1,229 @@
+"""The registry of data kinds: how a campaign of each kind is fitted and reported.
+
+One :class:`KindEntry` per kind in :data:`KINDS`; :func:`kind_of` finds a campaign's entry by
+its class.  The command line (``fit``, ``fit-driveline``, ``diagnose``) and the fit-directory
+writer (:mod:`bayes_roadload.output`) look everything kind-specific up here: the default model,
+which options apply (and the message refusing the others), the fit, its report (posterior,
+summary, per-run rows, gates) and the extra tables of its fit directory, the lines printed
+around the posterior table, the driveline channel and the diagnosis family.
+
+Adding a data kind: its campaign class (``bayes_roadload/data``), its problem
+(:class:`~bayes_roadload.inference.problem.Problem`) and fit function, and one entry here
+(``docs/architecture.md``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import pandas as pd
+
+from .. import config
+from ..data import Campaign, DistanceCampaign, IntervalCampaign, SpindownCampaign, SteadyCampaign
+from .distances import DEFAULT_MODEL as DISTANCE_DEFAULT_MODEL
+from .distances import distance_report, fit_distances_nuts
+from .driveline import off_load_channel, on_load_channel
+from .intervals import fit_intervals_nuts, interval_report
+from .nuts import NutsFit, fit_nuts
+from .results import FitReport, trace_report
+from .spec import ModelSpec
+from .spindown import fit_spindown_nuts, spindown_extras, spindown_report
+from .steady import compare_with_coastdown, fit_steady_nuts, resolve_wind, steady_extras, steady_report
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """The options of ``bayes-roadload fit`` that reach a kind (defaults: the command's).
+
+    ``runs``: the run ids to fit (after validity rejection), None for all; ``compare``: a
+    coastdown fit directory a steady-state fit is compared with; ``undriven``: ``--undriven``
+    was given."""
+
+    method: str = "nuts"
+    pooling: str = "pooled"
+    noise: str = "integrated"
+    robust: bool = False
+    validity: str | None = None
+    steady_wind: str = "auto"
+    compare: str | None = None
+    undriven: bool = False
+    sampler: config.SamplerConfig = config.DEFAULT_SAMPLER
+    runs: list | None = None
+
+
+@dataclass(frozen=True)
+class KindEntry:
+    """Everything kind-specific about fitting a campaign.
+
+    Attributes
+    ----------
+    name : the kind (``diagnostics.json`` ``kind``, ``fit.json`` ``kind``).
+    label : how messages name a campaign of the kind ("spin-down").
+    campaign_type : the campaign class (:func:`kind_of`).
+    default_model : (campaign, options) -> model variant name of ``fit`` without ``--model``.
+    check_options : raises ValueError naming the options that do not apply to the kind.
+    fit : (campaign, spec, options) -> :class:`~bayes_roadload.inference.nuts.NutsFit`.
+    report : (fit, campaign) -> :class:`~bayes_roadload.inference.results.FitReport`.
+    extras : (fit, campaign, summary, options) -> {file name: table} written beside it.
+    preamble, notes : lines printed before / after the posterior table.
+    validity_default : the ``--validity`` mode without the option ("reject"), None when no
+        run validity check applies unless asked for.
+    lsq : the classical least-squares fit applies (``--method lsq``).
+    driveline_channel : campaign -> the measured driveline loss
+        (:class:`~bayes_roadload.inference.driveline.DrivelineChannel`) of ``fit-driveline``,
+        None when the kind has none.
+    diagnosis : the sim-to-real diagnosis family of ``diagnose`` ("traces": one MAP fit with
+        linearised candidates; "band_times": candidates refitted by NUTS), None when none
+        applies; ``diagnosis_model`` its default model.
+    """
+
+    name: str
+    label: str
+    campaign_type: type
+    default_model: Callable[[Any, FitOptions], str]
+    check_options: Callable[[FitOptions], None]
+    fit: Callable[[Any, ModelSpec, FitOptions], NutsFit]
+    report: Callable[[NutsFit, Any], FitReport]
+    extras: Callable[[NutsFit, Any, pd.DataFrame, FitOptions], dict[str, pd.DataFrame]] = \
+        lambda fit, campaign, summary, options: {}
+    preamble: Callable[[Any], list[str]] = lambda campaign: []
+    notes: Callable[[NutsFit, Any, dict], list[str]] = lambda fit, campaign, extras: []
+    validity_default: str | None = None
+    lsq: bool = False
+    driveline_channel: Callable[[Any], Any] | None = None
+    diagnosis: str | None = None
+    diagnosis_model: str | None = None
+
+
+# ----------------------------------------------------------------------------- option checks
+
+def _nuts_only(label: str, *, pooling: bool = False) -> Callable[[FitOptions], None]:
+    """Refuse ``--method lsq`` and the trace-likelihood options for a kind with its own
+    likelihood (``pooling``: the kind has a hierarchical pooling of its own)."""
+    def check(o: FitOptions) -> None:
+        if o.method != "nuts":
+            raise ValueError(f"a {label} campaign is fitted by --method nuts only")
+        if (o.pooling != "pooled" and not pooling) or o.robust or o.noise != "integrated" or o.validity:
+            raise ValueError(f"a {label} campaign has its own likelihood: "
+                             + ("" if pooling else "--pooling, ") + "--noise, --robust and --validity do not apply")
+    return check
+
+
+def _check_traces(o: FitOptions) -> None:
+    return None
+
+
+def _check_intervals(o: FitOptions) -> None:
+    if o.method != "nuts":
+        raise ValueError("an interval campaign (intervals.csv) is fitted by --method nuts only")
+    if o.pooling != "pooled" or o.robust or o.noise != "integrated":
+        raise ValueError("an interval campaign has its own likelihood (gate timing, band noise, run effect): "
+                         "--pooling, --noise and --robust do not apply")
+
+
+def _check_spindown(o: FitOptions) -> None:
+    _nuts_only("spin-down", pooling=True)(o)
+    if o.undriven:
+        raise ValueError("--undriven feeds a spin-down result into coastdown or steady-state fits; a spin-down "
+                         "campaign is what gives it")
+
+
+def _check_steady(o: FitOptions) -> None:
+    _nuts_only("steady-state")(o)
+    if o.compare and not (Path(o.compare) / "summary.csv").is_file():
+        raise FileNotFoundError(f"{Path(o.compare) / 'summary.csv'}: --compare takes the output directory of a "
+                                "coastdown `fit`")
+
+
+# ----------------------------------------------------------------------------- fits
+
+def _fit_traces(campaign, spec, o: FitOptions) -> NutsFit:
+    if o.runs is not None and list(o.runs) != list(campaign.run_ids):
+        campaign = campaign.subset(o.runs)
+    return fit_nuts(campaign, spec, pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler)
+
+
+def _fit_intervals(campaign, spec, o: FitOptions) -> NutsFit:
+    return fit_intervals_nuts(campaign, spec, sampler=o.sampler, runs=o.runs)
+
+
+def _fit_distances(campaign, spec, o: FitOptions) -> NutsFit:
+    return fit_distances_nuts(campaign, spec, sampler=o.sampler, runs=o.runs)
+
+
+def _fit_spindown(campaign, spec, o: FitOptions) -> NutsFit:
+    return fit_spindown_nuts(campaign, spec, pooling=o.pooling, sampler=o.sampler)
+
+
+def _fit_steady(campaign, spec, o: FitOptions) -> NutsFit:
+    return fit_steady_nuts(campaign, spec, wind=resolve_wind(campaign, o.steady_wind), sampler=o.sampler)
+
+
+# ----------------------------------------------------------------------------- printing and extras
+
+def _distance_preamble(campaign) -> list[str]:
+    masses = sorted(set(campaign.masses_kg().values()))
+    return [f"{len(campaign.run_ids)} runs at {', '.join(f'{m:g}' for m in masses)} kg, "
+            f"{len(campaign.markers)} marker passings"]
+
+
+def _spindown_notes(fit, campaign, extras) -> list[str]:
+    lines = ["\nAgainst thesis table 7.10 (A_u = 3.24 N, B_u = 0.232 N s/m):"]
+    for _, r in extras["table_7_10.csv"].iterrows():
+        lines.append(f"  {r['parameter']}: {r['mean']:.4g} [{r['q2.5']:.4g}, {r['q97.5']:.4g}]  thesis "
+                     f"{r['thesis_table_7_10']:.4g} +- {r['thesis_sd']:.3g}  ({r['difference_pct']:+.1f} %)")
+    return lines
+
+
+def _steady_extras(fit, campaign, summary, o: FitOptions) -> dict[str, pd.DataFrame]:
+    out = steady_extras(fit, campaign, summary)
+    if o.compare:
+        out["comparison.csv"] = compare_with_coastdown(summary, pd.read_csv(Path(o.compare) / "summary.csv"))
+    return out
+
+
+def _steady_notes(fit, campaign, extras) -> list[str]:
+    lines = [f"relative air: {fit.problem.wind}; acceleration: {campaign.accel_source}"]
+    if "comparison.csv" in extras:
+        lines.append("\nsteady state against coastdown (thesis table 7.11: steady AD +12 %, BD -11 %, CD0 +4.9 %):")
+        for _, r in extras["comparison.csv"].iterrows():
+            lines.append(f"  {r['parameter']:<6} coastdown {r['coastdown_mean']:.4g} +- {r['coastdown_sd']:.2g}   "
+                         f"steady {r['steady_mean']:.4g} +- {r['steady_sd']:.2g}   {r['difference_pct']:+.1f} % "
+                         f"({r['difference_z']:+.1f} sd)")
+    return lines
+
+
+def _steady_default_model(campaign, o: FitOptions) -> str:
+    return "four_term" if resolve_wind(campaign, o.steady_wind) == "measured" else "three_term"
+
+
+# ----------------------------------------------------------------------------- the registry
+
+KINDS: dict[str, KindEntry] = {e.name: e for e in (
+    KindEntry("traces", "speed-trace", Campaign, lambda c, o: "four_term", _check_traces, _fit_traces,
+              trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
+              diagnosis_model="three_term"),
+    KindEntry("intervals", "interval", IntervalCampaign, lambda c, o: "split_f0_f2", _check_intervals,
+              _fit_intervals, interval_report, validity_default="reject", diagnosis="band_times",
+              diagnosis_model="split_f0_f2"),
+    KindEntry("distances", "distance-time", DistanceCampaign, lambda c, o: DISTANCE_DEFAULT_MODEL,
+              _nuts_only("distance-time"), _fit_distances, distance_report, preamble=_distance_preamble,
+              diagnosis="band_times", diagnosis_model=DISTANCE_DEFAULT_MODEL),
+    KindEntry("spindown", "spin-down", SpindownCampaign, lambda c, o: "undriven_spindown", _check_spindown,
+              _fit_spindown, spindown_report, extras=lambda f, c, s, o: spindown_extras(f, c, s),
+              notes=_spindown_notes),
+    KindEntry("steady", "steady-state", SteadyCampaign, _steady_default_model, _check_steady, _fit_steady,
+              steady_report, extras=_steady_extras, notes=_steady_notes, driveline_channel=on_load_channel),
+)}
+"""kind name -> :class:`KindEntry`, one line per data kind."""
+
+
+def kind_of(campaign) -> KindEntry:
+    """The registry entry of a campaign (by its class)."""
+    for entry in KINDS.values():
+        if isinstance(campaign, entry.campaign_type):
+            return entry
+    raise ValueError(f"{type(campaign).__name__} is not a campaign of a registered data kind "
+                     f"({', '.join(KINDS)})")

@@ -1,0 +1,122 @@
+"""The written contract every fit problem implements, whatever its data kind.
+
+A *problem* is a campaign resolved against a model variant (:class:`~.spec.ModelSpec`): the
+arrays the likelihood needs, the priors, and the starting values.  The sampler
+(:func:`~bayes_roadload.inference.nuts.sample_problem`: MAP, Laplace whitening, NUTS, gates),
+the summary tables and the fit-directory writer (:mod:`bayes_roadload.output`) only ever use
+the members of :class:`Problem`; nothing is looked up by ``getattr`` with a default and no
+problem carries a field it does not use.
+
+Implementations: :class:`~.bayes.FitProblem` (speed traces), :class:`~.intervals.IntervalProblem`
+(interval times), :class:`~.distances.DistanceProblem` (distance-time records),
+:class:`~.spindown.SpindownProblem` (wheel spin-downs), :class:`~.steady.SteadyProblem`
+(steady-state forces) and :class:`~.driveline.DrivelineProblem` (the driveline channel alone).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Protocol, runtime_checkable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..physics.roadload import road_load_summary
+from .spec import ModelSpec
+
+ROAD_LOAD_DERIVED = ("F50_N", "F50_tyre_N", "F50_aero_N", "F50_driveline_N", "F50_undriven_N",
+                     "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
+"""Derived road load at reference conditions (still air, 100 kPa, 293.2 K; thesis eq. 2.16 and
+the F0/F1/F2 fit of section 2.4) of the problems whose model is a drag model."""
+
+
+@runtime_checkable
+class Problem(Protocol):
+    """What a fit problem of any data kind provides.
+
+    Attributes
+    ----------
+    kind : the data kind (a key of :data:`bayes_roadload.inference.kinds.KINDS`, or
+        ``"driveline"`` for the driveline channel).
+    spec : the model variant.
+    free : names of the sampled coefficients (summary rows, in this order).
+    initial : constrained starting values of the sample sites (SI), the start of the MAP.
+    run_ids : the fitted runs, in the order of every per-run axis.
+    """
+
+    kind: str
+    spec: ModelSpec
+    free: tuple[str, ...]
+    initial: dict[str, Any]
+    run_ids: tuple
+
+    @property
+    def numpyro_model(self) -> Callable[[Any], None]:
+        """The numpyro model; called with the problem as its only argument."""
+        ...
+
+    @property
+    def hessian_runs(self) -> int:
+        """Block structure of the MAP's finite-difference Hessian
+        (:func:`~bayes_roadload.inference.nuts.fd_hessian`): the number ``R`` of runs whose
+        per-run sites (unconstrained sites of shape ``(R,)``) do not interact with each other
+        given the shared sites; 0 when every coordinate is to be treated as shared (sites
+        that couple several runs, e.g. one per wheel or per pair)."""
+        ...
+
+    def settings(self) -> dict[str, Any]:
+        """The likelihood options of the fit (``pooling``, ``noise``, ``robust``), recorded
+        in ``diagnostics.json`` and ``fit.json``."""
+        ...
+
+    def postprocess(self, samples: dict[str, np.ndarray], seed: int) -> dict[str, np.ndarray]:
+        """Sites added to the NUTS draws ([chain, draw, ...] arrays) after sampling, e.g. the
+        run-level coefficients integrated out while sampling; ``{}`` when there are none."""
+        ...
+
+    def derived(self, samples: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Derived quantities of every draw ([chain, draw] arrays), summary rows after the
+        sampled ones."""
+        ...
+
+    def truth_values(self, truth: dict | None) -> dict[str, float]:
+        """The truth of a simulated campaign keyed by summary row (scalar truths and the
+        derived quantities at them); ``{}`` without a truth."""
+        ...
+
+
+def road_load_draws(problem, samples: dict[str, np.ndarray], *,
+                    driveline_curve=(0.0, 0.0, 0.0)) -> dict[str, np.ndarray]:
+    """Road load at reference conditions (:data:`ROAD_LOAD_DERIVED`) for every draw of the free
+    coefficients of a problem with a drag model (``model``, ``fixed``, ``mass_kg``,
+    ``frontal_area_m2``); ``driveline_curve`` (c2, c1, c0) adds a measured driveline loss."""
+    chains = samples[problem.free[0]].shape[0] if problem.free else 1
+    free = {k: jnp.asarray(_flat(samples[k])) for k in problem.free}
+
+    def one(values):
+        params = dict(problem.fixed, **values)
+        return road_load_summary(problem.model, params, problem.mass_kg, problem.frontal_area_m2,
+                                 driveline_curve=driveline_curve)
+
+    out = jax.jit(jax.vmap(one))(free)
+    return {k: _unflat(np.asarray(out[k]), chains) for k in ROAD_LOAD_DERIVED}
+
+
+def road_load_truth(problem, truth: dict | None, *, driveline_curve=(0.0, 0.0, 0.0)) -> dict[str, float]:
+    """:data:`ROAD_LOAD_DERIVED` at the true coefficients (every free one must be in ``truth``)."""
+    if not truth:
+        return {}
+    values = {k: float(truth[k]) for k in problem.free if isinstance(truth.get(k), (int, float))}
+    if len(values) != len(problem.free):
+        return {}
+    out = road_load_summary(problem.model, dict(problem.fixed, **values), problem.mass_kg, problem.frontal_area_m2,
+                            driveline_curve=driveline_curve)
+    return {k: float(v) for k, v in out.items()}
+
+
+def _flat(x: np.ndarray) -> np.ndarray:
+    return x.reshape((-1,) + x.shape[2:])
+
+
+def _unflat(x: np.ndarray, chains: int) -> np.ndarray:
+    return x.reshape((chains, -1) + x.shape[1:])

@@ -1,0 +1,119 @@
+"""The fit directory: one writer and one reader for the NUTS fits of every data kind.
+
+A fit directory holds
+
+``posterior.nc``
+    ArviZ InferenceData (:func:`bayes_roadload.inference.results.inference_data`).
+``summary.csv``
+    ``parameter, mean, sd, q2.5, q50, q97.5, r_hat, ess_bulk, ess_tail``.
+``runs_summary.csv``
+    per-run rows, for the kinds that have them.
+``diagnostics.json``
+    the sampler diagnostics and gates (``pass``).
+``fit.json``
+    what the fit was: ``kind``, ``model``, ``model_file``, ``free``, ``pooling``, ``noise``,
+    ``robust``, ``undriven`` (the known undriven-wheel loss, or null) and ``campaign`` (the
+    campaign directory, or null): what ``plan`` needs to rebuild it.
+extra tables
+    per kind (:attr:`~bayes_roadload.inference.kinds.KindEntry.extras`), e.g. ``validity.csv``,
+    ``table_7_10.csv``, ``classical.csv``, ``comparison.csv``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import arviz as az
+import numpy as np
+import pandas as pd
+
+from ..inference.nuts import NutsFit
+from ..inference.results import FitReport
+
+FIT_FILES = ("posterior.nc", "summary.csv", "runs_summary.csv", "diagnostics.json", "fit.json")
+"""The files every writer of :func:`write_fit_dir` may write, in the order they are listed."""
+
+
+def fit_record(fit: NutsFit, campaign_path: str | os.PathLike | None = None) -> dict[str, Any]:
+    """The content of ``fit.json`` (module docstring)."""
+    p = fit.problem
+    settings = p.settings()
+    return {"kind": p.kind, "model": p.spec.name, "model_file": p.spec.source, "free": list(p.free),
+            "pooling": settings["pooling"], "noise": settings["noise"], "robust": bool(settings["robust"]),
+            "undriven": settings.get("undriven"),
+            "campaign": None if campaign_path is None else str(Path(campaign_path).resolve())}
+
+
+def write_fit_dir(report: FitReport, out_dir: str | os.PathLike, *, record: dict | None = None,
+                  extras: dict[str, pd.DataFrame] | None = None) -> list[str]:
+    """Write a fit directory: ``posterior.nc``, ``summary.csv``, ``runs_summary.csv`` (when the
+    report has per-run rows), ``diagnostics.json``, ``fit.json`` (``record``, when given:
+    :func:`fit_record`) and the ``extras`` tables.  Returns the names of the files written."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    report.idata.to_netcdf(str(out / "posterior.nc"))
+    report.summary.to_csv(out / "summary.csv", index=False)
+    written = ["posterior.nc", "summary.csv"]
+    if report.runs is not None:
+        report.runs.to_csv(out / "runs_summary.csv", index=False)
+        written.append("runs_summary.csv")
+    (out / "diagnostics.json").write_text(json.dumps(report.diagnostics, indent=2) + "\n")
+    written.append("diagnostics.json")
+    if record is not None:
+        (out / "fit.json").write_text(json.dumps(record, indent=2) + "\n")
+        written.append("fit.json")
+    for name, table in (extras or {}).items():
+        table.to_csv(out / name, index=False)
+        written.append(name)
+    return written
+
+
+@dataclass
+class FitDir:
+    """A fit directory read back (:func:`read_fit_dir`).
+
+    Attributes
+    ----------
+    path : the directory.
+    record : ``fit.json``.
+    samples : posterior draws, site -> [chain, draw, ...] array.
+    passed : the fit passed its gates (``diagnostics.json`` ``pass``; True when absent).
+    """
+
+    path: Path
+    record: dict[str, Any]
+    samples: dict[str, np.ndarray]
+    passed: bool
+
+    @property
+    def model(self) -> str:
+        """The model file when it still exists, else the model name."""
+        f = self.record.get("model_file")
+        return f if f and Path(f).is_file() else self.record["model"]
+
+
+def is_fit_dir(path: str | os.PathLike) -> bool:
+    """``path`` holds a ``posterior.nc``."""
+    return (Path(path) / "posterior.nc").is_file()
+
+
+def read_fit_dir(path: str | os.PathLike) -> FitDir:
+    """Read a fit directory written by :func:`write_fit_dir`; refuses one without ``fit.json``
+    or without the campaign path in it."""
+    src = Path(path)
+    meta_file = src / "fit.json"
+    if not meta_file.is_file():
+        raise ValueError(f"{src}: a fit directory needs the fit.json written by `bayes-roadload fit` (model, "
+                         "campaign); refit the campaign or give the campaign directory")
+    record = json.loads(meta_file.read_text())
+    if not record.get("campaign"):
+        raise ValueError(f"{meta_file}: no campaign path recorded; give the campaign directory instead")
+    post = az.from_netcdf(str(src / "posterior.nc")).posterior
+    samples = {k: post[k].values for k in post.data_vars}
+    diag_file = src / "diagnostics.json"
+    passed = not diag_file.is_file() or bool(json.loads(diag_file.read_text()).get("pass", True))
+    return FitDir(path=src, record=record, samples=samples, passed=passed)

@@ -1,0 +1,50 @@
+"""The registry of data kinds."""
+
+import pytest
+
+from bayes_roadload.data import Campaign, DistanceCampaign, IntervalCampaign, SpindownCampaign, SteadyCampaign
+from bayes_roadload.inference.kinds import KINDS, FitOptions, kind_of
+from bayes_roadload.inference.spec import available_models
+
+
+def test_every_campaign_class_has_one_entry():
+    classes = {Campaign: "traces", IntervalCampaign: "intervals", DistanceCampaign: "distances",
+               SpindownCampaign: "spindown", SteadyCampaign: "steady"}
+    assert {e.campaign_type: name for name, e in KINDS.items()} == classes
+    for name, entry in KINDS.items():
+        assert entry.name == name
+
+
+def test_kind_of_refuses_an_unknown_campaign():
+    with pytest.raises(ValueError, match="registered data kind"):
+        kind_of(object())
+
+
+def test_default_models_are_model_files():
+    models = set(available_models())
+    for name, entry in KINDS.items():
+        if name != "steady":   # depends on the campaign's anemometers (tests/test_cli.py)
+            assert entry.default_model(None, FitOptions()) in models, name
+        if entry.diagnosis is not None:
+            assert entry.diagnosis_model in models, name
+
+
+@pytest.mark.parametrize("name", ["intervals", "distances", "spindown", "steady"])
+def test_kinds_with_their_own_likelihood_refuse_trace_options(name):
+    check = KINDS[name].check_options
+    check(FitOptions())   # the defaults apply to every kind
+    with pytest.raises(ValueError, match="nuts only"):
+        check(FitOptions(method="lsq"))
+    with pytest.raises(ValueError, match="--robust"):
+        check(FitOptions(robust=True))
+    with pytest.raises(ValueError, match="--noise"):
+        check(FitOptions(noise="white"))
+
+
+def test_only_speed_traces_take_least_squares_and_any_option():
+    assert [n for n, e in KINDS.items() if e.lsq] == ["traces"]
+    KINDS["traces"].check_options(FitOptions(method="lsq", pooling="hierarchical", noise="white", robust=True))
+    # a spin-down campaign has a hierarchical pooling of its own; the others refuse it
+    KINDS["spindown"].check_options(FitOptions(pooling="hierarchical"))
+    with pytest.raises(ValueError, match="--pooling"):
+        KINDS["distances"].check_options(FitOptions(pooling="hierarchical"))
