@@ -1,11 +1,12 @@
 """The ``bayes-roadload`` command line.
 
-Subcommands: ``demo``, ``simulate``, ``fit``, ``fit-driveline``, ``import-vbox``, ``plan``, ``diagnose``, ``sensitivity``,
-``cases``, ``models``.
+Subcommands: ``demo``, ``simulate``, ``fit``, ``fit-driveline``, ``report``, ``batch``, ``plan``,
+``diagnose``, ``dyno``, ``predict``, ``import-vbox``, ``sensitivity``, ``cases``, ``models``.
 Every command that writes a directory validates its input first and writes nothing when the
 input is refused; errors are printed as one line naming the file, column and row.  Exit codes:
 0 success, 2 input refused, 3 a NUTS fit that failed its diagnostic gates (outputs written and
-flagged).
+flagged), 4 a valid campaign whose fit failed in a numerical stage (the stage, the run or
+parameter and the remedy printed; the traceback in ``error.log`` in ``--out``).
 """
 
 from __future__ import annotations
@@ -17,8 +18,13 @@ import sys
 import tempfile
 from pathlib import Path
 
+from . import __version__
+
 EXIT_REFUSED = 2
 EXIT_GATES_FAILED = 3
+EXIT_FIT_FAILED = 4
+STANDARD_NAMES = ("gtr15", "j2263", "j1263", "cfr1066")
+"""``--standard`` choices (:data:`bayes_roadload.analysis.standards.STANDARDS`)."""
 
 
 def _no_markers(args) -> None:
@@ -78,7 +84,20 @@ def _simulate_coastdown(args) -> int:
     return 0
 
 
-SIMULATIONS = {"coastdown": _simulate_coastdown, "spindown": _simulate_spindown, "steady": _simulate_steady}
+def _simulate_dyno(args) -> int:
+    from .data.dyno import save_dyno
+    from .simulate.dyno import simulate_dyno
+
+    _no_markers(args)
+    # a mid-size car's set coefficients (N, N/(km/h), N/(km/h)^2) and a dynamometer's own losses
+    dyno = simulate_dyno((100.0, 0.5, 0.03), (10.0, 0.1, 0.002), 1500.0, speed_noise_mps=0.02, seed=args.seed)
+    out = save_dyno(dyno, args.out)
+    print(f"dynamometer coastdown: {len(dyno.runs)} samples, known parasitic losses in dyno.toml -> {out}")
+    return 0
+
+
+SIMULATIONS = {"coastdown": _simulate_coastdown, "spindown": _simulate_spindown, "steady": _simulate_steady,
+               "dyno": _simulate_dyno}
 """``simulate --kind``: what each choice simulates."""
 
 
@@ -166,18 +185,12 @@ def _model_for(args, default: str):
 
 
 def _load_for_fit(args):
-    """The campaign of ``fit``: the spin-down options go to a spin-down campaign only."""
+    """The campaign of ``fit``: the spin-down options go to a spin-down campaign only
+    (:func:`~bayes_roadload.data.load_campaign` refuses them for other kinds)."""
     from .data import load_campaign
 
-    root = Path(args.campaign)
-    given = args.wheel_inertia_kgm2 is not None or args.rolling_radius_m is not None
-    if (root / "spindown.csv").exists():
-        from .data.spindown import load_spindown
-
-        return load_spindown(root, wheel_inertia_kgm2=args.wheel_inertia_kgm2, rolling_radius_m=args.rolling_radius_m)
-    if given:
-        raise ValueError("--wheel-inertia-kgm2 / --rolling-radius-m apply to spin-down campaigns (spindown.csv) only")
-    return load_campaign(root)
+    return load_campaign(args.campaign, wheel_inertia_kgm2=args.wheel_inertia_kgm2,
+                         rolling_radius_m=args.rolling_radius_m)
 
 
 def _validity(entry, campaign, args, out: Path):
@@ -198,6 +211,31 @@ def _validity(entry, campaign, args, out: Path):
     if not keep:
         raise ValueError("every run was rejected by the validity checks (validity.csv)")
     return keep
+
+
+def _after_fit(args, out: Path, campaign) -> None:
+    """What follows every fit: the standard's result (``--standard``, recorded in ``fit.json``)
+    and ``report.html`` / ``report.md`` (unless ``--no-report``)."""
+    if args.standard:
+        from .analysis.standards import format_standard, run_standard
+
+        record = out / "fit.json"
+        if record.is_file():
+            meta = json.loads(record.read_text())
+            meta["standard"] = args.standard
+            record.write_text(json.dumps(meta, indent=2) + "\n")
+        if (out / "posterior.nc").is_file():
+            result, checks = run_standard(out, args.standard, campaign=campaign,
+                                          rotating_inertia_known=args.rotating_inertia_known, out_dir=out)
+            print(f"\n{args.standard} result (standard_result.csv, standard_checks.csv):")
+            print(format_standard(result, checks))
+        else:
+            print(f"note: --standard {args.standard} needs posterior draws (a NUTS fit); none for --method lsq")
+    if not args.no_report:
+        from .output.report import render_report
+
+        html_path, _ = render_report(out)
+        print(f"report: {html_path} (and report.md)")
 
 
 def _cmd_fit(args) -> int:
@@ -222,6 +260,7 @@ def _cmd_fit(args) -> int:
         write_lsq_outputs(result, out)
         print(format_lsq_table(result, campaign.truth))
         print(f"\nwrote {out / 'summary.csv'}, per_group.csv, fit.json")
+        _after_fit(args, out, campaign)
         return 0
     for line in entry.preamble(campaign):
         print(line)
@@ -232,6 +271,7 @@ def _cmd_fit(args) -> int:
         print(line)
     written += ["validity.csv"] if runs is not None else []
     print(f"\nwrote {out / written[0]}, {', '.join(written[1:])}")
+    _after_fit(args, out, campaign)
     return 0 if report.diagnostics["pass"] else EXIT_GATES_FAILED
 
 
@@ -254,7 +294,60 @@ def _cmd_fit_driveline(args) -> int:
     truth = fit.problem.truth_values(campaign.truth)
     print(format_posterior_table(report.summary, report.diagnostics, truth or None))
     print(f"\nwrote {out / written[0]}, {', '.join(written[1:])}")
+    _after_fit(args, out, campaign)
     return 0 if report.diagnostics["pass"] else EXIT_GATES_FAILED
+
+
+def _cmd_report(args) -> int:
+    from .output.report import render_report
+
+    fit_dir = Path(args.fit_dir)
+    if args.standard:
+        from .analysis.standards import format_standard, run_standard
+        from .data import load_campaign
+        from .output import read_fit_dir
+
+        source = read_fit_dir(fit_dir)
+        campaign = load_campaign(source.record["campaign"]) if source.record.get("campaign") else None
+        result, checks = run_standard(fit_dir, args.standard, campaign=campaign,
+                                      rotating_inertia_known=args.rotating_inertia_known, out_dir=fit_dir)
+        print(format_standard(result, checks))
+    html_path, md_path = render_report(fit_dir, campaign=args.campaign)
+    print(f"wrote {html_path}, {md_path} (+ {md_path.parent / 'report_files'})")
+    return 0
+
+
+def _campaign_of_fit(fit_dir: Path):
+    """The campaign a fit directory's ``fit.json`` names."""
+    from .data import load_campaign
+    from .output import read_fit_dir
+
+    record = read_fit_dir(fit_dir).record
+    if not record.get("campaign"):
+        raise ValueError(f"{fit_dir / 'fit.json'}: no campaign path recorded; refit the campaign with `fit`")
+    return load_campaign(record["campaign"])
+
+
+def _cmd_dyno(args) -> int:
+    from .analysis.dyno import format_dyno, run_dyno
+
+    result = run_dyno(args.target_fit_dir, args.dyno_coastdown, tolerance_n=args.tolerance_n, out_dir=args.out)
+    print(format_dyno(result))
+    print(f"\nwrote {Path(args.out) / 'dyno_set.csv'}, dyno_checks.csv, dyno.json")
+    return 0
+
+
+def _cmd_predict(args) -> int:
+    from .analysis.predict import format_cycle_work, run_predict
+
+    campaign = _campaign_of_fit(Path(args.fit_dir))
+    work, shares, _ = run_predict(args.fit_dir, args.cycle, effective_mass_kg=campaign.vehicle.effective_mass_kg,
+                                  temperature_k=args.temperature_k, pressure_pa=args.pressure_pa,
+                                  mass_kg_change=args.mass_change_kg, v0_kph=args.v0_kph, power_w=args.power_w,
+                                  out_dir=args.out)
+    print(format_cycle_work(work, shares))
+    print(f"\nwrote the cycle work and the predicted trace in {args.out}")
+    return 0
 
 
 def _diagnose_band_times(campaign, spec, args) -> int:
@@ -311,7 +404,10 @@ def _cmd_diagnose(args) -> int:
 
 
 def _cmd_demo(args) -> int:
+    from .analysis.predict import format_cycle_work, run_predict
+    from .analysis.standards import format_standard, run_standard
     from .data import save_campaign
+    from .output.report import render_report
     from .inference.kinds import KINDS, FitOptions
     from .inference.lsq import fit_lsq, write_lsq_outputs
     from .inference.spec import load_model_spec
@@ -348,7 +444,14 @@ def _cmd_demo(args) -> int:
         print(f"{name:<15}{t_s}   {m:>11.5g} +- {se:<11.3g}  {r['mean']:>10.5g} [{r['q2.5']:.5g}, {r['q97.5']:.5g}]")
     print()
     print("\n".join(line for line in table.splitlines()[:2] if line.startswith(("!!", "NUTS"))))
-    print(f"\nCampaign, least-squares fit (fit_lsq/) and posterior (fit_nuts/) written under {out}")
+    fit_dir = out / "fit_nuts"
+    html_path, _ = render_report(fit_dir)
+    print(f"\nCampaign, least-squares fit (fit_lsq/) and posterior (fit_nuts/, report {html_path.name}) written "
+          f"under {out}")
+    print("\nGTR 15 target coefficients (reference conditions of the standard):")
+    print(format_standard(*run_standard(fit_dir, "gtr15", campaign=campaign, out_dir=fit_dir)))
+    work, shares, _ = run_predict(fit_dir, "wltc3b", effective_mass_kg=campaign.vehicle.effective_mass_kg)
+    print(format_cycle_work(work, shares))
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
@@ -384,7 +487,7 @@ def _plan_population(args, out: Path):
 
 def _cmd_plan(args) -> int:
     from . import config
-    from .analysis.batch import process_pool, run_batch
+    from .analysis.batch import batch_client, run_batch
     from .analysis.planning import Target, plan_jobs, plan_table, plot_plan, recommend
     from .analysis.regulation import regulation_checks
 
@@ -404,8 +507,8 @@ def _cmd_plan(args) -> int:
           f"campaigns of each of {pairs} pairs with {fit_model} ({population.pooling}, MAP + Laplace) ...")
     jobs = plan_jobs(population, pairs, simulations=args.simulations, model=fit_model,
                      confidence=args.confidence, seed=args.seed)
-    with process_pool(args.workers) as pool:
-        records = run_batch(jobs, pool)
+    with batch_client(args.workers, args.scheduler) as client:
+        records = run_batch(jobs, client, progress=not args.no_progress)
     records.to_csv(out / "plan_records.csv", index=False)
     failed = int(records["error"].notna().sum()) if "error" in records else 0
     not_converged = int((~records["gate_pass"].fillna(False).astype(bool)).sum()) if "gate_pass" in records else 0
@@ -520,7 +623,10 @@ def _add_nuts_options(p: argparse.ArgumentParser, seed: int) -> None:
 def build_parser() -> argparse.ArgumentParser:
     from . import config
 
-    p = argparse.ArgumentParser(prog="bayes-roadload", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="bayes-roadload", description="Road load from coastdown tests with honest "
+                                "uncertainty: NUTS over all paired runs jointly (docs/method.md).",
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
     d = sub.add_parser("demo", help="simulate a 6-pair campaign at thesis case 14 conditions and fit it "
@@ -538,7 +644,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("simulate", help="simulate a campaign of a thesis table 6.7 case")
     s.add_argument("--kind", choices=tuple(SIMULATIONS), default="coastdown",
                    help="coastdown runs (runs.csv), undriven-wheel spin-downs (spindown.csv, thesis table 7.10 "
-                        "wheels) or steady-state torque tests (steady.csv, the case's winds)")
+                        "wheels), steady-state torque tests (steady.csv, the case's winds) or a chassis-dynamometer "
+                        "coastdown with known parasitic losses (dyno_coastdown.csv, dyno.toml)")
     s.add_argument("--case", type=int, default=None, help="1-19, thesis table 6.7 (see `cases`); required for "
                                                          "coastdowns, the winds of a steady-state simulation")
     s.add_argument("--pairs", type=int, default=1, help="number of opposite-direction pairs (spindown: tests "
@@ -593,7 +700,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help="spin-down: rolling radius (m), if not in vehicle.toml")
     f.add_argument("--out", required=True)
     _add_nuts_options(f, seed=0)
+    f.add_argument("--standard", choices=STANDARD_NAMES, default=None,
+                   help="also give the result in a standard's terms (reference conditions, mass convention, units, "
+                        "its precision and validity checks): standard_result.csv, standard_checks.csv; recorded in "
+                        "fit.json (docs/standards.md)")
+    f.add_argument("--rotating-inertia-known", action="store_true",
+                   help="with --standard j2263: the effective mass is measured, not the 1.03 x test mass convention")
+    f.add_argument("--no-report", action="store_true", help="do not render report.html / report.md")
     f.set_defaults(func=_cmd_fit)
+    from .analysis.fleet import add_batch_parser
+
+    add_batch_parser(sub, fit_command=main, fit_parser=f)
 
     fd = sub.add_parser("fit-driveline", help="the driveline loss At + Bt v + Ct v^2 alone: off-load from a "
                                               "coastdown's driveline_force_n (or wheel torques, eq. 5.12), or "
@@ -604,7 +721,41 @@ def build_parser() -> argparse.ArgumentParser:
                     help="model variant whose At, Bt, Ct priors are used (default four_term_driveline)")
     fd.add_argument("--out", required=True)
     _add_nuts_options(fd, seed=0)
-    fd.set_defaults(func=_cmd_fit_driveline)
+    fd.add_argument("--no-report", action="store_true", help="do not render report.html / report.md")
+    fd.set_defaults(func=_cmd_fit_driveline, standard=None, rotating_inertia_known=False)
+
+    r = sub.add_parser("report", help="render report.html (self-contained) and report.md from a fit directory")
+    r.add_argument("fit_dir", metavar="FIT_DIR", help="the output directory of `fit` or `fit-driveline`")
+    r.add_argument("--campaign", default=None, help="campaign directory for truth and vehicle (default: fit.json's)")
+    r.add_argument("--standard", choices=STANDARD_NAMES, default=None,
+                   help="also write the standard's result and checks into FIT_DIR (see `fit --standard`)")
+    r.add_argument("--rotating-inertia-known", action="store_true", help="as for `fit --standard j2263`")
+    r.set_defaults(func=_cmd_report)
+
+    dy = sub.add_parser("dyno", help="chassis-dynamometer set coefficients from a target road-load fit and a coastdown "
+                                     "on the dynamometer (GTR 15 Annex 4 adjustment), the target's posterior carried "
+                                     "through, with the tolerance checks")
+    dy.add_argument("target_fit_dir", metavar="TARGET_FIT_DIR", help="a NUTS `fit` output directory (the target)")
+    dy.add_argument("dyno_coastdown", metavar="DYNO_COASTDOWN",
+                    help="directory with dyno_coastdown.csv and dyno.toml (see `simulate --kind dyno`)")
+    dy.add_argument("--tolerance-n", type=float, default=10.0, help="load tolerance at the check speeds, N")
+    dy.add_argument("--out", required=True, help="directory for dyno_set.csv, dyno_checks.csv, dyno.json")
+    dy.set_defaults(func=_cmd_dyno)
+
+    pr = sub.add_parser("predict", help="posterior of the road-load work over a drive cycle (kJ, kJ/km, the share of "
+                                        "its uncertainty by parameter) and a predicted speed trace with its band")
+    pr.add_argument("fit_dir", metavar="FIT_DIR", help="a NUTS `fit` output directory")
+    pr.add_argument("--cycle", default="wltc3b",
+                    help="wltc3b | nedc | ftp75 | hwfet (shipped tables, sources in bayes_roadload/cycles/README.md) "
+                         "or a CSV with time_s, speed_kph")
+    pr.add_argument("--temperature-k", type=float, default=293.15, help="ambient temperature of the predicted trace, K")
+    pr.add_argument("--pressure-pa", type=float, default=100000.0, help="ambient pressure of the predicted trace, Pa")
+    pr.add_argument("--mass-change-kg", type=float, default=0.0, help="test mass change of the predicted trace, kg")
+    pr.add_argument("--v0-kph", type=float, default=120.0, help="start speed of the predicted trace, km/h")
+    pr.add_argument("--power-w", type=float, default=0.0,
+                    help="constant tractive power of the predicted trace, W (0: a coastdown)")
+    pr.add_argument("--out", required=True)
+    pr.set_defaults(func=_cmd_predict)
 
     pl = sub.add_parser("plan", help="how many pairs until each quantity is known to a target: posterior-predictive "
                                      "campaigns refitted by MAP + Laplace")
@@ -626,7 +777,10 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--fit-model", default=None,
                     help="model the future campaigns are fitted with (default: the source's); e.g. a constrained "
                          "one (three_term, two_term_tyres)")
-    pl.add_argument("--workers", type=int, default=1, help="processes for the refits")
+    pl.add_argument("--workers", type=int, default=1,
+                    help="worker processes of a local Dask cluster for the refits (1: in this process)")
+    pl.add_argument("--scheduler", default=None, metavar="ADDR",
+                    help="address of a running Dask scheduler for the refits, e.g. tcp://10.0.0.5:8786")
     pl.add_argument("--out", required=True)
     _add_nuts_options(pl, seed=0)
     pl.set_defaults(func=_cmd_plan, noise="integrated", robust=False)
@@ -664,11 +818,17 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=_cmd_cases)
     m = sub.add_parser("models", help="list the model variants in models/")
     m.set_defaults(func=_cmd_models)
+    for command in sub.choices.values():  # every option's default in its help
+        command.formatter_class = argparse.ArgumentDefaultsHelpFormatter
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; exit codes as in the module docstring.  A refused input prints one line
+    and writes nothing; a failed fit stage or an unexpected error prints one line with the
+    stage and remedy, and the traceback goes to ``error.log`` in ``--out`` (never the terminal)."""
     from .data import CampaignError
+    from .errors import FitStageError, write_error_log
 
     args = build_parser().parse_args(argv)
     try:
@@ -676,6 +836,15 @@ def main(argv: list[str] | None = None) -> int:
     except (CampaignError, ValueError, FileNotFoundError) as e:
         print(f"bayes-roadload {args.command}: error: {e}", file=sys.stderr)
         return EXIT_REFUSED
+    except FitStageError as e:
+        log = write_error_log(getattr(args, "out", None), e, argv)  # not every command has --out
+        print(f"bayes-roadload {args.command}: error: {e}" + (f" (traceback in {log})" if log else ""), file=sys.stderr)
+        return EXIT_FIT_FAILED
+    except Exception as e:  # noqa: BLE001 - one line and a log, never a traceback on the terminal
+        log = write_error_log(getattr(args, "out", None), e, argv)
+        print(f"bayes-roadload {args.command}: internal error: {type(e).__name__}: {e}"
+              + (f" (traceback in {log}; please report it)" if log else ""), file=sys.stderr)
+        return EXIT_FIT_FAILED
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -233,7 +233,7 @@ def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
         "map": None if fit.map is None else {
             "success": fit.map.success, "iterations": fit.map.n_iter, "message": fit.map.message,
             "grad_max_scaled": fit.map.grad_max,
-            "hessian_min_eigenvalue_scaled": fit.map.min_eigenvalue},
+            "hessian_min_eigenvalue_scaled": fit.map.min_eigenvalue, **fit.map.diagnostics()},
         "map_converged": True if fit.map is None else bool(fit.map.success),
         "gates": {k: bool(v) for k, v in checks.items()},
         "thresholds": {
