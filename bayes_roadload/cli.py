@@ -837,11 +837,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bayes-roadload {args.command}: error: {e}", file=sys.stderr)
         return EXIT_REFUSED
     except FitStageError as e:
-        log = write_error_log(getattr(args, "out", None), e, argv)  # not every command has --out
+        log = write_error_log(vars(args).get("out"), e, argv)  # not every command has --out
         print(f"bayes-roadload {args.command}: error: {e}" + (f" (traceback in {log})" if log else ""), file=sys.stderr)
         return EXIT_FIT_FAILED
     except Exception as e:  # noqa: BLE001 - one line and a log, never a traceback on the terminal
-        log = write_error_log(getattr(args, "out", None), e, argv)
+        log = write_error_log(vars(args).get("out"), e, argv)
         print(f"bayes-roadload {args.command}: internal error: {type(e).__name__}: {e}"
               + (f" (traceback in {log}; please report it)" if log else ""), file=sys.stderr)
         return EXIT_FIT_FAILED

@@ -77,7 +77,7 @@ def gap_metrics(lin: fx.Linearisation, residual: np.ndarray, sol: fx.Solution | 
     # the spread against what the noise left by this model predicts (its noise levels refitted
     # to its residuals: a misfit inflates the integrated error, and with it every covariance)
     spread = fx.coefficient_spread(fx.with_noise(lin, *fx.fit_noise(lin, residual)), sol, library)
-    if any(library[e].kind == "run" for e in effects if e in library):
+    if any(library[e].per_run for e in effects if e in library):
         # each run its own coefficients: no spread left to compare (the refit is the spread)
         spread = {k: math.nan for k in spread}
     out.update(spread)
@@ -159,7 +159,7 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
             # luck (Vuong's test of non-nested models over the runs' gains).  Not asked of a
             # run-level best (each run its own coefficients): its gain lies, by what it is, in
             # the runs that differ most, and runs that happen to match the mean gain nothing
-            if getattr(library.get(best["effect"]), "kind", "term") == "run":
+            if best["effect"] in library and library[best["effect"]].per_run:
                 continue
             z = vuong_z(best.get("run_gains"), c.get("run_gains"))
             best.setdefault("vuong_z", {})[c["effect"]] = z
