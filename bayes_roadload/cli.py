@@ -240,7 +240,8 @@ def _after_fit(args, out: Path, campaign) -> None:
 
 def _cmd_fit(args) -> int:
     from .inference.kinds import kind_of
-    from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table, write_lsq_outputs
+    from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table
+    from .output import write_lsq_fit_dir
 
     campaign = _load_for_fit(args)
     out = Path(args.out)
@@ -257,7 +258,7 @@ def _cmd_fit(args) -> int:
             campaign = campaign.subset(runs)
         result = fit_lsq(campaign, spec, grouping=args.grouping,
                          settings=LsqSettings(initial_speed=args.initial_speed))
-        write_lsq_outputs(result, out)
+        write_lsq_fit_dir(result, out)
         print(format_lsq_table(result, campaign.truth))
         print(f"\nwrote {out / 'summary.csv'}, per_group.csv, fit.json")
         _after_fit(args, out, campaign)
@@ -409,7 +410,8 @@ def _cmd_demo(args) -> int:
     from .data import save_campaign
     from .output.report import render_report
     from .inference.kinds import KINDS, FitOptions
-    from .inference.lsq import fit_lsq, write_lsq_outputs
+    from .inference.lsq import fit_lsq
+    from .output import write_lsq_fit_dir
     from .inference.spec import load_model_spec
     from .simulate import get_case, simulate_campaign
 
@@ -426,7 +428,7 @@ def _cmd_demo(args) -> int:
     save_campaign(campaign, out / "campaign")
     print(f"Fitting model {args.model}: classical per-pair least squares, then NUTS over all runs jointly ...")
     lsq = fit_lsq(campaign, args.model, grouping="pair")
-    write_lsq_outputs(lsq, out / "fit_lsq")
+    write_lsq_fit_dir(lsq, out / "fit_lsq")
     _, report, _, _, truth, table = _fit_and_write(
         KINDS["traces"], campaign, load_model_spec(args.model),
         FitOptions(pooling=args.pooling, noise=args.noise, robust=bool(args.robust), sampler=_sampler(args)),

@@ -11,7 +11,7 @@ from .lsq import fit_lsq as fit_lsq
 from .lsq import format_lsq_table as format_lsq_table
 from .lsq import roadload_figures as roadload_figures
 from .lsq import weighted_mean as weighted_mean
-from .lsq import write_lsq_outputs as write_lsq_outputs
+from .lsq import lsq_record as lsq_record
 from .problem import Problem as Problem
 from .spec import ModelSpec as ModelSpec
 from .spec import ModelSpecError as ModelSpecError

@@ -25,13 +25,11 @@ per (model, free parameters) and, because every group of a grouping is padded to
 from __future__ import annotations
 
 import functools
-import json
 import math
 import os
 import time
 import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Mapping
 
 import jax
@@ -525,18 +523,13 @@ def _json_safe(x):
     return x
 
 
-def write_lsq_outputs(result: LsqResult, out_dir: str | os.PathLike) -> Path:
-    """Write ``summary.csv``, ``per_group.csv`` and ``fit.json`` to ``out_dir``.
-
-    ``summary.csv`` has exactly the columns of :data:`SUMMARY_COLUMNS`: per free parameter
-    and derived figure, the weighted mean (eq. 5.15), its standard error (eq. 5.16), normal
-    95 % bounds and median = mean; the MCMC diagnostics ``r_hat``, ``ess_bulk``, ``ess_tail``
-    are empty.  Non-finite numbers are written as empty cells / JSON null.
-    """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    result.summary().to_csv(out / "summary.csv", index=False, float_format="%.10g")
-    result.per_group.to_csv(out / "per_group.csv", index=False, float_format="%.10g")
+def lsq_record(result: LsqResult) -> dict[str, Any]:
+    """The ``fit.json`` of a least-squares fit (JSON-safe: non-finite numbers as null): method,
+    model, grouping, free and fixed parameters, weighted means (eq. 5.15) and standard errors
+    (eq. 5.16), the between-group spread, reference conditions, convergence and timings.
+    ``summary.csv`` (:meth:`LsqResult.summary`) has exactly the columns of :data:`SUMMARY_COLUMNS`:
+    per free parameter and derived figure, the weighted mean, its standard error, normal 95 %
+    bounds and median = mean; the MCMC diagnostics ``r_hat``, ``ess_bulk``, ``ess_tail`` are empty."""
     doc = {
         "method": "lsq",
         "model": result.model_name,
@@ -559,8 +552,7 @@ def write_lsq_outputs(result: LsqResult, out_dir: str | os.PathLike) -> Path:
         "fit_time_s": result.fit_time_s,
         "truth": result.truth,
     }
-    (out / "fit.json").write_text(json.dumps(_json_safe(doc), indent=2) + "\n")
-    return out
+    return _json_safe(doc)
 
 
 def _fmt(x: float) -> str:

@@ -299,16 +299,18 @@ class FitReport:
 
     Attributes
     ----------
-    idata : ``posterior.nc``.
+    idata : ``posterior.nc``; None for a fit without draws (least squares).
     summary : ``summary.csv`` (:data:`SUMMARY_COLUMNS`).
     runs : ``runs_summary.csv``; None for a kind without per-run rows.
-    diagnostics : ``diagnostics.json`` (:func:`diagnostics`, the gates).
+    diagnostics : ``diagnostics.json`` (:func:`diagnostics`, the gates); None for least squares.
+    float_format : number format of the CSV tables (None: full precision).
     """
 
-    idata: az.InferenceData
+    idata: az.InferenceData | None
     summary: pd.DataFrame
     runs: pd.DataFrame | None
-    diagnostics: dict
+    diagnostics: dict | None
+    float_format: str | None = None
 
 
 def trace_report(fit: NutsFit, campaign=None, *, gates: config.Gates = config.DEFAULT_GATES) -> FitReport:

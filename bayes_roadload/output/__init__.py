@@ -7,4 +7,5 @@ from .fitdir import fit_record as fit_record
 from .fitdir import is_fit_dir as is_fit_dir
 from .fitdir import read_fit_dir as read_fit_dir
 from .fitdir import write_fit_dir as write_fit_dir
+from .fitdir import write_lsq_fit_dir as write_lsq_fit_dir
 from .report import render_report as render_report

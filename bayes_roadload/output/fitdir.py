@@ -1,4 +1,5 @@
-"""The fit directory: one writer and one reader for the NUTS fits of every data kind.
+"""The fit directory: one writer and one reader for the fits of every data kind (NUTS, and the
+classical least squares through the same writer).
 
 A fit directory holds
 
@@ -31,6 +32,7 @@ import arviz as az
 import numpy as np
 import pandas as pd
 
+from ..inference.lsq import LsqResult, lsq_record
 from ..inference.nuts import NutsFit
 from ..inference.results import FitReport
 
@@ -50,26 +52,40 @@ def fit_record(fit: NutsFit, campaign_path: str | os.PathLike | None = None) -> 
 
 def write_fit_dir(report: FitReport, out_dir: str | os.PathLike, *, record: dict | None = None,
                   extras: dict[str, pd.DataFrame] | None = None) -> list[str]:
-    """Write a fit directory: ``posterior.nc``, ``summary.csv``, ``runs_summary.csv`` (when the
-    report has per-run rows), ``diagnostics.json``, ``fit.json`` (``record``, when given:
-    :func:`fit_record`) and the ``extras`` tables.  Returns the names of the files written."""
+    """Write a fit directory: ``posterior.nc`` (when the report has draws), ``summary.csv``,
+    ``runs_summary.csv`` (when the report has per-run rows), ``diagnostics.json`` (when it has
+    gates), ``fit.json`` (``record``, when given: :func:`fit_record`, :func:`~bayes_roadload.
+    inference.lsq.lsq_record`) and the ``extras`` tables.  Returns the names of the files written."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    report.idata.to_netcdf(str(out / "posterior.nc"))
-    report.summary.to_csv(out / "summary.csv", index=False)
-    written = ["posterior.nc", "summary.csv"]
+    written = []
+    if report.idata is not None:
+        report.idata.to_netcdf(str(out / "posterior.nc"))
+        written.append("posterior.nc")
+    report.summary.to_csv(out / "summary.csv", index=False, float_format=report.float_format)
+    written.append("summary.csv")
     if report.runs is not None:
-        report.runs.to_csv(out / "runs_summary.csv", index=False)
+        report.runs.to_csv(out / "runs_summary.csv", index=False, float_format=report.float_format)
         written.append("runs_summary.csv")
-    (out / "diagnostics.json").write_text(json.dumps(report.diagnostics, indent=2) + "\n")
-    written.append("diagnostics.json")
+    if report.diagnostics is not None:
+        (out / "diagnostics.json").write_text(json.dumps(report.diagnostics, indent=2) + "\n")
+        written.append("diagnostics.json")
     if record is not None:
         (out / "fit.json").write_text(json.dumps(record, indent=2) + "\n")
         written.append("fit.json")
     for name, table in (extras or {}).items():
-        table.to_csv(out / name, index=False)
+        table.to_csv(out / name, index=False, float_format=report.float_format)
         written.append(name)
     return written
+
+
+def write_lsq_fit_dir(result: LsqResult, out_dir: str | os.PathLike) -> list[str]:
+    """The fit directory of a classical least-squares fit through :func:`write_fit_dir`:
+    ``summary.csv`` (weighted means, eq. 5.15, and standard errors, eq. 5.16, in the columns
+    of every summary; the MCMC columns empty), ``per_group.csv`` and ``fit.json``
+    (:func:`~bayes_roadload.inference.lsq.lsq_record`)."""
+    report = FitReport(idata=None, summary=result.summary(), runs=None, diagnostics=None, float_format="%.10g")
+    return write_fit_dir(report, out_dir, record=lsq_record(result), extras={"per_group.csv": result.per_group})
 
 
 @dataclass

@@ -14,8 +14,9 @@ import pytest
 from bayes_roadload import config
 from bayes_roadload import thesis
 from bayes_roadload.data import Campaign, Vehicle
-from bayes_roadload.inference import LsqSettings, fit_lsq, format_lsq_table, load_model_spec, weighted_mean, write_lsq_outputs
+from bayes_roadload.inference import LsqSettings, fit_lsq, format_lsq_table, load_model_spec, weighted_mean
 from bayes_roadload.inference.lsq import SUMMARY_COLUMNS, between_group_spread
+from bayes_roadload.output import write_lsq_fit_dir
 from bayes_roadload.physics import integrate_batch, make_run, simplified_model, stack_runs
 from bayes_roadload.physics.atmosphere import REFERENCE_AIR_DENSITY_KGPM3
 
@@ -245,7 +246,7 @@ def test_driveline_polynomial_from_speed_only_keeps_the_total(clean):
 
 def test_outputs(tmp_path, clean_fits, clean):
     result = clean_fits["pair"]
-    write_lsq_outputs(result, tmp_path)
+    write_lsq_fit_dir(result, tmp_path)
     summary = pd.read_csv(tmp_path / "summary.csv")
     assert tuple(summary.columns) == SUMMARY_COLUMNS
     assert list(summary["parameter"]) == ["AD", "BD", "CD0", "KD", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2"]
