@@ -47,7 +47,7 @@ from ..physics.model import DragModel
 from .bayes import default_prior
 from .intervals import NOISE_SITES, interval_report, run_log_likelihood, sample_coefficients_and_noise
 from .nuts import sample_problem
-from .problem import road_load_draws, road_load_truth
+from .problem import PooledRunProblem
 from .spec import ModelSpec, Prior, load_model_spec
 
 DEFAULT_MODEL = "three_term"
@@ -56,7 +56,7 @@ coastdown through markers from ~30 m/s to a crawl spans the speeds that separate
 
 
 @dataclass(frozen=True, eq=False)
-class DistanceProblem:
+class DistanceProblem(PooledRunProblem):
     """Everything a Bayesian fit of distance-time records needs, resolved once.
 
     Attributes
@@ -94,26 +94,7 @@ class DistanceProblem:
     observed_name = "segment_time_s"
     """Name of the observed times in ``posterior.nc`` (dims run, band: the segment after marker k)."""
 
-    @property
-    def n_runs(self) -> int:
-        return len(self.run_ids)
-
-    @property
-    def hessian_runs(self) -> int:
-        return self.n_runs
-
-    def settings(self) -> dict[str, Any]:
-        return {"pooling": "pooled", "noise": "distance-time", "robust": False}
-
-    def postprocess(self, samples: dict[str, Any], seed: int) -> dict[str, Any]:
-        return {}
-
-    def derived(self, samples: dict[str, Any]) -> dict[str, Any]:
-        """Road load at reference conditions (:func:`~.problem.road_load_draws`)."""
-        return road_load_draws(self, samples)
-
-    def truth_values(self, truth: dict | None) -> dict[str, float]:
-        return dict(truth or {}, **road_load_truth(self, truth))
+    noise_model = "distance-time"
 
     @property
     def numpyro_model(self):

@@ -57,7 +57,7 @@ from ..physics.intervals import (
 from ..physics.model import DragModel
 from .bayes import default_prior
 from .nuts import sample_problem
-from .problem import road_load_draws, road_load_truth
+from .problem import PooledRunProblem
 from .results import DERIVED, SUMMARY_COLUMNS, FitReport, _rows, diagnostics, inference_data
 from .spec import ModelSpec, Prior, load_model_spec
 
@@ -65,7 +65,7 @@ NOISE_SITES = ("sigma_gate_s", "band_noise_s_per_sqrt_s", "run_decel_sd_mps2")
 
 
 @dataclass(frozen=True, eq=False)
-class IntervalProblem:
+class IntervalProblem(PooledRunProblem):
     """Everything a Bayesian fit of interval times needs, resolved once.
 
     Attributes
@@ -104,26 +104,7 @@ class IntervalProblem:
     observed_name = "interval_s"
     """Name of the observed times in ``posterior.nc`` (dims run, band)."""
 
-    @property
-    def n_runs(self) -> int:
-        return len(self.run_ids)
-
-    @property
-    def hessian_runs(self) -> int:
-        return self.n_runs
-
-    def settings(self) -> dict[str, Any]:
-        return {"pooling": "pooled", "noise": "interval", "robust": False}
-
-    def postprocess(self, samples: dict[str, Any], seed: int) -> dict[str, Any]:
-        return {}
-
-    def derived(self, samples: dict[str, Any]) -> dict[str, Any]:
-        """Road load at reference conditions (:func:`~.problem.road_load_draws`)."""
-        return road_load_draws(self, samples)
-
-    def truth_values(self, truth: dict | None) -> dict[str, float]:
-        return dict(truth or {}, **road_load_truth(self, truth))
+    noise_model = "interval"
 
     @property
     def numpyro_model(self):

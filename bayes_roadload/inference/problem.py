@@ -85,6 +85,37 @@ class Problem(Protocol):
         ...
 
 
+class PooledRunProblem:
+    """Protocol members shared by the pooled problems whose runs are independent given the
+    coefficients (interval times, distance-time records): every run its own Hessian block, no
+    sites drawn after sampling, the road load at reference conditions as the derived rows.  A
+    subclass sets ``noise_model`` (recorded in ``diagnostics.json`` / ``fit.json``) and has the
+    members ``run_ids``, ``free``, ``fixed``, ``model``, ``mass_kg``, ``frontal_area_m2``."""
+
+    noise_model = ""
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.run_ids)
+
+    @property
+    def hessian_runs(self) -> int:
+        return self.n_runs
+
+    def settings(self) -> dict[str, Any]:
+        return {"pooling": "pooled", "noise": self.noise_model, "robust": False}
+
+    def postprocess(self, samples: dict[str, Any], seed: int) -> dict[str, Any]:
+        return {}
+
+    def derived(self, samples: dict[str, Any]) -> dict[str, Any]:
+        """Road load at reference conditions (:func:`road_load_draws`)."""
+        return road_load_draws(self, samples)
+
+    def truth_values(self, truth: dict | None) -> dict[str, float]:
+        return dict(truth or {}, **road_load_truth(self, truth))
+
+
 def road_load_draws(problem, samples: dict[str, np.ndarray], *,
                     driveline_curve=(0.0, 0.0, 0.0)) -> dict[str, np.ndarray]:
     """Road load at reference conditions (:data:`ROAD_LOAD_DERIVED`) for every draw of the free
