@@ -41,6 +41,7 @@ import json
 import os
 import platform
 import resource
+import signal
 import subprocess
 import sys
 import time
@@ -623,12 +624,15 @@ def main() -> None:
         cmd = [sys.executable, __file__, *passthrough, "--worker", name]
         r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
         try:
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout_s)
-            lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RECORD ")]
+            stdout, stderr = proc.communicate(timeout=args.timeout_s)
+            lines = [ln for ln in stdout.splitlines() if ln.startswith("RECORD ")]
             rec = json.loads(lines[-1][7:]) if lines else {
-                "sampler": name, "error": f"worker exited {proc.returncode}: {proc.stderr.strip().splitlines()[-1][:200] if proc.stderr.strip() else ''}"}
+                "sampler": name, "error": f"worker exited {proc.returncode}: {stderr.strip().splitlines()[-1][:200] if stderr.strip() else ''}"}
         except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)  # the worker and its samplers' processes (Stan's chains)
+            proc.communicate()
             rec = {"sampler": name, "error": f"did not finish within {args.timeout_s:.0f} s",
                    "min_ess_per_s_upper_bound": round(args.chains * args.draws / args.timeout_s, 3)}
         r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
