@@ -7,7 +7,9 @@ four_term, pooled, integrated noise) is sampled by
   Laplace whitening ``x = x_MAP + L u``, numpyro NUTS);
 * ``blackjax_window``: BlackJAX NUTS with its window adaptation, on our JAX log density in
   numpyro's unconstrained space;
-* ``blackjax_meads``: BlackJAX generalised HMC with MEADS adaptation, same density;
+* ``ours_diag``: ours with a diagonal instead of a dense metric in the whitened coordinates;
+* ``blackjax_meads``: BlackJAX generalised HMC with MEADS adaptation, same density, and
+  ``blackjax_meads_whitened`` on our whitened coordinates;
 * ``nutpie``: nutpie on the same JAX log density (``nutpie.from_pyfunc``);
 * ``stan_default``: Stan (PyStan) with its default adaptation, on the same unconstrained space;
 * ``stan_whitened``: Stan on the MAP-whitened coordinates ``u`` of ours.
@@ -391,17 +393,23 @@ def run_blackjax_window(setup: Setup, args) -> dict:
                     {"warmup": warm, "includes": "LSQ start + window adaptation (diagonal) + NUTS, chains pmapped/vmapped (compile inside)"})
 
 
-def run_blackjax_meads(setup: Setup, args) -> dict:
+def run_blackjax_meads(setup: Setup, args, whitened: bool = False) -> dict:
     import blackjax
 
-    warm = args.peer_warmup
+    warm = args.warmup if whitened else args.peer_warmup
     key = jax.random.PRNGKey(args.seed)
     k1, k2 = jax.random.split(key)
     c0, t0 = cpu_seconds(), time.perf_counter()
-    starts = jnp.asarray(start_points(setup, args.meads_chains, args.seed))
-    adapt = blackjax.meads_adaptation(setup.logdensity, args.meads_chains)
+    shift, chol = jnp.asarray(setup.flat_map), jnp.asarray(setup.chol)
+    if whitened:  # ours' coordinates x = x_MAP + L u, chains from standard-normal draws
+        logdensity = jax.jit(lambda u: setup.logdensity(shift + chol @ u))
+        starts = jnp.asarray(np.random.default_rng(args.seed).standard_normal((args.meads_chains, setup.flat0.size)))
+    else:
+        logdensity = setup.logdensity
+        starts = jnp.asarray(start_points(setup, args.meads_chains, args.seed))
+    adapt = blackjax.meads_adaptation(logdensity, args.meads_chains)
     (state, params), _ = jax.block_until_ready(adapt.run(k1, starts, num_steps=warm))
-    kernel = blackjax.ghmc(setup.logdensity, **params).step
+    kernel = blackjax.ghmc(logdensity, **params).step
 
     @jax.jit
     def sample(state, key):
@@ -415,9 +423,14 @@ def run_blackjax_meads(setup: Setup, args) -> dict:
     wall = time.perf_counter() - t0 + setup.setup_s
     cpu = cpu_seconds() - c0
     x = np.swapaxes(np.asarray(x), 0, 1)
+    if whitened:
+        x = np.asarray(shift)[None, None, :] + np.einsum("cdj,ij->cdi", x, np.asarray(chol))
     steps = np.ones(x.shape[:2])  # generalised HMC: one leapfrog step per transition
-    return diagnose("blackjax_meads", constrained_draws(setup, x), steps, np.swapaxes(np.asarray(div), 0, 1), wall, cpu, None,
-                    {"warmup": warm, "includes": f"LSQ start + MEADS adaptation + GHMC, {args.meads_chains} chains vectorised (compile inside)",
+    if whitened:
+        wall += setup.map_s
+    return diagnose("blackjax_meads_whitened" if whitened else "blackjax_meads", constrained_draws(setup, x), steps,
+                    np.swapaxes(np.asarray(div), 0, 1), wall, cpu, None,
+                    {"warmup": warm, "includes": ("LSQ start + MAP/Laplace + " if whitened else "LSQ start + ") + f"MEADS adaptation + GHMC, {args.meads_chains} chains vectorised (compile inside)",
                      "note": "GHMC takes one leapfrog step per transition; ESS counts all chains' draws"})
 
 
@@ -508,6 +521,7 @@ SAMPLERS = {
     "ours_diag": lambda s, a: run_ours(s, a, mass_matrix="diag"),  # Stan's diagonal metric, in our whitened space
     "blackjax_window": run_blackjax_window,
     "blackjax_meads": run_blackjax_meads,
+    "blackjax_meads_whitened": lambda s, a: run_blackjax_meads(s, a, whitened=True),
     "nutpie": run_nutpie,
     "stan_default": lambda s, a: run_stan(s, a, whitened=False),
     "stan_whitened": lambda s, a: run_stan(s, a, whitened=True),
