@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from bayes_roadload import config
-from bayes_roadload.cli import EXIT_GATES_FAILED, EXIT_REFUSED, main
+from bayes_roadload.cli import EXIT_FIT_FAILED, EXIT_GATES_FAILED, EXIT_REFUSED, main
 from bayes_roadload.data import load_campaign
 
 SUMMARY_COLUMNS = ["parameter", "mean", "sd", "q2.5", "q50", "q97.5", "r_hat", "ess_bulk", "ess_tail"]
@@ -138,9 +138,11 @@ def test_pooling_option_reaches_the_fit(campaign_dir, tmp_path, monkeypatch):
         raise RuntimeError("stop here")
 
     monkeypatch.setattr(kinds, "fit_nuts", fake_fit)   # the speed-trace fit of the kind registry
-    with pytest.raises(RuntimeError, match="stop here"):
-        main(["fit", str(campaign_dir), "--model", "three_term", "--pooling", "hierarchical", "--noise", "white",
-              "--no-progress", "--out", str(tmp_path / "h")])
+    code = main(["fit", str(campaign_dir), "--model", "three_term", "--pooling", "hierarchical", "--noise", "white",
+                 "--no-progress", "--out", str(tmp_path / "h")])
+    # an unexpected exception is one line, exit 4 and its traceback in error.log, never a crash
+    assert code == EXIT_FIT_FAILED
+    assert "stop here" in (tmp_path / "h" / "error.log").read_text()
     assert seen["pooling"] == "hierarchical" and seen["noise"] == "white"
     with pytest.raises(SystemExit, match="no hierarchical model"):
         main(["fit", str(campaign_dir), "--method", "lsq", "--pooling", "hierarchical", "--out", str(tmp_path / "l")])

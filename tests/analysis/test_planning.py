@@ -115,6 +115,7 @@ def test_predictive_half_widths_against_the_thesis_formula():
     assert table.loc[3, "assurance_at_thesis"] < 0.25 < table.loc[96, "assurance_at_thesis"] < 0.75
 
 
+@pytest.mark.slow  # 40-75 s; `plan` through the same door is exercised by tests/test_cli.py
 def test_plan_through_the_batch_door(conditions):
     """Laplace refits of future campaigns: half-widths shrink with the number of pairs, jobs of
     one size share a shape (so a compilation).  (Pooled here for speed; a population with

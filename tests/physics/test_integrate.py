@@ -257,7 +257,7 @@ def test_a_stopped_vehicle_stays_stopped_in_still_air():
 
     model = DragModel(terms=(TyreRolling(), AeroDrag()), air=StillAir())
     t = np.arange(0.0, 400.0, 0.25)
-    run = make_run(t, np.full(t.shape, 3.0))
+    run = make_run(t, np.full(t.shape, 3.0), **VEHICLE)
     p = {"AD": 0.02, "BD": 2e-4, "CD0": 0.4, "KD": 0.6}
     v, s = integrate_run(model, p, run, 3.0)
     assert bool(jnp.all(jnp.isfinite(v))) and float(v[-1]) > -0.1 and float(v[200]) < 0.5
