@@ -32,6 +32,7 @@ import io
 import json
 import math
 import os
+import tomllib
 import warnings
 from pathlib import Path
 
@@ -216,7 +217,9 @@ def read_fit_directory(fit_dir: str | os.PathLike, campaign: str | os.PathLike |
         truth = _flat_truth(fit["truth"])
     vehicle = None
     if cdir is not None and (cdir / "vehicle.toml").is_file():
-        vehicle = read_vehicle_file(cdir / "vehicle.toml")[0]
+        # spin-down campaigns describe wheels ([spindown]), not a vehicle
+        if "vehicle" in tomllib.loads((cdir / "vehicle.toml").read_text()):
+            vehicle = read_vehicle_file(cdir / "vehicle.toml")[0]
     return FitDirectory(path, summary, diag, fit, idata, cdir, truth, vehicle)
 
 

@@ -23,6 +23,7 @@ from bayes_roadload.inference.results import REMEDIES
 from bayes_roadload.output.report import FILES_DIR, fmt, render_report
 from bayes_roadload.simulate import simulate_campaign
 from bayes_roadload.simulate.intervals import interval_campaign_from_traces
+from bayes_roadload.simulate.spindown import simulate_spindown
 
 from ..conftest import clean_case
 
@@ -240,8 +241,14 @@ def _summary_of(draws: dict) -> pd.DataFrame:
 
 def test_channel_fit_without_predictive(tmp_path):
     """A fit directory as a spin-down writes it (Au, Bu draws, classical.csv with a ``total`` row,
-    no posterior predictive): the curve Au + Bu v (v in m/s) with its bands beside the classical
+    no posterior predictive, fit.json naming a spin-down campaign whose vehicle.toml describes
+    wheels, not a vehicle): the curve Au + Bu v (v in m/s) with its bands beside the classical
     line, a pair plot Au-Bu, and a note instead of residuals."""
+    campaign = save_campaign(simulate_spindown(tests_per_wheel=1, seed=2), tmp_path / "campaign")
+    tmp_path = tmp_path / "fit"
+    tmp_path.mkdir()
+    (tmp_path / "fit.json").write_text(json.dumps({"kind": "spindown", "model": "undriven_spindown",
+                                                   "campaign": str(campaign)}))
     rng = np.random.default_rng(5)
     draws = {"Au": rng.normal(3.2, 0.1, (2, 300)), "Bu": rng.normal(0.23, 0.01, (2, 300))}
     az.from_dict(posterior=draws).to_netcdf(str(tmp_path / "posterior.nc"))
