@@ -23,6 +23,19 @@ from . import __version__
 EXIT_REFUSED = 2
 EXIT_GATES_FAILED = 3
 EXIT_FIT_FAILED = 4
+COMMON_HELP = {
+    "campaign": "campaign directory: runs.csv (or .parquet), intervals.csv, distances.csv, spindown.csv or "
+                "steady.csv, with vehicle.toml (docs/data-format.md)",
+    "campaigns": "directory searched for campaign directories",
+    "out": "output directory",
+    "seed": "random seed",
+    "method": "nuts: NUTS over all runs jointly; lsq: classical least squares (thesis chapter 5)",
+    "case": "thesis table 6.7 case (see `cases`)",
+    "pairs": "opposite-direction pairs to simulate",
+    "format": "file format of the speed traces",
+    "cross_wind": "cross winds (m/s) of the sensitivity table",
+}
+"""Help of the options that several commands share (set where a command gives none)."""
 STANDARD_NAMES = ("gtr15", "j2263", "j1263", "cfr1066")
 """``--standard`` choices (:data:`bayes_roadload.analysis.standards.STANDARDS`)."""
 
@@ -820,8 +833,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=_cmd_cases)
     m = sub.add_parser("models", help="list the model variants in models/")
     m.set_defaults(func=_cmd_models)
-    for command in sub.choices.values():  # every option's default in its help
+    for command in sub.choices.values():  # every option with a help text and its default
         command.formatter_class = argparse.ArgumentDefaultsHelpFormatter
+        for action in command._actions:
+            if action.help is None:
+                action.help = COMMON_HELP.get(action.dest.removeprefix("fit_"))  # batch: fit's options
     return p
 
 

@@ -1,5 +1,6 @@
 """The command line, end to end on small campaigns."""
 
+import argparse
 import dataclasses
 import json
 
@@ -8,7 +9,7 @@ import pandas as pd
 import pytest
 
 from bayes_roadload import config
-from bayes_roadload.cli import EXIT_FIT_FAILED, EXIT_GATES_FAILED, EXIT_REFUSED, main
+from bayes_roadload.cli import EXIT_FIT_FAILED, EXIT_GATES_FAILED, EXIT_REFUSED, build_parser, main
 from bayes_roadload.data import load_campaign
 
 SUMMARY_COLUMNS = ["parameter", "mean", "sd", "q2.5", "q50", "q97.5", "r_hat", "ess_bulk", "ess_tail"]
@@ -432,3 +433,26 @@ def test_hierarchical_spindown_carries_the_test_to_test_scatter(tmp_path):
     main(["fit", str(camp), "--no-progress", "--out", str(pooled)])
     sp = pd.read_csv(pooled / "summary.csv").set_index("parameter")
     assert abs(sp.loc["Au", "mean"] - 3.24) > 5 * sp.loc["Au", "sd"]
+
+
+def test_standard_choices_are_the_standards_table():
+    """``--standard`` offers exactly the standards implemented in analysis.standards."""
+    from bayes_roadload.analysis.standards import STANDARDS
+    from bayes_roadload.cli import STANDARD_NAMES
+
+    assert STANDARD_NAMES == tuple(STANDARDS)
+
+
+def test_version_and_defaults_in_help(capsys):
+    """``--version`` prints the package version; every subcommand's help shows the defaults."""
+    from bayes_roadload import __version__
+
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert __version__ in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["fit", "--help"])
+    assert "(default: nuts)" in capsys.readouterr().out
+    parser = build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+    assert not [(name, a.dest) for name, c in commands.items() for a in c._actions if a.help is None]
