@@ -94,6 +94,7 @@ def test_fit_nuts_writes_outputs_and_flags_gates(campaign_dir, tmp_path, capsys)
     assert list(summary.columns) == SUMMARY_COLUMNS
     assert {"AD", "BD", "CD0", "F50_N"} <= set(summary["parameter"])
     assert (out / "posterior.nc").exists() and (out / "runs_summary.csv").exists()
+    assert (out / "report.html").exists() and (out / "report.md").exists()  # every fit reports
 
 
 def test_sampler_options_reach_the_sampler():
@@ -115,7 +116,7 @@ def test_fit_hierarchical_writes_tau_rows_and_run_rows(campaign_dir, tmp_path, c
     tests/inference/test_hierarchical.py, and the option's plumbing by
     :func:`test_pooling_option_reaches_the_fit`."""
     out = tmp_path / "hier"
-    code = main(["fit", str(campaign_dir), "--model", "three_term", "--pooling", "hierarchical", "--warmup", "150",
+    code = main(["fit", "--no-report", str(campaign_dir), "--model", "three_term", "--pooling", "hierarchical", "--warmup", "150",
                  "--draws", "150", "--no-progress", "--out", str(out)])
     diag = json.loads((out / "diagnostics.json").read_text())
     assert code == (0 if diag["pass"] else 3)
@@ -221,7 +222,7 @@ def test_import_vbox_and_fit_an_interval_campaign(tmp_path, capsys):
     assert main(["import-vbox", str(high), str(low), "--vehicle", str(tmp_path / "vehicle.toml"),
                  "--out", str(out)]) == 0
     assert len(load_campaign(out).run_ids) == 12 and (out / "import_report.json").exists()
-    code = main(["fit", str(out), "--out", str(tmp_path / "fit"), "--warmup", "200", "--draws", "300",
+    code = main(["fit", "--no-report", str(out), "--out", str(tmp_path / "fit"), "--warmup", "200", "--draws", "300",
                  "--no-progress"])
     text = capsys.readouterr().out
     assert code in (0, EXIT_GATES_FAILED)
@@ -251,7 +252,7 @@ def test_simulate_and_fit_a_distance_time_campaign_at_two_masses(tmp_path, capsy
     assert main(["fit", str(camp), "--validity", "report", "--out", str(tmp_path / "no")]) == EXIT_REFUSED
     assert "--validity" in capsys.readouterr().err and not (tmp_path / "no").exists()
     out = tmp_path / "fit"
-    code = main(["fit", str(camp), "--model", "three_term", "--out", str(out), "--warmup", "150", "--draws", "150",
+    code = main(["fit", "--no-report", str(camp), "--model", "three_term", "--out", str(out), "--warmup", "150", "--draws", "150",
                  "--target-accept", "0.9", "--no-progress"])
     text = capsys.readouterr().out
     assert code in (0, EXIT_GATES_FAILED) and "4 runs at 1100, 1400 kg, 20 marker passings" in text
@@ -293,7 +294,7 @@ def _driveline_campaign(path, *, with_channel=True, seed=0):
 def test_fit_driveline_writes_summary_and_gates(tmp_path, capsys):
     camp = _driveline_campaign(tmp_path / "dl")
     out = tmp_path / "fit"
-    code = main(["fit-driveline", str(camp), "--warmup", "200", "--draws", "300", "--no-progress",
+    code = main(["fit-driveline", "--no-report", str(camp), "--warmup", "200", "--draws", "300", "--no-progress",
                  "--seed", "2", "--out", str(out)])
     diag = json.loads((out / "diagnostics.json").read_text())
     assert code == (0 if diag["pass"] else EXIT_GATES_FAILED)
@@ -328,7 +329,7 @@ def test_spindown_simulate_and_fit_recover_the_undriven_wheels(tmp_path, capsys)
     camp = tmp_path / "sd"
     assert main(["simulate", "--kind", "spindown", "--pairs", "2", "--seed", "3", "--out", str(camp)]) == 0
     out = tmp_path / "fit"
-    code = main(["fit", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--out", str(out)])
+    code = main(["fit", "--no-report", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--out", str(out)])
     diag = json.loads((out / "diagnostics.json").read_text())
     assert diag["kind"] == "spindown" and code == (0 if diag["pass"] else EXIT_GATES_FAILED)
     s = pd.read_csv(out / "summary.csv").set_index("parameter")
@@ -377,7 +378,7 @@ def test_steady_simulate_fit_and_compare_with_a_coastdown(tmp_path, capsys):
                   "sd": [2e-4, 1e-5, 0.004, 0.1, 1.0], "q2.5": [0.0096, 1.8e-4, 0.392, 0.42, 371.6],
                   "q97.5": [0.0104, 2.2e-4, 0.408, 0.81, 375.6]}).to_csv(coast / "summary.csv", index=False)
     out = tmp_path / "fit"
-    code = main(["fit", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--compare", str(coast),
+    code = main(["fit", "--no-report", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--compare", str(coast),
                  "--out", str(out)])
     diag = json.loads((out / "diagnostics.json").read_text())
     assert diag["kind"] == "steady" and diag["wind"] == "measured" and code == (0 if diag["pass"] else EXIT_GATES_FAILED)
@@ -394,7 +395,7 @@ def test_steady_simulate_fit_and_compare_with_a_coastdown(tmp_path, capsys):
     assert (out / "classical.csv").exists() and "table 7.11" in capsys.readouterr().out
     # the on-load driveline loss (gearbox input minus wheel force, table 7.9: At 36.3 N, Bt 0)
     dl = tmp_path / "dl"
-    main(["fit-driveline", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--out", str(dl)])
+    main(["fit-driveline", "--no-report", str(camp), "--warmup", "200", "--draws", "300", "--no-progress", "--out", str(dl)])
     d = pd.read_csv(dl / "summary.csv").set_index("parameter")
     assert abs(d.loc["At", "mean"] - 36.3) < 3 * d.loc["At", "sd"] and abs(d.loc["Bt", "mean"]) < 3 * d.loc["Bt", "sd"]
 
@@ -424,13 +425,13 @@ def test_hierarchical_spindown_carries_the_test_to_test_scatter(tmp_path):
 
     camp = save_spindown(simulate_spindown(tests_per_wheel=3, seed=0, test_sd=(0.1, 0.004)), tmp_path / "sd")
     out = tmp_path / "h"
-    assert main(["fit", str(camp), "--pooling", "hierarchical", "--no-progress", "--out", str(out)]) == 0
+    assert main(["fit", "--no-report", str(camp), "--pooling", "hierarchical", "--no-progress", "--out", str(out)]) == 0
     s = pd.read_csv(out / "summary.csv").set_index("parameter")
     assert s.loc["Au", "q2.5"] < 3.24 < s.loc["Au", "q97.5"] and s.loc["Bu", "q2.5"] < 0.235 < s.loc["Bu", "q97.5"]
     assert {"tau_Au_wheel", "tau_Bu_wheel"} <= set(s.index)
     assert "Au_run[1]" in set(pd.read_csv(out / "runs_summary.csv")["parameter"])
     pooled = tmp_path / "p"
-    main(["fit", str(camp), "--no-progress", "--out", str(pooled)])
+    main(["fit", "--no-report", str(camp), "--no-progress", "--out", str(pooled)])
     sp = pd.read_csv(pooled / "summary.csv").set_index("parameter")
     assert abs(sp.loc["Au", "mean"] - 3.24) > 5 * sp.loc["Au", "sd"]
 
