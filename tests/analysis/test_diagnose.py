@@ -177,8 +177,8 @@ def test_a_lead_made_by_one_run_is_not_a_claim(monkeypatch):
     assert dg.select_effects(None, e, {}, cfg) == ["mass_error"]
     # a run-level best (each run its own coefficients) gains where the runs differ: the same
     # lucky-looking gains are its nature, and Vuong's test is not asked of it
-    run_level = {"run_to_run_variation": type("E", (), {"kind": "run"})(),
-                 "anemometer_dynamics": type("E", (), {"kind": "term"})()}
+    run_level = {"run_to_run_variation": type("E", (), {"per_run": True})(),
+                 "anemometer_dynamics": type("E", (), {"per_run": False})()}
     e = entries(lucky)
     e[0]["effect"] = "run_to_run_variation"
     assert dg.select_effects(None, e, run_level, cfg) == ["run_to_run_variation"]
