@@ -1,7 +1,9 @@
 """Tests of the batch door for many fits (:mod:`bayes_roadload.analysis.batch`).
 
-One real NUTS fit (1 pair, 100 + 100 draws: about 30 s, mostly compilation) on a 2-worker Dask
-``LocalCluster``; everything else uses jobs that fail at once or synthetic records.
+One real NUTS fit (1 pair, 100 + 100 draws: about 30 s, mostly compilation) through the door in
+this process; the 2-worker Dask ``LocalCluster`` (x64 and core sharing in the workers) is in the
+slow set, since tests/analysis/test_fleet.py runs fits on such a cluster in the default suite;
+everything else uses jobs that fail at once or synthetic records.
 """
 
 from __future__ import annotations
@@ -67,12 +69,13 @@ def client():
 
 
 @pytest.fixture(scope="module")
-def batch(client):
+def batch():
     seen = []
     jobs = [_good_job(), FitJob("broken", _broken_campaign, model="three_term", sampler=TINY_SAMPLER), RaisingJob()]
-    return run_batch(jobs, client, on_record=seen.append), seen
+    return run_batch(jobs, on_record=seen.append), seen
 
 
+@pytest.mark.slow  # a cluster of its own; the fleet tests run fits on a 2-worker cluster by default
 def test_cluster_workers(client):
     info = client.scheduler_info()["workers"]
     assert len(info) == 2 and all(w["nthreads"] == 1 for w in info.values())

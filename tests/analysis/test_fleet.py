@@ -23,7 +23,7 @@ from bayes_roadload.simulate import simulate_campaign
 
 from ..conftest import clean_case
 
-LSQ = ("--method", "lsq", "--model", "three_term", "--no-progress")
+LSQ = ("--method", "lsq", "--model", "three_term", "--no-progress", "--no-report")
 """The fit options of the fleet: what the batch command passes for ``--method lsq --model
 three_term`` (it adds ``--no-progress``), so that its run resumes the fixture's."""
 

@@ -100,6 +100,7 @@ def test_white_and_robust_variants(small_campaign):
         build_problem(small_campaign, "three_term", pooling="partial")
 
 
+@pytest.mark.slow  # 20-30 s; the integrator's forward and reverse gradients agree in tests/physics
 def test_forward_and_reverse_gradients_of_the_potential_agree(small_campaign):
     import dataclasses
 
