@@ -134,15 +134,21 @@ def road_load_draws(problem, samples: dict[str, np.ndarray], *,
 
 
 def road_load_truth(problem, truth: dict | None, *, driveline_curve=(0.0, 0.0, 0.0)) -> dict[str, float]:
-    """:data:`ROAD_LOAD_DERIVED` at the true coefficients (every free one must be in ``truth``)."""
+    """:data:`ROAD_LOAD_DERIVED` at the true coefficients (every free one must be in ``truth``).
+
+    A truth that states a road-load quantity itself (a simulator whose physics differs from
+    the analysis model, e.g. :mod:`bayes_roadload.simulate.independent`, reports its own road
+    load at the reference conditions) keeps its value: the analysis model's formula at the
+    true coefficients would leave out what the model does not describe."""
     if not truth:
         return {}
+    stated = {k: float(truth[k]) for k in ROAD_LOAD_DERIVED if isinstance(truth.get(k), (int, float))}
     values = {k: float(truth[k]) for k in problem.free if isinstance(truth.get(k), (int, float))}
     if len(values) != len(problem.free):
-        return {}
+        return stated
     out = road_load_summary(problem.model, dict(problem.fixed, **values), problem.mass_kg, problem.frontal_area_m2,
                             driveline_curve=driveline_curve)
-    return {k: float(v) for k, v in out.items()}
+    return {k: float(v) for k, v in out.items()} | stated
 
 
 def _flat(x: np.ndarray) -> np.ndarray:
