@@ -43,13 +43,15 @@ def main(argv=None) -> int:
     ap.add_argument("--scheduler", default=None, metavar="ADDR",
                     help="address of a running Dask scheduler (default: a local cluster of --workers processes)")
     ap.add_argument("--seed0", type=int, default=0)
+    ap.add_argument("--exact", action="store_true",
+                    help="exact SBC: speed traces drawn from the model's own likelihood (ModelDrawnCampaign)")
     ap.add_argument("--records", type=Path, default=RECORDS)
     args = ap.parse_args(argv)
 
     sampler = dataclasses.replace(SBC_SAMPLER, num_warmup=args.warmup, num_samples=args.draws)
-    jobs = (sbc_jobs(args.campaigns, seed0=args.seed0, pairs=args.pairs, sampler=sampler)
+    jobs = (sbc_jobs(args.campaigns, seed0=args.seed0, pairs=args.pairs, sampler=sampler, exact=args.exact)
             + sbc_jobs(args.control, seed0=args.seed0 + 10_000, pairs=args.pairs, sampler=sampler,
-                       control_factor=args.mass_factor))
+                       control_factor=args.mass_factor, exact=args.exact))
     if args.control:  # interleave the arms, so that a study cut short still has both
         step = max(args.campaigns // args.control, 1)
         cal, ctl = jobs[:args.campaigns], jobs[args.campaigns:]

@@ -50,7 +50,7 @@ from .batch import FitJob, coverage_summary, successful
 
 SBC_MODEL = "four_term_driveline_informative"
 """Model that draws the truths and fits them (``models/four_term_driveline_informative.toml``)."""
-SBC_PARAMETERS = ("AD", "BD", "CD0", "KD", "At", "Bt")
+SBC_PARAMETERS = ("AD", "BD", "CD0", "KD", "At", "Bt", "F50_N")
 """Parameters whose calibration the study reports (Ct is drawn and fitted too)."""
 SBC_SAMPLER = config.SamplerConfig(num_warmup=300, num_samples=500, num_chains=2, target_accept=0.95)
 """Sampler of the SBC fits: 1000 draws per fit; 0.95 because two-run campaigns barely identify
@@ -145,6 +145,76 @@ class PriorDrawnCampaign:
 
 
 @dataclass(frozen=True)
+class ModelDrawnCampaign:
+    """A picklable recipe for exact SBC: a campaign drawn from the fitted model's own joint
+    distribution, so that uniform ranks test the computation (sampler, likelihood, gradients)
+    and nothing else.
+
+    The inputs (sample times, airspeed and yaw readings, air density, directions, vehicle) and
+    the true coefficients come from a :class:`PriorDrawnCampaign` of the same seed (its truth is
+    a draw from the model's priors).  The speed traces are then replaced by a draw of the
+    model's likelihood (:mod:`bayes_roadload.physics.residuals`) with the noise parameters drawn
+    from their priors (:data:`bayes_roadload.config.NOISE_PRIORS`):
+
+        q ~ Gamma(2, mean q_prior),  sigma_r ~ HalfNormal(sigma_prior),
+        v_r,k = v_model,r,k(theta, v0_r) + delta_r,k + e_r,k,
+        delta_r,k = delta_r,k-1 + N(0, q^2 dt_k),  delta_r,0 = 0,  e_r,k ~ N(0, sigma_r^2),
+
+    with ``v0_r`` the template's first logged speed (the fit's prior of ``v0_mps`` is centred
+    on the first sample: data-dependent, so the ranks of ``v0_mps`` are not part of the test);
+    and the logged driveline force, when the model fits it, by
+    ``F_k = A_t + B_t v_k + C_t v_k^2 + N(0, sigma_d^2)``, sigma_d ~ HalfNormal(sigma_d_prior),
+    at the new logged speeds (:func:`~bayes_roadload.inference.bayes.driveline_log_likelihood`).
+    ``truth`` then also holds q, the sigmas and sigma_d.  The pooled, integrated-noise
+    likelihood is the one drawn from (the default analysis).
+    """
+
+    seed: int
+    pairs: int = 1
+    model: str = SBC_MODEL
+    case: Any = None
+    settings: Any = None
+
+    def __call__(self) -> Campaign:
+        from ..inference.bayes import build_problem, integrated_speed
+
+        template = PriorDrawnCampaign(self.seed, pairs=self.pairs, model=self.model, case=self.case,
+                                      settings=self.settings)()
+        problem = build_problem(template, self.model)
+        truth = {p: float(template.truth[p]) for p in problem.free}
+        b = problem.batch
+        first = np.asarray(b.speed_mps)[:, 0]
+        v_model = np.asarray(integrated_speed(problem, {**truth, "v0_mps": first}))
+        rng = np.random.default_rng([self.seed, 5381])
+        q = rng.gamma(2.0, config.NOISE_PRIORS["q_mps_per_sqrt_s"] / 2.0)
+        sigma = np.abs(rng.normal(0.0, config.NOISE_PRIORS["sigma_mps"], problem.n_runs))
+        runs = template.runs.copy()
+        speed = runs["speed_mps"].to_numpy(float).copy()
+        t_all = np.asarray(b.time_s)
+        mask = np.asarray(b.mask, bool)
+        for r, rid in enumerate(problem.run_ids):
+            rows = np.flatnonzero((runs["run"] == rid).to_numpy())
+            n = int(mask[r].sum())
+            if n != rows.size:
+                raise ValueError(f"run {rid!r}: {rows.size} rows against {n} batch samples")
+            dt = np.diff(t_all[r, :n], prepend=t_all[r, 0])
+            walk = np.cumsum(rng.normal(0.0, 1.0, n) * q * np.sqrt(dt))
+            speed[rows] = v_model[r, :n] + walk + rng.normal(0.0, sigma[r], n)
+        runs["speed_mps"] = speed
+        extra: dict[str, Any] = {"q_mps_per_sqrt_s": float(q),
+                                 "sigma_mps": [float(x) for x in sigma]}
+        if problem.driveline_channel:
+            p = {**problem.fixed, **truth}
+            sigma_d = abs(rng.normal(0.0, config.NOISE_PRIORS["sigma_driveline_n"]))
+            runs["driveline_force_n"] = (p["At"] + p["Bt"] * speed + p["Ct"] * speed**2
+                                         + rng.normal(0.0, sigma_d, speed.size))
+            extra["sigma_driveline_n"] = float(sigma_d)
+        meta = dict(template.meta, sbc="exact")
+        return Campaign(runs, template.vehicle, template.anemometer, template.tunnel,
+                        dict(template.truth, **extra), meta)
+
+
+@dataclass(frozen=True)
 class WrongEffectiveMass:
     """A picklable wrapper of a campaign factory that mis-states the vehicle's effective mass by
     ``factor`` (the negative control of SBC: a deliberately mis-specified analysis)."""
@@ -161,16 +231,18 @@ class WrongEffectiveMass:
 
 def sbc_jobs(n_campaigns: int, *, seed0: int = 0, pairs: int = 1, model: str = SBC_MODEL,
              sampler: config.SamplerConfig = SBC_SAMPLER, control_factor: float | None = None,
-             settings: Any = None) -> list[FitJob]:
+             settings: Any = None, exact: bool = False) -> list[FitJob]:
     """The fit jobs of one SBC arm: ``n_campaigns`` prior-drawn campaigns (seeds ``seed0``...),
     fitted with ``model``; with ``control_factor`` the negative control (effective mass
-    mis-stated by that factor).  Tags: ``arm`` ("calibrated" or "wrong_mass") and
-    ``mass_factor``."""
-    arm = "calibrated" if control_factor is None else "wrong_mass"
+    mis-stated by that factor); ``exact`` draws the speed traces from the model's own
+    likelihood (:class:`ModelDrawnCampaign`) instead of the simulator.  Tags: ``arm``
+    ("calibrated" or "wrong_mass", prefixed ``exact_`` for exact SBC) and ``mass_factor``."""
+    arm = ("exact_" if exact else "") + ("calibrated" if control_factor is None else "wrong_mass")
+    recipe = ModelDrawnCampaign if exact else PriorDrawnCampaign
     jobs = []
     for i in range(int(n_campaigns)):
         seed = seed0 + i
-        factory: Callable[[], Campaign] = PriorDrawnCampaign(seed, pairs=pairs, model=model, settings=settings)
+        factory: Callable[[], Campaign] = recipe(seed, pairs=pairs, model=model, settings=settings)
         if control_factor is not None:
             factory = WrongEffectiveMass(factory, float(control_factor))
         jobs.append(FitJob(f"sbc-{arm}-{seed}", factory, model=model,

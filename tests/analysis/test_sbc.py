@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 from bayes_roadload.analysis.batch import run_batch
-from bayes_roadload.analysis.sbc import (SBC_MODEL, SBC_PARAMETERS, SBC_SAMPLER, PriorDrawnCampaign,
+from bayes_roadload.analysis.sbc import (SBC_MODEL, SBC_PARAMETERS, SBC_SAMPLER, ModelDrawnCampaign, PriorDrawnCampaign,
                                          WrongEffectiveMass, draw_from_prior, rank_fractions, rank_histograms,
                                          sbc_jobs, sbc_markdown, sbc_tests)
 from bayes_roadload.inference.spec import load_model_spec
@@ -47,6 +47,45 @@ def test_prior_drawn_campaign_carries_its_draw_as_truth():
     assert wrong.vehicle.effective_mass_kg == pytest.approx(1.05 * campaign.vehicle.effective_mass_kg)
     assert wrong.vehicle.mass_kg == campaign.vehicle.mass_kg
     pd.testing.assert_frame_equal(wrong.runs, campaign.runs)
+
+
+def test_model_drawn_campaign_follows_the_model_likelihood():
+    """Exact SBC data: at the true coefficients the residual of each run is a random walk of
+    intensity q plus white noise sigma_r, so its first differences have variance
+    q^2 dt + 2 sigma_r^2 and lag-1 autocovariance -sigma_r^2; the logged driveline force
+    scatters about A_t + B_t v + C_t v^2 with sd sigma_d."""
+    from bayes_roadload.inference.bayes import build_problem, integrated_speed
+
+    factory = ModelDrawnCampaign(3, pairs=1)
+    assert pickle.loads(pickle.dumps(factory)) == factory
+    campaign = factory()
+    template = PriorDrawnCampaign(3, pairs=1)()
+    t = campaign.truth
+    for k in ("AD", "BD", "CD0", "KD", "At", "Bt", "Ct"):
+        assert t[k] == template.truth[k]
+    assert campaign.meta["sbc"] == "exact"
+    pd.testing.assert_frame_equal(campaign.runs.drop(columns=["speed_mps", "driveline_force_n"]),
+                                  template.runs.drop(columns=["speed_mps", "driveline_force_n"]))
+    problem = build_problem(campaign, SBC_MODEL)
+    b = problem.batch
+    first = np.asarray(b.speed_mps)[:, 0]
+    v = np.asarray(integrated_speed(problem, {**{k: t[k] for k in problem.free}, "v0_mps": first}))
+    q = t["q_mps_per_sqrt_s"]
+    for r in range(problem.n_runs):
+        n = int(np.asarray(b.mask)[r].sum())
+        resid = np.asarray(b.speed_mps)[r, :n] - v[r, :n]
+        assert resid[0] == pytest.approx(0.0, abs=5 * t["sigma_mps"][r])  # delta_0 = 0
+        d = np.diff(resid)
+        dt = np.diff(np.asarray(b.time_s)[r, :n])
+        expected = np.mean(q**2 * dt) + 2 * t["sigma_mps"][r] ** 2
+        # the sample variance of ~n differences has relative sd ~ sqrt(2 (1 + 2 rho^2) / n),
+        # rho = lag-1 correlation (at most 1/2): 5 of those
+        assert np.var(d) == pytest.approx(expected, rel=5 * np.sqrt(3.0 / d.size))
+    speed = campaign.runs["speed_mps"].to_numpy()
+    loss = t["At"] + t["Bt"] * speed + t["Ct"] * speed**2
+    scatter = campaign.runs["driveline_force_n"].to_numpy() - loss
+    # sd of a sample sd: sigma / sqrt(2 n); 5 of those
+    assert np.std(scatter) == pytest.approx(t["sigma_driveline_n"], rel=5 / np.sqrt(2 * scatter.size))
 
 
 def _synthetic_records(u_by_arm: dict[str, np.ndarray], draws: int = 999) -> pd.DataFrame:
