@@ -244,6 +244,13 @@ class SamplerConfig:
         77 dimensions).
     seed : PRNG seed.
     progress_bar : show numpyro's progress bar.
+    retry : when the first run fails a gate, run the sampler once more with the remedy for
+        that gate (:func:`bayes_roadload.inference.nuts.remedy`): divergences -> target
+        acceptance 0.95 (0.99 if already there); R-hat, ESS, E-BFMI or tree depth -> twice the
+        warm-up and the draws.  The retry, why, and the first run's time are recorded in
+        ``diagnostics.json`` (``retries``); the gates are then those of the second run.  Only
+        fits with at least the default warm-up and draws retry: fewer is a quick look whose
+        ESS gates are expected to fail, and a retry would spend the time it was meant to save.
     """
 
     num_warmup: int = 300
@@ -255,6 +262,7 @@ class SamplerConfig:
     mass_matrix: str = "auto"
     seed: int = 0
     progress_bar: bool = False
+    retry: bool = True
     posterior_predictive_draws: int = 200
 
     def __post_init__(self):

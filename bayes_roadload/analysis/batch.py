@@ -284,6 +284,8 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
         "min_ess_tail": float(diag["min_ess_tail"]),
         "mean_tree_depth": float(diag["mean_tree_depth"]),
         "map_converged": bool(fit.map.success) if fit.map is not None else None,
+        "retries": len(fit.retries),
+        "retry_failed": ",".join(fit.retries[0]["failed"]) if fit.retries else "",
     })
     rec.update({f"time_{k}": float(v) for k, v in fit.timings.items()})
     return rec

@@ -120,6 +120,7 @@ class NutsFit:
     sampler: config.SamplerConfig
     timings: dict[str, float] = field(default_factory=dict)
     truth: dict | None = None
+    retries: list[dict[str, Any]] = field(default_factory=list)
 
 
 def _site_scales(problem: Problem, z: dict[str, Any]) -> dict[str, Any]:
@@ -655,7 +656,44 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
         post = unconstrained_posterior(problem, init)
         map_result = find_map(problem, {}, posterior=post)
     fit = run_nuts(problem, sampler=sampler, map_result=map_result, posterior=post)
+    if sampler.retry and sampler.num_warmup >= config.DEFAULT_SAMPLER.num_warmup \
+            and sampler.num_samples >= config.DEFAULT_SAMPLER.num_samples:
+        from .results import gate_failures  # results imports this module
+
+        failed = gate_failures(fit)
+        second = remedy(sampler, failed)
+        if second is not None:
+            first_s = fit.timings["warmup_s"] + fit.timings["sampling_s"]
+            fit = run_nuts(problem, sampler=second, map_result=map_result, posterior=post)
+            fit.retries = [{"failed": failed, "first_attempt_s": round(first_s, 3),
+                            "num_warmup": second.num_warmup, "num_samples": second.num_samples,
+                            "target_accept": second.target_accept, "seed": second.seed}]
+            fit.timings["first_attempt_s"] = first_s
     if map_result is not None:
         fit.timings["map_s"] = map_result.time_s
     fit.truth = truth
     return fit
+
+
+RETRY_MORE_DRAWS = ("r_hat", "ess_bulk", "ess_tail", "bfmi", "tree_depth")
+"""Gates whose failure the retry answers with twice the warm-up and the draws."""
+
+
+def remedy(sampler: config.SamplerConfig, failed: list[str]) -> config.SamplerConfig | None:
+    """The sampler of the one retry after the gates ``failed`` (None: nothing to retry).
+
+    Divergences: the step size was too large for the curvature met (with few runs, where the
+    integrated-noise intensity q is small and the coefficients' posterior narrows with it), so
+    the target acceptance rises to 0.95 (0.99 when it already was 0.95 or more).  R-hat, ESS,
+    E-BFMI, tree depth: the chains had too few draws or too short an adaptation, so warm-up and
+    draws double.  A new seed makes the retry's chains independent of the first run's.
+    """
+    if not failed:
+        return None
+    changes: dict[str, Any] = {"seed": sampler.seed + 1, "retry": False}
+    if "divergences" in failed:
+        changes["target_accept"] = 0.95 if sampler.target_accept < 0.95 else 0.99
+    if any(g in failed for g in RETRY_MORE_DRAWS):
+        changes["num_warmup"] = 2 * sampler.num_warmup
+        changes["num_samples"] = 2 * sampler.num_samples
+    return dataclasses.replace(sampler, **changes)

@@ -191,6 +191,36 @@ def run_table(fit: NutsFit, idata: az.InferenceData) -> pd.DataFrame:
     return _rows(idata, names)
 
 
+def gate_failures(fit: NutsFit, gates: config.Gates = config.DEFAULT_GATES) -> list[str]:
+    """The gates a fit fails, from its draws alone (for any kind of problem): the checks of
+    :func:`diagnostics` over every posterior variable and the problem's derived quantities
+    (:func:`inference_data`), without building the kind's full InferenceData."""
+    idata = inference_data(fit)
+    post = idata.posterior
+    chains = int(post.sizes["chain"])
+
+    def extreme(ds, fn):
+        values = np.concatenate([np.ravel(ds[v].values) for v in ds.data_vars]) if ds.data_vars else np.array([])
+        values = values[np.isfinite(values)]
+        return float(fn(values)) if values.size else math.nan
+
+    with np.errstate(invalid="ignore", divide="ignore"):
+        max_rhat = extreme(az.rhat(post), np.max) if chains > 1 else math.nan
+        min_bulk = extreme(az.ess(post, method="bulk"), np.min)
+        min_tail = extreme(az.ess(post, method="tail"), np.min)
+    bfmi = np.atleast_1d(az.bfmi(idata))
+    hits = float(np.mean(fit.stats["tree_depth"] >= fit.sampler.max_tree_depth))
+    checks = {
+        "divergences": int(fit.stats["diverging"].sum()) <= gates.max_divergences,
+        "r_hat": chains < 2 or not math.isfinite(max_rhat) or max_rhat <= gates.max_r_hat,
+        "ess_bulk": not math.isfinite(min_bulk) or min_bulk >= gates.min_ess_bulk_per_chain * chains,
+        "ess_tail": not math.isfinite(min_tail) or min_tail >= gates.min_ess_tail_per_chain * chains,
+        "bfmi": float(np.min(bfmi)) >= gates.min_bfmi,
+        "tree_depth": hits <= gates.max_tree_depth_hits_fraction,
+    }
+    return [k for k, ok in checks.items() if not ok]
+
+
 def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
                 gates: config.Gates = config.DEFAULT_GATES, runs: pd.DataFrame | None = None) -> dict:
     """Sampler diagnostics and the pass/fail of every gate.  ``runs`` is :func:`run_table`'s
@@ -229,6 +259,7 @@ def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
         "mean_leapfrog_steps": float(fit.stats["num_steps"].mean()),
         "bfmi": bfmi,
         "timings_s": {k: round(v, 3) for k, v in fit.timings.items()},
+        "retries": list(fit.retries),
         "precondition": fit.sampler.precondition,
         "map": None if fit.map is None else {
             "success": fit.map.success, "iterations": fit.map.n_iter, "message": fit.map.message,

@@ -262,3 +262,46 @@ def test_collect_warmup_keeps_every_draw():
     mcmc.run(jax.random.PRNGKey(0), extra_fields=("num_steps",))
     assert mcmc.get_samples()["x"].shape == (12,)
     assert mcmc.get_extra_fields()["num_steps"].shape == (12,)
+
+
+def test_remedy_answers_each_failed_gate():
+    from bayes_roadload.inference.nuts import remedy
+
+    base = config.SamplerConfig()
+    assert remedy(base, []) is None
+    div = remedy(base, ["divergences"])
+    assert div.target_accept == 0.95 and div.num_samples == base.num_samples and div.seed == base.seed + 1
+    assert remedy(dataclasses.replace(base, target_accept=0.95), ["divergences"]).target_accept == 0.99
+    for gate in ("r_hat", "ess_bulk", "ess_tail", "bfmi", "tree_depth"):
+        more = remedy(base, [gate])
+        assert (more.num_warmup, more.num_samples) == (2 * base.num_warmup, 2 * base.num_samples)
+        assert more.target_accept == base.target_accept
+    both = remedy(base, ["divergences", "r_hat"])
+    assert both.target_accept == 0.95 and both.num_samples == 2 * base.num_samples
+    assert not both.retry  # one retry only
+
+
+def test_gate_failures_agree_with_the_diagnostics(pooled_fit):
+    from bayes_roadload.inference.results import gate_failures
+
+    idata = to_inference_data(pooled_fit, predictive=False)
+    assert gate_failures(pooled_fit) == diagnostics(pooled_fit, idata, summary_table(pooled_fit, idata))["failed"]
+    short = dataclasses.replace(pooled_fit, samples={k: v[:, :12] for k, v in pooled_fit.samples.items()},
+                                stats={k: v[:, :12] for k, v in pooled_fit.stats.items()})
+    assert {"ess_bulk", "ess_tail"} <= set(gate_failures(short))
+
+
+def test_a_failed_gate_is_retried_once_and_recorded(small_campaign, monkeypatch):
+    """20 draws per chain fail the ESS gates (>= 100 per chain); with the default sampler set to
+    those counts the fit retries once with twice the warm-up and draws, and says so."""
+    from bayes_roadload.inference.nuts import fit_nuts
+
+    tiny = config.SamplerConfig(num_warmup=20, num_samples=20, num_chains=2, seed=3)
+    monkeypatch.setattr(config, "DEFAULT_SAMPLER", tiny)
+    fit = fit_nuts(small_campaign, "four_term", sampler=tiny)
+    assert len(fit.retries) == 1
+    retry = fit.retries[0]
+    assert "ess_bulk" in retry["failed"] and (retry["num_warmup"], retry["num_samples"]) == (40, 40)
+    assert fit.samples["CD0"].shape == (2, 40) and fit.timings["first_attempt_s"] > 0
+    idata = to_inference_data(fit, predictive=False)
+    assert diagnostics(fit, idata, summary_table(fit, idata))["retries"] == fit.retries
