@@ -449,15 +449,27 @@ def _cmd_demo(args) -> int:
     summary, diag = report.summary, report.diagnostics
     post = summary.set_index("parameter")
     print()
-    print(f"{'quantity':<15}{'truth':>10}   {'least squares: mean +- SE':<27}{'posterior: mean [95 % interval]'}")
-    print("-" * 90)
+    print(f"{'quantity':<15}{'truth':>10}   {'least squares: mean +- SE':<27}"
+          f"{'posterior: mean [95 % interval]':<38}truth inside")
+    print("-" * 102)
+    inside: dict[str, bool] = {}
     for name in list(lsq.free) + ["F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2"]:
         t = truth.get(name)
         t_s = f"{t:>10.5g}" if isinstance(t, (int, float)) else f"{'-':>10}"
         m, se = lsq.weighted_mean.get(name, float("nan")), lsq.weighted_se.get(name, float("nan"))
         r = post.loc[name]
-        print(f"{name:<15}{t_s}   {m:>11.5g} +- {se:<11.3g}  {r['mean']:>10.5g} [{r['q2.5']:.5g}, {r['q97.5']:.5g}]")
+        interval = f"{r['mean']:>10.5g} [{r['q2.5']:.5g}, {r['q97.5']:.5g}]"
+        flag = ""
+        if isinstance(t, (int, float)):
+            inside[name] = bool(r["q2.5"] <= t <= r["q97.5"])
+            flag = "yes" if inside[name] else "NO"
+        print(f"{name:<15}{t_s}   {m:>11.5g} +- {se:<11.3g}  {interval:<38}{flag}")
     print()
+    if inside:
+        missed = [k for k, ok in inside.items() if not ok]
+        print(f"The posterior 95 % intervals contain the simulated truth for {len(inside) - len(missed)} of "
+              f"{len(inside)} quantities" + (f"; they miss it for {', '.join(missed)}." if missed else ".")
+              + " (Expected: about 1 in 20 misses; docs/calibration.md measures how often over many campaigns.)")
     print("\n".join(line for line in table.splitlines()[:2] if line.startswith(("!!", "NUTS"))))
     fit_dir = out / "fit_nuts"
     html_path, _ = render_report(fit_dir)

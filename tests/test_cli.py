@@ -79,6 +79,15 @@ def test_demo_runs_and_prints_truth_beside_estimates(tmp_path, capsys):
     assert (tmp_path / "campaign" / "runs.csv").exists()
     assert (tmp_path / "fit_lsq" / "summary.csv").exists()
     assert (tmp_path / "fit_nuts" / "posterior.nc").exists()
+    # the statement on the intervals counts what summary.csv and the truth say
+    summary = pd.read_csv(tmp_path / "fit_nuts" / "summary.csv").set_index("parameter")
+    truth = json.loads((tmp_path / "campaign" / "truth.json").read_text())
+    names = ["AD", "BD", "CD0", "KD"]
+    ok = sum(summary.loc[k, "q2.5"] <= truth[k] <= summary.loc[k, "q97.5"] for k in names)
+    line = next(x for x in out.splitlines() if x.startswith("The posterior 95 % intervals contain"))
+    n = int(line.split(" of ")[1].split()[0])
+    k = int(line.split("truth for ")[1].split()[0])
+    assert n >= len(names) and k <= n and (n - k) >= (len(names) - ok)
 
 
 def test_fit_nuts_writes_outputs_and_flags_gates(campaign_dir, tmp_path, capsys):
