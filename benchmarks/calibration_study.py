@@ -26,7 +26,6 @@ its markers.
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import re
 import sys
@@ -39,73 +38,14 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_roadload.analysis.batch import FitJob, batch_client, coverage_summary, run_batch  # noqa: E402
-from bayes_roadload.inference.kinds import FitOptions  # noqa: E402
-from bayes_roadload.simulate.independent import simulate_independent  # noqa: E402
+from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
+from bayes_roadload.analysis.calibration import (CONFIRMATORY_SEED0, calibration_jobs,  # noqa: E402
+                                                 calibration_markdown, calibration_table)
 
 RECORDS = ROOT / "docs" / "calibration" / "independent_records.csv"
 DOC = ROOT / "docs" / "calibration.md"
-QUANTITIES = ("AD", "BD", "CD0", "KD", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
-DERIVED = ("F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
-COVERAGE_TARGET = (0.92, 0.98)
-Z_SD_TARGET = (0.85, 1.15)
-SIZE_BINS = ((1, 2), (3, 5), (6, 12))
 MARK_BEGIN = "<!-- calibration_study:begin -->"
 MARK_END = "<!-- calibration_study:end -->"
-
-
-def pairs_of(seed: int, lo: int, hi: int) -> int:
-    """Pairs of campaign ``seed``: uniform in [lo, hi], from the seed alone."""
-    return int(np.random.default_rng([seed, 7]).integers(lo, hi + 1))
-
-
-def jobs_for(seeds, lo: int, hi: int, options: FitOptions) -> list[FitJob]:
-    """One fit job per seed with the default fit options."""
-    return [FitJob(f"ind-{s}", functools.partial(simulate_independent, s, pairs=pairs_of(s, lo, hi)),
-                   pooling=options.pooling, noise=options.noise, robust=options.robust, sampler=options.sampler,
-                   derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi)})
-            for s in seeds]
-
-
-def size_bin(pairs: int) -> str:
-    for lo, hi in SIZE_BINS:
-        if lo <= pairs <= hi:
-            return f"{lo}-{hi}"
-    return "other"
-
-
-def summarise(records: pd.DataFrame) -> pd.DataFrame:
-    """95 % coverage and sd(z) by quantity, overall and by campaign size, with the verdicts."""
-    rec = records.copy()
-    rec["size"] = rec["pairs"].map(size_bin)
-    rec["all"] = "all"
-    rows = []
-    for by in ("all", "size"):
-        cov = coverage_summary(rec, by=(by,), quantities=list(QUANTITIES), levels=(0.95,))
-        for _, c in cov.iterrows():
-            rows.append({"group": c[by], "quantity": c["quantity"], "n": int(c["n"]),
-                         "coverage95": float(c["coverage"]), "z_sd": float(c["z_sd"])})
-    out = pd.DataFrame(rows)
-    out["coverage_ok"] = out["coverage95"].between(*COVERAGE_TARGET)
-    out["z_sd_ok"] = out["z_sd"].between(*Z_SD_TARGET)
-    return out
-
-
-def markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: float | None = None) -> str:
-    ok = records[records["error"].isna()] if "error" in records else records
-    gate = ok["gate_pass"].astype(bool)
-    lines = [f"{len(records)} campaigns (seeds {int(records['seed'].min())}-{int(records['seed'].max())}), "
-             f"{len(records) - len(ok)} errors, {int(gate.sum())} of {len(ok)} fits passed every gate; "
-             f"targets: 95 % coverage in [{COVERAGE_TARGET[0]:.2f}, {COVERAGE_TARGET[1]:.2f}], "
-             f"sd(z) in [{Z_SD_TARGET[0]}, {Z_SD_TARGET[1]}].", "",
-             "| campaigns | quantity | n | 95 % coverage | sd(z) | verdict |", "|---|---|---|---|---|---|"]
-    for _, r in table.iterrows():
-        verdict = "pass" if r["coverage_ok"] and r["z_sd_ok"] else "**fail**"
-        lines.append(f"| {r['group']} | {r['quantity']} | {r['n']} | {r['coverage95']:.2f} | {r['z_sd']:.2f} | "
-                     f"{verdict} |")
-    if wall_s is not None:
-        lines += ["", f"Mean fit time {ok['time_total_s'].mean():.0f} s; wall time {wall_s / 60:.0f} min."]
-    return "\n".join(lines) + "\n"
 
 
 def write_doc_section(text: str, doc: Path = DOC) -> None:
@@ -119,7 +59,7 @@ def write_doc_section(text: str, doc: Path = DOC) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=200, help="campaigns (default 200)")
-    ap.add_argument("--seed0", type=int, default=1000, help="first seed (confirmatory seeds start at 1000)")
+    ap.add_argument("--seed0", type=int, default=CONFIRMATORY_SEED0, help="first seed (confirmatory seeds start at 1000)")
     ap.add_argument("--pairs", type=int, nargs=2, default=(1, 12), metavar=("MIN", "MAX"))
     ap.add_argument("--workers", type=int, default=None, help="Dask workers (default: the usable cores)")
     ap.add_argument("--scheduler", default=None, metavar="ADDR", help="a running Dask scheduler")
@@ -132,7 +72,7 @@ def main(argv=None) -> int:
     if args.from_records:
         records = pd.read_csv(args.records)
     else:
-        jobs = jobs_for(range(args.seed0, args.seed0 + args.n), *args.pairs, FitOptions())
+        jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs)
         args.records.parent.mkdir(parents=True, exist_ok=True)
         partial = args.records.with_suffix(".partial.csv")
         done: list[dict] = []
@@ -148,8 +88,8 @@ def main(argv=None) -> int:
         partial.unlink(missing_ok=True)
     if "error" not in records:
         records["error"] = np.nan
-    table = summarise(records)
-    text = markdown(records, table, wall)
+    table = calibration_table(records)
+    text = calibration_markdown(records, table, wall)
     print(text, file=sys.stderr)
     if args.docs:
         write_doc_section(text)

@@ -1,0 +1,94 @@
+"""Interval calibration of the default fit on the independent simulator's campaigns: the
+study's jobs and its frozen pass rules (``docs/calibration.md``; run by
+``benchmarks/calibration_study.py``).
+
+Each campaign is :func:`~bayes_roadload.simulate.independent.simulate_independent` ``(seed,
+pairs=P)`` -- its own integrator, wind field, instruments and vehicles, every nuisance effect,
+the Type B errors drawn inside the standards' accuracies -- with P drawn uniformly from
+``[lo, hi]`` by the seed alone (:func:`pairs_of`), fitted with the options ``bayes-roadload fit``
+uses by default (:class:`~bayes_roadload.inference.kinds.FitOptions`).
+
+Rules, frozen before the confirmatory seeds run: quantities :data:`QUANTITIES`; a group passes
+when its 95 % intervals cover the truth in :data:`COVERAGE_TARGET` of the fits that ran and the
+sd over fits of z = (mean - truth) / sd lies in :data:`Z_SD_TARGET`; groups are every campaign
+and each campaign size of :data:`SIZE_BINS`.  Design seeds 100-199, confirmatory seeds from
+:data:`CONFIRMATORY_SEED0`.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Iterable
+
+import numpy as np
+import pandas as pd
+
+from ..inference.kinds import FitOptions
+from ..simulate.independent import simulate_independent
+from .batch import FitJob, coverage_summary
+
+QUANTITIES = ("AD", "BD", "CD0", "KD", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
+DERIVED = ("F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
+COVERAGE_TARGET = (0.92, 0.98)
+Z_SD_TARGET = (0.85, 1.15)
+SIZE_BINS = ((1, 2), (3, 5), (6, 12))
+CONFIRMATORY_SEED0 = 1000
+
+
+def pairs_of(seed: int, lo: int, hi: int) -> int:
+    """Pairs of campaign ``seed``: uniform in [lo, hi], from the seed alone."""
+    return int(np.random.default_rng([seed, 7]).integers(lo, hi + 1))
+
+
+def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
+                     options: FitOptions | None = None) -> list[FitJob]:
+    """One fit job per seed, with the default fit options (or ``options``)."""
+    o = options or FitOptions()
+    return [FitJob(f"ind-{s}", functools.partial(simulate_independent, s, pairs=pairs_of(s, lo, hi)),
+                   pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler,
+                   derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi)})
+            for s in seeds]
+
+
+def size_bin(pairs: int) -> str:
+    """The campaign-size group of a campaign of ``pairs`` pairs ("1-2", "3-5", "6-12")."""
+    for lo, hi in SIZE_BINS:
+        if lo <= pairs <= hi:
+            return f"{lo}-{hi}"
+    return "other"
+
+
+def calibration_table(records: pd.DataFrame) -> pd.DataFrame:
+    """95 % coverage and sd(z) by quantity, over every campaign and by campaign size, with the
+    verdicts ``coverage_ok``, ``z_sd_ok`` of the frozen rules."""
+    rec = records.copy()
+    rec["size"] = rec["pairs"].map(size_bin)
+    rec["all"] = "all"
+    rows = []
+    for by in ("all", "size"):
+        cov = coverage_summary(rec, by=(by,), quantities=list(QUANTITIES), levels=(0.95,))
+        for _, c in cov.iterrows():
+            rows.append({"group": c[by], "quantity": c["quantity"], "n": int(c["n"]),
+                         "coverage95": float(c["coverage"]), "z_sd": float(c["z_sd"])})
+    out = pd.DataFrame(rows, columns=["group", "quantity", "n", "coverage95", "z_sd"])
+    out["coverage_ok"] = out["coverage95"].between(*COVERAGE_TARGET)
+    out["z_sd_ok"] = out["z_sd"].between(*Z_SD_TARGET)
+    return out
+
+
+def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: float | None = None) -> str:
+    """The study's section of ``docs/calibration.md``: counts, gates, the table with verdicts."""
+    ok = records[records["error"].isna()] if "error" in records else records
+    gate = ok["gate_pass"].astype(bool)
+    lines = [f"{len(records)} campaigns (seeds {int(records['seed'].min())}-{int(records['seed'].max())}), "
+             f"{len(records) - len(ok)} errors, {int(gate.sum())} of {len(ok)} fits passed every gate; "
+             f"targets: 95 % coverage in [{COVERAGE_TARGET[0]:.2f}, {COVERAGE_TARGET[1]:.2f}], "
+             f"sd(z) in [{Z_SD_TARGET[0]}, {Z_SD_TARGET[1]}].", "",
+             "| campaigns | quantity | n | 95 % coverage | sd(z) | verdict |", "|---|---|---|---|---|---|"]
+    for _, r in table.iterrows():
+        verdict = "pass" if r["coverage_ok"] and r["z_sd_ok"] else "**fail**"
+        lines.append(f"| {r['group']} | {r['quantity']} | {r['n']} | {r['coverage95']:.2f} | {r['z_sd']:.2f} | "
+                     f"{verdict} |")
+    if wall_s is not None and "time_total_s" in ok:
+        lines += ["", f"Mean fit time {ok['time_total_s'].mean():.0f} s; wall time {wall_s / 60:.0f} min."]
+    return "\n".join(lines) + "\n"

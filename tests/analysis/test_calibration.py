@@ -1,0 +1,69 @@
+"""The calibration study's rules (:mod:`bayes_roadload.analysis.calibration`) on synthetic
+records, and a smoke run of its whole path on one small independent-simulator campaign."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.stats import norm
+
+from bayes_roadload import config
+from bayes_roadload.analysis.batch import run_batch
+from bayes_roadload.analysis.calibration import (COVERAGE_TARGET, QUANTITIES, calibration_jobs,
+                                                 calibration_markdown, calibration_table, pairs_of, size_bin)
+from bayes_roadload.inference.kinds import FitOptions
+
+
+def _records(scale: float, n: int = 400, seed: int = 0) -> pd.DataFrame:
+    """Posteriors N(truth + scale * e, 1) with e ~ N(0, 1): calibrated for scale 1."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(n):
+        rec = {"seed": i, "pairs": 1 + i % 12, "error": np.nan, "gate_pass": True}
+        for q in QUANTITIES:
+            mean = scale * rng.standard_normal()
+            half = norm.ppf(0.975)
+            rec.update({f"{q}_truth": 0.0, f"{q}_mean": mean, f"{q}_sd": 1.0,
+                        f"{q}_q2.5": mean - half, f"{q}_q97.5": mean + half,
+                        f"{q}_in95": bool(abs(mean) <= half)})
+        rows.append(rec)
+    return pd.DataFrame(rows)
+
+
+def test_the_rules_pass_calibrated_and_fail_overconfident_posteriors():
+    good = calibration_table(_records(1.0))
+    overall = good[good["group"] == "all"]
+    assert set(overall["quantity"]) == set(QUANTITIES) and (overall["n"] == 400).all()
+    # 400 fits: the coverage's binomial sd is 0.011, sd(z)'s ~0.035: far inside the targets
+    assert overall["coverage_ok"].all() and overall["z_sd_ok"].all()
+    assert set(good["group"]) == {"all", "1-2", "3-5", "6-12"}
+    bad = calibration_table(_records(2.0))
+    b = bad[bad["group"] == "all"]
+    # errors twice the posterior sd: coverage P(|2 e| < 1.96) = 0.67, sd(z) = 2
+    assert not b["coverage_ok"].any() and not b["z_sd_ok"].any()
+    assert b["coverage95"].mean() == pytest.approx(0.67, abs=0.05)
+    assert COVERAGE_TARGET[0] < 0.95 < COVERAGE_TARGET[1]
+    text = calibration_markdown(_records(2.0), bad)
+    assert "**fail**" in text and "400 campaigns" in text
+
+
+def test_campaign_sizes_come_from_the_seed():
+    assert [pairs_of(s, 1, 12) for s in range(50)] == [pairs_of(s, 1, 12) for s in range(50)]
+    assert {pairs_of(s, 1, 12) for s in range(200)} == set(range(1, 13))
+    assert [size_bin(p) for p in (1, 2, 3, 5, 6, 12)] == ["1-2", "1-2", "3-5", "3-5", "6-12", "6-12"]
+
+
+def test_smoke_one_independent_campaign_through_the_study():
+    """The study's path end to end on one 1-pair campaign with few draws: the record carries
+    the simulator's own truth of every quantity, and the table has a row per quantity."""
+    small = config.SamplerConfig(num_warmup=100, num_samples=100, num_chains=1)
+    jobs = calibration_jobs([8], 1, 1, FitOptions(sampler=small))  # seed 8: a small car logged at 2 Hz
+    assert jobs[0].pooling == FitOptions().pooling and jobs[0].tags["pairs"] == 1
+    records = run_batch(jobs, progress=False)
+    assert records["error"].isna().all(), records.get("traceback")
+    campaign = jobs[0].campaign()
+    for q in QUANTITIES:
+        assert records.loc[0, f"{q}_truth"] == pytest.approx(campaign.truth[q], rel=1e-12), q
+    table = calibration_table(records)
+    assert set(table.loc[table["group"] == "all", "quantity"]) == set(QUANTITIES)
