@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
 from pathlib import Path
@@ -28,6 +29,23 @@ from bayes_roadload.inference.lsq import fit_lsq  # noqa: E402
 from bayes_roadload.simulate.independent import EFFECTS, simulate_independent  # noqa: E402
 
 QUANTITIES = ("AD", "BD", "CD0", "KD", "F50_N")
+DOC = ROOT / "docs" / "calibration.md"
+MARKS = ("<!-- effect_bias:begin -->", "<!-- effect_bias:end -->")
+
+
+def markdown(df: pd.DataFrame) -> str:
+    """Per effect: the seeds' vehicles and the relative error of each quantity, seed by seed."""
+    ok = df[df.get("error", pd.Series(index=df.index, dtype=object)).isna()]
+    seeds = sorted(ok["seed"].unique())
+    lines = [f"Least-squares error (%) of the default model, one effect at a time, {ok['pairs'].iloc[0]} pairs, "
+             f"seeds {', '.join(str(s) for s in seeds)} (vehicles: {', '.join(ok.drop_duplicates('seed')['vehicle'])}); "
+             "per cell the seeds' values in that order.", "",
+             "| effect | " + " | ".join(QUANTITIES) + " |", "|---|" + "---|" * len(QUANTITIES)]
+    for effect, g in ok.groupby("effect", sort=False):
+        g = g.sort_values("seed")
+        cells = [" / ".join(f"{x:+.1f}" for x in g[f"{q}_err_pct"]) for q in QUANTITIES]
+        lines.append(f"| {effect} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def one(effect: str, seed: int, pairs: int, model: str) -> dict:
@@ -37,7 +55,8 @@ def one(effect: str, seed: int, pairs: int, model: str) -> dict:
                                     perfect_instruments=not instrument)
     t0 = time.perf_counter()
     fit = fit_lsq(campaign, model, grouping="all")
-    row = {"effect": effect, "seed": seed, "pairs": pairs, "fit_s": time.perf_counter() - t0}
+    row = {"effect": effect, "seed": seed, "pairs": pairs, "fit_s": time.perf_counter() - t0,
+           "vehicle": campaign.truth["meta"]["vehicle_true"]["category"]}
     for q in QUANTITIES:
         est, truth = fit.weighted_mean.get(q, np.nan), campaign.truth.get(q, np.nan)
         row[f"{q}_err_pct"] = 100.0 * (est / truth - 1.0)
@@ -52,7 +71,17 @@ def main(argv=None) -> int:
     ap.add_argument("--model", default="four_term")
     ap.add_argument("--effects", nargs="*", default=None, help="default: none and every effect")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "records" / "effect_bias.csv")
+    ap.add_argument("--docs", action="store_true", help="regenerate the section of docs/calibration.md")
+    ap.add_argument("--from-records", action="store_true", help="summarise --out without fitting")
     args = ap.parse_args(argv)
+    if args.from_records:
+        df = pd.read_csv(args.out)
+        if "vehicle" not in df:  # the vehicle is drawn from the seed alone
+            category = {int(s): simulate_independent(int(s), pairs=1, effects=[], type_b=False, run_to_run_sd=0.0,
+                                                     perfect_instruments=True).truth["meta"]["vehicle_true"]["category"]
+                        for s in df["seed"].unique()}
+            df["vehicle"] = df["seed"].map(category)
+        return _report(df, args)
     effects = args.effects or ["none"] + sorted(EFFECTS)
     rows = []
     for e in effects:
@@ -63,7 +92,14 @@ def main(argv=None) -> int:
                 rows.append({"effect": e, "seed": s, "error": f"{type(exc).__name__}: {exc}"})
             args.out.parent.mkdir(parents=True, exist_ok=True)
             pd.DataFrame(rows).to_csv(args.out, index=False)
-    df = pd.DataFrame(rows)
+    return _report(pd.DataFrame(rows), args)
+
+
+def _report(df: pd.DataFrame, args) -> int:
+    if args.docs:
+        body = DOC.read_text()
+        pattern = re.compile(re.escape(MARKS[0]) + ".*?" + re.escape(MARKS[1]), re.S)
+        DOC.write_text(pattern.sub(lambda _: f"{MARKS[0]}\n{markdown(df)}{MARKS[1]}", body))
     cols = [f"{q}_err_pct" for q in QUANTITIES]
     table = df.groupby("effect")[cols].agg(["mean", "std"]).round(2)
     print(table.to_string(), file=sys.stderr)
