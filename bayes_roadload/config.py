@@ -246,7 +246,7 @@ class SamplerConfig:
     progress_bar : show numpyro's progress bar.
     retry : when the first run fails a gate, run the sampler once more with the remedy for
         that gate (:func:`bayes_roadload.inference.nuts.remedy`): divergences -> target
-        acceptance 0.95 (0.99 if already there); R-hat, ESS, E-BFMI or tree depth -> twice the
+        acceptance 0.99; R-hat, ESS, E-BFMI or tree depth -> twice the
         warm-up and the draws.  The retry, why, and the first run's time are recorded in
         ``diagnostics.json`` (``retries``); the gates are then those of the second run.  Only
         fits with at least the default warm-up and draws retry: fewer is a quick look whose
@@ -301,7 +301,8 @@ DEFAULT_GATES = Gates()
 
 # Priors of the nuisance parameters of the Bayesian models (physical units).
 NOISE_PRIORS = {
-    "sigma_mps": 0.1,          # half-normal scale of the speed measurement noise, per run
+    "sigma_mps": 0.1,          # half-normal scale of the speed measurement noise, per run (spin-downs)
+    "sigma_speed_mean_mps": 0.05,  # mean of the Gamma(2) prior of a speed trace's noise, per run
     "q_mps_per_sqrt_s": 0.005,  # mean of the Gamma(2) prior of the integrated (process) noise
     "v0_scale_mps": 0.5,       # normal scale of each run's initial speed around its first sample
     "student_df_rate": 0.1,    # Gamma(2, rate) prior of the Student-t degrees of freedom
@@ -315,6 +316,13 @@ with mean 0.01 (sd 0.007; vanishes at 0, so few pairs do not leave a funnel at s
 measured 0.0078 per pair over 100 simulated pairs at 2 m/s head and cross wind (the
 turbulence that does not average out over a run), and the thesis' track groups of 3 pairs
 scattered by 0.0063 (table 4.1), ~0.011 per pair."""
+SPEED_NOISE_FLOOR_MPS = 1e-3
+"""m/s: the speed noise of the likelihood is sqrt(sigma_mps^2 + floor^2).  A logged speed is
+never exact: a 0.01 km/h resolution alone is 0.0008 m/s of quantisation noise (resolution /
+sqrt 12).  Without the floor a noise-free or finely resolved trace drives sigma_mps towards 0,
+where the likelihood's curvature in log sigma changes by orders of magnitude (a funnel: hundreds
+of divergences on the thesis' noise-free cases 7-13); with it the likelihood is flat there and
+sigma_mps follows its prior."""
 TAU_PRIOR_SCALES = {"AD": 1.0e-3, "BD": 5.0e-5, "CD0": 0.02}
 """Prior means of the run-to-run spreads tau of the hierarchical model, Gamma(2) priors (10 %,
 25 %, 5 % of typical values: the thesis' track spreads were 4.3 %, 23.1 %, 4.3 %)."""

@@ -156,9 +156,10 @@ class ModelDrawnCampaign:
     model's likelihood (:mod:`bayes_roadload.physics.residuals`) with the noise parameters drawn
     from their priors (:data:`bayes_roadload.config.NOISE_PRIORS`):
 
-        q ~ Gamma(2, mean q_prior),  sigma_r ~ HalfNormal(sigma_prior),
+        q ~ Gamma(2, mean q_prior),  sigma_r ~ Gamma(2, mean sigma_prior),
         v_r,k = v_model,r,k(theta, v0_r) + delta_r,k + e_r,k,
-        delta_r,k = delta_r,k-1 + N(0, q^2 dt_k),  delta_r,0 = 0,  e_r,k ~ N(0, sigma_r^2),
+        delta_r,k = delta_r,k-1 + N(0, q^2 dt_k),  delta_r,0 = 0,
+        e_r,k ~ N(0, sigma_r^2 + floor^2)   (config.SPEED_NOISE_FLOOR_MPS),
 
     with ``v0_r`` the template's first logged speed (the fit's prior of ``v0_mps`` is centred
     on the first sample: data-dependent, so the ranks of ``v0_mps`` are not part of the test);
@@ -187,7 +188,8 @@ class ModelDrawnCampaign:
         v_model = np.asarray(integrated_speed(problem, {**truth, "v0_mps": first}))
         rng = np.random.default_rng([self.seed, 5381])
         q = rng.gamma(2.0, config.NOISE_PRIORS["q_mps_per_sqrt_s"] / 2.0)
-        sigma = np.abs(rng.normal(0.0, config.NOISE_PRIORS["sigma_mps"], problem.n_runs))
+        sigma = rng.gamma(2.0, config.NOISE_PRIORS["sigma_speed_mean_mps"] / 2.0, problem.n_runs)
+        sigma_eff = np.sqrt(sigma**2 + config.SPEED_NOISE_FLOOR_MPS**2)  # the likelihood's noise
         runs = template.runs.copy()
         speed = runs["speed_mps"].to_numpy(float).copy()
         t_all = np.asarray(b.time_s)
@@ -199,7 +201,7 @@ class ModelDrawnCampaign:
                 raise ValueError(f"run {rid!r}: {rows.size} rows against {n} batch samples")
             dt = np.diff(t_all[r, :n], prepend=t_all[r, 0])
             walk = np.cumsum(rng.normal(0.0, 1.0, n) * q * np.sqrt(dt))
-            speed[rows] = v_model[r, :n] + walk + rng.normal(0.0, sigma[r], n)
+            speed[rows] = v_model[r, :n] + walk + rng.normal(0.0, sigma_eff[r], n)
         runs["speed_mps"] = speed
         extra: dict[str, Any] = {"q_mps_per_sqrt_s": float(q),
                                  "sigma_mps": [float(x) for x in sigma]}

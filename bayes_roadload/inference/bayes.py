@@ -37,8 +37,10 @@ motion, so a likelihood with independent residuals gives intervals that are too 
 
 Priors of the coefficients are those of the model file (physical units); a free parameter
 without one gets a wide normal around its default (``10 x`` its typical scale).  Nuisance
-priors (:data:`bayes_roadload.config.NOISE_PRIORS`, ``TAU_PRIOR_SCALES``): ``sigma_mps`` half-
-normal(0.1 m/s); ``v0_mps`` normal(first sample, 0.5 m/s); ``q_mps_per_sqrt_s`` Gamma(2) with
+priors (:data:`bayes_roadload.config.NOISE_PRIORS`, ``TAU_PRIOR_SCALES``): ``sigma_mps``
+Gamma(2) with mean 0.05 m/s (vanishes at 0), the likelihood's speed noise being
+sqrt(sigma_mps^2 + 0.001^2) (``config.SPEED_NOISE_FLOOR_MPS``: no logged speed is exact, and
+the floor keeps noise-free traces out of a funnel in log sigma); ``v0_mps`` normal(first sample, 0.5 m/s); ``q_mps_per_sqrt_s`` Gamma(2) with
 mean 0.005 m/s/sqrt(s) (vanishes at 0: inputs are never noise-free, and a boundary-avoiding
 prior removes the funnel at q -> 0, Chung et al. 2013); ``tau_*`` Gamma(2) with means 10 %,
 25 %, 5 % of typical AD, BD, CD0 (likewise boundary-avoiding); ``student_df`` Gamma(2, 0.1);
@@ -412,12 +414,18 @@ def speed_residuals(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp.
     return problem.batch.speed_mps - integrated_speed(problem, sample)
 
 
+def speed_noise(sample: dict[str, jnp.ndarray]) -> jnp.ndarray:
+    """[R] the likelihood's white speed noise: sqrt(sigma_mps^2 + floor^2), the floor
+    :data:`bayes_roadload.config.SPEED_NOISE_FLOOR_MPS` (no logged speed is exact)."""
+    return jnp.sqrt(sample["sigma_mps"] ** 2 + config.SPEED_NOISE_FLOOR_MPS**2)
+
+
 def run_log_likelihood(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp.ndarray:
     """[R] log-likelihood of each run's speed trace for one draw (hierarchical: with the run
     effects integrated out, at the population values)."""
     resid = effect_residuals(problem, sample) if problem.varying else speed_residuals(problem, sample)
     q = sample.get("q_mps_per_sqrt_s", jnp.zeros(()))
-    sigma = sample["sigma_mps"]
+    sigma = speed_noise(sample)
     b = problem.batch
     if problem.robust:
         df = sample["student_df"]
@@ -499,7 +507,7 @@ def linearise_run_effects(problem: FitProblem, reference: dict[str, Any], offset
 def _effects_posterior(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Conditional posterior mean [R, k] and covariance [R, k, k] of the run effects at one draw."""
     b = problem.batch
-    return local_level_effects_posterior(effect_residuals(problem, sample), b.time_s, b.mask, sample["sigma_mps"],
+    return local_level_effects_posterior(effect_residuals(problem, sample), b.time_s, b.mask, speed_noise(sample),
                                          sample.get("q_mps_per_sqrt_s", jnp.zeros(())), _design(problem),
                                          _effect_var(problem, sample))
 
@@ -566,7 +574,11 @@ def coastdown_model(problem: FitProblem) -> None:
     first = problem.batch.speed_mps[:, 0]
     with numpyro.plate("run", r):
         sample["v0_mps"] = numpyro.sample("v0_mps", dist.Normal(first, config.NOISE_PRIORS["v0_scale_mps"]))
-        sample["sigma_mps"] = numpyro.sample("sigma_mps", dist.HalfNormal(config.NOISE_PRIORS["sigma_mps"]))
+        # Gamma(2): a logged speed always carries some noise (resolution, sensor), and a prior
+        # that vanishes at 0 keeps noise-free or finely resolved traces from a funnel in
+        # log sigma, where the integrated noise q takes over the residual
+        sample["sigma_mps"] = numpyro.sample(
+            "sigma_mps", dist.Gamma(2.0, 2.0 / config.NOISE_PRIORS["sigma_speed_mean_mps"]))
     if problem.noise == "integrated":
         # Gamma(2) vanishes at 0: measured inputs are never noise-free, and the boundary-avoiding
         # prior removes the funnel at q -> 0 where the coefficients' posterior narrows

@@ -684,7 +684,8 @@ def remedy(sampler: config.SamplerConfig, failed: list[str]) -> config.SamplerCo
 
     Divergences: the step size was too large for the curvature met (with few runs, where the
     integrated-noise intensity q is small and the coefficients' posterior narrows with it), so
-    the target acceptance rises to 0.95 (0.99 when it already was 0.95 or more).  R-hat, ESS,
+    the target acceptance rises to 0.99 (measured on thesis case 14, one pair: 10 divergences
+    of 2000 draws at 0.8, 3 at 0.95, none at 0.99, for 2.2x the leapfrog steps of 0.8).  R-hat, ESS,
     E-BFMI, tree depth: the chains had too few draws or too short an adaptation, so warm-up and
     draws double.  A new seed makes the retry's chains independent of the first run's.
     """
@@ -692,7 +693,7 @@ def remedy(sampler: config.SamplerConfig, failed: list[str]) -> config.SamplerCo
         return None
     changes: dict[str, Any] = {"seed": sampler.seed + 1, "retry": False}
     if "divergences" in failed:
-        changes["target_accept"] = 0.95 if sampler.target_accept < 0.95 else 0.99
+        changes["target_accept"] = max(sampler.target_accept, 0.99)
     if any(g in failed for g in RETRY_MORE_DRAWS):
         changes["num_warmup"] = 2 * sampler.num_warmup
         changes["num_samples"] = 2 * sampler.num_samples

@@ -76,7 +76,8 @@ def posterior_predictive(fit: NutsFit, n_draws: int | None = None, seed: int = 1
         k1, k2 = jax.random.split(k)
         q = sample.get("q_mps_per_sqrt_s", jnp.zeros(()))
         walk = jnp.cumsum(q * jnp.sqrt(dt) * jax.random.normal(k1, v.shape), axis=1)
-        noise = sample["sigma_mps"][:, None] * jax.random.normal(k2, v.shape)
+        sigma = jnp.sqrt(sample["sigma_mps"] ** 2 + config.SPEED_NOISE_FLOOR_MPS**2)  # the likelihood's noise
+        noise = sigma[:, None] * jax.random.normal(k2, v.shape)
         return v, v + walk + noise
 
     draws_dict = _draw_dicts(fit, idx)

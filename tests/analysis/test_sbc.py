@@ -15,6 +15,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from bayes_roadload import config
+
 from bayes_roadload.analysis.batch import run_batch
 from bayes_roadload.analysis.sbc import (SBC_MODEL, SBC_PARAMETERS, SBC_SAMPLER, ModelDrawnCampaign, PriorDrawnCampaign,
                                          WrongEffectiveMass, draw_from_prior, rank_fractions, rank_histograms,
@@ -74,10 +76,11 @@ def test_model_drawn_campaign_follows_the_model_likelihood():
     for r in range(problem.n_runs):
         n = int(np.asarray(b.mask)[r].sum())
         resid = np.asarray(b.speed_mps)[r, :n] - v[r, :n]
-        assert resid[0] == pytest.approx(0.0, abs=5 * t["sigma_mps"][r])  # delta_0 = 0
+        assert resid[0] == pytest.approx(0.0, abs=5 * (t["sigma_mps"][r] + config.SPEED_NOISE_FLOOR_MPS))  # delta_0 = 0
         d = np.diff(resid)
         dt = np.diff(np.asarray(b.time_s)[r, :n])
-        expected = np.mean(q**2 * dt) + 2 * t["sigma_mps"][r] ** 2
+        sigma2 = t["sigma_mps"][r] ** 2 + config.SPEED_NOISE_FLOOR_MPS**2
+        expected = np.mean(q**2 * dt) + 2 * sigma2
         # the sample variance of ~n differences has relative sd ~ sqrt(2 (1 + 2 rho^2) / n),
         # rho = lag-1 correlation (at most 1/2): 5 of those
         assert np.var(d) == pytest.approx(expected, rel=5 * np.sqrt(3.0 / d.size))

@@ -270,14 +270,14 @@ def test_remedy_answers_each_failed_gate():
     base = config.SamplerConfig()
     assert remedy(base, []) is None
     div = remedy(base, ["divergences"])
-    assert div.target_accept == 0.95 and div.num_samples == base.num_samples and div.seed == base.seed + 1
-    assert remedy(dataclasses.replace(base, target_accept=0.95), ["divergences"]).target_accept == 0.99
+    assert div.target_accept == 0.99 and div.num_samples == base.num_samples and div.seed == base.seed + 1
+    assert remedy(dataclasses.replace(base, target_accept=0.995), ["divergences"]).target_accept == 0.995
     for gate in ("r_hat", "ess_bulk", "ess_tail", "bfmi", "tree_depth"):
         more = remedy(base, [gate])
         assert (more.num_warmup, more.num_samples) == (2 * base.num_warmup, 2 * base.num_samples)
         assert more.target_accept == base.target_accept
     both = remedy(base, ["divergences", "r_hat"])
-    assert both.target_accept == 0.95 and both.num_samples == 2 * base.num_samples
+    assert both.target_accept == 0.99 and both.num_samples == 2 * base.num_samples
     assert not both.retry  # one retry only
 
 
