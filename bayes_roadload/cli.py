@@ -148,22 +148,31 @@ def _fit_options(args, runs=None):
 
     return FitOptions(method=args.method, pooling=args.pooling, noise=args.noise, robust=bool(args.robust),
                       validity=args.validity, steady_wind=args.steady_wind, compare=args.compare,
-                      undriven=bool(args.undriven), sampler=_sampler(args), runs=runs)
+                      undriven=bool(args.undriven), sampler=_sampler(args), runs=runs,
+                      type_b=not args.no_type_b)
 
 
 def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None):
     """NUTS fit of a campaign of kind ``entry``, its fit directory (:func:`~bayes_roadload.output.
     write_fit_dir`) and the posterior table against the truth of a simulated campaign."""
+    from .analysis.budget import format_budget, propagate_type_b
     from .inference.results import format_posterior_table
     from .output import fit_record, write_fit_dir
 
     fit = entry.fit(campaign, spec, options)
     report = entry.report(fit, campaign)
     tables = entry.extras(fit, campaign, report.summary, options)
-    written = write_fit_dir(report, out, record=fit_record(fit, campaign_path), extras=tables)
+    record = fit_record(fit, campaign_path)
+    record["type_b"] = bool(entry.type_b and options.type_b)
+    if record["type_b"]:
+        report, budget, _ = propagate_type_b(report, campaign, spec, seed=options.sampler.seed)
+        tables = dict(tables, **{"budget.csv": budget})
+    written = write_fit_dir(report, out, record=record, extras=tables)
     truth = fit.problem.truth_values(campaign.truth)
-    return fit, report, tables, written, truth, format_posterior_table(report.summary, report.diagnostics,
-                                                                       truth or None)
+    text = format_posterior_table(report.summary, report.diagnostics, truth or None)
+    if "budget.csv" in tables:
+        text += "\n\n" + format_budget(tables["budget.csv"])
+    return fit, report, tables, written, truth, text
 
 
 def _undriven_values(arg: str) -> tuple[float, float]:
@@ -471,6 +480,8 @@ def _cmd_demo(args) -> int:
               f"{len(inside)} quantities" + (f"; they miss it for {', '.join(missed)}." if missed else ".")
               + " (Expected: about 1 in 20 misses; docs/calibration.md measures how often over many campaigns.)")
     print("\n".join(line for line in table.splitlines()[:2] if line.startswith(("!!", "NUTS"))))
+    if "Uncertainty budget" in table:
+        print("\n" + table[table.index("Uncertainty budget"):])
     fit_dir = out / "fit_nuts"
     html_path, _ = render_report(fit_dir)
     print(f"\nCampaign, least-squares fit (fit_lsq/) and posterior (fit_nuts/, report {html_path.name}) written "
@@ -734,6 +745,10 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--rotating-inertia-known", action="store_true",
                    help="with --standard j2263: the effective mass is measured, not the 1.03 x test mass convention")
     f.add_argument("--no-report", action="store_true", help="do not render report.html / report.md")
+    f.add_argument("--no-type-b", action="store_true",
+                   help="leave the Type B uncertainty of the declared values and instruments (vehicle.toml "
+                        "[uncertainty], docs/calibration.md) out of the intervals and write no budget.csv "
+                        "(default: added, speed traces)")
     f.set_defaults(func=_cmd_fit)
     from .analysis.fleet import add_batch_parser
 

@@ -104,6 +104,11 @@ def test_fit_nuts_writes_outputs_and_flags_gates(campaign_dir, tmp_path, capsys)
     assert {"AD", "BD", "CD0", "F50_N"} <= set(summary["parameter"])
     assert (out / "posterior.nc").exists() and (out / "runs_summary.csv").exists()
     assert (out / "report.html").exists() and (out / "report.md").exists()  # every fit reports
+    # the Type B budget: written, announced, and its shares of each quantity sum to 1
+    budget = pd.read_csv(out / "budget.csv")
+    f50 = budget[budget["quantity"] == "F50_N"]
+    assert {"data", "mass_kg"} <= set(f50["source"]) and f50["variance_share"].sum() == pytest.approx(1.0)
+    assert "Uncertainty budget" in printed and json.loads((out / "fit.json").read_text())["type_b"] is True
 
 
 def test_sampler_options_reach_the_sampler():

@@ -190,6 +190,9 @@ class FitJob:
     derived : tuple of str
         Road-load quantities recorded besides the free parameters
         (:data:`~bayes_roadload.inference.results.DERIVED` names).
+    type_b : bool
+        NUTS only: add the Type B uncertainty of the declared values and instruments to the
+        draws before the intervals are read, as ``fit`` does (:mod:`.budget`).
     start : mapping, optional
         Laplace only: starting values of the free parameters instead of the least-squares
         start.
@@ -207,6 +210,7 @@ class FitJob:
     method: str = "nuts"
     derived: tuple[str, ...] = DERIVED_QUANTITIES
     start: Mapping[str, float] | None = None
+    type_b: bool = True
 
     def __post_init__(self):
         if not all(0.0 < lv < 1.0 for lv in self.levels):
@@ -252,6 +256,8 @@ def _interval_fields(name: str, draws: np.ndarray, truth: float | None,
 def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
     from ..inference.results import diagnostics, summary_table, to_inference_data, truth_derived
 
+    from .budget import BUDGET_QUANTITIES, add_type_b_to_idata, type_b_sensitivities
+
     problem = fit.problem
     truth = campaign.truth or {}
     idata = to_inference_data(fit, predictive=False)
@@ -259,10 +265,15 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
     diag = diagnostics(fit, idata, summary)
     rows = summary.set_index("parameter")
     rec: dict[str, Any] = {"parameters": ",".join(problem.free),
-                           "rank_draws": int(np.asarray(fit.samples[problem.free[0]]).size)}
+                           "rank_draws": int(np.asarray(fit.samples[problem.free[0]]).size), "type_b": job.type_b}
+    if job.type_b:  # the draws every interval below is read from get the Type B uncertainty (analysis.budget)
+        typeb = type_b_sensitivities(campaign, problem.spec,
+                                     [q for q in BUDGET_QUANTITIES if q in idata.posterior])
+        add_type_b_to_idata(idata, typeb, seed=job.sampler.seed)
+        rec["time_type_b_s"] = typeb.time_s
     for name in problem.free:
         t = truth.get(name)
-        rec.update(_interval_fields(name, fit.samples[name], t if isinstance(t, (int, float)) else None,
+        rec.update(_interval_fields(name, idata.posterior[name].values, t if isinstance(t, (int, float)) else None,
                                     job.levels))
         rec[f"{name}_r_hat"] = float(rows.loc[name, "r_hat"])
         rec[f"{name}_ess_bulk"] = float(rows.loc[name, "ess_bulk"])

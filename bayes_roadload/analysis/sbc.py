@@ -247,7 +247,9 @@ def sbc_jobs(n_campaigns: int, *, seed0: int = 0, pairs: int = 1, model: str = S
         factory: Callable[[], Campaign] = recipe(seed, pairs=pairs, model=model, settings=settings)
         if control_factor is not None:
             factory = WrongEffectiveMass(factory, float(control_factor))
-        jobs.append(FitJob(f"sbc-{arm}-{seed}", factory, model=model,
+        # type_b=False: the campaigns' declared values are exact, and SBC checks the posterior of the
+        # model as sampled (the Type B part is checked on the independent simulator, analysis.calibration)
+        jobs.append(FitJob(f"sbc-{arm}-{seed}", factory, model=model, type_b=False,
                            sampler=dataclasses.replace(sampler, seed=seed),
                            tags={"arm": arm, "mass_factor": 1.0 if control_factor is None else float(control_factor)}))
     return jobs

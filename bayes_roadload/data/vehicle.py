@@ -2,7 +2,8 @@
 
 Every kind of campaign but the wheel spin-down (whose ``[spindown]`` table is read by
 :mod:`~bayes_roadload.data.spindown`) has a ``vehicle.toml`` with ``[vehicle]`` (SI units),
-optionally ``[anemometer]``, ``[tunnel]`` and ``[meta]``; the format is in
+optionally ``[anemometer]``, ``[tunnel]``, ``[uncertainty]`` (Type B standard uncertainties,
+:mod:`.uncertainty`, carried in the campaign's ``meta["uncertainty"]``) and ``[meta]``; the format is in
 ``docs/data-format.md``.  Reading validates and refuses with the file's name and the key.
 """
 
@@ -20,6 +21,7 @@ import numpy as np
 
 from .. import config
 from .checks import CampaignError, refuse
+from .uncertainty import UNCERTAINTY_TABLE, uncertainty_from_toml
 
 VEHICLE_FILE = "vehicle.toml"
 VEHICLE_KEYS = ("mass_kg", "effective_mass_kg", "frontal_area_m2", "rolling_radius_m", "rotating_inertia_kgm2",
@@ -111,7 +113,10 @@ def vehicle_from_toml(doc: Mapping[str, Any], where: str) -> tuple[Vehicle, Anem
         tunnel = dict(tunnel)
         if ("yaw_deg" in tunnel) != ("cd" in tunnel):
             refuse(where, "[tunnel]", None, "a C_D(yaw) table needs both yaw_deg and cd")
-    return vehicle, anem, tunnel, dict(doc.get("meta", {}))
+    meta = dict(doc.get("meta", {}))
+    if UNCERTAINTY_TABLE in doc:  # Type B standard uncertainties (data.uncertainty), carried in meta
+        meta[UNCERTAINTY_TABLE] = uncertainty_from_toml(doc[UNCERTAINTY_TABLE], where)
+    return vehicle, anem, tunnel, meta
 
 
 def read_toml_file(path: str | os.PathLike) -> dict:
@@ -166,5 +171,7 @@ def vehicle_toml(c) -> str:
     lines += ["", "[anemometer]",
               f"airspeed_factor = {toml_value(c.anemometer.airspeed_factor)}",
               f"yaw_factor = {toml_value(c.anemometer.yaw_factor)}"]
-    lines += toml_table("tunnel", c.tunnel) + toml_table("meta", c.meta)
+    meta = {k: v for k, v in c.meta.items() if k != UNCERTAINTY_TABLE}
+    lines += (toml_table("tunnel", c.tunnel) + toml_table("meta", meta)
+              + toml_table(UNCERTAINTY_TABLE, c.meta.get(UNCERTAINTY_TABLE)))
     return "\n".join(lines) + "\n"

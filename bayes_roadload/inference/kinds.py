@@ -39,7 +39,7 @@ class FitOptions:
 
     ``runs``: the run ids to fit (after validity rejection), None for all; ``compare``: a
     coastdown fit directory a steady-state fit is compared with; ``undriven``: ``--undriven``
-    was given."""
+    was given; ``type_b``: add the Type B uncertainty where the kind has it (``--no-type-b``)."""
 
     method: str = "nuts"
     pooling: str = "pooled"
@@ -51,6 +51,7 @@ class FitOptions:
     undriven: bool = False
     sampler: config.SamplerConfig = config.DEFAULT_SAMPLER
     runs: list | None = None
+    type_b: bool = True
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,9 @@ class KindEntry:
     diagnosis : the sim-to-real diagnosis family of ``diagnose`` ("traces": one MAP fit with
         linearised candidates; "band_times": candidates refitted by NUTS), None when none
         applies; ``diagnosis_model`` its default model.
+    type_b : the Type B uncertainty of the test's declared values and instruments is added to
+        the draws, with ``budget.csv`` (:mod:`bayes_roadload.analysis.budget`; its sensitivities
+        come from least-squares refits, so the kind needs ``lsq``).
     """
 
     name: str
@@ -95,6 +99,7 @@ class KindEntry:
     driveline_channel: Callable[[Any], Any] | None = None
     diagnosis: str | None = None
     diagnosis_model: str | None = None
+    type_b: bool = False
 
 
 # ----------------------------------------------------------------------------- option checks
@@ -204,7 +209,7 @@ def _steady_default_model(campaign, o: FitOptions) -> str:
 KINDS: dict[str, KindEntry] = {e.name: e for e in (
     KindEntry("traces", "speed-trace", Campaign, lambda c, o: "four_term", _check_traces, _fit_traces,
               trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
-              diagnosis_model="three_term"),
+              diagnosis_model="three_term", type_b=True),
     KindEntry("intervals", "interval", IntervalCampaign, lambda c, o: "split_f0_f2", _check_intervals,
               _fit_intervals, interval_report, validity_default="reject", diagnosis="band_times",
               diagnosis_model="split_f0_f2"),

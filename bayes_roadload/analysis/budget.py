@@ -1,0 +1,182 @@
+"""Type B uncertainty in every reported quantity, and the uncertainty budget (GUM 5.1.2).
+
+The test's own uncertainty sources (:mod:`bayes_roadload.data.uncertainty`: declared mass and
+rotating inertia, the anemometer's airspeed factor and yaw, speed, temperature and pressure
+sensors, the driveline transducer) are not informed by the coastdown: the posterior holds them
+fixed at their declared values.  They are marginalised to first order after the fit:
+
+* **sensitivities** ``c_{x,s} = dx/ds`` of every reported quantity x (free coefficients and the
+  derived road load) to every source s, by central differences of the joint least-squares
+  estimate (:func:`~bayes_roadload.inference.lsq.fit_lsq`, one group: the estimate the
+  posterior centres on) on the campaign with the source shifted by ``+-u_s``
+  (:meth:`~bayes_roadload.data.uncertainty.UncertaintySource.apply`);
+* **draws**: every posterior draw gets ``sum_s c_{x,s} delta_s`` with ``delta_s ~ N(0, u_s^2)``
+  drawn once per draw and shared by all quantities (so their correlations through a common
+  source are kept) -- the law of propagation of uncertainty (GUM eq. 10) applied draw by draw;
+* **budget**: the share of each source in the variance of each quantity,
+  ``c_{x,s}^2 u_s^2 / (var_data + sum_s c_{x,s}^2 u_s^2)``, and the share of the data (the
+  posterior's own variance).  The shares sum to 1.
+
+A source the model samples itself (a free ``airspeed_factor`` or ``yaw_factor`` of a
+``*_calibrated`` model) is left to the posterior; a source the campaign has nothing for (no
+temperature channel, no driveline channel) is not applicable.  First order and independent
+sources: a source whose effect is not linear over +-2 u, or two sources that share an error,
+are outside this budget.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+
+from ..data.uncertainty import SOURCES, standard_uncertainties
+from ..inference.lsq import fit_lsq
+from ..inference.results import SUMMARY_COLUMNS
+from ..inference.spec import ModelSpec, load_model_spec
+
+SAMPLED_BY_MODEL = {"airspeed_factor_rel": "airspeed_factor", "yaw_factor_rel": "yaw_factor"}
+"""Sources that a model can sample itself: source key -> the model's free parameter."""
+BUDGET_QUANTITIES = ("AD", "BD", "CD0", "KD", "At", "Bt", "Ct", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
+"""Quantities whose Type B sensitivities are computed (those the model reports)."""
+BUDGET_COLUMNS = ("quantity", "source", "standard_uncertainty", "sensitivity", "variance", "variance_share", "note")
+
+
+@dataclass
+class TypeB:
+    """Sensitivities of a campaign's reported quantities to its Type B sources.
+
+    ``u``: source -> standard uncertainty (key's unit); ``sensitivity``: quantity -> source ->
+    dx/ds; ``notes``: source -> why it is not propagated ("not applicable", "sampled by the
+    model", "switched off"); ``time_s``: the least-squares refits' wall time."""
+
+    u: dict[str, float]
+    sensitivity: dict[str, dict[str, float]]
+    notes: dict[str, str] = field(default_factory=dict)
+    time_s: float = 0.0
+
+    @property
+    def sources(self) -> list[str]:
+        return [s for s in self.u if s not in self.notes]
+
+
+def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[str] = BUDGET_QUANTITIES) -> TypeB:
+    """Central-difference sensitivities of the least-squares estimate (module docstring)."""
+    spec = load_model_spec(spec) if isinstance(spec, str) else spec
+    t0 = time.perf_counter()
+    u = standard_uncertainties(campaign)
+    notes: dict[str, str] = {}
+    sens: dict[str, dict[str, float]] = {}
+    for key, source in SOURCES.items():
+        if u[key] <= 0.0:
+            notes[key] = "switched off ([uncertainty] = 0)"
+            continue
+        if SAMPLED_BY_MODEL.get(key) in spec.free:
+            notes[key] = f"sampled by the model ({SAMPLED_BY_MODEL[key]} is free)"
+            continue
+        plus, minus = source.apply(campaign, u[key]), source.apply(campaign, -u[key])
+        if plus is None or minus is None:
+            notes[key] = "not applicable (the campaign has no channel it acts on)"
+            continue
+        hi, lo = fit_lsq(plus, spec, grouping="all"), fit_lsq(minus, spec, grouping="all")
+        for q in quantities:
+            a, b = hi.weighted_mean.get(q), lo.weighted_mean.get(q)
+            if a is None or b is None or not (math.isfinite(a) and math.isfinite(b)):
+                continue
+            sens.setdefault(q, {})[key] = (a - b) / (2.0 * u[key])
+    return TypeB(u=u, sensitivity=sens, notes=notes, time_s=time.perf_counter() - t0)
+
+
+def type_b_draws(typeb: TypeB, shape: tuple[int, ...], seed: int = 0) -> dict[str, np.ndarray]:
+    """``delta_s`` ~ N(0, u_s^2) for every propagated source, one per draw (``shape``)."""
+    rng = np.random.default_rng([seed, 20240])
+    return {s: rng.normal(0.0, typeb.u[s], shape) for s in typeb.sources}
+
+
+def add_type_b(posterior: dict[str, np.ndarray], typeb: TypeB, seed: int = 0) -> dict[str, np.ndarray]:
+    """The draws of every quantity with a sensitivity, plus ``sum_s c_{x,s} delta_s``
+    (``posterior``: name -> [chain, draw] array; others are returned unchanged)."""
+    if not posterior:
+        return {}
+    shape = np.shape(next(iter(posterior.values())))[:2]
+    deltas = type_b_draws(typeb, shape, seed)
+    out = dict(posterior)
+    for q, row in typeb.sensitivity.items():
+        if q in out and np.ndim(out[q]) == 2:
+            out[q] = np.asarray(out[q], float) + sum(c * deltas[s] for s, c in row.items() if s in deltas)
+    return out
+
+
+def budget_table(typeb: TypeB, data_sd: dict[str, float]) -> pd.DataFrame:
+    """``budget.csv``: per quantity, a row per source (standard uncertainty, sensitivity, its
+    variance c^2 u^2 and share) and a ``data`` row (the posterior's own variance), then a row
+    per source left out with the reason."""
+    rows = []
+    for q, sd in data_sd.items():
+        row = typeb.sensitivity.get(q, {})
+        var = {s: (c * typeb.u[s]) ** 2 for s, c in row.items()}
+        total = sd**2 + sum(var.values())
+        rows.append({"quantity": q, "source": "data", "standard_uncertainty": math.nan, "sensitivity": math.nan,
+                     "variance": sd**2, "variance_share": sd**2 / total if total > 0 else math.nan, "note": ""})
+        for s in sorted(var, key=var.get, reverse=True):
+            rows.append({"quantity": q, "source": s, "standard_uncertainty": typeb.u[s], "sensitivity": row[s],
+                         "variance": var[s], "variance_share": var[s] / total if total > 0 else math.nan,
+                         "note": ""})
+    for s, why in typeb.notes.items():
+        rows.append({"quantity": "", "source": s, "standard_uncertainty": typeb.u[s], "sensitivity": math.nan,
+                     "variance": math.nan, "variance_share": math.nan, "note": why})
+    return pd.DataFrame(rows, columns=list(BUDGET_COLUMNS))
+
+
+def format_budget(budget: pd.DataFrame, quantities: Sequence[str] = ("F50_N", "CD0"), top: int = 3) -> str:
+    """A few lines for the terminal: each quantity's data share and its largest sources."""
+    lines = ["Uncertainty budget (share of the variance; budget.csv has every source):"]
+    for q in quantities:
+        g = budget[budget["quantity"] == q]
+        if g.empty:
+            continue
+        parts = [f"{r.source} {100 * r.variance_share:.0f} %" for r in g.head(top + 1).itertuples()]
+        lines.append(f"  {q}: " + ", ".join(parts))
+    return "\n".join(lines)
+
+
+def add_type_b_to_idata(idata, typeb: TypeB, seed: int = 0) -> list[str]:
+    """Add the Type B draws (:func:`add_type_b`) to the posterior group of ``idata`` in place;
+    returns the quantities changed.  The group's attribute ``type_b`` names them."""
+    post = idata.posterior
+    names = [q for q in typeb.sensitivity if q in post and post[q].ndim == 2]
+    new = add_type_b({q: post[q].values for q in names}, typeb, seed)
+    for q in names:
+        post[q] = (post[q].dims, new[q], post[q].attrs)
+    post.attrs["type_b"] = ("first-order Type B draws added (analysis.budget): " + ", ".join(names)) if names else ""
+    return names
+
+
+def propagate_type_b(report, campaign, spec: ModelSpec | str, seed: int = 0):
+    """A fit report with the Type B uncertainty in its draws and summary, and its budget.
+
+    Returns ``(report, budget, typeb)``: the report's posterior draws of every quantity with a
+    sensitivity get the Type B draws, its summary rows are recomputed from them (mean, sd,
+    quantiles; R-hat and ESS stay the sampler's, the added draws being independent), and
+    ``budget`` is :func:`budget_table` with the data's own sd from the summary before."""
+    quantities = [q for q in BUDGET_QUANTITIES if q in report.idata.posterior]
+    typeb = type_b_sensitivities(campaign, spec, quantities)
+    summary = report.summary.set_index("parameter")
+    data_sd = {q: float(summary.loc[q, "sd"]) for q in quantities if q in summary.index}
+    changed = add_type_b_to_idata(report.idata, typeb, seed)
+    rows = report.summary.copy()
+    for q in changed:
+        x = np.asarray(report.idata.posterior[q].values, float).ravel()
+        lo, mid, hi = np.percentile(x, [2.5, 50.0, 97.5])
+        i = rows.index[rows["parameter"] == q]
+        rows.loc[i, ["mean", "sd", "q2.5", "q50", "q97.5"]] = [x.mean(), x.std(ddof=1), lo, mid, hi]
+    diag = dict(report.diagnostics or {})
+    diag["type_b"] = {"sources": typeb.sources, "left_out": typeb.notes, "time_s": round(typeb.time_s, 3),
+                      "quantities": changed}
+    new = dataclasses.replace(report, summary=rows[list(SUMMARY_COLUMNS)], diagnostics=diag)
+    return new, budget_table(typeb, data_sd), typeb
