@@ -26,7 +26,7 @@ from .uncertainty import UNCERTAINTY_TABLE, uncertainty_from_toml
 VEHICLE_FILE = "vehicle.toml"
 VEHICLE_KEYS = ("mass_kg", "effective_mass_kg", "frontal_area_m2", "rolling_radius_m", "rotating_inertia_kgm2",
                 "length_m")
-ANEMOMETER_KEYS = ("airspeed_factor", "yaw_factor")
+ANEMOMETER_KEYS = ("airspeed_factor", "yaw_factor", "distance_constant_m")
 
 
 @dataclass(frozen=True)
@@ -46,10 +46,14 @@ class Vehicle:
 
 @dataclass(frozen=True)
 class Anemometer:
-    """``[anemometer]``: true = factor x reading (thesis section 4.7.3)."""
+    """``[anemometer]``: true = factor x reading (thesis section 4.7.3); ``distance_constant_m``
+    the cup's (or propeller's) distance constant d, first order: d(reading)/dt = (a - reading)
+    a / d (thesis 4.7: 1.5 m), 0 when not stated -- then the analysis takes the reading as the
+    airspeed, else it undoes the lag (the ``anemometer_lag`` term, :mod:`bayes_roadload.physics.effects`)."""
 
     airspeed_factor: float = 1.0
     yaw_factor: float = 1.0
+    distance_constant_m: float = 0.0
 
 
 def validate_vehicle(v: Vehicle, where: str = VEHICLE_FILE) -> None:
@@ -104,10 +108,14 @@ def vehicle_from_toml(doc: Mapping[str, Any], where: str) -> tuple[Vehicle, Anem
     for k in a:
         if k not in ANEMOMETER_KEYS:
             refuse(where, f"[anemometer] {k}", None, f"unknown key; known: {', '.join(ANEMOMETER_KEYS)}")
-    anem = Anemometer(float(a.get("airspeed_factor", 1.0)), float(a.get("yaw_factor", 1.0)))
-    for k in ANEMOMETER_KEYS:
+    anem = Anemometer(float(a.get("airspeed_factor", 1.0)), float(a.get("yaw_factor", 1.0)),
+                      float(a.get("distance_constant_m", 0.0)))
+    for k in ("airspeed_factor", "yaw_factor"):
         if not 0.5 <= getattr(anem, k) <= 2.0:
             refuse(where, f"[anemometer] {k}", None, f"{getattr(anem, k)} is outside [0.5, 2]")
+    if not 0.0 <= anem.distance_constant_m <= 20.0:
+        refuse(where, "[anemometer] distance_constant_m", None,
+               f"{anem.distance_constant_m} is outside [0, 20] m (cup anemometers: 1-5 m)")
     tunnel = doc.get("tunnel")
     if tunnel is not None:
         tunnel = dict(tunnel)
@@ -171,6 +179,8 @@ def vehicle_toml(c) -> str:
     lines += ["", "[anemometer]",
               f"airspeed_factor = {toml_value(c.anemometer.airspeed_factor)}",
               f"yaw_factor = {toml_value(c.anemometer.yaw_factor)}"]
+    if c.anemometer.distance_constant_m > 0.0:
+        lines.append(f"distance_constant_m = {toml_value(c.anemometer.distance_constant_m)}")
     meta = {k: v for k, v in c.meta.items() if k != UNCERTAINTY_TABLE}
     lines += (toml_table("tunnel", c.tunnel) + toml_table("meta", meta)
               + toml_table(UNCERTAINTY_TABLE, c.meta.get(UNCERTAINTY_TABLE)))

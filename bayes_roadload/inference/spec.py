@@ -292,6 +292,9 @@ class ModelSpec:
             options["aero_drag_table"] = {"yaw_deg": tuple(float(x) for x in table["yaw_deg"]),
                                           "cd": tuple(float(x) for x in table["cd"])}
         air = self.resolve_air(campaign)
+        cup_lag = float(campaign.anemometer.distance_constant_m) if air == "measured" else 0.0
+        if cup_lag > 0.0 and "anemometer_lag" not in names:
+            names.append("anemometer_lag")  # the campaign states its cup's lag: undo it (eq. 2.26, thesis 4.7)
         model = model_from_names(names, air=air, **options)
 
         used = set(model.parameter_names)
@@ -304,6 +307,8 @@ class ModelSpec:
         if air == "measured":
             values["airspeed_factor"] = float(campaign.anemometer.airspeed_factor)
             values["yaw_factor"] = float(campaign.anemometer.yaw_factor)
+        if cup_lag > 0.0 and "cup_lag_m" not in self.free:
+            values["cup_lag_m"] = cup_lag
         for p, v in self.fixed.items():
             if p not in used:
                 continue  # e.g. CL0 when the campaign has no tunnel lift: nothing to fix

@@ -46,7 +46,7 @@ import pandas as pd
 
 from .. import config
 from .. import thesis
-from ..data.campaign import Campaign, Vehicle
+from ..data.campaign import Anemometer, Campaign, Vehicle
 from ..physics.atmosphere import air_density_kgpm3
 from ..physics.model import DragModel, full_model, simplified_model
 from ..physics.terms import Conditions, DrivelinePolynomial
@@ -581,4 +581,7 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
               "KL": float(settings.full_model_params["KL"]),
               "yaw_deg": list(thesis.THESIS_TUNNEL_TABLE["yaw_deg"]),
               "cd": list(thesis.THESIS_TUNNEL_TABLE["cd"])}
-    return Campaign(runs_df, settings.vehicle, tunnel=tunnel, truth=truth, meta=meta)
+    # a campaign with a lagging cup states its distance constant, as a data sheet would
+    anemometer = Anemometer(distance_constant_m=float(settings.sensors.cup_distance_constant_m)
+                            if sc.dynamics else 0.0)
+    return Campaign(runs_df, settings.vehicle, anemometer, tunnel=tunnel, truth=truth, meta=meta)

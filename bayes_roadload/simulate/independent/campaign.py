@@ -318,5 +318,9 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     truth.update(case="independent", model="independent simulator", per_run=per_run, meta=_json_safe(meta))
     vmeta = {"simulator": "independent", "seed": int(seed), "pairs": n_pairs, "category": base.category,
              "sample_rate_hz": rate}
-    return Campaign(runs, declared, Anemometer(airspeed_factor=declared_air, yaw_factor=declared_yaw),
+    # the cup's distance constant as its data sheet states it (the speed-up one: the slower
+    # slow-down of an over-speeding cup is not on the sheet)
+    stated_d = float(dyn.distance_constant_m) if dyn is not None else 0.0
+    return Campaign(runs, declared, Anemometer(airspeed_factor=declared_air, yaw_factor=declared_yaw,
+                                               distance_constant_m=stated_d),
                     tunnel=tunnel, truth=_json_safe(truth), meta=vmeta)
