@@ -245,9 +245,8 @@ class SamplerConfig:
     seed : PRNG seed.
     progress_bar : show numpyro's progress bar.
     retry : when the first run fails a gate, run the sampler once more with the remedy for
-        that gate (:func:`bayes_roadload.inference.nuts.remedy`): divergences -> target
-        acceptance 0.99; R-hat, ESS, E-BFMI or tree depth -> twice the
-        warm-up and the draws.  The retry, why, and the first run's time are recorded in
+        that gate (:func:`bayes_roadload.inference.nuts.remedy`): twice the warm-up and the
+        draws, and after divergences target acceptance 0.99.  The retry, why, and the first run's time are recorded in
         ``diagnostics.json`` (``retries``); the gates are then those of the second run.  Only
         fits with at least the default warm-up and draws retry: fewer is a quick look whose
         ESS gates are expected to fail, and a retry would spend the time it was meant to save.

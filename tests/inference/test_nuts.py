@@ -270,7 +270,7 @@ def test_remedy_answers_each_failed_gate():
     base = config.SamplerConfig()
     assert remedy(base, []) is None
     div = remedy(base, ["divergences"])
-    assert div.target_accept == 0.99 and div.num_samples == base.num_samples and div.seed == base.seed + 1
+    assert div.target_accept == 0.99 and div.num_samples == 2 * base.num_samples and div.seed == base.seed + 1
     assert remedy(dataclasses.replace(base, target_accept=0.995), ["divergences"]).target_accept == 0.995
     for gate in ("r_hat", "ess_bulk", "ess_tail", "bfmi", "tree_depth"):
         more = remedy(base, [gate])
