@@ -8,12 +8,14 @@ from numpyro import handlers
 
 from scipy import stats
 
+from bayes_roadload import config
 from bayes_roadload.inference.bayes import (
     build_problem,
     coastdown_model,
     integrated_speed,
     linearise_run_effects,
     run_log_likelihood,
+    speed_noise,
     speed_residuals,
 )
 from bayes_roadload.inference.nuts import initial_values
@@ -70,7 +72,7 @@ def test_hierarchical_likelihood_is_the_first_order_marginal(small_campaign):
         jac = np.stack(cols, axis=1)
         np.testing.assert_allclose(jac, np.asarray(p.run_jacobian)[r, :n], rtol=1e-5, atol=1e-9)
         t = np.asarray(b.time_s[r, :n]) - float(b.time_s[r, 0])
-        q, sig = float(sample["q_mps_per_sqrt_s"]), float(sample["sigma_mps"][r])
+        q, sig = float(sample["q_mps_per_sqrt_s"]), float(speed_noise(sample)[r])  # sigma with the floor
         tau2 = np.array([5e-4, 3e-5, 0.01]) ** 2
         cov = q**2 * np.minimum.outer(t, t) + sig**2 * np.eye(n) + jac @ np.diag(tau2) @ jac.T
         ref = stats.multivariate_normal(np.zeros(n), cov).logpdf(base[r, :n])
@@ -87,8 +89,12 @@ def test_factor_is_the_sum_of_run_likelihoods(small_campaign):
     # each run's term is the Kalman likelihood of its residual
     resid = speed_residuals(p, sample)
     b = p.batch
-    one = local_level_loglik(resid[1], b.time_s[1], b.mask[1], sample["sigma_mps"][1], sample["q_mps_per_sqrt_s"])
-    assert float(per_run[1]) == pytest.approx(float(one), rel=1e-12)
+    sigma = np.sqrt(float(sample["sigma_mps"][1]) ** 2 + config.SPEED_NOISE_FLOOR_MPS**2)
+    one = local_level_loglik(resid[1], b.time_s[1], b.mask[1], sigma, sample["q_mps_per_sqrt_s"])
+    # sigma rounded once in numpy, once in JAX: an ulp in sigma^2 over ~10^3 terms of a
+    # log likelihood of ~10^6 is ~10^-12 relative
+    assert float(per_run[1]) == pytest.approx(float(one), rel=1e-10)
+    assert float(speed_noise(sample)[1]) == pytest.approx(sigma, rel=1e-15)
 
 
 def test_white_and_robust_variants(small_campaign):

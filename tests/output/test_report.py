@@ -110,7 +110,8 @@ def fits(tmp_path_factory):
 
 def test_sections_follow_the_files(fits):
     expected = {
-        "nuts": {"header", "gates", "posterior", "trace", "pairs", "road-load", "residuals", "table-runs-summary"},
+        "nuts": {"header", "gates", "posterior", "trace", "pairs", "road-load", "residuals", "table-runs-summary",
+                 "table-budget"},
         "lsq": {"header", "gates", "posterior", "road-load", "table-per-group"},
         "intervals": {"header", "gates", "posterior", "trace", "pairs", "road-load", "residuals", "validity",
                       "table-runs-summary"},
