@@ -261,7 +261,7 @@ def _after_fit(args, out: Path, campaign) -> None:
 
 
 def _cmd_fit(args) -> int:
-    from .inference.kinds import kind_of
+    from .inference.kinds import kind_of, resolve_pooling
     from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table
     from .output import write_lsq_fit_dir
 
@@ -269,8 +269,9 @@ def _cmd_fit(args) -> int:
     out = Path(args.out)
     entry = kind_of(campaign)
     options = _fit_options(args)
-    entry.check_options(options)
     spec = _model_for(args, entry.default_model(campaign, options))
+    options = resolve_pooling(entry, campaign, spec, options)
+    entry.check_options(options)
     runs = _validity(entry, campaign, args, out)
     if args.method == "lsq":
         if args.pooling == "hierarchical":
@@ -287,7 +288,8 @@ def _cmd_fit(args) -> int:
         return 0
     for line in entry.preamble(campaign):
         print(line)
-    fit, report, tables, written, _, table = _fit_and_write(entry, campaign, spec, _fit_options(args, runs), out,
+    fit, report, tables, written, _, table = _fit_and_write(entry, campaign, spec,
+                                                            dataclasses.replace(options, runs=runs), out,
                                                             args.campaign)
     print(table)
     for line in entry.notes(fit, campaign, tables):
@@ -431,7 +433,7 @@ def _cmd_demo(args) -> int:
     from .analysis.standards import format_standard, run_standard
     from .data import save_campaign
     from .output.report import render_report
-    from .inference.kinds import KINDS, FitOptions
+    from .inference.kinds import KINDS, FitOptions, resolve_pooling
     from .inference.lsq import fit_lsq
     from .output import write_lsq_fit_dir
     from .inference.spec import load_model_spec
@@ -451,10 +453,11 @@ def _cmd_demo(args) -> int:
     print(f"Fitting model {args.model}: classical per-pair least squares, then NUTS over all runs jointly ...")
     lsq = fit_lsq(campaign, args.model, grouping="pair")
     write_lsq_fit_dir(lsq, out / "fit_lsq")
-    _, report, _, _, truth, table = _fit_and_write(
-        KINDS["traces"], campaign, load_model_spec(args.model),
-        FitOptions(pooling=args.pooling, noise=args.noise, robust=bool(args.robust), sampler=_sampler(args)),
-        out / "fit_nuts", out / "campaign")
+    spec = load_model_spec(args.model)
+    options = resolve_pooling(KINDS["traces"], campaign, spec, FitOptions(
+        pooling=args.pooling, noise=args.noise, robust=bool(args.robust), sampler=_sampler(args)))
+    _, report, _, _, truth, table = _fit_and_write(KINDS["traces"], campaign, spec, options, out / "fit_nuts",
+                                                   out / "campaign")
     summary, diag = report.summary, report.diagnostics
     post = summary.set_index("parameter")
     print()
@@ -676,8 +679,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="simulate with the basic drag model (eq. 6.1, the physics of the analysis "
                         "model) or with the case's own (case 14: the full model, eq. 6.2)")
     d.add_argument("--out", default=None, help="directory for the campaign and fits (default: a temp dir)")
+    d.add_argument("--pooling", choices=("auto", "pooled", "hierarchical"), default="auto",
+                   help="one set of coefficients for every run, or run-level AD, BD, CD0 around population "
+                        "means; auto: as `fit` (hierarchical here; docs/calibration.md, test-to-test variation)")
     _add_nuts_options(d, seed=1)
-    d.set_defaults(func=_cmd_demo, pooling="pooled", noise="integrated", robust=False)
+    d.set_defaults(func=_cmd_demo, noise="integrated", robust=False)
 
     s = sub.add_parser("simulate", help="simulate a campaign of a thesis table 6.7 case")
     s.add_argument("--kind", choices=tuple(SIMULATIONS), default="coastdown",
@@ -709,8 +715,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                 "four_term (speed traces), split_f0_f2 (interval campaigns), "
                                                 "three_term (distance-time campaigns)")
     f.add_argument("--method", choices=("nuts", "lsq"), default="nuts")
-    f.add_argument("--pooling", choices=("pooled", "hierarchical"), default="pooled",
-                   help="nuts: one set of coefficients, or run-level AD, BD, CD0 around population means")
+    f.add_argument("--pooling", choices=("auto", "pooled", "hierarchical"), default="auto",
+                   help="nuts: one set of coefficients, or run-level AD, BD, CD0 around population means; auto: "
+                        "hierarchical for speed traces of two or more runs (docs/calibration.md), else pooled")
     f.add_argument("--noise", choices=("integrated", "white"), default="integrated",
                    help="nuts: residual model ('integrated': white noise plus integrated input noise)")
     f.add_argument("--robust", action="store_true", help="nuts: Student-t innovations (outlier-robust)")

@@ -377,6 +377,8 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
     """
     from ..inference.laplace import fit_laplace
     from ..inference.nuts import fit_nuts
+    from ..inference.kinds import FitOptions, traces_default_pooling
+    from ..inference.spec import load_model_spec
 
     rec = _job_fields(job)
     rec["error"] = None
@@ -397,11 +399,16 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
                 if key in campaign.meta and key not in rec:
                     rec[key] = campaign.meta[key]
             t0 = time.perf_counter()
+            pooling = job.pooling
+            if pooling == "auto":  # as `fit`: the speed-trace kind's default for this campaign and model
+                pooling = traces_default_pooling(campaign, load_model_spec(job.model),
+                                                 FitOptions(method="nuts", robust=job.robust))
+                rec["pooling"] = pooling
             if job.method == "laplace":
-                fit = fit_laplace(campaign, job.model, pooling=job.pooling, noise=job.noise, robust=job.robust,
+                fit = fit_laplace(campaign, job.model, pooling=pooling, noise=job.noise, robust=job.robust,
                                   seed=job.sampler.seed, start=None if job.start is None else dict(job.start))
             else:
-                fit = fit_nuts(campaign, job.model, pooling=job.pooling, noise=job.noise, robust=job.robust,
+                fit = fit_nuts(campaign, job.model, pooling=pooling, noise=job.noise, robust=job.robust,
                                sampler=job.sampler)
             rec["time_fit_s"] = time.perf_counter() - t0
             t0 = time.perf_counter()

@@ -48,3 +48,28 @@ def test_only_speed_traces_take_least_squares_and_any_option():
     KINDS["spindown"].check_options(FitOptions(pooling="hierarchical"))
     with pytest.raises(ValueError, match="--pooling"):
         KINDS["distances"].check_options(FitOptions(pooling="hierarchical"))
+
+
+def test_auto_pooling_is_hierarchical_for_nuts_fits_of_speed_traces(small_campaign):
+    """``--pooling auto``: run-level coefficients where the hierarchical model applies (NUTS,
+    two or more runs, AD / BD / CD0 free, no robust noise, no latent wind), pooled otherwise and
+    for the other kinds; an explicit choice is kept."""
+    import dataclasses
+
+    from bayes_roadload.inference.kinds import KINDS, FitOptions, resolve_pooling
+    from bayes_roadload.inference.spec import load_model_spec
+
+    traces = KINDS["traces"]
+    spec = load_model_spec("four_term")
+    assert FitOptions().pooling == "auto"
+    assert resolve_pooling(traces, small_campaign, spec, FitOptions()).pooling == "hierarchical"
+    assert resolve_pooling(traces, small_campaign, spec, FitOptions(method="lsq")).pooling == "pooled"
+    assert resolve_pooling(traces, small_campaign, spec, FitOptions(robust=True)).pooling == "pooled"
+    assert resolve_pooling(traces, small_campaign, spec, FitOptions(pooling="pooled")).pooling == "pooled"
+    one_run = small_campaign.subset([small_campaign.run_ids[0]])
+    assert resolve_pooling(traces, one_run, spec, FitOptions()).pooling == "pooled"
+    speed_only = dataclasses.replace(small_campaign,
+                                     runs=small_campaign.runs.drop(columns=["airspeed_mps", "yaw_rad"]))
+    assert resolve_pooling(traces, speed_only, load_model_spec("speed_only_wind"), FitOptions()).pooling == "pooled"
+    for name in ("intervals", "distances", "spindown", "steady"):
+        assert KINDS[name].default_pooling(small_campaign, spec, FitOptions()) == "pooled"
