@@ -14,11 +14,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import logging
+import shlex
 import sys
 import tempfile
 from pathlib import Path
 
-from . import __version__
+from . import __version__, console
 
 EXIT_REFUSED = 2
 EXIT_GATES_FAILED = 3
@@ -37,6 +39,19 @@ COMMON_HELP = {
 }
 """Help of the options that several commands share (set where a command gives none)."""
 STANDARD_NAMES = ("gtr15", "j2263", "j1263", "cfr1066")
+WRITES_OUT = ("demo", "simulate", "fit", "fit-driveline", "dyno", "predict", "plan", "diagnose", "import-vbox")
+"""Commands whose ``--out`` directory must be empty or new (``--force`` replaces an earlier
+output there); ``report`` writes into its fit directory and ``batch`` resumes in its own."""
+OUT_MARKER = ".bayes-roadload.json"
+"""Written in every ``--out`` directory: the command line, the version and the files written
+(what ``--force`` removes before a new run)."""
+
+_output = logging.getLogger(console.OUTPUT_LOGGER)
+
+
+def echo(text: str = "") -> None:
+    """A line of a command's output (standard output through logging: ``--quiet`` silences it)."""
+    _output.info(text)
 """``--standard`` choices (:data:`bayes_roadload.analysis.standards.STANDARDS`)."""
 
 
@@ -52,7 +67,7 @@ def _simulate_spindown(args) -> int:
     _no_markers(args)
     campaign = simulate_spindown(tests_per_wheel=args.pairs, seed=args.seed)
     out = save_spindown(campaign, args.out)
-    print(f"spin-down: {len(campaign.run_ids)} runs of wheels {', '.join(campaign.wheels)}, "
+    echo(f"spin-down: {len(campaign.run_ids)} runs of wheels {', '.join(campaign.wheels)}, "
           f"{len(campaign.runs)} samples -> {out}")
     return 0
 
@@ -64,7 +79,7 @@ def _simulate_steady(args) -> int:
     _no_markers(args)
     campaign = simulate_steady(args.case, pairs=args.pairs, seed=args.seed)
     out = save_steady(campaign, args.out)
-    print(f"steady state: {len(campaign.run_ids)} runs, {len(campaign.runs)} samples -> {out}")
+    echo(f"steady state: {len(campaign.run_ids)} runs, {len(campaign.runs)} samples -> {out}")
     return 0
 
 
@@ -89,11 +104,11 @@ def _simulate_coastdown(args) -> int:
         markers = _parse_markers(args.markers)
         campaign = distance_campaign_from_traces(campaign, markers, timing_sd_s=timing_sd, seed=args.seed)
         out = save_campaign(campaign, args.out)
-        print(f"case {args.case}: {n} runs ({args.pairs} pairs{masses}) timed past {len(markers)} markers "
+        echo(f"case {args.case}: {n} runs ({args.pairs} pairs{masses}) timed past {len(markers)} markers "
               f"({markers[0]:g}-{markers[-1]:g} m, timing sd {timing_sd:g} s) -> {out / 'distances.csv'}")
         return 0
     out = save_campaign(campaign, args.out, fmt=args.format)
-    print(f"case {args.case}: {n} runs ({args.pairs} pairs{masses}), {len(campaign.runs)} samples -> {out}")
+    echo(f"case {args.case}: {n} runs ({args.pairs} pairs{masses}), {len(campaign.runs)} samples -> {out}")
     return 0
 
 
@@ -105,7 +120,7 @@ def _simulate_dyno(args) -> int:
     # a mid-size car's set coefficients (N, N/(km/h), N/(km/h)^2) and a dynamometer's own losses
     dyno = simulate_dyno((100.0, 0.5, 0.03), (10.0, 0.1, 0.002), 1500.0, speed_noise_mps=0.02, seed=args.seed)
     out = save_dyno(dyno, args.out)
-    print(f"dynamometer coastdown: {len(dyno.runs)} samples, known parasitic losses in dyno.toml -> {out}")
+    echo(f"dynamometer coastdown: {len(dyno.runs)} samples, known parasitic losses in dyno.toml -> {out}")
     return 0
 
 
@@ -137,7 +152,7 @@ def _sampler(args):
     from . import config
 
     return config.SamplerConfig(num_warmup=args.warmup, num_samples=args.draws, num_chains=args.chains,
-                                seed=args.seed, progress_bar=not args.no_progress,
+                                seed=args.seed, progress_bar=console.progress_bars(not args.no_progress),
                                 target_accept=args.target_accept,
                                 precondition="none" if args.no_precondition else "laplace")
 
@@ -152,7 +167,15 @@ def _fit_options(args, runs=None):
                       type_b=not args.no_type_b)
 
 
-def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None):
+def _provenance(args, campaign, campaign_path):
+    """``fit.json`` / ``posterior.nc`` provenance of a fit of ``campaign`` read from ``campaign_path``."""
+    from .output import fit_provenance
+
+    return fit_provenance(getattr(args, "command_line", None), campaign_path,
+                          getattr(campaign, "meta", {}).get("conversions"))
+
+
+def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None, provenance=None):
     """NUTS fit of a campaign of kind ``entry``, its fit directory (:func:`~bayes_roadload.output.
     write_fit_dir`) and the posterior table against the truth of a simulated campaign."""
     from .analysis.budget import format_budget, propagate_type_b
@@ -167,7 +190,7 @@ def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None
     if record["type_b"]:
         report, budget, _ = propagate_type_b(report, campaign, spec, seed=options.sampler.seed)
         tables = dict(tables, **{"budget.csv": budget})
-    written = write_fit_dir(report, out, record=record, extras=tables)
+    written = write_fit_dir(report, out, record=record, extras=tables, provenance=provenance)
     truth = fit.problem.truth_values(campaign.truth)
     text = format_posterior_table(report.summary, report.diagnostics, truth or None)
     if "budget.csv" in tables:
@@ -212,7 +235,8 @@ def _load_for_fit(args):
     from .data import load_campaign
 
     return load_campaign(args.campaign, wheel_inertia_kgm2=args.wheel_inertia_kgm2,
-                         rolling_radius_m=args.rolling_radius_m)
+                         rolling_radius_m=args.rolling_radius_m, speed_unit=args.speed_unit,
+                         airspeed_unit=args.airspeed_unit)
 
 
 def _validity(entry, campaign, args, out: Path):
@@ -224,7 +248,7 @@ def _validity(entry, campaign, args, out: Path):
     if mode is None:
         return None
     validity = validity_table(campaign, args.wind_limits)
-    print(format_validity(validity) + (" (reported only: every run fitted)" if mode == "report" else ""))
+    echo(format_validity(validity) + (" (reported only: every run fitted)" if mode == "report" else ""))
     out.mkdir(parents=True, exist_ok=True)
     validity.to_csv(out / "validity.csv", index=False)
     if mode == "report":
@@ -249,15 +273,15 @@ def _after_fit(args, out: Path, campaign) -> None:
         if (out / "posterior.nc").is_file():
             result, checks = run_standard(out, args.standard, campaign=campaign,
                                           rotating_inertia_known=args.rotating_inertia_known, out_dir=out)
-            print(f"\n{args.standard} result (standard_result.csv, standard_checks.csv):")
-            print(format_standard(result, checks))
+            echo(f"\n{args.standard} result (standard_result.csv, standard_checks.csv):")
+            echo(format_standard(result, checks))
         else:
-            print(f"note: --standard {args.standard} needs posterior draws (a NUTS fit); none for --method lsq")
+            echo(f"note: --standard {args.standard} needs posterior draws (a NUTS fit); none for --method lsq")
     if not args.no_report:
         from .output.report import render_report
 
         html_path, _ = render_report(out)
-        print(f"report: {html_path} (and report.md)")
+        echo(f"report: {html_path} (and report.md)")
 
 
 def _cmd_fit(args) -> int:
@@ -281,21 +305,25 @@ def _cmd_fit(args) -> int:
             campaign = campaign.subset(runs)
         result = fit_lsq(campaign, spec, grouping=args.grouping,
                          settings=LsqSettings(initial_speed=args.initial_speed))
-        write_lsq_fit_dir(result, out)
-        print(format_lsq_table(result, campaign.truth))
-        print(f"\nwrote {out / 'summary.csv'}, per_group.csv, fit.json")
+        write_lsq_fit_dir(result, out, provenance=_provenance(args, campaign, args.campaign))
+        echo(format_lsq_table(result, campaign.truth))
+        echo(f"\nwrote {out / 'summary.csv'}, per_group.csv, fit.json")
         _after_fit(args, out, campaign)
         return 0
     for line in entry.preamble(campaign):
-        print(line)
+        echo(line)
     fit, report, tables, written, _, table = _fit_and_write(entry, campaign, spec,
                                                             dataclasses.replace(options, runs=runs), out,
-                                                            args.campaign)
-    print(table)
+                                                            args.campaign, _provenance(args, campaign, args.campaign))
+    echo(table)
+    if not report.diagnostics["pass"] and not _output.isEnabledFor(logging.INFO):  # --quiet: still said
+        logging.getLogger("bayes_roadload").warning("the NUTS fit FAILED its diagnostic gates (%s): see %s",
+                                                    ", ".join(report.diagnostics.get("failed", [])),
+                                                    out / "diagnostics.json")
     for line in entry.notes(fit, campaign, tables):
-        print(line)
+        echo(line)
     written += ["validity.csv"] if runs is not None else []
-    print(f"\nwrote {out / written[0]}, {', '.join(written[1:])}")
+    echo(f"\nwrote {out / written[0]}, {', '.join(written[1:])}")
     _after_fit(args, out, campaign)
     return 0 if report.diagnostics["pass"] else EXIT_GATES_FAILED
 
@@ -315,10 +343,11 @@ def _cmd_fit_driveline(args) -> int:
     out = Path(args.out)
     fit = fit_driveline_nuts(campaign, args.model, sampler=_sampler(args))
     report = driveline_report(fit, campaign)
-    written = write_fit_dir(report, out, record=fit_record(fit, args.campaign))
+    written = write_fit_dir(report, out, record=fit_record(fit, args.campaign),
+                            provenance=_provenance(args, campaign, args.campaign))
     truth = fit.problem.truth_values(campaign.truth)
-    print(format_posterior_table(report.summary, report.diagnostics, truth or None))
-    print(f"\nwrote {out / written[0]}, {', '.join(written[1:])}")
+    echo(format_posterior_table(report.summary, report.diagnostics, truth or None))
+    echo(f"\nwrote {out / written[0]}, {', '.join(written[1:])}")
     _after_fit(args, out, campaign)
     return 0 if report.diagnostics["pass"] else EXIT_GATES_FAILED
 
@@ -336,9 +365,9 @@ def _cmd_report(args) -> int:
         campaign = load_campaign(source.record["campaign"]) if source.record.get("campaign") else None
         result, checks = run_standard(fit_dir, args.standard, campaign=campaign,
                                       rotating_inertia_known=args.rotating_inertia_known, out_dir=fit_dir)
-        print(format_standard(result, checks))
+        echo(format_standard(result, checks))
     html_path, md_path = render_report(fit_dir, campaign=args.campaign)
-    print(f"wrote {html_path}, {md_path} (+ {md_path.parent / 'report_files'})")
+    echo(f"wrote {html_path}, {md_path} (+ {md_path.parent / 'report_files'})")
     return 0
 
 
@@ -357,8 +386,8 @@ def _cmd_dyno(args) -> int:
     from .analysis.dyno import format_dyno, run_dyno
 
     result = run_dyno(args.target_fit_dir, args.dyno_coastdown, tolerance_n=args.tolerance_n, out_dir=args.out)
-    print(format_dyno(result))
-    print(f"\nwrote {Path(args.out) / 'dyno_set.csv'}, dyno_checks.csv, dyno.json")
+    echo(format_dyno(result))
+    echo(f"\nwrote {Path(args.out) / 'dyno_set.csv'}, dyno_checks.csv, dyno.json")
     return 0
 
 
@@ -370,8 +399,8 @@ def _cmd_predict(args) -> int:
                                   temperature_k=args.temperature_k, pressure_pa=args.pressure_pa,
                                   mass_kg_change=args.mass_change_kg, v0_kph=args.v0_kph, power_w=args.power_w,
                                   out_dir=args.out)
-    print(format_cycle_work(work, shares))
-    print(f"\nwrote the cycle work and the predicted trace in {args.out}")
+    echo(format_cycle_work(work, shares))
+    echo(f"\nwrote the cycle work and the predicted trace in {args.out}")
     return 0
 
 
@@ -381,13 +410,13 @@ def _diagnose_band_times(campaign, spec, args) -> int:
     diag = diagnose_intervals(campaign, spec, sampler=_sampler(args))
     path = write_interval_diagnosis(diag, args.out)
     gap = diag.result["gap"]
-    print(f"gap of {spec.name} on the band times: residual RMS {gap['band_z_rms']:.2f} predictive sd (floor 1), "
+    echo(f"gap of {spec.name} on the band times: residual RMS {gap['band_z_rms']:.2f} predictive sd (floor 1), "
           f"+/- heading difference {gap['heading_z_diff']:.2f} sd, 90 % coverage {gap['coverage_90']:.2f}; "
           f"residuals concentrate by {diag.result['localisation']['where'][0]}")
     for c in diag.candidates:
         d = c["delta_elpd"]
-        print(f"{c['rank']:3d}  {c['effect']:22s} delta_elpd_loo {'-' if d is None else f'{d:9.1f}'}  {c['statement']}")
-    print(f"\nwrote {path}, {Path(args.out) / 'report.md'} (+ plots)")
+        echo(f"{c['rank']:3d}  {c['effect']:22s} delta_elpd_loo {'-' if d is None else f'{d:9.1f}'}  {c['statement']}")
+    echo(f"\nwrote {path}, {Path(args.out) / 'report.md'} (+ plots)")
     return 0
 
 
@@ -397,16 +426,16 @@ def _diagnose_traces(campaign, spec, args) -> int:
     diag = diagnose(campaign, spec)
     path = write_diagnosis(diag, args.out)
     gap = diag.result["gap"]
-    print(f"gap of {spec.name}: residual trend {gap['trend_rms_mps']:.4f} m/s (white-noise floor "
+    echo(f"gap of {spec.name}: residual trend {gap['trend_rms_mps']:.4f} m/s (white-noise floor "
           f"{gap['trend_floor_mps']:.4f}), lag-1 autocorrelation {gap['lag1_autocorr']:.2f}; "
           f"residuals concentrate by {diag.result['localisation']['where'][0]}")
     for c in diag.candidates:
         d = c["delta_elpd"]
-        print(f"{c['rank']:3d}  {c['effect']:22s} delta_elpd {'-' if d is None else f'{d:9.1f}'}  {c['statement']}")
+        echo(f"{c['rank']:3d}  {c['effect']:22s} delta_elpd {'-' if d is None else f'{d:9.1f}'}  {c['statement']}")
     if diag.refit["effects"]:
-        print("refit with " + ", ".join(diag.refit["effects"]) + ": shrink % "
+        echo("refit with " + ", ".join(diag.refit["effects"]) + ": shrink % "
               + ", ".join(f"{k} {v:.0f}" for k, v in diag.refit["shrink_pct"].items() if v is not None))
-    print(f"\nwrote {path}, {Path(args.out) / 'report.md'} (+ plots)")
+    echo(f"\nwrote {path}, {Path(args.out) / 'report.md'} (+ plots)")
     return 0
 
 
@@ -444,26 +473,26 @@ def _cmd_demo(args) -> int:
     if args.truth_model == "basic":
         case = dataclasses.replace(case, model="basic")
     on = lambda b: "on" if b else "off"  # noqa: E731
-    print(f"Simulating {args.pairs} pairs of opposite-direction coastdowns at thesis case {args.case} "
+    echo(f"Simulating {args.pairs} pairs of opposite-direction coastdowns at thesis case {args.case} "
           f"conditions: head wind {case.head_wind_mps:g} m/s, cross wind {case.cross_wind_mps:g} m/s, "
           f"instrument dynamics {on(case.dynamics)}, measurement noise {on(case.measurement_noise)}, "
           f"system noise {on(case.system_noise)}, {case.model} drag model; seed {args.seed}.")
     campaign = simulate_campaign(case, pairs=args.pairs, seed=args.seed)
     save_campaign(campaign, out / "campaign")
-    print(f"Fitting model {args.model}: classical per-pair least squares, then NUTS over all runs jointly ...")
+    echo(f"Fitting model {args.model}: classical per-pair least squares, then NUTS over all runs jointly ...")
     lsq = fit_lsq(campaign, args.model, grouping="pair")
-    write_lsq_fit_dir(lsq, out / "fit_lsq")
+    write_lsq_fit_dir(lsq, out / "fit_lsq", provenance=_provenance(args, campaign, out / "campaign"))
     spec = load_model_spec(args.model)
     options = resolve_pooling(KINDS["traces"], campaign, spec, FitOptions(
         pooling=args.pooling, noise=args.noise, robust=bool(args.robust), sampler=_sampler(args)))
     _, report, _, _, truth, table = _fit_and_write(KINDS["traces"], campaign, spec, options, out / "fit_nuts",
-                                                   out / "campaign")
+                                                   out / "campaign", _provenance(args, campaign, out / "campaign"))
     summary, diag = report.summary, report.diagnostics
     post = summary.set_index("parameter")
-    print()
-    print(f"{'quantity':<15}{'truth':>10}   {'least squares: mean +- SE':<27}"
+    echo("")
+    echo(f"{'quantity':<15}{'truth':>10}   {'least squares: mean +- SE':<27}"
           f"{'posterior: mean [95 % interval]':<38}truth inside")
-    print("-" * 102)
+    echo("-" * 102)
     inside: dict[str, bool] = {}
     for name in list(lsq.free) + ["F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2"]:
         t = truth.get(name)
@@ -475,24 +504,24 @@ def _cmd_demo(args) -> int:
         if isinstance(t, (int, float)):
             inside[name] = bool(r["q2.5"] <= t <= r["q97.5"])
             flag = "yes" if inside[name] else "NO"
-        print(f"{name:<15}{t_s}   {m:>11.5g} +- {se:<11.3g}  {interval:<38}{flag}")
-    print()
+        echo(f"{name:<15}{t_s}   {m:>11.5g} +- {se:<11.3g}  {interval:<38}{flag}")
+    echo("")
     if inside:
         missed = [k for k, ok in inside.items() if not ok]
-        print(f"The posterior 95 % intervals contain the simulated truth for {len(inside) - len(missed)} of "
+        echo(f"The posterior 95 % intervals contain the simulated truth for {len(inside) - len(missed)} of "
               f"{len(inside)} quantities" + (f"; they miss it for {', '.join(missed)}." if missed else ".")
               + " (Expected: about 1 in 20 misses; docs/calibration.md measures how often over many campaigns.)")
-    print("\n".join(line for line in table.splitlines()[:2] if line.startswith(("!!", "NUTS"))))
+    echo("\n".join(line for line in table.splitlines()[:2] if line.startswith(("!!", "NUTS"))))
     if "Uncertainty budget" in table:
-        print("\n" + table[table.index("Uncertainty budget"):])
+        echo("\n" + table[table.index("Uncertainty budget"):])
     fit_dir = out / "fit_nuts"
     html_path, _ = render_report(fit_dir)
-    print(f"\nCampaign, least-squares fit (fit_lsq/) and posterior (fit_nuts/, report {html_path.name}) written "
+    echo(f"\nCampaign, least-squares fit (fit_lsq/) and posterior (fit_nuts/, report {html_path.name}) written "
           f"under {out}")
-    print("\nGTR 15 target coefficients (reference conditions of the standard):")
-    print(format_standard(*run_standard(fit_dir, "gtr15", campaign=campaign, out_dir=fit_dir)))
+    echo("\nGTR 15 target coefficients (reference conditions of the standard):")
+    echo(format_standard(*run_standard(fit_dir, "gtr15", campaign=campaign, out_dir=fit_dir)))
     work, shares, _ = run_predict(fit_dir, "wltc3b", effective_mass_kg=campaign.vehicle.effective_mass_kg)
-    print(format_cycle_work(work, shares))
+    echo(format_cycle_work(work, shares))
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
@@ -509,19 +538,19 @@ def _plan_population(args, out: Path):
         source = read_fit_dir(src)
         campaign = load_campaign(source.record["campaign"])
         if not source.passed:
-            print(f"!! the source fit {src} FAILED its diagnostic gates: the plan draws from a posterior that is "
+            echo(f"!! the source fit {src} FAILED its diagnostic gates: the plan draws from a posterior that is "
                   "not trustworthy; refit with more draws (see `fit`)")
         return population_from_samples(source.samples, source.record["free"], source.model, campaign,
                                        source=f"{source.record['pooling']} fit {src}"), campaign
     campaign = load_campaign(src)
-    print(f"Fitting {src} ({campaign.runs['run'].nunique()} runs) with model {args.model}, {args.pooling} "
+    echo(f"Fitting {src} ({campaign.runs['run'].nunique()} runs) with model {args.model}, {args.pooling} "
           "pooling, to draw the future campaigns from ...")
     fit = fit_nuts(campaign, args.model, pooling=args.pooling, sampler=_sampler(args))
     report = trace_report(fit, campaign)
-    write_fit_dir(report, out / "fit", record=fit_record(fit, src))
+    write_fit_dir(report, out / "fit", record=fit_record(fit, src), provenance=_provenance(args, campaign, src))
     diag = report.diagnostics
     if not diag["pass"]:
-        print(f"!! the source fit FAILED its gates ({', '.join(diag['failed'])}): the plan below draws from a "
+        echo(f"!! the source fit FAILED its gates ({', '.join(diag['failed'])}): the plan below draws from a "
               "posterior that is not trustworthy; refit with more draws (see `fit`)")
     return population_from_fit(fit, campaign), campaign
 
@@ -540,16 +569,16 @@ def _cmd_plan(args) -> int:
     population, campaign = _plan_population(args, out)
     fit_model = args.fit_model or population.model
     if not population.tau:
-        print("note: the source posterior has no run-to-run spreads (pooled fit): future runs are drawn without "
+        echo("note: the source posterior has no run-to-run spreads (pooled fit): future runs are drawn without "
               "run-to-run variation, so the plan counts measurement noise only; fit with --pooling hierarchical "
               "for a plan that includes it")
     pairs = sorted(set(args.pairs))
-    print(f"Population: {population.source}; {population.n_draws} draws; refitting {args.simulations} simulated "
+    echo(f"Population: {population.source}; {population.n_draws} draws; refitting {args.simulations} simulated "
           f"campaigns of each of {pairs} pairs with {fit_model} ({population.pooling}, MAP + Laplace) ...")
     jobs = plan_jobs(population, pairs, simulations=args.simulations, model=fit_model,
                      confidence=args.confidence, seed=args.seed)
     with batch_client(args.workers, args.scheduler) as client:
-        records = run_batch(jobs, client, progress=not args.no_progress)
+        records = run_batch(jobs, client, progress=console.progress_bars(not args.no_progress))
     records.to_csv(out / "plan_records.csv", index=False)
     failed = int(records["error"].notna().sum()) if "error" in records else 0
     not_converged = int((~records["gate_pass"].fillna(False).astype(bool)).sum()) if "gate_pass" in records else 0
@@ -558,32 +587,32 @@ def _cmd_plan(args) -> int:
     rec = recommend(table, args.assurance)
     rec.to_csv(out / "recommendation.csv", index=False)
     plot_plan(table, targets, out / "plan.png", assurance=args.assurance)
-    print(f"\n{'quantity':<15}{'target':>10}  " + "".join(f"{n:>8}" for n in pairs) + "   pairs needed")
+    echo(f"\n{'quantity':<15}{'target':>10}  " + "".join(f"{n:>8}" for n in pairs) + "   pairs needed")
     for t in targets:
         rows = table[table["quantity"] == t.quantity].set_index("n_pairs")
         if rows.empty:
-            print(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  not a quantity of model {fit_model}")
+            echo(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  not a quantity of model {fit_model}")
             continue
         cells = "".join(f"{rows.loc[n, 'median_half_width']:>8.3g}" if n in rows.index else f"{'-':>8}" for n in pairs)
         r = rec[rec["quantity"] == t.quantity].iloc[0]
         need = f"{int(r['n_pairs'])}" if r["reached"] else f"> {int(r['max_pairs_simulated'])}"
-        print(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  {cells}   {need}")
-    print(f"(median {100 * args.confidence:g} % half-width against pairs, in the target's units; pairs needed: "
+        echo(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  {cells}   {need}")
+    echo(f"(median {100 * args.confidence:g} % half-width against pairs, in the target's units; pairs needed: "
           f"smallest simulated n with P(half-width <= target) >= {args.assurance:g})")
     if failed or not_converged:
-        print(f"!! {failed} refits raised (left out of the table), {not_converged} failed their gate (MAP not "
+        echo(f"!! {failed} refits raised (left out of the table), {not_converged} failed their gate (MAP not "
               "converged, or importance weights with Pareto k > 0.7: the Laplace approximation is poor there; kept, "
               "see gate_pass_frac in plan.csv)")
     if "pair" in campaign.runs and campaign.runs["pair"].nunique() >= 2:
         reg = regulation_checks(campaign, population.model if args.fit_model is None else fit_model)
         reg.to_csv(out / "regulation.csv", index=False)
-        print("\nRegulation precision on the measured campaign (regulation.csv):")
+        echo("\nRegulation precision on the measured campaign (regulation.csv):")
         for _, r in reg.iterrows():
             verdict = "pass" if r["pass"] else f"FAIL: {r['extra_pairs']} more pairs ({r['extra_pairs_assured']} for " \
                                                f"{100 * args.assurance:g} % assurance)"
-            print(f"  {r['criterion']:<6} {r['speed_kph']:>6.1f} km/h  n={r['n_pairs']}  precision "
+            echo(f"  {r['criterion']:<6} {r['speed_kph']:>6.1f} km/h  n={r['n_pairs']}  precision "
                   f"{r['precision_pct']:.2f} % (limit {r['limit_pct']:g} %)  {verdict}")
-    print(f"\nwrote {out / 'plan.csv'}, recommendation.csv, plan_records.csv, plan.png"
+    echo(f"\nwrote {out / 'plan.csv'}, recommendation.csv, plan_records.csv, plan.png"
           + (", regulation.csv" if (out / "regulation.csv").exists() else ""))
     return 0
 
@@ -609,8 +638,8 @@ def _cmd_import_vbox(args) -> int:
     out = save_campaign(campaign, args.out)
     (out / "import_report.json").write_text(json.dumps(report.to_dict(), indent=2) + "\n")
     load_campaign(out)  # the written campaign reads back under the contract
-    print("\n".join(report.lines()))
-    print(f"{len(campaign.run_ids)} runs, {len(campaign.intervals)} bands, {len(campaign.pairs())} pairs -> {out} "
+    echo("\n".join(report.lines()))
+    echo(f"{len(campaign.run_ids)} runs, {len(campaign.intervals)} bands, {len(campaign.pairs())} pairs -> {out} "
           "(intervals.csv, vehicle.toml, import_report.json)")
     return 0
 
@@ -619,7 +648,7 @@ def _cmd_sensitivity(args) -> int:
     from .analysis.sensitivity import coefficient_sensitivity, format_sensitivity_table
 
     table = coefficient_sensitivity(cross_winds_mps=tuple(args.cross_wind))
-    print(format_sensitivity_table(table))
+    echo(format_sensitivity_table(table))
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         table.to_csv(args.out, index=False)
@@ -629,10 +658,10 @@ def _cmd_sensitivity(args) -> int:
 def _cmd_cases(args) -> int:
     from .simulate import CASES
 
-    print(f"{'case':>4}  {'description':<24} {'head':>5} {'cross':>5}  dyn  M  S  model")
+    echo(f"{'case':>4}  {'description':<24} {'head':>5} {'cross':>5}  dyn  M  S  model")
     for n, c in CASES.items():
         yn = lambda b: "Y" if b else "N"  # noqa: E731
-        print(f"{n:>4}  {c.description:<24} {c.head_wind_mps:>5.1f} {c.cross_wind_mps:>5.1f}   "
+        echo(f"{n:>4}  {c.description:<24} {c.head_wind_mps:>5.1f} {c.cross_wind_mps:>5.1f}   "
               f"{yn(c.dynamics)}   {yn(c.measurement_noise)}  {yn(c.system_noise)}  {c.model}")
     return 0
 
@@ -642,7 +671,7 @@ def _cmd_models(args) -> int:
 
     for name in available_models():
         spec = load_model_spec(name)
-        print(f"{name:<22} free: {', '.join(spec.free):<28} {spec.description}")
+        echo(f"{name:<22} free: {', '.join(spec.free):<28} {spec.description}")
     return 0
 
 
@@ -661,6 +690,15 @@ def _add_nuts_options(p: argparse.ArgumentParser, seed: int) -> None:
                    help="nuts: numpyro's default NUTS without the MAP/Laplace start (slow; for comparison)")
 
 
+def _add_verbosity(p: argparse.ArgumentParser, default) -> None:
+    """``-q/--quiet`` and ``-v/--verbose`` (on the program, and again on every command with
+    ``default`` SUPPRESS so that a command's own flag does not reset the program's)."""
+    p.add_argument("-q", "--quiet", action="store_true", default=default,
+                   help="warnings and errors only: no tables, no progress (the files are written as usual)")
+    p.add_argument("-v", "--verbose", action="store_true", default=default,
+                   help="also debug messages: stage details and third-party warnings")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import config
 
@@ -668,6 +706,7 @@ def build_parser() -> argparse.ArgumentParser:
                                 "uncertainty: NUTS over all paired runs jointly (docs/method.md).",
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    _add_verbosity(p, False)
     sub = p.add_subparsers(dest="command", required=True)
 
     d = sub.add_parser("demo", help="simulate a 6-pair campaign at thesis case 14 conditions and fit it "
@@ -752,6 +791,11 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--rotating-inertia-known", action="store_true",
                    help="with --standard j2263: the effective mass is measured, not the 1.03 x test mass convention")
     f.add_argument("--no-report", action="store_true", help="do not render report.html / report.md")
+    f.add_argument("--speed-unit", choices=("mps", "kph", "mph"), default=None,
+                   help="speed traces: the unit of the speed column whatever its name says (converted on load and "
+                        "recorded in fit.json); default: the column name's (speed_mps, speed_kph, speed_mph)")
+    f.add_argument("--airspeed-unit", choices=("mps", "kph", "mph"), default=None,
+                   help="speed traces: the unit of the airspeed column, as --speed-unit")
     f.add_argument("--no-type-b", action="store_true",
                    help="leave the Type B uncertainty of the declared values and instruments (vehicle.toml "
                         "[uncertainty], docs/calibration.md) out of the intervals and write no budget.csv "
@@ -867,7 +911,12 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=_cmd_cases)
     m = sub.add_parser("models", help="list the model variants in models/")
     m.set_defaults(func=_cmd_models)
-    for command in sub.choices.values():  # every option with a help text and its default
+    for name, command in sub.choices.items():  # every option with a help text and its default
+        _add_verbosity(command, argparse.SUPPRESS)  # also after the command: `fit ... --quiet`
+        if name in WRITES_OUT:
+            command.add_argument("--force", action="store_true",
+                                 help="write into a non-empty --out: the files an earlier command wrote there are "
+                                      "removed first (without it a non-empty --out is refused)")
         command.formatter_class = argparse.ArgumentDefaultsHelpFormatter
         for action in command._actions:
             if action.help is None:
@@ -875,16 +924,69 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _files_under(out: Path) -> set[str]:
+    return {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()} if out.is_dir() else set()
+
+
+def _claim_out(args) -> tuple[Path, set[str]] | None:
+    """Check a command's ``--out`` before it runs (:data:`WRITES_OUT`): a non-empty directory
+    is refused unless ``--force``; with ``--force`` the files an earlier command wrote there
+    (listed in :data:`OUT_MARKER`) are removed first, other files are left.  Returns the
+    directory and the files in it now (None: the command writes no ``--out``)."""
+    out = vars(args).get("out")
+    if args.command not in WRITES_OUT or out is None:
+        return None
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out}: a file, not a directory")
+    present = _files_under(out)
+    if present:
+        if not args.force:
+            raise ValueError(f"--out {out} is not empty ({len(present)} files, e.g. {min(present - {OUT_MARKER}, default=OUT_MARKER)}): give a new "
+                             "or empty directory, or --force to replace an earlier output there")
+        marker = out / OUT_MARKER
+        earlier = json.loads(marker.read_text()).get("written", []) if marker.is_file() else []
+        for name in [*earlier, OUT_MARKER, "error.log"]:
+            (out / name).unlink(missing_ok=True)
+        for d in sorted((p for p in out.rglob("*") if p.is_dir()), key=lambda p: -len(p.parts)):
+            if not any(d.iterdir()):
+                d.rmdir()
+        present = _files_under(out)
+    return out, present
+
+
+def _mark_out(claim: tuple[Path, set[str]] | None, command_line: str) -> None:
+    """Write :data:`OUT_MARKER` in the command's ``--out`` (when it wrote anything)."""
+    if claim is None:
+        return
+    out, before = claim
+    written = sorted(_files_under(out) - before - {OUT_MARKER})
+    if written:
+        (out / OUT_MARKER).write_text(json.dumps({"command_line": command_line, "version": __version__,
+                                                  "written": written}, indent=2) + "\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; exit codes as in the module docstring.  A refused input prints one line
     and writes nothing; a failed fit stage or an unexpected error prints one line with the
-    stage and remedy, and the traceback goes to ``error.log`` in ``--out`` (never the terminal)."""
+    stage and remedy, and the traceback goes to ``error.log`` in ``--out`` (never the terminal).
+    Output and messages go through :mod:`logging` (:mod:`bayes_roadload.console`:
+    ``--quiet`` / ``--verbose``; third-party warnings at DEBUG)."""
     from .data import CampaignError
     from .errors import FitStageError, write_error_log
 
     args = build_parser().parse_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    args.command_line = "bayes-roadload " + shlex.join(str(w) for w in words)
+    claim = None
     try:
-        return int(args.func(args) or 0)
+        console.configure(console.verbosity_of(args.quiet, args.verbose))
+        with console.routed_warnings():
+            claim = _claim_out(args)
+            try:
+                return int(args.func(args) or 0)
+            finally:
+                _mark_out(claim, args.command_line)
     except (CampaignError, ValueError, FileNotFoundError) as e:
         print(f"bayes-roadload {args.command}: error: {e}", file=sys.stderr)
         return EXIT_REFUSED

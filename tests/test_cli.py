@@ -46,12 +46,12 @@ def test_fit_refuses_bad_campaign_and_writes_nothing(tmp_path, capsys):
     bad = tmp_path / "bad"
     bad.mkdir()
     t = np.arange(20) * 0.25
-    pd.DataFrame({"run": 1, "time_s": t, "speed_kph": 100.0 - t}).to_csv(bad / "runs.csv", index=False)
+    pd.DataFrame({"run": 1, "time_s": t, "speed": 100.0 - t}).to_csv(bad / "runs.csv", index=False)
     (bad / "vehicle.toml").write_text("[vehicle]\nmass_kg = 1100.0\neffective_mass_kg = 1130.0\nfrontal_area_m2 = 1.85\n")
     out = tmp_path / "out"
     assert main(["fit", str(bad), "--method", "lsq", "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "runs.csv" in err and "speed_kph" in err and "speed_mps" in err
+    assert "runs.csv" in err and "'speed'" in err and "speed_mps" in err and "--speed-unit" in err
     assert not out.exists()
 
 
@@ -72,7 +72,8 @@ def test_sensitivity_cases_models(tmp_path, capsys):
 
 
 def test_demo_runs_and_prints_truth_beside_estimates(tmp_path, capsys):
-    code = main(["demo", "--pairs", "1", "--warmup", "150", "--draws", "150", "--no-progress", "--out", str(tmp_path)])
+    code = main(["demo", "--pairs", "1", "--warmup", "150", "--draws", "150", "--no-progress", "--pooling", "pooled",
+                 "--out", str(tmp_path)])
     out = capsys.readouterr().out
     assert code in (0, 3)
     assert "truth" in out and "least squares" in out and "posterior" in out and "NUTS" in out
@@ -93,8 +94,21 @@ def test_demo_runs_and_prints_truth_beside_estimates(tmp_path, capsys):
 def test_fit_nuts_writes_outputs_and_flags_gates(campaign_dir, tmp_path, capsys):
     out = tmp_path / "nuts"
     code = main(["fit", str(campaign_dir), "--model", "three_term", "--warmup", "100", "--draws", "100",
-                 "--no-progress", "--out", str(out)])
-    printed = capsys.readouterr().out
+                 "--pooling", "pooled", "--out", str(out)])
+    captured = capsys.readouterr()
+    printed = captured.out
+    # off a terminal: no progress bars, one plain line per chain and the MAP's result
+    chain_lines = [x for x in captured.err.splitlines() if x.startswith("chain ")]
+    assert len(chain_lines) == config.DEFAULT_SAMPLER.num_chains and "\r" not in captured.err
+    assert any(x.startswith("MAP: trust-exact") or x.startswith("MAP: L-BFGS-B") for x in captured.err.splitlines())
+    # posterior.nc: units per variable, the provenance of the fit
+    import arviz as az
+
+    idata = az.from_netcdf(str(out / "posterior.nc"))
+    assert idata.posterior["BD"].attrs["units"] == "s/m" and idata.posterior["F50_N"].attrs["units"] == "N"
+    assert idata.posterior.attrs["command_line"].startswith("bayes-roadload fit ")
+    assert idata.posterior.attrs["campaign_sha256"] == json.loads((out / "fit.json").read_text())[
+        "provenance"]["campaign_sha256"]
     diag = json.loads((out / "diagnostics.json").read_text())
     assert code == (0 if diag["pass"] else 3)
     # a failed fit is announced before anything else is printed

@@ -124,7 +124,7 @@ def summary_columns(out_dir: str | os.PathLike) -> dict[str, float]:
 
 @dataclass(frozen=True)
 class FleetJob:
-    """One campaign of a fleet: ``fit_command(["fit", campaign_dir, "--out", out_dir,
+    """One campaign of a fleet: ``fit_command(["fit", campaign_dir, "--out", out_dir, "--force",
     *fit_args])`` with its printed output captured in ``out_dir/fit.log``.
 
     Parameters
@@ -147,7 +147,7 @@ class FleetJob:
 
     def argv(self) -> list[str]:
         """The command line of this campaign's fit."""
-        return ["fit", self.campaign_dir, "--out", self.out_dir, *self.fit_args]
+        return ["fit", self.campaign_dir, "--out", self.out_dir, "--force", *self.fit_args]  # the fleet owns out_dir
 
     def previous(self) -> dict[str, Any] | None:
         """The row of a finished earlier fit with the same options, or None."""

@@ -11,6 +11,7 @@ from .checks import write_atomically as write_atomically
 from .distances import DistanceCampaign as DistanceCampaign
 from .intervals import IntervalCampaign as IntervalCampaign
 from .io import DATA_KINDS as DATA_KINDS
+from .io import campaign_sha256 as campaign_sha256
 from .io import CampaignKind as CampaignKind
 from .io import data_kind as data_kind
 from .io import find_kind as find_kind

@@ -52,8 +52,8 @@ the conversion): such a column is refused rather than guessed."""
 
 CHANNEL_LIMITS = {
     # column: (low, high, what a value outside usually means)
-    "speed_mps": (0.0, config.MAX_SPEED_MPS, "negative, or km/h in a m/s column"),
-    "airspeed_mps": (0.0, config.MAX_SPEED_MPS, "negative, or km/h in a m/s column"),
+    "speed_mps": (0.0, config.MAX_SPEED_MPS, "negative, or km/h in a m/s column: --speed-unit kph"),
+    "airspeed_mps": (0.0, config.MAX_SPEED_MPS, "negative, or km/h in a m/s column: --airspeed-unit kph"),
     "yaw_rad": (-math.pi / 2, math.pi / 2, "degrees in a radian column"),
     "temperature_k": (200.0, 350.0, "degrees Celsius in a kelvin column"),
     "pressure_pa": (50_000.0, 120_000.0, "kPa, hPa or bar in a pascal column"),
@@ -121,7 +121,9 @@ def check_numeric(df: pd.DataFrame, columns, limits: Mapping[str, tuple], where:
         bad = ~np.isfinite(values)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            refuse(where, c, i + 1, f"value {df[c].iloc[i]!r} is not a finite number")
+            raw = plain_value(df[c].iloc[i])
+            shown = "an empty cell" if isinstance(raw, float) and math.isnan(raw) else f"value {raw!r}"
+            refuse(where, c, i + 1, f"{shown} is not a finite number")
         df[c] = values
         if c in limits:
             lo, hi, meaning = limits[c]
@@ -247,6 +249,17 @@ def data_file(root: str | os.PathLike, name: str) -> Path:
     if not f.exists():
         raise CampaignError(f"{root}: {name} is missing")
     return f
+
+
+def read_csv_table(path: str | os.PathLike, **kwargs) -> pd.DataFrame:
+    """``pd.read_csv`` of a campaign file; an empty or unparsable file is a
+    :class:`CampaignError` naming it."""
+    try:
+        return pd.read_csv(path, **kwargs)
+    except pd.errors.EmptyDataError:
+        raise CampaignError(f"{path}: the file is empty (no header, no samples)") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as e:
+        raise CampaignError(f"{path}: not a readable CSV table ({str(e).strip()})") from None
 
 
 def read_truth(root: str | os.PathLike) -> dict[str, Any] | None:

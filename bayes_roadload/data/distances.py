@@ -21,6 +21,7 @@ import pandas as pd
 
 from .. import config
 from .checks import (
+    read_csv_table,
     UNIT_HINTS,
     check_columns,
     check_contiguous,
@@ -181,7 +182,7 @@ def validate_distances(df: pd.DataFrame, where: str = "distances.csv") -> pd.Dat
 
 def read_distances(path) -> pd.DataFrame:
     """``distances.csv`` as a table."""
-    return pd.read_csv(path)
+    return read_csv_table(path)
 
 
 def load(root: str | os.PathLike) -> DistanceCampaign:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .checks import write_atomically
+from .checks import read_csv_table, write_atomically
 
 
 @dataclass
@@ -48,7 +48,7 @@ def load_dyno(root: str | os.PathLike) -> DynoCoastdown:
     for f in (csv, toml):
         if not f.is_file():
             raise ValueError(f"{root}: a dynamometer coastdown needs {f.name} (docs/standards.md)")
-    runs = pd.read_csv(csv)
+    runs = read_csv_table(csv)
     for col in ("time_s", "speed_mps"):
         if col not in runs:
             raise ValueError(f"{csv}: missing column {col}")

@@ -20,6 +20,7 @@ import pandas as pd
 
 from .. import config
 from .checks import (
+    read_csv_table,
     UNIT_HINTS,
     check_columns,
     check_contiguous,
@@ -192,7 +193,7 @@ def validate_intervals(df: pd.DataFrame, where: str = "intervals.csv") -> pd.Dat
 
 def read_intervals(path) -> pd.DataFrame:
     """``intervals.csv`` as a table (window labels as text)."""
-    return pd.read_csv(path, dtype={"window": str})
+    return read_csv_table(path, dtype={"window": str})
 
 
 def load(root: str | os.PathLike) -> IntervalCampaign:

@@ -9,6 +9,7 @@ campaign's ``kind``: a new kind is its own module plus one line in :data:`DATA_K
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
 from typing import Any, Protocol
@@ -139,3 +140,12 @@ def save_campaign(campaign: Any, path: str | os.PathLike, fmt: str = "csv") -> P
     "parquet".
     """
     return write_atomically(path, kind_of(campaign).files(campaign, fmt), stale=DATA_FILES + (TRUTH_FILE,))
+
+
+def campaign_sha256(path: str | os.PathLike) -> str:
+    """SHA-256 of a campaign directory's content: the names and bytes of its top-level files
+    (hidden files left out), in name order; what a fit records of the data it saw."""
+    h = hashlib.sha256()
+    for f in sorted(p for p in Path(path).iterdir() if p.is_file() and not p.name.startswith(".")):
+        h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()

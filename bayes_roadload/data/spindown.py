@@ -35,6 +35,7 @@ import pandas as pd
 
 from .. import config
 from .checks import (
+    read_csv_table,
     check_columns,
     check_contiguous,
     check_csv_format,
@@ -227,7 +228,7 @@ def load(root: str | os.PathLike, *, wheel_inertia_kgm2: float | None = None,
     vfile = root / VEHICLE_FILE
     inertia, radius, undriven, meta = read_spindown_setup(
         vfile if vfile.exists() else None, wheel_inertia_kgm2=wheel_inertia_kgm2, rolling_radius_m=rolling_radius_m)
-    df = validate_spindown(pd.read_csv(f), str(f), radius)
+    df = validate_spindown(read_csv_table(f), str(f), radius)
     wheels = [str(w) for w in pd.unique(df["wheel"])]
     inertia = inertia_per_wheel(inertia, wheels)
     validate_spindown_setup(inertia, radius, undriven, wheels, str(vfile))

@@ -43,6 +43,7 @@ import pandas as pd
 
 from .. import config
 from .checks import (
+    read_csv_table,
     CHANNEL_LIMITS,
     WHEEL_TORQUE_COLUMNS,
     check_columns,
@@ -216,7 +217,7 @@ def load(root: str | os.PathLike) -> SteadyCampaign:
     root = Path(root)
     f = data_file(root, "steady.csv")
     vehicle, anem, tunnel, meta = read_vehicle_file(root / VEHICLE_FILE)
-    df, source = validate_steady(pd.read_csv(f), str(f), vehicle.rolling_radius_m)
+    df, source = validate_steady(read_csv_table(f), str(f), vehicle.rolling_radius_m)
     return SteadyCampaign(df, vehicle, anem, tunnel, read_truth(root), meta, accel_source=source)
 
 

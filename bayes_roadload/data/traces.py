@@ -21,6 +21,7 @@ from .. import config
 from ..physics.atmosphere import air_density_kgpm3
 from ..physics.integrate import make_run, stack_runs
 from .checks import (
+    read_csv_table,
     CHANNEL_LIMITS,
     UNIT_HINTS,
     CampaignError,
@@ -45,12 +46,13 @@ from .checks import (
     truth_files,
     wheel_torque_force_n,
 )
+from .units import check_plausible_road_load, convert_units
 from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
 
 KIND = "traces"
 FILES = ("runs.csv", "runs.parquet")
 DESCRIPTION = "speed traces"
-OPTIONS: tuple[str, ...] = ()
+OPTIONS: tuple[str, ...] = ("speed_unit", "airspeed_unit")
 
 REQUIRED_COLUMNS = ("run", "time_s", "speed_mps")
 OPTIONAL_COLUMNS = (
@@ -191,7 +193,7 @@ def read_runs(root: str | os.PathLike) -> tuple[pd.DataFrame, Path]:
     if csv.exists() and parquet.exists():
         raise CampaignError(f"{root}: both runs.csv and runs.parquet present (ambiguous)")
     if csv.exists():
-        return pd.read_csv(csv), csv
+        return read_csv_table(csv), csv
     if parquet.exists():
         try:
             return pd.read_parquet(parquet), parquet
@@ -200,16 +202,30 @@ def read_runs(root: str | os.PathLike) -> tuple[pd.DataFrame, Path]:
     raise CampaignError(f"{root}: runs.csv (or runs.parquet) is missing")
 
 
-def load(root: str | os.PathLike) -> Campaign:
+def load(root: str | os.PathLike, speed_unit: str | None = None, airspeed_unit: str | None = None) -> Campaign:
     """Load and validate a speed-trace campaign directory (``runs.csv`` or ``runs.parquet``,
-    ``vehicle.toml``, optional ``truth.json``); wheel torques become ``driveline_force_n``
-    = (left + right) / R_r."""
+    ``vehicle.toml``, optional ``truth.json``).
+
+    Columns whose name states a non-SI unit, and the speed / airspeed columns whose unit
+    ``speed_unit`` / ``airspeed_unit`` state (``mps``, ``kph``, ``mph``), are converted to SI
+    (:func:`~bayes_roadload.data.units.convert_units`; recorded in ``meta["conversions"]``);
+    speeds whose implied road load says they were logged in km/h or mph are refused
+    (:func:`~bayes_roadload.data.units.check_plausible_road_load`).  Wheel torques become
+    ``driveline_force_n`` = (left + right) / R_r.
+    """
     root = Path(root)
     df, runs_file = read_runs(root)
     vehicle, anem, tunnel, meta = read_vehicle_file(root / VEHICLE_FILE)
+    df, conversions = convert_units(df, str(runs_file), speed_unit, airspeed_unit)
     df = validate_runs(df, str(runs_file))
+    rho = air_density_kgpm3(float(df["pressure_pa"].mean()) if "pressure_pa" in df else config.REFERENCE_PRESSURE_PA,
+                            float(df["temperature_k"].mean()) if "temperature_k" in df
+                            else config.REFERENCE_TEMPERATURE_K)
+    check_plausible_road_load(df, str(runs_file), vehicle.effective_mass_kg, vehicle.mass_kg, float(rho))
     if "wheel_torque_left_nm" in df:
         df["driveline_force_n"] = wheel_torque_force_n(df, vehicle.rolling_radius_m)
+    if conversions:
+        meta = dict(meta, conversions=[c.record() for c in conversions])
     return Campaign(df, vehicle, anem, tunnel, read_truth(root), meta)
 
 

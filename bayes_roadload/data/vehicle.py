@@ -181,7 +181,7 @@ def vehicle_toml(c) -> str:
               f"yaw_factor = {toml_value(c.anemometer.yaw_factor)}"]
     if c.anemometer.distance_constant_m > 0.0:
         lines.append(f"distance_constant_m = {toml_value(c.anemometer.distance_constant_m)}")
-    meta = {k: v for k, v in c.meta.items() if k != UNCERTAINTY_TABLE}
+    meta = {k: v for k, v in c.meta.items() if k not in (UNCERTAINTY_TABLE, "conversions")}  # saved in SI
     lines += (toml_table("tunnel", c.tunnel) + toml_table("meta", meta)
               + toml_table(UNCERTAINTY_TABLE, c.meta.get(UNCERTAINTY_TABLE)))
     return "\n".join(lines) + "\n"

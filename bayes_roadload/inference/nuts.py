@@ -25,6 +25,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import time
 import warnings
@@ -38,6 +39,7 @@ from jax.flatten_util import ravel_pytree
 from numpyro.infer import MCMC, NUTS, init_to_value
 from numpyro.infer.util import initialize_model
 from scipy.optimize import minimize
+from tqdm import tqdm
 
 from .. import config
 from ..data.campaign import Campaign
@@ -51,6 +53,8 @@ from .bayes import (
 from .problem import Problem
 from .lsq import fit_lsq
 from .spec import ModelSpec
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -365,7 +369,7 @@ def _name_of(names: list[str] | None, j: int) -> str:
 
 
 def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *,
-               max_iter: int = 200, names: list[str] | None = None) -> dict[str, Any]:
+               max_iter: int = 200, names: list[str] | None = None, progress: bool = False) -> dict[str, Any]:
     """Trust-region Newton (``scipy.optimize.minimize``, ``trust-exact``) on O(1)-scaled
     coordinates ``y`` with the exact gradient ``g`` and the Hessian by :func:`fd_hessian`,
     guarded against non-finite values.
@@ -388,6 +392,7 @@ def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *
     scale : the coordinates' scale (``x = y * scale``).
     max_iter : iteration limit of each optimiser.
     names : names of the coordinates (:func:`_coordinate_names`), for error messages.
+    progress : show a progress bar of the objective's evaluations and its best value.
 
     Returns
     -------
@@ -408,6 +413,7 @@ def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *
     """
     y0 = np.asarray(y0, float)
     best = {"y": y0.copy(), "f": math.inf}
+    bar = tqdm(desc="MAP", unit=" evaluations", disable=not progress, leave=False, dynamic_ncols=True)
     last: dict[bytes, tuple[float, np.ndarray]] = {}
 
     def evaluate(y) -> tuple[float, np.ndarray]:
@@ -423,6 +429,8 @@ def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *
             last[key] = (v, d) if ok else (math.inf, np.zeros_like(y))
             if ok and v < best["f"]:
                 best.update(y=y.copy(), f=v)
+                bar.set_postfix_str(f"-log p {v:.6g}", refresh=False)
+            bar.update()
         return last[key]
 
     def fun(y):
@@ -482,6 +490,7 @@ def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *
         if not math.isfinite(float(res.fun)):
             raise FitStageError("map", "no finite optimum of the log posterior was found (trust-region Newton "
                                 "and L-BFGS-B both failed)")
+    bar.close()
     fval = float(f(y))
     grad = np.asarray(g(y), float)
     grad_max = float(np.max(np.abs(grad))) if np.all(np.isfinite(grad)) else math.inf
@@ -506,7 +515,7 @@ def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *
 
 
 def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200,
-             posterior: Posterior | None = None) -> MapResult:
+             posterior: Posterior | None = None, progress: bool = False) -> MapResult:
     """MAP by trust-region Newton on the O(1)-scaled unconstrained parameters, and the
     Laplace covariance from the Hessian there (:func:`newton_map`).
 
@@ -525,10 +534,13 @@ def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200,
         def objective(y):
             return post.potential_fn(post.unravel(y * scale))
 
+        log.info("MAP: %d unknowns, trust-region Newton from the least-squares start ...", post.flat0.size)
         res = newton_map(jax.jit(objective), jax.jit(jax.grad(objective)), post.flat0 / scale, post.run_index,
-                         scale, max_iter=max_iter, names=_coordinate_names(post.z0))
+                         scale, max_iter=max_iter, names=_coordinate_names(post.z0), progress=progress)
         z_map = post.unravel(jnp.asarray(res["y"] * scale))
         constrained = post.postprocess_fn(z_map)
+    log.info("MAP: %s, %d iterations, max |gradient| %.2g, %.1f s%s", res["map_method"], res["n_iter"],
+             res["grad_max"], time.perf_counter() - t0, f" ({res['map_fallback']})" if res["map_fallback"] else "")
     return MapResult(z=z_map, constrained=constrained, cov=res["cov"], success=res["success"],
                      n_iter=res["n_iter"], grad_max=res["grad_max"], message=res["message"],
                      neg_log_posterior=res["fun"], time_s=time.perf_counter() - t0,
@@ -601,6 +613,8 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
                 num_chains=sampler.num_chains, chain_method=_chain_method(sampler.num_chains),
                 progress_bar=sampler.progress_bar)
     collect_warmup(mcmc)
+    log.info("NUTS: %d chain%s x (%d warm-up + %d draws), target acceptance %.2f ...", sampler.num_chains,
+             "s" if sampler.num_chains > 1 else "", sampler.num_warmup, sampler.num_samples, sampler.target_accept)
     t0 = time.perf_counter()
     mcmc.run(key, *args, init_params=init_params, extra_fields=fields)
     raw = jax.block_until_ready(mcmc.get_samples(group_by_chain=True))
@@ -620,6 +634,13 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
         samples = {k: np.asarray(v) for k, v in raw.items()}
     samples.update(problem.postprocess(samples, seed=sampler.seed))
     extra["tree_depth"] = np.ceil(np.log2(extra["num_steps"] + 1.0)).astype(int)
+    for c in range(sampler.num_chains):  # one plain line per chain (progress bars only on a terminal)
+        log.info("chain %d/%d: %d + %d draws, %.1f leapfrog steps per draw, %d divergences, max tree depth %d",
+                 c + 1, sampler.num_chains, sampler.num_warmup, sampler.num_samples,
+                 float(extra["num_steps"][c].mean()), int(np.sum(extra["diverging"][c])),
+                 int(extra["tree_depth"][c].max()))
+    log.info("NUTS: %.1f s (warm-up %.1f s, sampling %.1f s)", elapsed, warm_share * elapsed,
+             (1.0 - warm_share) * elapsed)
     return NutsFit(problem=problem, samples=samples, stats=extra, map=map_result, sampler=sampler,
                    timings={"warmup_s": warm_share * elapsed, "sampling_s": (1.0 - warm_share) * elapsed})
 
@@ -654,7 +675,7 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
     map_result = post = None
     if sampler.precondition == "laplace":
         post = unconstrained_posterior(problem, init)
-        map_result = find_map(problem, {}, posterior=post)
+        map_result = find_map(problem, {}, posterior=post, progress=sampler.progress_bar)
     fit = run_nuts(problem, sampler=sampler, map_result=map_result, posterior=post)
     if sampler.retry and sampler.num_warmup >= config.DEFAULT_SAMPLER.num_warmup \
             and sampler.num_samples >= config.DEFAULT_SAMPLER.num_samples:
@@ -663,6 +684,8 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
         failed = gate_failures(fit)
         second = remedy(sampler, failed)
         if second is not None:
+            log.warning("gates failed (%s): retrying once with %d + %d draws per chain, target acceptance %.2f",
+                        ", ".join(failed), second.num_warmup, second.num_samples, second.target_accept)
             first_s = fit.timings["warmup_s"] + fit.timings["sampling_s"]
             fit = run_nuts(problem, sampler=second, map_result=map_result, posterior=post)
             fit.retries = [{"failed": failed, "first_attempt_s": round(first_s, 3),

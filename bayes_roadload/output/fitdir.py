@@ -14,7 +14,12 @@ A fit directory holds
 ``fit.json``
     what the fit was: ``kind``, ``model``, ``model_file``, ``free``, ``pooling``, ``noise``,
     ``robust``, ``undriven`` (the known undriven-wheel loss, or null) and ``campaign`` (the
-    campaign directory, or null): what ``plan`` needs to rebuild it.
+    campaign directory, or null): what ``plan`` needs to rebuild it; and ``provenance``
+    (:func:`fit_provenance`: package version, command line, the campaign's content hash, the unit
+    conversions made on load).
+
+``posterior.nc`` carries the provenance as attributes of every group, and every variable its
+``units`` (:func:`variable_units`).
 extra tables
     per kind (:attr:`~bayes_roadload.inference.kinds.KindEntry.extras`), e.g. ``validity.csv``,
     ``table_7_10.csv``, ``classical.csv``, ``comparison.csv``.
@@ -32,6 +37,8 @@ import arviz as az
 import numpy as np
 import pandas as pd
 
+from .. import __version__, config
+from ..data import campaign_sha256
 from ..inference.lsq import LsqResult, lsq_record
 from ..inference.nuts import NutsFit
 from ..inference.results import FitReport
@@ -50,16 +57,68 @@ def fit_record(fit: NutsFit, campaign_path: str | os.PathLike | None = None) -> 
             "campaign": None if campaign_path is None else str(Path(campaign_path).resolve())}
 
 
+_SUFFIX_UNITS = (("_mps_per_sqrt_s", "m/s/sqrt(s)"), ("_N_per_kph2", "N/(km/h)^2"), ("_N_per_kph", "N/(km/h)"), ("_N", "N"), ("_mps2", "m/s^2"),
+                 ("_mps", "m/s"), ("_kph", "km/h"), ("_kg", "kg"), ("_kgm2", "kg m^2"), ("_rad", "rad"),
+                 ("_deg", "deg"), ("_m", "m"), ("_s", "s"), ("_k", "K"), ("_pa", "Pa"))
+
+
+def variable_units(name: str) -> str:
+    """The units of a posterior variable: a contract parameter's
+    (:data:`~bayes_roadload.config.PARAMETER_UNITS`), a run-to-run spread ``tau_X`` in X's units,
+    a standardised run offset ``z_X`` dimensionless, otherwise the unit its name's suffix
+    states (``F50_N``: N, ``sigma_mps``: m/s, ``F2_N_per_kph2``: N/(km/h)^2); "unknown" when
+    neither says."""
+    if name in config.PARAMETER_UNITS:
+        return config.PARAMETER_UNITS[name]
+    head, _, rest = name.partition("_")
+    if head == "tau" and rest in config.PARAMETER_UNITS:
+        return config.PARAMETER_UNITS[rest]
+    if head == "z" and rest:
+        return "-"
+    for suffix, unit in _SUFFIX_UNITS:
+        if name.endswith(suffix):
+            return unit
+    return "unknown"
+
+
+def fit_provenance(command_line: str | None = None, campaign: str | os.PathLike | None = None,
+               conversions: list | None = None) -> dict[str, Any]:
+    """Where a fit came from: ``package_version``, ``command_line`` (or null), ``campaign_sha256``
+    (:func:`~bayes_roadload.data.campaign_sha256` of the campaign directory, or null) and the
+    unit ``conversions`` made on load (:mod:`bayes_roadload.data.units`)."""
+    return {"package_version": __version__, "command_line": command_line,
+            "campaign_sha256": campaign_sha256(campaign) if campaign is not None and Path(campaign).is_dir() else None,
+            "conversions": list(conversions or [])}
+
+
+def _annotate(idata: az.InferenceData, prov: dict[str, Any]) -> None:
+    """Units on every variable and the provenance on every group of ``idata`` (in place;
+    netCDF attributes are strings and numbers: conversions as JSON)."""
+    attrs = {"package": "bayes-roadload", "package_version": prov.get("package_version", __version__),
+             "command_line": prov.get("command_line") or "", "campaign_sha256": prov.get("campaign_sha256") or "",
+             "unit_conversions": json.dumps(prov.get("conversions", []))}
+    for group in idata.groups():
+        ds = idata[group]
+        ds.attrs.update(attrs)
+        for var in ds.data_vars:
+            ds[var].attrs["units"] = variable_units(str(var))
+
+
 def write_fit_dir(report: FitReport, out_dir: str | os.PathLike, *, record: dict | None = None,
-                  extras: dict[str, pd.DataFrame] | None = None) -> list[str]:
-    """Write a fit directory: ``posterior.nc`` (when the report has draws), ``summary.csv``,
-    ``runs_summary.csv`` (when the report has per-run rows), ``diagnostics.json`` (when it has
-    gates), ``fit.json`` (``record``, when given: :func:`fit_record`, :func:`~bayes_roadload.
-    inference.lsq.lsq_record`) and the ``extras`` tables.  Returns the names of the files written."""
+                  extras: dict[str, pd.DataFrame] | None = None, provenance: dict | None = None) -> list[str]:
+    """Write a fit directory: ``posterior.nc`` (when the report has draws; units and provenance
+    as attributes), ``summary.csv``, ``runs_summary.csv`` (when the report has per-run rows),
+    ``diagnostics.json`` (when it has gates), ``fit.json`` (``record``, when given:
+    :func:`fit_record`, :func:`~bayes_roadload.inference.lsq.lsq_record`, with ``provenance``
+    added) and the ``extras`` tables.  Returns the names of the files written."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    prov = provenance if provenance is not None else fit_provenance()
+    if record is not None:
+        record = dict(record, provenance=prov)
     written = []
     if report.idata is not None:
+        _annotate(report.idata, prov)
         report.idata.to_netcdf(str(out / "posterior.nc"))
         written.append("posterior.nc")
     report.summary.to_csv(out / "summary.csv", index=False, float_format=report.float_format)
@@ -79,13 +138,14 @@ def write_fit_dir(report: FitReport, out_dir: str | os.PathLike, *, record: dict
     return written
 
 
-def write_lsq_fit_dir(result: LsqResult, out_dir: str | os.PathLike) -> list[str]:
+def write_lsq_fit_dir(result: LsqResult, out_dir: str | os.PathLike, provenance: dict | None = None) -> list[str]:
     """The fit directory of a classical least-squares fit through :func:`write_fit_dir`:
     ``summary.csv`` (weighted means, eq. 5.15, and standard errors, eq. 5.16, in the columns
     of every summary; the MCMC columns empty), ``per_group.csv`` and ``fit.json``
-    (:func:`~bayes_roadload.inference.lsq.lsq_record`)."""
+    (:func:`~bayes_roadload.inference.lsq.lsq_record`, with ``provenance``)."""
     report = FitReport(idata=None, summary=result.summary(), runs=None, diagnostics=None, float_format="%.10g")
-    return write_fit_dir(report, out_dir, record=lsq_record(result), extras={"per_group.csv": result.per_group})
+    return write_fit_dir(report, out_dir, record=lsq_record(result), extras={"per_group.csv": result.per_group},
+                         provenance=provenance)
 
 
 @dataclass

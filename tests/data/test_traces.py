@@ -60,7 +60,8 @@ def test_wheel_torque_and_rotating_inertia(tmp_path):
     "mutate, expected",
     [
         (lambda d: d.drop(columns="speed_mps"), "column 'speed_mps': required column is missing"),
-        (lambda d: d.rename(columns={"speed_mps": "speed_kph"}), "column 'speed_kph'"),
+        (lambda d: d.rename(columns={"speed_mps": "speed"}), "column 'speed': the column name states no unit"),
+        (lambda d: d.assign(speed_kph=d["speed_mps"] * 3.6), "column 'speed_kph': two speed columns"),
         (lambda d: d.assign(speed_mps=d["speed_mps"] * 3.6 + 20), "column 'speed_mps', row 1"),
         (lambda d: d.assign(speed_mps=d["speed_mps"].where(d.index != 7, np.nan)), "column 'speed_mps', row 8"),
         (lambda d: d.assign(speed_mps=d["speed_mps"].where(d.index != 3, -1.0)), "row 4"),

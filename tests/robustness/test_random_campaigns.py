@@ -20,8 +20,8 @@ def test_a_valid_draw_ends_in_a_written_fit(seed, tmp_path):
 
 @pytest.mark.parametrize("how", INVALID)
 def test_an_invalid_draw_is_refused_cleanly(how, tmp_path):
-    # start 31 m/s: km/h read as m/s then exceeds the 100 m/s limit (below 27.8 m/s it does not:
-    # test_kph_in_a_mps_column_below_the_speed_limit_is_not_detected)
+    # start 31 m/s: km/h read as m/s then exceeds the 100 m/s channel limit (below 27.8 m/s the
+    # implied road load refuses it: test_kph_in_a_mps_column_below_the_speed_limit_is_refused_...)
     d = dict(draw(1000, invalid=True), invalid=how, pairs=1, method="lsq", model="three_term", rate_hz=2.0,
              start_speed_mps=31.0)
     rec = run_draw(d, tmp_path)
@@ -29,12 +29,14 @@ def test_an_invalid_draw_is_refused_cleanly(how, tmp_path):
     assert "runs.csv" in rec["message"] or how == "missing_time", rec  # the message names the file
 
 
-@pytest.mark.xfail(strict=True, reason="a known gap: km/h logged in speed_mps is refused only above 100 m/s "
-                   "(config.MAX_SPEED_MPS); a 97 km/h start read as 97 m/s is accepted")
-def test_kph_in_a_mps_column_below_the_speed_limit_is_not_detected(tmp_path):
+def test_kph_in_a_mps_column_below_the_speed_limit_is_refused_with_the_conversion(tmp_path):
+    """A 97 km/h start read as 97 m/s stays under the 100 m/s channel limit; the implied road
+    load (rolling coefficient x 3.6, drag area / 3.6) refuses it and names --speed-unit kph."""
     d = dict(draw(1000, invalid=True), invalid="kph_in_mps", pairs=1, method="lsq", model="three_term",
              rate_hz=2.0, start_speed_mps=27.0)
-    assert run_draw(d, tmp_path)["outcome"] == "refused"
+    rec = run_draw(d, tmp_path)
+    assert rec["outcome"] == "refused", rec
+    assert "runs.csv" in rec["message"] and "--speed-unit kph" in rec["message"], rec
 
 
 @pytest.mark.slow
