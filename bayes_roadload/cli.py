@@ -49,6 +49,49 @@ OUT_MARKER = ".bayes-roadload.json"
 _output = logging.getLogger(console.OUTPUT_LOGGER)
 
 
+class Stages:
+    """Wall time of a command's stages (``with stages("load"): ...``), written to
+    ``diagnostics.json`` ``stages_s`` with the fit's own ``timings_s`` so a slow stage shows."""
+
+    def __init__(self):
+        import time
+
+        self._clock = time.perf_counter
+        self.started = self._clock()
+        self.seconds: dict[str, float] = {}
+
+    def __call__(self, name: str):
+        import contextlib
+
+        @contextlib.contextmanager
+        def timed():
+            t0 = self._clock()
+            try:
+                yield
+            finally:
+                self.seconds[name] = self.seconds.get(name, 0.0) + self._clock() - t0
+        return timed()
+
+    def record(self, diagnostics_file: Path, fit_timings: dict[str, float] | None = None) -> dict[str, float]:
+        """Add ``stages_s`` to ``diagnostics_file`` (when it exists): ``imports`` (from the
+        package's import to the command's start), the timed stages, the fit's setup (LSQ start,
+        linearisation: the fit's wall time less MAP, warm-up and sampling; compilation is inside
+        the stage that first runs a program) and ``total`` (import to now)."""
+        from . import IMPORT_STARTED
+
+        stages = {"imports": self.started - IMPORT_STARTED, **self.seconds}
+        if fit_timings is not None and "fit" in self.seconds:
+            sampled = sum(fit_timings.get(k, 0.0) for k in ("map_s", "warmup_s", "sampling_s", "first_attempt_s"))
+            stages["fit_setup"] = max(self.seconds["fit"] - sampled, 0.0)
+        stages["total"] = self._clock() - IMPORT_STARTED
+        stages = {k: round(v, 3) for k, v in stages.items()}
+        if diagnostics_file.is_file():
+            doc = json.loads(diagnostics_file.read_text())
+            doc["stages_s"] = stages
+            diagnostics_file.write_text(json.dumps(doc, indent=2) + "\n")
+        return stages
+
+
 def echo(text: str = "") -> None:
     """A line of a command's output (standard output through logging: ``--quiet`` silences it)."""
     _output.info(text)
@@ -175,22 +218,27 @@ def _provenance(args, campaign, campaign_path):
                           getattr(campaign, "meta", {}).get("conversions"))
 
 
-def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None, provenance=None):
+def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None, provenance=None, stages=None):
     """NUTS fit of a campaign of kind ``entry``, its fit directory (:func:`~bayes_roadload.output.
     write_fit_dir`) and the posterior table against the truth of a simulated campaign."""
     from .analysis.budget import format_budget, propagate_type_b
     from .inference.results import format_posterior_table
     from .output import fit_record, write_fit_dir
 
-    fit = entry.fit(campaign, spec, options)
-    report = entry.report(fit, campaign)
-    tables = entry.extras(fit, campaign, report.summary, options)
+    stages = stages or Stages()
+    with stages("fit"):
+        fit = entry.fit(campaign, spec, options)
+    with stages("summaries_and_predictive"):
+        report = entry.report(fit, campaign)
+        tables = entry.extras(fit, campaign, report.summary, options)
     record = fit_record(fit, campaign_path)
     record["type_b"] = bool(entry.type_b and options.type_b)
     if record["type_b"]:
-        report, budget, _ = propagate_type_b(report, campaign, spec, seed=options.sampler.seed)
+        with stages("type_b"):
+            report, budget, _ = propagate_type_b(report, campaign, spec, seed=options.sampler.seed)
         tables = dict(tables, **{"budget.csv": budget})
-    written = write_fit_dir(report, out, record=record, extras=tables, provenance=provenance)
+    with stages("writing"):
+        written = write_fit_dir(report, out, record=record, extras=tables, provenance=provenance)
     truth = fit.problem.truth_values(campaign.truth)
     text = format_posterior_table(report.summary, report.diagnostics, truth or None)
     if "budget.csv" in tables:
@@ -289,7 +337,9 @@ def _cmd_fit(args) -> int:
     from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table
     from .output import write_lsq_fit_dir
 
-    campaign = _load_for_fit(args)
+    stages = Stages()
+    with stages("load"):
+        campaign = _load_for_fit(args)
     out = Path(args.out)
     entry = kind_of(campaign)
     options = _fit_options(args)
@@ -314,7 +364,8 @@ def _cmd_fit(args) -> int:
         echo(line)
     fit, report, tables, written, _, table = _fit_and_write(entry, campaign, spec,
                                                             dataclasses.replace(options, runs=runs), out,
-                                                            args.campaign, _provenance(args, campaign, args.campaign))
+                                                            args.campaign, _provenance(args, campaign, args.campaign),
+                                                            stages)
     echo(table)
     if not report.diagnostics["pass"] and not _output.isEnabledFor(logging.INFO):  # --quiet: still said
         logging.getLogger("bayes_roadload").warning("the NUTS fit FAILED its diagnostic gates (%s): see %s",
@@ -324,7 +375,10 @@ def _cmd_fit(args) -> int:
         echo(line)
     written += ["validity.csv"] if runs is not None else []
     echo(f"\nwrote {out / written[0]}, {', '.join(written[1:])}")
-    _after_fit(args, out, campaign)
+    with stages("report"):
+        _after_fit(args, out, campaign)
+    timed = stages.record(out / "diagnostics.json", fit.timings)
+    logging.getLogger("bayes_roadload").info("stages (s): " + ", ".join(f"{k} {v:.1f}" for k, v in timed.items()))
     return 0 if report.diagnostics["pass"] else EXIT_GATES_FAILED
 
 
@@ -979,6 +1033,9 @@ def main(argv: list[str] | None = None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
     args.command_line = "bayes-roadload " + shlex.join(str(w) for w in words)
     claim = None
+    from ._jax import enable_compilation_cache
+
+    enable_compilation_cache()  # before the first compilation: same-shaped fits reuse compiled code
     try:
         console.configure(console.verbosity_of(args.quiet, args.verbose))
         with console.routed_warnings():

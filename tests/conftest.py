@@ -1,12 +1,15 @@
 """Shared fixtures: small simulated campaigns and one NUTS fit reused by many tests."""
 
 import dataclasses
+import os
 import warnings
 
 import pytest
 
 from bayes_roadload import config
 from bayes_roadload.simulate import get_case, simulate_campaign
+
+os.environ.setdefault("BAYES_ROADLOAD_CACHE_DIR", "")  # no persistent compilation cache in the tests
 
 SMALL_SAMPLER = config.SamplerConfig(num_warmup=300, num_samples=800, num_chains=2, seed=3, target_accept=0.95)
 """Small draw counts for tests, and what a two-pair campaign needs to pass the gates: with

@@ -108,3 +108,25 @@ def test_speed_unit_is_converted_and_recorded(campaign_dir, tmp_path, capsys):
     (conv,) = prov["conversions"]
     assert conv["column"] == "speed_mps" and conv["unit"] == "km/h" and conv["stated_by"] == "--speed-unit"
     assert len(prov["campaign_sha256"]) == 64 and prov["command_line"].endswith("--speed-unit kph")
+
+
+def test_the_command_line_fills_and_reuses_the_compilation_cache(campaign_dir, tmp_path):
+    """Two processes fit the same campaign: the first writes compiled programs to
+    $BAYES_ROADLOAD_CACHE_DIR, the second finds every program there and adds none."""
+    import os
+    import subprocess
+    import sys
+
+    cache = tmp_path / "cache"
+    # every program cached (a threshold in compile seconds would make the count depend on the load)
+    env = dict(os.environ, BAYES_ROADLOAD_CACHE_DIR=str(cache), BAYES_ROADLOAD_CACHE_DIR_MIN_COMPILE_S="0")
+
+    def run(out):
+        cmd = [sys.executable, "-m", "bayes_roadload", "fit", str(campaign_dir), "--method", "lsq", "--model",
+               "three_term", "--no-report", "-q", "--out", str(tmp_path / out)]
+        assert subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600).returncode == 0
+        return sorted(p.name for p in cache.iterdir())
+
+    first = run("a")
+    assert first, "no compiled program was cached"
+    assert run("b") == first

@@ -1,0 +1,121 @@
+"""Cold and warm start of a fit from the shell prompt: ``bayes-roadload fit`` in a new process,
+first with an empty persistent compilation cache (cold), then again with the cache the first run
+filled (warm), timed from before the process starts to its exit, with the stages the fit records
+in ``diagnostics.json`` (``stages_s``: imports, load, fit setup, MAP, warm-up, sampling,
+summaries and predictive, Type B, writing, report, total).
+
+The reference campaign is the issue's: 18 pairs (36 runs) from the independent simulator
+(``bayes_roadload.simulate.independent``, calm wind, one vehicle category, fixed logging rate),
+``--model four_term``; each pooling (the default ``auto``, hierarchical here, and ``pooled``) is
+timed.  Records: ``benchmarks/records/performance/cold_start.json``; the section of
+``docs/performance.md`` is generated from them (``--docs``).
+
+    python benchmarks/cold_start.py [--pairs 18] [--pooling auto pooled] [--docs]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RECORDS = ROOT / "benchmarks" / "records" / "performance" / "cold_start.json"
+DOC = ROOT / "docs" / "performance.md"
+BEGIN, END = "<!-- cold_start: begin -->", "<!-- cold_start: end -->"
+TARGETS_S = {"cold": 15.0, "warm": 8.0}
+
+
+def campaign(pairs: int, root: Path) -> Path:
+    """The reference campaign: the independent simulator, seed 2026, an SUV or van, calm wind, 10 Hz."""
+    sys.path.insert(0, str(ROOT))
+    from bayes_roadload.data import save_campaign
+    from bayes_roadload.simulate.independent import simulate_independent
+
+    c = simulate_independent(2026, pairs=pairs, category="suv_van", wind="calm", sample_rate_hz=10.0)
+    return save_campaign(c, root / f"ind_{pairs}pairs")
+
+
+def timed_fit(camp: Path, out: Path, cache: Path, pooling: str) -> dict:
+    env = dict(os.environ, BAYES_ROADLOAD_CACHE_DIR=str(cache))
+    cmd = [sys.executable, "-m", "bayes_roadload", "fit", str(camp), "--model", "four_term", "--pooling", pooling,
+           "--no-progress", "--no-report", "--force", "--out", str(out)]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    diag = json.loads((out / "diagnostics.json").read_text()) if (out / "diagnostics.json").is_file() else {}
+    return {"rc": proc.returncode, "wall_s": round(wall, 2), "stages_s": diag.get("stages_s", {}),
+            "timings_s": diag.get("timings_s", {}), "pass": diag.get("pass"), "failed": diag.get("failed"),
+            "retries": diag.get("retries", []), "pooling": diag.get("pooling") or pooling,
+            "stderr_tail": proc.stderr.strip().splitlines()[-3:]}
+
+
+def measure(pairs: int, poolings: list[str]) -> dict:
+    with tempfile.TemporaryDirectory(prefix="cold_start_") as tmp:
+        tmp = Path(tmp)
+        camp = campaign(pairs, tmp)
+        runs = sum(1 for _ in open(camp / "runs.csv")) - 1
+        rows = []
+        for pooling in poolings:
+            cache = tmp / f"cache_{pooling}"
+            for start in ("cold", "warm"):
+                r = timed_fit(camp, tmp / f"fit_{pooling}", cache, pooling)
+                rows.append({"pooling": pooling, "start": start, **r})
+                print(json.dumps(rows[-1]), flush=True)
+    return {"pairs": pairs, "runs": 2 * pairs, "samples": runs, "model": "four_term", "cpu_count": os.cpu_count(),
+            "load_1min": os.getloadavg()[0], "rows": rows}
+
+
+def markdown(rec: dict) -> str:
+    lines = [BEGIN, "", f"Reference: {rec['pairs']} pairs ({rec['runs']} runs, {rec['samples']} samples) from the "
+             "independent simulator, `fit --model four_term --no-progress --no-report` in a new process, timed "
+             f"from the shell prompt to exit on this {rec['cpu_count']}-core machine (1-minute load "
+             f"{rec['load_1min']:.1f} when the run ended). Cold: an empty compilation cache; warm: the cache the "
+             "cold run filled (`BAYES_ROADLOAD_CACHE_DIR`, default `~/.cache/bayes-roadload/jax`). Stages from "
+             "`diagnostics.json` `stages_s` (compilation is inside the stage that first runs a program: "
+             "`fit_setup` holds the least-squares start, `warmup` the sampler's).", "",
+             "| pooling | start | wall (s) | target | imports | load | fit setup | MAP | warm-up | sampling "
+             "| summaries + predictive | Type B | writing | gates |", "|" + "---|" * 14]
+    for r in rec["rows"]:
+        s, t = r["stages_s"], r["timings_s"]
+        gates = "pass" if r["pass"] else f"FAIL ({', '.join(r['failed'] or [])})"
+        if r["retries"]:
+            gates += f", {len(r['retries'])} retry"
+        lines.append(f"| {r['pooling']} | {r['start']} | {r['wall_s']:.1f} | <= {TARGETS_S[r['start']]:.0f} | "
+                     f"{s.get('imports', 0):.1f} | {s.get('load', 0):.1f} | {s.get('fit_setup', 0):.1f} | "
+                     f"{t.get('map_s', 0):.1f} | {t.get('warmup_s', 0):.1f} | {t.get('sampling_s', 0):.1f} | "
+                     f"{s.get('summaries_and_predictive', 0):.1f} | {s.get('type_b', 0):.1f} | "
+                     f"{s.get('writing', 0):.1f} | {gates} |")
+    return "\n".join(lines + ["", END])
+
+
+def write_doc(rec: dict) -> None:
+    text = DOC.read_text()
+    block = markdown(rec)
+    if BEGIN in text:
+        text = text[:text.index(BEGIN)] + block + text[text.index(END) + len(END):]
+    else:
+        text = text.rstrip("\n") + "\n\n## Cold and warm start\n\n" + block + "\n"
+    DOC.write_text(text)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--pairs", type=int, default=18)
+    ap.add_argument("--pooling", nargs="+", default=["auto", "pooled"])
+    ap.add_argument("--docs", action="store_true", help="regenerate the docs section from the records only")
+    args = ap.parse_args()
+    if not args.docs:
+        rec = measure(args.pairs, args.pooling)
+        RECORDS.parent.mkdir(parents=True, exist_ok=True)
+        RECORDS.write_text(json.dumps(rec, indent=2) + "\n")
+    write_doc(json.loads(RECORDS.read_text()))
+
+
+if __name__ == "__main__":
+    main()
