@@ -333,6 +333,7 @@ def _after_fit(args, out: Path, campaign) -> None:
 
 
 def _cmd_fit(args) -> int:
+    from . import config
     from .inference.kinds import kind_of, resolve_pooling
     from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table
     from .output import write_lsq_fit_dir
@@ -346,6 +347,12 @@ def _cmd_fit(args) -> int:
     spec = _model_for(args, entry.default_model(campaign, options))
     options = resolve_pooling(entry, campaign, spec, options)
     entry.check_options(options)
+    pooling_note = None
+    if args.pooling == "auto" and options.pooling == "pooled" and args.method == "nuts" \
+            and len(campaign.run_ids) > config.AUTO_HIERARCHICAL_MAX_RUNS:
+        pooling_note = (f"note: --pooling auto fitted these {len(campaign.run_ids)} runs pooled (over "
+                        f"{config.AUTO_HIERARCHICAL_MAX_RUNS} runs): the run-to-run spread is not in the intervals; "
+                        "--pooling hierarchical adds it at several times the fit time (docs/calibration.md)")
     runs = _validity(entry, campaign, args, out)
     if args.method == "lsq":
         if args.pooling == "hierarchical":
@@ -373,6 +380,8 @@ def _cmd_fit(args) -> int:
                                                     out / "diagnostics.json")
     for line in entry.notes(fit, campaign, tables):
         echo(line)
+    if pooling_note:
+        echo(pooling_note)
     written += ["validity.csv"] if runs is not None else []
     echo(f"\nwrote {out / written[0]}, {', '.join(written[1:])}")
     with stages("report"):

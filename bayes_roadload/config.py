@@ -273,6 +273,11 @@ class SamplerConfig:
             raise ValueError("num_warmup, num_samples and num_chains must be positive")
 
 
+AUTO_HIERARCHICAL_MAX_RUNS = 24
+"""``--pooling auto`` is hierarchical for speed-trace campaigns of 2 to this many runs (12 pairs:
+the calibration study's range) and pooled above: the hierarchical fit of 36 runs ran for more
+than 8 minutes on a 2-core machine against 95 s pooled (docs/calibration.md, benchmarks/cold_start.py)."""
+
 DENSE_MASS_MAX_DIM = 20
 """Largest number of unconstrained dimensions for which ``mass_matrix="auto"`` adapts a dense
 mass matrix (numpyro's first warm-up window has 25 draws)."""

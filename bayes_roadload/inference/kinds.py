@@ -109,15 +109,19 @@ class KindEntry:
 
 def traces_default_pooling(campaign, spec: ModelSpec, o: FitOptions) -> str:
     """``--pooling auto`` for speed traces: hierarchical (run-level AD, BD, CD0) for a NUTS fit
-    of two or more runs whose model frees any of them, pooled otherwise (least squares, robust
-    noise, a latent wind per pair: combinations the hierarchical model does not have).  Measured
+    of two to :data:`~bayes_roadload.config.AUTO_HIERARCHICAL_MAX_RUNS` runs whose model frees
+    any of them, pooled otherwise (least squares, robust noise, a latent wind per pair:
+    combinations the hierarchical model does not have; larger campaigns, whose hierarchical fit
+    takes many times the pooled one's time -- ``--pooling hierarchical`` still fits them).  Measured
     in docs/calibration.md (test-to-test variation): the pooled model claims a precision the
     runs' scatter contradicts (thesis case 14, 3 pairs: F50_N rms z 4.0 pooled, 1.7
     hierarchical; the demo's 95 % intervals hold the truth for 6 of 8 quantities pooled, 8 of 8
     hierarchical)."""
     latent_wind = spec.resolve_air(campaign) == "wind" and "head_wind_mps" in spec.free
     varying = any(p in spec.free for p in HIERARCHICAL_PARAMETERS)
-    if o.method == "nuts" and not o.robust and not latent_wind and varying and len(campaign.run_ids) >= 2:
+    runs = len(o.runs) if o.runs is not None else len(campaign.run_ids)
+    if o.method == "nuts" and not o.robust and not latent_wind and varying \
+            and 2 <= runs <= config.AUTO_HIERARCHICAL_MAX_RUNS:
         return "hierarchical"
     return "pooled"
 

@@ -68,6 +68,11 @@ def test_auto_pooling_is_hierarchical_for_nuts_fits_of_speed_traces(small_campai
     assert resolve_pooling(traces, small_campaign, spec, FitOptions(pooling="pooled")).pooling == "pooled"
     one_run = small_campaign.subset([small_campaign.run_ids[0]])
     assert resolve_pooling(traces, one_run, spec, FitOptions()).pooling == "pooled"
+    from bayes_roadload import config
+
+    many = list(range(config.AUTO_HIERARCHICAL_MAX_RUNS + 1))  # the runs to fit, as --validity gives them
+    assert resolve_pooling(traces, small_campaign, spec, FitOptions(runs=many)).pooling == "pooled"
+    assert resolve_pooling(traces, small_campaign, spec, FitOptions(runs=many[:-1])).pooling == "hierarchical"
     speed_only = dataclasses.replace(small_campaign,
                                      runs=small_campaign.runs.drop(columns=["airspeed_mps", "yaw_rad"]))
     assert resolve_pooling(traces, speed_only, load_model_spec("speed_only_wind"), FitOptions()).pooling == "pooled"

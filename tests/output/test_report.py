@@ -321,3 +321,38 @@ def test_page_in_a_headless_browser(fits, kind):
     finally:
         driver.quit()
         shutil.rmtree(profile, ignore_errors=True)
+
+
+SPLIT = (Path(__file__).resolve().parents[3] / "shared" / "data" / "external" / "coastdown-mda-split"
+         / "sample_data" / "Split" / "coastdown")
+
+
+@pytest.mark.external
+@pytest.mark.skipif(not SPLIT.is_dir(), reason=f"{SPLIT} not present (real data are read in place)")
+def test_report_of_a_real_interval_campaign_in_a_headless_browser(tmp_path):
+    """A real VBOX split export (the Ioniq's high and low windows) imported and fitted through
+    the command line: its report loads without console errors, every image renders, and the
+    page's F0 equals summary.csv's."""
+    from selenium.webdriver.common.by import By
+
+    (tmp_path / "vehicle.toml").write_text("[vehicle]\nmass_kg = 1600.0\neffective_mass_kg = 1640.0\n"
+                                           "frontal_area_m2 = 2.2\n")
+    camp, out = tmp_path / "ioniq", tmp_path / "fit"
+    assert cli(["import-vbox", str(SPLIT / "altas_ioniq.csv"), str(SPLIT / "baixas_ioniq.csv"), "--vehicle",
+                str(tmp_path / "vehicle.toml"), "--out", str(camp), "-q"]) == 0
+    assert cli(["fit", str(camp), *SMALL, "--out", str(out), "-q"]) in (0, 3)
+    summary = pd.read_csv(out / "summary.csv").set_index("parameter")
+    driver, profile = _browser()
+    try:
+        driver.get((out / "report.html").resolve().as_uri())
+        assert [e for e in driver.get_log("browser") if e["level"] == "SEVERE"] == []
+        images = driver.find_elements(By.TAG_NAME, "img")
+        assert images and len(images) == len(list((out / FILES_DIR).glob("*.png")))
+        for img in images:
+            assert driver.execute_script("return arguments[0].complete && arguments[0].naturalWidth", img) > 0
+        rows = driver.find_elements(By.CSS_SELECTOR, "#posterior tbody tr")
+        shown = {r.find_elements(By.TAG_NAME, "td")[0].text: r.find_elements(By.TAG_NAME, "td")[1].text for r in rows}
+        assert math.isclose(float(shown["F0_N"]), summary.loc["F0_N", "mean"], rel_tol=PRINT_RTOL)
+    finally:
+        driver.quit()
+        shutil.rmtree(profile, ignore_errors=True)
