@@ -17,12 +17,20 @@
 # posterior is examined: the A_D-B_D-C_D0 correlation, posterior-predictive bands over the
 # speed traces, residuals, and the road-load curve with its band.
 #
-# Draw counts are set by environment variables so that the test suite can run this notebook
-# quickly (`BR_PAIRS`, `BR_WARMUP`, `BR_DRAWS`); the defaults are a full analysis.
+# **Your own fit:** set `FIT_DIR` (below, or the environment variable `BR_FIT_DIR`) to a
+# directory written by `bayes-roadload fit` (speed traces, NUTS) and the same analysis runs on
+# it; left empty, the notebook simulates and fits its example.  Draw counts of the example are
+# set by environment variables so that the test suite can run this notebook quickly
+# (`BR_PAIRS`, `BR_WARMUP`, `BR_DRAWS`); the defaults are a full analysis.
+
+# %% tags=["parameters"]
+import os
+
+FIT_DIR = os.environ.get("BR_FIT_DIR") or None  # a `bayes-roadload fit` output directory, or None
 
 # %%
 import dataclasses
-import os
+import json
 
 import matplotlib
 
@@ -30,10 +38,14 @@ matplotlib.use(os.environ.get("MPLBACKEND", "Agg"))
 import arviz as az
 import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 
 from bayes_roadload import config
+from bayes_roadload.data import load_campaign
+from bayes_roadload.inference.bayes import build_problem
 from bayes_roadload.inference.nuts import fit_nuts
 from bayes_roadload.inference.results import diagnostics, format_posterior_table, summary_table, to_inference_data
+from bayes_roadload.inference.spec import load_model_spec
 from bayes_roadload.physics.roadload import road_load_parts_n
 from bayes_roadload.simulate import get_case, simulate_campaign
 
@@ -43,17 +55,31 @@ DRAWS = int(os.environ.get("BR_DRAWS", 1000))
 OUT = os.environ.get("BR_OUT", ".")
 
 # %% [markdown]
-# ## Simulate and fit
-# The basic drag model (thesis eq. 6.1) is used to simulate, so the analysis model is the
-# true physics up to the instrument dynamics and the noise.
+# ## The fit: yours, or simulate and fit the example
+# With `FIT_DIR` the posterior, summary and gates are read from the fit directory and the
+# campaign from the path its `fit.json` records.  Without it, the basic drag model (thesis
+# eq. 6.1) is used to simulate, so the analysis model is the true physics up to the instrument
+# dynamics and the noise.
 
 # %%
-case = dataclasses.replace(get_case(14), model="basic")
-campaign = simulate_campaign(case, pairs=PAIRS, seed=1)
-fit = fit_nuts(campaign, "four_term", sampler=config.SamplerConfig(num_warmup=WARMUP, num_samples=DRAWS))
-idata = to_inference_data(fit)
-summary = summary_table(fit, idata)
-diag = diagnostics(fit, idata, summary)
+if FIT_DIR:
+    record = json.loads(open(os.path.join(FIT_DIR, "fit.json")).read())
+    campaign = load_campaign(record["campaign"])
+    model_file = record.get("model_file")
+    spec = load_model_spec(model_file if model_file and os.path.isfile(model_file) else record["model"])
+    problem = build_problem(campaign, spec, pooling=record["pooling"], noise=record["noise"], robust=record["robust"])
+    idata = az.from_netcdf(os.path.join(FIT_DIR, "posterior.nc"))
+    summary = pd.read_csv(os.path.join(FIT_DIR, "summary.csv"))
+    diag = json.loads(open(os.path.join(FIT_DIR, "diagnostics.json")).read())
+else:
+    case = dataclasses.replace(get_case(14), model="basic")
+    campaign = simulate_campaign(case, pairs=PAIRS, seed=1)
+    fit = fit_nuts(campaign, "four_term", sampler=config.SamplerConfig(num_warmup=WARMUP, num_samples=DRAWS))
+    problem = fit.problem
+    idata = to_inference_data(fit)
+    summary = summary_table(fit, idata)
+    diag = diagnostics(fit, idata, summary)
+samples = {k: idata.posterior[k].values for k in problem.free if k in idata.posterior}
 print(format_posterior_table(summary, diag, campaign.truth))
 
 # %% [markdown]
@@ -63,9 +89,10 @@ print(format_posterior_table(summary, diag, campaign.truth))
 # coefficients while the total road load is well determined.
 
 # %%
-corr = np.corrcoef(np.stack([fit.samples[k].ravel() for k in ("AD", "BD", "CD0", "KD")]))
-print("posterior correlation (AD, BD, CD0, KD):\n", np.round(corr, 3))
-axes = az.plot_pair(idata, var_names=["AD", "BD", "CD0", "KD"], kind="kde", marginals=True)
+coefficients = [k for k in ("AD", "BD", "CD0", "KD") if k in samples]
+corr = np.corrcoef(np.stack([samples[k].ravel() for k in coefficients]))
+print(f"posterior correlation ({', '.join(coefficients)}):\n", np.round(corr, 3))
+axes = az.plot_pair(idata, var_names=coefficients, kind="kde", marginals=True)
 plt.savefig(os.path.join(OUT, "posterior_pairs.png"), dpi=80)
 
 # %% [markdown]
@@ -100,11 +127,12 @@ print("fraction of measured speeds inside the 95 % predictive band:", np.round(i
 
 # %%
 speeds = np.linspace(5.0, 31.3, 60)
-draws = {k: fit.samples[k].ravel() for k in fit.problem.free}
+draws = {k: v.reshape(-1) for k, v in samples.items()}
+n_draws = next(iter(draws.values())).size
 curves = np.stack([
-    sum(road_load_parts_n(fit.problem.model, dict(fit.problem.fixed, **{k: v[i] for k, v in draws.items()}),
-                          speeds, fit.problem.mass_kg, fit.problem.frontal_area_m2).values())
-    for i in range(0, draws["AD"].size, max(1, draws["AD"].size // 200))])
+    sum(road_load_parts_n(problem.model, dict(problem.fixed, **{k: v[i] for k, v in draws.items()}),
+                          speeds, problem.mass_kg, problem.frontal_area_m2).values())
+    for i in range(0, n_draws, max(1, n_draws // 200))])
 lo, mid, hi = np.percentile(curves, [2.5, 50, 97.5], axis=0)
 plt.figure(figsize=(6, 4))
 plt.fill_between(speeds * 3.6, lo, hi, alpha=0.4, label="95 % band")

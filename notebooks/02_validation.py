@@ -24,6 +24,15 @@
 #
 # It reads results; it fits nothing (the studies take tens of minutes).  `BR_VALIDATION_DIR`
 # points it at another directory of study tables, `BR_OUT` is where the figures go.
+#
+# **Your own fit:** with `FIT_DIR` (or `BR_FIT_DIR`) set to a `bayes-roadload fit` directory,
+# a last section checks that fit: its intervals beside the classical least-squares fit of the
+# same campaign, and beside the truth when the campaign was simulated.
+
+# %% tags=["parameters"]
+import os
+
+FIT_DIR = os.environ.get("BR_FIT_DIR") or None  # a `bayes-roadload fit` output directory, or None
 
 # %%
 import os
@@ -139,3 +148,40 @@ if cal is not None and "CD0_err_pct" in cal:
     ax.set_ylabel("C_D0 error (%)")
     fig.tight_layout()
     fig.savefig(OUT / "validation_calibration.png", dpi=80)
+
+
+# %% [markdown]
+# ## 5. Your fit (`FIT_DIR`): posterior beside classical least squares and the truth
+# The classical joint least-squares fit (thesis chapter 5, one group) of the campaign the fit
+# recorded; a posterior interval far from it, or a simulated truth outside the 95 % interval,
+# is worth a look.
+
+# %%
+if FIT_DIR:
+    import json
+
+    from bayes_roadload.data import load_campaign
+    from bayes_roadload.inference.lsq import fit_lsq
+
+    record = json.loads((Path(FIT_DIR) / "fit.json").read_text())
+    campaign = load_campaign(record["campaign"])
+    posterior = pd.read_csv(Path(FIT_DIR) / "summary.csv").set_index("parameter")
+    classical = fit_lsq(campaign, record.get("model_file") or record["model"], grouping="all")
+    mine = pd.DataFrame({q: {"posterior mean": posterior.loc[q, "mean"], "q2.5": posterior.loc[q, "q2.5"],
+                             "q97.5": posterior.loc[q, "q97.5"], "least squares": classical.weighted_mean.get(q),
+                             "truth": (campaign.truth or {}).get(q)}
+                         for q in ("AD", "BD", "CD0", "KD", "F50_N", "F0_N") if q in posterior.index}).T
+    mine["truth inside"] = [(lo <= t <= hi) if t == t and t is not None else None
+                            for lo, hi, t in zip(mine["q2.5"], mine["q97.5"], mine["truth"])]
+    print(mine.to_string(float_format=lambda x: f"{x:.6g}"))
+    fig, ax = plt.subplots(figsize=(6, 3))
+    rel = [(mine.loc[q, "least squares"] / mine.loc[q, "posterior mean"] - 1) * 100 for q in mine.index]
+    half = [(mine.loc[q, "q97.5"] - mine.loc[q, "q2.5"]) / 2 / abs(mine.loc[q, "posterior mean"]) * 100
+            for q in mine.index]
+    ax.errorbar(range(len(mine)), np.zeros(len(mine)), yerr=half, fmt="o", label="posterior 95 %")
+    ax.plot(range(len(mine)), rel, "rx", label="least squares")
+    ax.set_xticks(range(len(mine)), mine.index)
+    ax.set_ylabel("% of the posterior mean")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(OUT / "validation_your_fit.png", dpi=80)

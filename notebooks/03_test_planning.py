@@ -27,6 +27,15 @@
 #
 # It fits nothing itself (the study takes tens of minutes).  `BR_PLANNING_DIR` points it at
 # another directory of study tables, `BR_OUT` is where the figures go.
+#
+# **Your own fit:** with `FIT_DIR` (or `BR_FIT_DIR`) set to a `bayes-roadload fit` directory,
+# section 2 draws the future campaign from that fit's posterior and campaign, and section 5 plans
+# from it as `bayes-roadload plan FIT_DIR` does (`BR_PLAN_SIMULATIONS` campaigns per size).
+
+# %% tags=["parameters"]
+import os
+
+FIT_DIR = os.environ.get("BR_FIT_DIR") or None  # a `bayes-roadload fit` output directory, or None
 
 # %%
 import os
@@ -83,11 +92,21 @@ assert (need["n_for_target"] >= need["thesis_n_for_target"]).all()
 # population, the coastdown integrated through the reconstructed wind, speed noise added.
 
 # %%
-with warnings.catch_warnings():
-    warnings.simplefilter("ignore", RuntimeWarning)
-    observed = simulate_campaign(14, pairs=int(os.environ.get("BR_PAIRS", "2")), seed=0)
-pilot = pl.population_from_pilot({"AD": 0.0095, "BD": 0.214e-3, "CD0": 0.393}, {"AD": 4.3, "BD": 23.1, "CD0": 4.3},
-                                 18, observed, "three_term", noise={"sigma_mps": 0.05, "q_mps_per_sqrt_s": 0.002})
+if FIT_DIR:  # the population of your fit: its posterior draws and its campaign's conditions
+    from bayes_roadload.data import load_campaign
+    from bayes_roadload.output.fitdir import read_fit_dir
+
+    source = read_fit_dir(FIT_DIR)
+    observed = load_campaign(source.record["campaign"])
+    pilot = pl.population_from_samples(source.samples, source.record["free"], source.model, observed,
+                                       source=f"fit {FIT_DIR}")
+else:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        observed = simulate_campaign(14, pairs=int(os.environ.get("BR_PAIRS", "2")), seed=0)
+    pilot = pl.population_from_pilot({"AD": 0.0095, "BD": 0.214e-3, "CD0": 0.393},
+                                     {"AD": 4.3, "BD": 23.1, "CD0": 4.3}, 18, observed, "three_term",
+                                     noise={"sigma_mps": 0.05, "q_mps_per_sqrt_s": 0.002})
 future = pl.simulate_future(pilot, pairs=2, seed=7)
 fig, ax = plt.subplots(figsize=(6, 3.5))
 for rid, g in observed.runs.groupby("run"):
@@ -149,3 +168,22 @@ if con is not None:
     axes[2].legend(fontsize=8)
 fig.tight_layout()
 fig.savefig(OUT / "planning_study.png", dpi=100)
+
+
+# %% [markdown]
+# ## 5. Your plan (`FIT_DIR`): pairs needed for the default targets, from your fit
+# The same refits as `bayes-roadload plan FIT_DIR` (MAP + Laplace of simulated future
+# campaigns, in this process), with few campaigns per size unless `BR_PLAN_SIMULATIONS` says more.
+
+# %%
+if FIT_DIR:
+    from bayes_roadload import config
+    from bayes_roadload.analysis.batch import run_batch
+
+    targets = [pl.Target.parse(t) for t in config.PLAN_TARGETS]
+    sims = int(os.environ.get("BR_PLAN_SIMULATIONS", "10"))
+    jobs = pl.plan_jobs(pilot, [1, 2, 4], simulations=sims, model=pilot.model, confidence=0.95, seed=0)
+    plan_records = run_batch(jobs, None, progress=False)
+    mine = pl.plan_table(plan_records, targets, 0.95)
+    print(mine[["quantity", "n_pairs", "median_half_width", "assurance"]].to_string(index=False))
+    pl.plot_plan(mine, targets, OUT / "planning_your_fit.png")

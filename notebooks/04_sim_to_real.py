@@ -29,6 +29,15 @@
 #
 # It reads results; it fits nothing.  `BR_SIM_TO_REAL_DIR` points it at another records
 # directory, `BR_OUT` is where the figures go.
+#
+# **Your own fit:** with `FIT_DIR` (or `BR_FIT_DIR`) set to a `bayes-roadload fit` directory of
+# speed traces, section 5 diagnoses the fit's campaign with the fit's model, as
+# `bayes-roadload diagnose CAMPAIGN --model MODEL` does (one MAP fit, candidates linearised).
+
+# %% tags=["parameters"]
+import os
+
+FIT_DIR = os.environ.get("BR_FIT_DIR") or None  # a `bayes-roadload fit` output directory, or None
 
 # %%
 import os
@@ -138,3 +147,36 @@ if "before_spread_excess" in records:
     fig.savefig(OUT / "sim_to_real_spread.png", dpi=90)
     for k, v in zip(arms, values):
         print(f"spread_excess, {k}: median", float(v.median()) if len(v) else None, "over", len(v))
+
+
+# %% [markdown]
+# ## 5. Your campaign (`FIT_DIR`): the gap of your model and the candidate effects
+
+# %%
+if FIT_DIR:
+    import json
+
+    from bayes_roadload.analysis.diagnose import diagnose
+    from bayes_roadload.data import load_campaign
+    from bayes_roadload.inference.kinds import kind_of
+
+    record = json.loads((Path(FIT_DIR) / "fit.json").read_text())
+    campaign = load_campaign(record["campaign"])
+    if kind_of(campaign).diagnosis != "traces":
+        print(f"{record['kind']} campaigns are diagnosed by `bayes-roadload diagnose` (NUTS refits); not run here")
+    else:
+        model_file = record.get("model_file")
+        mine = diagnose(campaign, model_file if model_file and Path(model_file).is_file() else record["model"])
+        gap = mine.result["gap"]
+        print(f"residual trend {gap['trend_rms_mps']:.4f} m/s (white-noise floor {gap['trend_floor_mps']:.4f}); "
+              f"residuals concentrate by {mine.result['localisation']['where'][0]}")
+        table = pd.DataFrame(mine.candidates)[["rank", "effect", "delta_elpd", "statement"]]
+        print(table.to_string(index=False))
+        fig, ax = plt.subplots(figsize=(6, 3))
+        d = pd.to_numeric(table["delta_elpd"], errors="coerce").fillna(0.0)
+        ax.barh(table["effect"], d)
+        ax.axvline(threshold, color="r", ls="--", lw=0.8, label="support threshold")
+        ax.set_xlabel("delta_elpd")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(OUT / "sim_to_real_your_campaign.png", dpi=90)

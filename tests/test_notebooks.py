@@ -1,12 +1,26 @@
-"""Every notebook in notebooks/ runs top to bottom with small draw counts."""
+"""Every notebook in notebooks/ runs top to bottom with small draw counts, on its own example
+and on a user's fit directory (``BR_FIT_DIR``), and converts to a valid .ipynb with a
+``parameters`` cell."""
 
 import os
 import runpy
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 NOTEBOOKS = sorted((Path(__file__).parents[1] / "notebooks").glob("*.py"))
+SMALL = {"BR_PAIRS": "1", "BR_WARMUP": "150", "BR_DRAWS": "150", "BR_PLAN_SIMULATIONS": "3", "MPLBACKEND": "Agg"}
+
+
+def run_notebook(path, out, monkeypatch, fit_dir=None):
+    for k, v in dict(SMALL, BR_OUT=str(out)).items():
+        monkeypatch.setenv(k, v)
+    if fit_dir is None:
+        monkeypatch.delenv("BR_FIT_DIR", raising=False)
+    else:
+        monkeypatch.setenv("BR_FIT_DIR", str(fit_dir))
+    return runpy.run_path(str(path), run_name="__main__")
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
@@ -14,11 +28,51 @@ def test_notebook_runs(path, tmp_path, monkeypatch):
     jupytext = pytest.importorskip("jupytext")
     nb = jupytext.read(path)  # the percent format parses: it opens in Jupyter
     assert nb.cells and nb.cells[0].cell_type == "markdown"
-    for k, v in {"BR_PAIRS": "1", "BR_WARMUP": "150", "BR_DRAWS": "150", "BR_OUT": str(tmp_path),
-                 "MPLBACKEND": "Agg"}.items():
-        monkeypatch.setenv(k, v)
-    namespace = runpy.run_path(str(path), run_name="__main__")
+    namespace = run_notebook(path, tmp_path, monkeypatch)
     pngs = list(tmp_path.glob("*.png"))
     assert pngs, "the notebook saved no figure"
     if "inside" in namespace:  # 01: the predictive band holds most of the measured speeds
         assert min(namespace["inside"]) > 0.8
+
+
+@pytest.fixture(scope="module")
+def user_fit(tmp_path_factory):
+    """A user's fit directory: `simulate` then `fit` through the command line (one pair, pooled)."""
+    from bayes_roadload.cli import main
+
+    root = tmp_path_factory.mktemp("user")
+    assert main(["simulate", "--case", "14", "--pairs", "1", "--seed", "5", "--out", str(root / "c"), "-q"]) == 0
+    assert main(["fit", str(root / "c"), "--model", "three_term", "--pooling", "pooled", "--warmup", "150", "--draws",
+                 "150", "--no-report", "--no-type-b", "--out", str(root / "f"), "-q"]) in (0, 3)
+    return root / "f"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_notebook_runs_on_a_user_fit(path, user_fit, tmp_path, monkeypatch):
+    ns = run_notebook(path, tmp_path, monkeypatch, fit_dir=user_fit)
+    summary = pd.read_csv(user_fit / "summary.csv").set_index("parameter")
+    assert ns["FIT_DIR"] == str(user_fit)
+    assert ns["mine" if "mine" in ns else "summary"] is not None
+    if path.stem.startswith("01"):  # the analysis read the user's draws, not a new fit
+        assert "fit" not in ns
+        assert ns["samples"]["CD0"].mean() == pytest.approx(summary.loc["CD0", "mean"], rel=1e-9)
+        assert (tmp_path / "road_load.png").is_file()
+    elif path.stem.startswith("02"):
+        assert ns["mine"].loc["CD0", "posterior mean"] == pytest.approx(summary.loc["CD0", "mean"], rel=1e-12)
+        assert (tmp_path / "validation_your_fit.png").is_file()
+    elif path.stem.startswith("03"):
+        assert set(ns["mine"]["n_pairs"]) == {1, 2, 4} and (tmp_path / "planning_your_fit.png").is_file()
+    else:
+        assert len(ns["mine"].candidates) > 0 and (tmp_path / "sim_to_real_your_campaign.png").is_file()
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_ipynb_from_the_percent_source(path):
+    """`jupytext --to ipynb notebooks/*.py` (notebooks/README.md): a valid notebook whose
+    parameters cell is tagged for papermill."""
+    jupytext = pytest.importorskip("jupytext")
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.reads(jupytext.writes(jupytext.read(path), fmt="ipynb"), as_version=4)
+    nbformat.validate(nb)
+    tagged = [c for c in nb.cells if "parameters" in c.metadata.get("tags", [])]
+    assert len(tagged) == 1 and "FIT_DIR" in tagged[0].source
