@@ -7,9 +7,9 @@ Road-load work over a cycle (the quantity reported by :func:`cycle_work`)::
 with the cycle's speed trace v_i (1 Hz tables, trapezoidal weights dt_i), i.e. the energy the
 road-load force dissipates while the vehicle follows the trace (level road, reference
 conditions, still air).  It is linear in the coefficients, ``W = c0 f0 + c1 f1 + c2 f2`` with
-``c_k = sum_i v_i^k (v_i / 3.6) dt_i``, so its posterior is exact draw by draw and its
-variance splits into shares ``S_k = c_k Cov(f_k, W) / Var(W)`` that sum to one (a negative share
-means the parameter's covariance with the others cancels part of the variance).
+``c_k = sum_i v_i^k (v_i / 3.6) dt_i``, so its posterior is exact draw by draw.  Its variance is
+shared among the coefficients by their Shapley effects (:func:`variance_shares`): non-negative
+shares that sum to one even though f0, f1 and f2 are strongly correlated.
 
 The positive tractive work ``sum_i max(F(v_i) + M_e a_i, 0) v_i dt_i`` (with inertia, the
 energy the wheels must deliver) is reported beside it when an effective mass is given.
@@ -115,13 +115,43 @@ def _row(quantity: str, unit: str, x: np.ndarray) -> dict:
 
 
 def variance_shares(coef: np.ndarray, draws: np.ndarray) -> np.ndarray:
-    """``S_k = c_k Cov(f_k, W) / Var(W)`` for the linear functional W = draws @ coef (sum 1;
-    NaN when W has no spread)."""
+    """Shapley effects of the coefficients in Var(W), W = draws @ coef, as shares (sum 1; NaN
+    when W has no spread).
+
+    With v(S) = Var(E[W | f_S]) = Cov(W, f_S) Cov(f_S)^-1 Cov(f_S, W) (exact for a Gaussian
+    posterior: the variance of W that knowing the coefficients in S would remove), coefficient
+    k's share is phi_k / Var(W), phi_k = sum over S not holding k of |S|! (n - |S| - 1)! / n!
+    (v(S + k) - v(S)) (Owen 2014; Song, Nelson and Staum 2016).  The phi_k are non-negative and
+    sum to v(all) = Var(W); for independent coefficients phi_k = c_k^2 Var(f_k).  (The
+    covariance split c_k Cov(f_k, W) / Var(W) also sums to one but goes negative when the
+    coefficients are correlated, as f0, f1, f2 are.)
+    """
+    from itertools import combinations
+    from math import factorial
+
+    coef = np.asarray(coef, float)
+    draws = np.asarray(draws, float)
     w = draws @ coef
     cov = np.cov(np.column_stack([draws, w]), rowvar=False)
     if not cov[-1, -1] > 0:  # a posterior without spread: no share to give
         return np.full(coef.shape, np.nan)
-    return coef * cov[:-1, -1] / cov[-1, -1]
+    n = len(coef)
+    c_ff, c_fw = cov[:n, :n], cov[:n, -1]
+
+    def explained(subset: tuple[int, ...]) -> float:
+        if not subset:
+            return 0.0
+        idx = list(subset)
+        return float(c_fw[idx] @ np.linalg.lstsq(c_ff[np.ix_(idx, idx)], c_fw[idx], rcond=None)[0])
+
+    phi = np.zeros(n)
+    for k in range(n):
+        others = [j for j in range(n) if j != k]
+        for size in range(n):
+            weight = factorial(size) * factorial(n - size - 1) / factorial(n)
+            for subset in combinations(others, size):
+                phi[k] += weight * (explained(tuple(sorted(subset + (k,)))) - explained(subset))
+    return phi / phi.sum()
 
 
 def cycle_work(samples: Mapping[str, np.ndarray], cycle: Cycle | str, *,

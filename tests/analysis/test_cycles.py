@@ -94,3 +94,17 @@ def test_cycle_csv_refuses_negative_speed(tmp_path):
 def test_missing_coefficient_is_refused():
     with pytest.raises(ValueError, match="F2_N_per_kph2"):
         cycle_work({k: np.ones(3) for k in COEFFICIENTS[:2]}, _constant())
+
+
+def test_variance_shares_of_correlated_coefficients_by_hand():
+    """Two correlated coefficients, W = f0 + f1 with Var f0 = 1, Var f1 = 4, Cov = -1.5: the
+    covariance split gives f0 (1 - 1.5) / 2 = -0.25 (negative); the Shapley effects, by hand,
+    v({0}) = Cov(W, f0)^2 / Var f0 = 0.25, v({1}) = 2.5^2 / 4 = 1.5625, v({0, 1}) = Var W = 2:
+    phi_0 = (0.25 + 2 - 1.5625) / 2 = 0.34375, phi_1 = 1.65625; shares / 2."""
+    rng = np.random.default_rng(1)
+    cov = np.array([[1.0, -1.5], [-1.5, 4.0]])
+    draws = rng.multivariate_normal([0.0, 0.0], cov, size=400_000)
+    s = variance_shares(np.array([1.0, 1.0]), draws)
+    # sample covariances of 4e5 draws: relative error ~ sqrt(2 / 4e5) ~ 0.002 per entry
+    np.testing.assert_allclose(s, [0.34375 / 2, 1.65625 / 2], atol=0.01)
+    assert (s >= 0).all() and s.sum() == pytest.approx(1.0, abs=1e-12)
