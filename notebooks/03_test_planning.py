@@ -173,7 +173,8 @@ fig.savefig(OUT / "planning_study.png", dpi=100)
 # %% [markdown]
 # ## 5. Your plan (`FIT_DIR`): pairs needed for the default targets, from your fit
 # The same refits as `bayes-roadload plan FIT_DIR` (MAP + Laplace of simulated future
-# campaigns, in this process), with few campaigns per size unless `BR_PLAN_SIMULATIONS` says more.
+# campaigns, in this process), with few campaigns per size unless `BR_PLAN_SIMULATIONS` says more
+# (sizes: `BR_PLAN_PAIRS`, default "1 2 4").
 
 # %%
 if FIT_DIR:
@@ -182,7 +183,8 @@ if FIT_DIR:
 
     targets = [pl.Target.parse(t) for t in config.PLAN_TARGETS]
     sims = int(os.environ.get("BR_PLAN_SIMULATIONS", "10"))
-    jobs = pl.plan_jobs(pilot, [1, 2, 4], simulations=sims, model=pilot.model, confidence=0.95, seed=0)
+    sizes = [int(n) for n in os.environ.get("BR_PLAN_PAIRS", "1 2 4").split()]
+    jobs = pl.plan_jobs(pilot, sizes, simulations=sims, model=pilot.model, confidence=0.95, seed=0)
     plan_records = run_batch(jobs, None, progress=False)
     mine = pl.plan_table(plan_records, targets, 0.95)
     print(mine[["quantity", "n_pairs", "median_half_width", "assurance"]].to_string(index=False))

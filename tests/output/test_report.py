@@ -102,7 +102,7 @@ def fits(tmp_path_factory):
         warnings.simplefilter("ignore")
         traces = simulate_campaign(clean_case(), pairs=1, seed=21)
         intervals = interval_campaign_from_traces(simulate_campaign(clean_case(), pairs=2, seed=22))
-        dirs = {"nuts": _fit(tmp, traces, "nuts", "--model", "four_term", *SMALL),
+        dirs = {"nuts": _fit(tmp, traces, "nuts", "--model", "four_term", "--pooling", "pooled", *SMALL),
                 "lsq": _fit(tmp, traces, "lsq", "--method", "lsq"),
                 "intervals": _fit(tmp, intervals, "intervals", *SMALL)}
     return dirs  # `fit` renders each report
