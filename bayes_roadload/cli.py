@@ -783,7 +783,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", default=None, help="directory for the campaign and fits (default: a temp dir)")
     d.add_argument("--pooling", choices=("auto", "pooled", "hierarchical"), default="auto",
                    help="one set of coefficients for every run, or run-level AD, BD, CD0 around population "
-                        "means; auto: as `fit` (hierarchical here; docs/calibration.md, test-to-test variation)")
+                        "means; auto: as `fit` (hierarchical for 2-12 pairs; docs/calibration.md, test-to-test variation)")
     _add_nuts_options(d, seed=1)
     d.set_defaults(func=_cmd_demo, noise="integrated", robust=False)
 
@@ -819,7 +819,7 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--method", choices=("nuts", "lsq"), default="nuts")
     f.add_argument("--pooling", choices=("auto", "pooled", "hierarchical"), default="auto",
                    help="nuts: one set of coefficients, or run-level AD, BD, CD0 around population means; auto: "
-                        "hierarchical for speed traces of two or more runs (docs/calibration.md), else pooled")
+                        "hierarchical for speed traces of 2 to 12 pairs (docs/calibration.md), else pooled")
     f.add_argument("--noise", choices=("integrated", "white"), default="integrated",
                    help="nuts: residual model ('integrated': white noise plus integrated input noise)")
     f.add_argument("--robust", action="store_true", help="nuts: Student-t innovations (outlier-robust)")

@@ -273,10 +273,15 @@ class SamplerConfig:
             raise ValueError("num_warmup, num_samples and num_chains must be positive")
 
 
+AUTO_HIERARCHICAL_MIN_RUNS = 4
+"""``--pooling auto`` is hierarchical from this many runs (two pairs) on: with one pair the
+run-to-run spreads are informed by two runs only (their posterior is their prior) and the
+hierarchical fit failed its gates first time on thesis cases 9, 14 and 15 (divergences, R-hat;
+benchmarks/records/gates/gate_rate_hierarchical_one_pair.csv, docs/calibration.md)."""
 AUTO_HIERARCHICAL_MAX_RUNS = 24
-"""``--pooling auto`` is hierarchical for speed-trace campaigns of 2 to this many runs (12 pairs:
-the calibration study's range) and pooled above: the hierarchical fit of 36 runs ran for more
-than 8 minutes on a 2-core machine against 95 s pooled (docs/calibration.md, benchmarks/cold_start.py)."""
+"""``--pooling auto`` is hierarchical up to this many runs (12 pairs: the calibration study's
+range) and pooled above: the hierarchical fit of 36 runs ran for more than 8 minutes on a
+2-core machine against 95 s pooled (docs/calibration.md, benchmarks/cold_start.py)."""
 
 DENSE_MASS_MAX_DIM = 20
 """Largest number of unconstrained dimensions for which ``mass_matrix="auto"`` adapts a dense

@@ -50,8 +50,10 @@ def main(argv=None) -> int:
     ap.add_argument("--max-pairs", type=int, default=3, help="pairs of the independent campaigns: 1..MAX")
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--records", type=Path, default=RECORDS)
+    ap.add_argument("--pooling", choices=("auto", "pooled", "hierarchical"), default="auto",
+                    help="pooling of every fit (default: the default of `fit`)")
     args = ap.parse_args(argv)
-    o = FitOptions()
+    o = FitOptions(pooling=args.pooling)
     common = dict(pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler)
     jobs = [FitJob(f"case{c}-p{args.pairs}-s{args.seed}", SimulatedCampaign(c, args.pairs, args.seed),
                    tags={"source": "thesis case", "case": c, "pairs": args.pairs}, **common)

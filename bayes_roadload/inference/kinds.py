@@ -109,7 +109,8 @@ class KindEntry:
 
 def traces_default_pooling(campaign, spec: ModelSpec, o: FitOptions) -> str:
     """``--pooling auto`` for speed traces: hierarchical (run-level AD, BD, CD0) for a NUTS fit
-    of two to :data:`~bayes_roadload.config.AUTO_HIERARCHICAL_MAX_RUNS` runs whose model frees
+    of :data:`~bayes_roadload.config.AUTO_HIERARCHICAL_MIN_RUNS` (two pairs) to
+    :data:`~bayes_roadload.config.AUTO_HIERARCHICAL_MAX_RUNS` runs whose model frees
     any of them, pooled otherwise (least squares, robust noise, a latent wind per pair:
     combinations the hierarchical model does not have; larger campaigns, whose hierarchical fit
     takes many times the pooled one's time -- ``--pooling hierarchical`` still fits them).  Measured
@@ -121,7 +122,7 @@ def traces_default_pooling(campaign, spec: ModelSpec, o: FitOptions) -> str:
     varying = any(p in spec.free for p in HIERARCHICAL_PARAMETERS)
     runs = len(o.runs) if o.runs is not None else len(campaign.run_ids)
     if o.method == "nuts" and not o.robust and not latent_wind and varying \
-            and 2 <= runs <= config.AUTO_HIERARCHICAL_MAX_RUNS:
+            and config.AUTO_HIERARCHICAL_MIN_RUNS <= runs <= config.AUTO_HIERARCHICAL_MAX_RUNS:
         return "hierarchical"
     return "pooled"
 

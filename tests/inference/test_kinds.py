@@ -52,7 +52,7 @@ def test_only_speed_traces_take_least_squares_and_any_option():
 
 def test_auto_pooling_is_hierarchical_for_nuts_fits_of_speed_traces(small_campaign):
     """``--pooling auto``: run-level coefficients where the hierarchical model applies (NUTS,
-    two or more runs, AD / BD / CD0 free, no robust noise, no latent wind), pooled otherwise and
+    2 to 12 pairs, AD / BD / CD0 free, no robust noise, no latent wind), pooled otherwise and
     for the other kinds; an explicit choice is kept."""
     import dataclasses
 
@@ -73,6 +73,9 @@ def test_auto_pooling_is_hierarchical_for_nuts_fits_of_speed_traces(small_campai
     many = list(range(config.AUTO_HIERARCHICAL_MAX_RUNS + 1))  # the runs to fit, as --validity gives them
     assert resolve_pooling(traces, small_campaign, spec, FitOptions(runs=many)).pooling == "pooled"
     assert resolve_pooling(traces, small_campaign, spec, FitOptions(runs=many[:-1])).pooling == "hierarchical"
+    one_pair = list(range(config.AUTO_HIERARCHICAL_MIN_RUNS - 1))
+    assert resolve_pooling(traces, small_campaign, spec, FitOptions(runs=one_pair)).pooling == "pooled"
+    assert resolve_pooling(traces, small_campaign, spec, FitOptions(runs=one_pair + [9])).pooling == "hierarchical"
     speed_only = dataclasses.replace(small_campaign,
                                      runs=small_campaign.runs.drop(columns=["airspeed_mps", "yaw_rad"]))
     assert resolve_pooling(traces, speed_only, load_model_spec("speed_only_wind"), FitOptions()).pooling == "pooled"
