@@ -59,7 +59,8 @@ def _campaigns(work: Path) -> dict[str, Path]:
 
 
 def _commands(c: dict[str, Path], out: Path) -> dict[str, list[str]]:
-    return {
+    """The command lines of the check (``--force``: ``--keep DIR`` may hold an earlier run's outputs)."""
+    return {name: [*argv, "--force"] for name, argv in {
         "demo_seed1": ["demo", "--seed", "1", "--out", str(out / "demo_seed1")],
         "traces_nuts": ["fit", str(c["traces"]), "--model", "four_term", *SMALL, "--out", str(out / "traces_nuts")],
         "traces_lsq": ["fit", str(c["traces"]), "--method", "lsq", "--out", str(out / "traces_lsq")],
@@ -68,7 +69,7 @@ def _commands(c: dict[str, Path], out: Path) -> dict[str, list[str]]:
         "spindown": ["fit", str(c["spindown"]), *SMALL, "--out", str(out / "spindown")],
         "steady": ["fit", str(c["steady"]), *SMALL, "--out", str(out / "steady")],
         "driveline": ["fit-driveline", str(c["traces"]), *SMALL, "--out", str(out / "driveline")],
-    }
+    }.items()}
 
 
 def _summary_of(out: Path, name: str) -> Path:
