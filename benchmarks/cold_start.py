@@ -92,7 +92,8 @@ def markdown(rec: dict) -> str:
             gates += f", {len(r['retries'])} retry"
         lines.append(f"| {r['pooling']} | {r['start']} | {r['wall_s']:.1f} | <= {TARGETS_S[r['start']]:.0f} | "
                      f"{s.get('imports', 0):.1f} | {s.get('load', 0):.1f} | {s.get('fit_setup', 0):.1f} | "
-                     f"{t.get('map_s', 0):.1f} | {t.get('first_attempt_s', 0):.1f} | "
+                     f"{t.get('map_s', 0):.1f} | "
+                     f"{'%.1f' % t['first_attempt_s'] if 'first_attempt_s' in t else '-'} | "
                      f"{t.get('warmup_s', 0):.1f} | {t.get('sampling_s', 0):.1f} | "
                      f"{s.get('summaries_and_predictive', 0):.1f} | {s.get('type_b', 0):.1f} | "
                      f"{s.get('writing', 0):.1f} | {gates} |")
