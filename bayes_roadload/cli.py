@@ -641,7 +641,8 @@ def _cmd_plan(args) -> int:
     jobs = plan_jobs(population, pairs, simulations=args.simulations, model=fit_model,
                      confidence=args.confidence, seed=args.seed)
     with batch_client(args.workers, args.scheduler) as client:
-        records = run_batch(jobs, client, progress=console.progress_bars(not args.no_progress))
+        # the batch door draws a bar on a terminal and plain lines elsewhere; --quiet: neither
+        records = run_batch(jobs, client, progress=not args.no_progress and _output.isEnabledFor(logging.INFO))
     records.to_csv(out / "plan_records.csv", index=False)
     failed = int(records["error"].notna().sum()) if "error" in records else 0
     not_converged = int((~records["gate_pass"].fillna(False).astype(bool)).sum()) if "gate_pass" in records else 0

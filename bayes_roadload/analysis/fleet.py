@@ -340,15 +340,18 @@ def cmd_batch(args: argparse.Namespace) -> int:
     command shared by the failures when they share one (2 refused, 3 gates failed), else 1."""
     fit_args = list(args.fit_args) + [a for a in args.fit_quiet if a not in args.fit_args]
     out = Path(args.out)
+    quiet = bool(getattr(args, "quiet", False))  # -q: no progress, no summary (batch.csv is written)
+    say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
     with batch_client(args.workers, args.scheduler) as client:
         where = "in this process" if client is None else f"on the Dask cluster at {client.scheduler_info()['address']}"
-        print(f"Fitting the campaigns under {args.campaigns} {where} into {out} ...", flush=True)
-        table = fit_fleet(args.campaigns, out, fit_args, fit_command=args.fit_command, client=client)
+        say(f"Fitting the campaigns under {args.campaigns} {where} into {out} ...")
+        table = fit_fleet(args.campaigns, out, fit_args, fit_command=args.fit_command, client=client,
+                          progress=not quiet)
     counts = table["status"].value_counts()
-    print(f"\n{len(table)} campaigns: " + ", ".join(f"{n} {s}" for s, n in counts.items()))
+    say(f"\n{len(table)} campaigns: " + ", ".join(f"{n} {s}" for s, n in counts.items()))
     for _, r in table[table["status"] != "passed"].iterrows():
-        print(f"  {r['campaign']}: {r['status']}" + (f" ({r['error']})" if isinstance(r["error"], str) else ""))
-    print(f"wrote {out / TABLE_FILE}")
+        say(f"  {r['campaign']}: {r['status']}" + (f" ({r['error']})" if isinstance(r["error"], str) else ""))
+    say(f"wrote {out / TABLE_FILE}")
     failed = table[table["status"] != "passed"]
     if failed.empty:
         return 0
