@@ -345,15 +345,17 @@ def _cmd_fit(args) -> int:
     entry = kind_of(campaign)
     options = _fit_options(args)
     spec = _model_for(args, entry.default_model(campaign, options))
-    options = resolve_pooling(entry, campaign, spec, options)
     entry.check_options(options)
+    runs = _validity(entry, campaign, args, out)
+    # --pooling auto: decided on the runs that are fitted (after the validity cut)
+    options = resolve_pooling(entry, campaign, spec, dataclasses.replace(options, runs=runs))
+    n_fitted = len(campaign.run_ids) if runs is None else len(runs)
     pooling_note = None
     if args.pooling == "auto" and options.pooling == "pooled" and args.method == "nuts" \
-            and len(campaign.run_ids) > config.AUTO_HIERARCHICAL_MAX_RUNS:
-        pooling_note = (f"note: --pooling auto fitted these {len(campaign.run_ids)} runs pooled (over "
+            and n_fitted > config.AUTO_HIERARCHICAL_MAX_RUNS:
+        pooling_note = (f"note: --pooling auto fitted these {n_fitted} runs pooled (over "
                         f"{config.AUTO_HIERARCHICAL_MAX_RUNS} runs): the run-to-run spread is not in the intervals; "
                         "--pooling hierarchical adds it at several times the fit time (docs/calibration.md)")
-    runs = _validity(entry, campaign, args, out)
     if args.method == "lsq":
         if args.pooling == "hierarchical":
             raise SystemExit("error: least squares has no hierarchical model; use --method nuts --pooling "

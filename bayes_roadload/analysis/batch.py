@@ -377,7 +377,7 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
     """
     from ..inference.laplace import fit_laplace
     from ..inference.nuts import fit_nuts
-    from ..inference.kinds import FitOptions, traces_default_pooling
+    from ..inference.kinds import KINDS, FitOptions, resolve_pooling
     from ..inference.spec import load_model_spec
 
     rec = _job_fields(job)
@@ -401,8 +401,8 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
             t0 = time.perf_counter()
             pooling = job.pooling
             if pooling == "auto":  # as `fit`: the speed-trace kind's default for this campaign and model
-                pooling = traces_default_pooling(campaign, load_model_spec(job.model),
-                                                 FitOptions(method="nuts", robust=job.robust))
+                pooling = resolve_pooling(KINDS["traces"], campaign, load_model_spec(job.model),
+                                          FitOptions(method="nuts", robust=job.robust)).pooling
                 rec["pooling"] = pooling
             if job.method == "laplace":
                 fit = fit_laplace(campaign, job.model, pooling=pooling, noise=job.noise, robust=job.robust,

@@ -179,7 +179,7 @@ def _check_steady(o: FitOptions) -> None:
 def _fit_traces(campaign, spec, o: FitOptions) -> NutsFit:
     if o.runs is not None and list(o.runs) != list(campaign.run_ids):
         campaign = campaign.subset(o.runs)
-    pooling = traces_default_pooling(campaign, spec, o) if o.pooling == "auto" else o.pooling
+    pooling = resolve_pooling(KINDS["traces"], campaign, spec, o).pooling
     return fit_nuts(campaign, spec, pooling=pooling, noise=o.noise, robust=o.robust, sampler=o.sampler)
 
 
@@ -192,7 +192,8 @@ def _fit_distances(campaign, spec, o: FitOptions) -> NutsFit:
 
 
 def _fit_spindown(campaign, spec, o: FitOptions) -> NutsFit:
-    return fit_spindown_nuts(campaign, spec, pooling="pooled" if o.pooling == "auto" else o.pooling, sampler=o.sampler)
+    return fit_spindown_nuts(campaign, spec, pooling=resolve_pooling(KINDS["spindown"], campaign, spec, o).pooling,
+                             sampler=o.sampler)
 
 
 def _fit_steady(campaign, spec, o: FitOptions) -> NutsFit:
