@@ -222,6 +222,7 @@ def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None
     """NUTS fit of a campaign of kind ``entry``, its fit directory (:func:`~bayes_roadload.output.
     write_fit_dir`) and the posterior table against the truth of a simulated campaign."""
     from .analysis.budget import format_budget, propagate_type_b
+    from .errors import stage
     from .inference.results import format_posterior_table
     from .output import fit_record, write_fit_dir
 
@@ -237,7 +238,7 @@ def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None
         with stages("type_b"):
             report, budget, _ = propagate_type_b(report, campaign, spec, seed=options.sampler.seed)
         tables = dict(tables, **{"budget.csv": budget})
-    with stages("writing"):
+    with stages("writing"), stage("output"):
         written = write_fit_dir(report, out, record=record, extras=tables, provenance=provenance)
     truth = fit.problem.truth_values(campaign.truth)
     text = format_posterior_table(report.summary, report.diagnostics, truth or None)
@@ -335,6 +336,7 @@ def _after_fit(args, out: Path, campaign) -> None:
 def _cmd_fit(args) -> int:
     from . import config
     from .inference.kinds import kind_of, resolve_pooling
+    from .errors import stage
     from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table
     from .output import write_lsq_fit_dir
 
@@ -364,7 +366,8 @@ def _cmd_fit(args) -> int:
             campaign = campaign.subset(runs)
         result = fit_lsq(campaign, spec, grouping=args.grouping,
                          settings=LsqSettings(initial_speed=args.initial_speed))
-        write_lsq_fit_dir(result, out, provenance=_provenance(args, campaign, args.campaign))
+        with stage("output"):
+            write_lsq_fit_dir(result, out, provenance=_provenance(args, campaign, args.campaign))
         echo(format_lsq_table(result, campaign.truth))
         echo(f"\nwrote {out / 'summary.csv'}, per_group.csv, fit.json")
         _after_fit(args, out, campaign)
@@ -395,6 +398,7 @@ def _cmd_fit(args) -> int:
 
 def _cmd_fit_driveline(args) -> int:
     from .data import load_campaign
+    from .errors import stage
     from .inference.driveline import driveline_report, fit_driveline_nuts
     from .inference.kinds import kind_of
     from .inference.results import format_posterior_table
@@ -408,8 +412,9 @@ def _cmd_fit_driveline(args) -> int:
     out = Path(args.out)
     fit = fit_driveline_nuts(campaign, args.model, sampler=_sampler(args))
     report = driveline_report(fit, campaign)
-    written = write_fit_dir(report, out, record=fit_record(fit, args.campaign),
-                            provenance=_provenance(args, campaign, args.campaign))
+    with stage("output"):
+        written = write_fit_dir(report, out, record=fit_record(fit, args.campaign),
+                                provenance=_provenance(args, campaign, args.campaign))
     truth = fit.problem.truth_values(campaign.truth)
     echo(format_posterior_table(report.summary, report.diagnostics, truth or None))
     echo(f"\nwrote {out / written[0]}, {', '.join(written[1:])}")

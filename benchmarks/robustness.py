@@ -5,12 +5,14 @@ message), written after every draw so an interrupted run keeps its records.
 
     nice python benchmarks/robustness.py --n 1000 --n-invalid 200 --name long
     nice python benchmarks/robustness.py --budget-s 1200 --draw-timeout-s 300 --name short
+    python benchmarks/robustness.py --summarise --docs   # every record file -> docs/robustness.md
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 import tempfile
@@ -46,6 +48,64 @@ def run_with_timeout(d: dict, workdir: Path, timeout_s: float | None) -> dict:
     return json.loads(lines[-1][len("RECORD "):])
 
 
+RECORDS = ROOT / "benchmarks" / "records" / "robustness"
+DOC = ROOT / "docs" / "robustness.md"
+MARK_BEGIN, MARK_END = "<!-- robustness:begin -->", "<!-- robustness:end -->"
+OUTCOMES = (("fitted", "fitted (exit 0)"), ("gates_failed", "gates failed, said so (exit 3)"),
+            ("refused", "refused (exit 2)"), ("timeout", "timeout"), ("FAILURE", "failure"))
+
+
+def summarise(records: pd.DataFrame, files: list[str]) -> str:
+    """Markdown summary of the records of every run: totals (exceptions and wrong exit codes
+    are both failures), outcomes by class and kind, invalid draws by damage, time per draw."""
+    df = records.copy()
+    df["invalid"] = df["invalid"].fillna("").astype(str)
+    df["class"] = (df["invalid"] != "").map({True: "invalid", False: "valid"})
+    df["outcome_class"] = df["outcome"].where(~df["outcome"].str.startswith("FAILURE"), "FAILURE")
+    failed = df[df["outcome_class"] == "FAILURE"]
+    exceptions = failed["message"].fillna("").str.contains("Error|Exception|Traceback", regex=True)
+    lines = [f"Records: {', '.join(f'`{f}`' for f in files)}.  **{len(df)} draws, "
+             f"{int((df['class'] == 'valid').sum())} valid and {int((df['class'] == 'invalid').sum())} invalid: "
+             f"{int(exceptions.sum())} exceptions, {int((~exceptions).sum())} wrong exit codes, "
+             f"{int((df['outcome'] == 'timeout').sum())} timeouts**; {df['time_s'].sum() / 60:.0f} min of draw "
+             "wall time.", "",
+             "| class | kind | " + " | ".join(label for _, label in OUTCOMES) + " |",
+             "| --- | --- | " + " | ".join("---:" for _ in OUTCOMES) + " |"]
+    for (cls, kind), g in df.groupby(["class", "kind"]):
+        counts = g["outcome_class"].value_counts()
+        lines.append(f"| {cls} | {kind} | " + " | ".join(str(int(counts.get(k, 0))) for k, _ in OUTCOMES) + " |")
+    inv = df[df["class"] == "invalid"]
+    if len(inv):
+        by = inv.groupby("invalid")["outcome_class"].agg(lambda o: f"{int((o == 'refused').sum())} / {len(o)}")
+        lines += ["", "Invalid draws refused, by kind of damage: "
+                  + ", ".join(f"{k} {v}" for k, v in by.items()) + "."]
+    parts = []
+    for label, g in (("lsq", df[(df["class"] == "valid") & (df["method"] == "lsq")]),
+                     ("nuts", df[(df["class"] == "valid") & (df["method"] == "nuts")]),
+                     ("refusal", inv)):
+        if len(g):
+            parts.append(f"{label} median {g['time_s'].median():.1f}, max {g['time_s'].max():.1f} ({len(g)} draws)")
+    lines += ["", "Time per draw (s, simulation + fit; in a child process, imports included, where a time limit was set): "
+              + "; ".join(parts) + "."]
+    if len(failed):
+        lines += ["", "Failures:", ""] + [f"* seed {int(r.seed)} ({r.kind}, {r.invalid or r.method}): {r.outcome}; "
+                                          f"{str(r.message)[:160]}" for r in failed.itertuples()]
+    slow = df[df["outcome"] == "timeout"]
+    if len(slow):
+        lines += ["", "Timeouts (no exception, no fit within the limit): " + "; ".join(
+            f"seed {int(r.seed)} {r.kind} {r.vehicle} {r.pairs} pair(s) at {r.rate_hz:g} Hz, {r.model}, "
+            f"measurement noise {'on' if r.measurement_noise else 'off'}" for r in slow.itertuples()) + "."]
+    return "\n".join(lines) + "\n"
+
+
+def write_doc_section(text: str, doc: Path = DOC) -> None:
+    body = doc.read_text()
+    pattern = re.compile(re.escape(MARK_BEGIN) + ".*?" + re.escape(MARK_END), re.S)
+    if not pattern.search(body):
+        raise SystemExit(f"{doc}: markers {MARK_BEGIN} ... {MARK_END} not found")
+    doc.write_text(pattern.sub(lambda _: f"{MARK_BEGIN}\n{text}{MARK_END}", body))
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--n", type=int, default=1000, help="valid draws")
@@ -55,8 +115,18 @@ def main(argv=None) -> int:
     p.add_argument("--name", default="long")
     p.add_argument("--draw-timeout-s", type=float, default=None,
                    help="run each draw in a child process and stop it after this long (outcome 'timeout')")
+    p.add_argument("--summarise", action="store_true", help="summarise every record file instead of drawing")
+    p.add_argument("--docs", action="store_true", help="with --summarise: regenerate docs/robustness.md's section")
     a = p.parse_args(argv)
-    out = ROOT / "benchmarks" / "records" / "robustness" / f"{a.name}.csv"
+    if a.summarise:
+        files = sorted(RECORDS.glob("*.csv"))
+        text = summarise(pd.concat([pd.read_csv(f) for f in files], ignore_index=True),
+                         [str(f.relative_to(ROOT)) for f in files])
+        print(text)
+        if a.docs:
+            write_doc_section(text)
+        return 0
+    out = RECORDS / f"{a.name}.csv"
     out.parent.mkdir(parents=True, exist_ok=True)
     # invalid draws interleaved (one in every (n + n_invalid) / n_invalid) so a budgeted run covers both
     plan = []

@@ -616,8 +616,11 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
     log.info("NUTS: %d chain%s x (%d warm-up + %d draws), target acceptance %.2f ...", sampler.num_chains,
              "s" if sampler.num_chains > 1 else "", sampler.num_warmup, sampler.num_samples, sampler.target_accept)
     t0 = time.perf_counter()
-    mcmc.run(key, *args, init_params=init_params, extra_fields=fields)
-    raw = jax.block_until_ready(mcmc.get_samples(group_by_chain=True))
+    # warm-up and sampling are one compiled program: a failure in either is the "sampling" stage
+    with stage("sampling", remedy="more warm-up (--warmup) or a higher --target-accept; the MAP and its "
+                                  "Hessian are in diagnostics.json of a fit with --method lsq for comparison"):
+        mcmc.run(key, *args, init_params=init_params, extra_fields=fields)
+        raw = jax.block_until_ready(mcmc.get_samples(group_by_chain=True))
     elapsed = time.perf_counter() - t0
     keep = slice(sampler.num_warmup, None)
     raw = jax.tree_util.tree_map(lambda a: a[:, keep], raw)

@@ -1,4 +1,5 @@
-"""Seeded random campaigns for the robustness suite: valid draws over data kind, model file,
+"""Seeded random campaigns for the robustness suite: valid draws over data kind (speed traces,
+speed-gate intervals, distance-time, spin-down, steady state), model file,
 channels present, campaign size, vehicle, wind, sample rate, run length, start speed and noise,
 and invalid draws (a valid campaign's files broken in one of the ways a user's data are), each
 fitted through the command line in-process (:func:`run_draw`).
@@ -28,6 +29,11 @@ from bayes_roadload.simulate.campaign import SimulationSettings
 from bayes_roadload.simulate.cases import SimulationCase
 
 KINDS = ("traces", "distances", "spindown", "steady")
+"""The kinds drawn from the draw's first random stream (kept as it was, so earlier records'
+seeds still draw the same campaigns)."""
+INTERVAL_SHARE = 0.2
+"""Share of the valid speed-trace draws turned into interval campaigns (speed-gate times, the
+split method's two windows) by a second stream of the seed."""
 INVALID = ("kph_in_mps", "nan_speed", "missing_time", "negative_speed", "duplicated_time", "empty_file",
            "text_in_speed")
 TRACE_MODELS = ("three_term", "four_term", "split_f0_f2")
@@ -54,7 +60,11 @@ def draw(seed: int, invalid: bool = False) -> dict:
          "system_noise": bool(rng.random() < 0.5),
          "drop_anemometer": bool(rng.random() < 0.4), "driveline": bool(rng.random() < 0.4),
          "model": str(rng.choice(TRACE_MODELS)), "method": "nuts" if rng.random() < 0.25 else "lsq"}
-    if kind != "traces" or d["model"] == "split_f0_f2":
+    if kind == "traces" and not invalid and np.random.default_rng([seed, 1]).random() < INTERVAL_SHARE:
+        # the gates 95 -> 70 and 50 -> 35 km/h lie inside the run, with the logger's 1 s either side
+        d.update(kind="intervals", model="split_f0_f2", start_speed_mps=max(d["start_speed_mps"], 28.0),
+                 stop_speed_mps=min(d["stop_speed_mps"], 8.0))
+    if d["kind"] != "traces" or d["model"] == "split_f0_f2":
         d["method"] = "nuts"  # every other kind, and the split model, are fitted by NUTS only
     if d["method"] == "nuts":
         d["pairs"] = min(d["pairs"], 3)  # NUTS draws stay small: the suite runs on a shared CPU
@@ -101,6 +111,10 @@ def write_campaign(d: dict, root: Path) -> Path:
         from bayes_roadload.simulate.distances import distance_campaign_from_traces
 
         c = distance_campaign_from_traces(c, tuple(float(x) for x in np.arange(100.0, 1001.0, 100.0)), seed=d["seed"])
+    if d["kind"] == "intervals":
+        from bayes_roadload.simulate.intervals import interval_campaign_from_traces
+
+        c = interval_campaign_from_traces(c)
     save_campaign(c, root)
     if d["invalid"]:
         _break(root / "runs.csv", d["invalid"], np.random.default_rng(d["seed"] + 1))
