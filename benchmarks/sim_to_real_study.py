@@ -154,6 +154,23 @@ def design_intro(design: str) -> str:
                                       factors=factors)
 
 
+def rules_line(records: pd.DataFrame) -> str:
+    """The rules the records were diagnosed under (``rules_*_sha256`` columns of
+    :func:`studies.proof_suite.diagnosis_record`) against the shipped ones."""
+    from bayes_roadload.analysis.diagnose import rules_fingerprint
+    from bayes_roadload.analysis.effects import load_library
+
+    now = rules_fingerprint(load_library(), config.DEFAULT_DIAGNOSIS)
+    cur = f"library `{now['library_sha256'][:16]}`, thresholds `{now['thresholds_sha256'][:16]}`"
+    if "rules_library_sha256" not in records:
+        return (f"Rules: not recorded (these records predate the rules' fingerprint); the shipped rules are {cur}.")
+    seen = sorted({(str(a)[:16], str(b)[:16]) for a, b in
+                   zip(records["rules_library_sha256"], records["rules_thresholds_sha256"]) if isinstance(a, str)})
+    same = seen == [(now["library_sha256"][:16], now["thresholds_sha256"][:16])]
+    return ("Rules of these records: " + "; ".join(f"library `{a}`, thresholds `{b}`" for a, b in seen)
+            + (" (the shipped rules)." if same else f"; the shipped rules differ: {cur}."))
+
+
 def design_section(design: str, records: pd.DataFrame) -> list[str]:
     s = summarise(records)
     ok = records[records["error"].isna()].copy()
@@ -171,6 +188,7 @@ def design_section(design: str, records: pd.DataFrame) -> list[str]:
              f"[sim_to_real/records_{design}.csv](sim_to_real/records_{design}.csv).", "",
              "| quantity | value |", "| --- | --- |"]
     lines += [f"| {k} | {v if not isinstance(v, float) else f'{v:.1f}'} |" for k, v in s.items()]
+    lines += ["", rules_line(records)]
     shrink_txt = "-" if s["median_trend_shrink_pct_when_correct"] is None else f"{s['median_trend_shrink_pct_when_correct']:.0f} %"
     lines += ["", f"Target (issue 6): true effect ranked first in >= 90 % of campaigns -- here "
               f"{s['true_ranked_first_pct']:.0f} % at rank 1 of diagnosis.json ({s['true_ranked_first']} of "

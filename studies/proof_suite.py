@@ -189,14 +189,17 @@ class DiagnoseJob:
 
 def diagnosis_record(d: Diagnosis) -> dict[str, Any]:
     """A flat record of a diagnosis: the top-ranked supported effect (``"none"``), the
-    supported and not-identifiable effects, every candidate's delta_elpd, the gap before and
-    after the combined refit and its shrink, timings."""
+    supported and not-identifiable effects, the rules' fingerprints (library and thresholds
+    SHA-256), every candidate's delta_elpd, the gap before and after the combined refit and its
+    shrink, timings."""
     rec: dict[str, Any] = {"top": d.top or "none",
                            "supported": ",".join(c["effect"] for c in d.candidates if c["supported"]),
                            "not_identifiable": ",".join(c["effect"] for c in d.candidates
                                                         if not c["identifiable"] and not c["unavailable"]),
                            "not_distinguishable": ",".join(c["effect"] for c in d.candidates if c.get("ambiguous_with")),
-                           "refit_effects": ",".join(d.refit["effects"])}
+                           "refit_effects": ",".join(d.refit["effects"]),
+                           "rules_library_sha256": d.result["rules"]["library_sha256"],
+                           "rules_thresholds_sha256": d.result["rules"]["thresholds_sha256"]}
     for c in d.candidates:
         rec[f"delta_elpd_{c['effect']}"] = c["delta_elpd"]
         rec[f"delta_lopo_{c['effect']}"] = c.get("delta_lopo_lpd")

@@ -23,6 +23,8 @@ campaigns simulated with a known effect is a study outside the package (``studie
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import json
 import math
 import time
@@ -287,6 +289,34 @@ class Diagnosis:
         return c["effect"] if c is not None and c["supported"] else None
 
 
+DIAGNOSIS_CONTRACT = 2
+"""Version of ``diagnosis.json``'s contract: the keys ``gap``, ``localisation``,
+``candidates`` (each candidate with :data:`CANDIDATE_KEYS`), ``contract`` (this number) and
+``rules`` (:func:`rules_fingerprint`).  Raised whenever a key is added or its meaning changes,
+so a committed diagnosis older than the code is detected."""
+
+CANDIDATE_KEYS = ("effect", "rank", "supported", "qualifies", "delta_elpd", "gap_before", "gap_after", "shrink_pct",
+                  "identifiable", "identification", "estimates", "unavailable", "needs", "statement")
+"""The keys every candidate entry of ``diagnosis.json`` carries."""
+
+
+def _sha256_json(obj: Any) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def rules_fingerprint(library: Mapping[str, fx.Effect],
+                      settings: config.DiagnosisConfig = config.DEFAULT_DIAGNOSIS) -> dict[str, Any]:
+    """The frozen rules a diagnosis ran under: SHA-256 of the candidate library (each effect's
+    terms, priors, fixed constants, as read from ``models/effects/library.toml``) and of the
+    thresholds (:class:`~bayes_roadload.config.DiagnosisConfig`), both as sorted JSON, with
+    the thresholds themselves.  A study records it before its confirmatory seeds run; a
+    committed report whose fingerprint differs from the code's was made under other rules."""
+    lib = {name: dataclasses.asdict(e) for name, e in sorted(library.items())}
+    thresholds = dataclasses.asdict(settings)
+    return {"library_sha256": _sha256_json(lib), "thresholds_sha256": _sha256_json(thresholds),
+            "thresholds": thresholds}
+
+
 def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[str, fx.Effect] | None = None,
              settings: config.DiagnosisConfig = config.DEFAULT_DIAGNOSIS) -> Diagnosis:
     """Diagnose the sim-to-real gap of ``model`` (a ``models/*.toml`` name or a ModelSpec) on
@@ -375,7 +405,8 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
     refit, after_resid = combined_refit(lin, [c for c in chosen if c not in kinematic], library, settings, groups,
                                         before)
     timings["refit_s"] = time.perf_counter() - t0
-    result = {"gap": before, "localisation": loc, "candidates": entries}
+    result = {"gap": before, "localisation": loc, "candidates": entries, "contract": DIAGNOSIS_CONTRACT,
+              "rules": rules_fingerprint(library, settings)}
     spec_name = getattr(model, "name", model)
     return Diagnosis(result=_json_safe(result), refit=_json_safe(refit), model=str(spec_name),
                      residual=lin.residual, residual_after=after_resid, time_s=np.asarray(lin.batch.time_s),
@@ -439,7 +470,8 @@ def plot_candidates(entries: list[dict], path: Path, threshold: float) -> Path:
 
 def write_diagnosis(diag: Diagnosis, out_dir: str | Path,
                     settings: config.DiagnosisConfig = config.DEFAULT_DIAGNOSIS) -> Path:
-    """Write ``diagnosis.json`` (keys ``gap``, ``localisation``, ``candidates``),
+    """Write ``diagnosis.json`` (keys ``gap``, ``localisation``, ``candidates``, ``contract``,
+    ``rules``: :data:`DIAGNOSIS_CONTRACT`),
     ``refit.json`` (the combined refit), ``report.md`` and its plots into ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -486,6 +518,10 @@ def write_diagnosis(diag: Diagnosis, out_dir: str | Path,
             lines.append(f"| {k} | {_fmt(gap[k])} | {_fmt(r['gap_after'].get(k))} | {_fmt(r['shrink_pct'].get(k), 3)} |")
     else:
         lines.append("Nothing to refit: no candidate is supported.")
-    lines += ["", f"Timings (s): " + ", ".join(f"{k} {v:.1f}" for k, v in diag.timings.items()), ""]
+    rules = diag.result["rules"]
+    lines += ["", f"Rules: contract {diag.result['contract']}, candidate library sha256 "
+              f"`{rules['library_sha256'][:16]}`, thresholds sha256 `{rules['thresholds_sha256'][:16]}` "
+              "(diagnosis.json `rules`).", "",
+              f"Timings (s): " + ", ".join(f"{k} {v:.1f}" for k, v in diag.timings.items()), ""]
     (out / "report.md").write_text("\n".join(lines))
     return out / "diagnosis.json"

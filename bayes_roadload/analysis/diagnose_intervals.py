@@ -274,7 +274,9 @@ def diagnose_intervals(campaign, model: Any = "split_f0_f2", *, library: Mapping
              "gap_after": chosen[0]["gap_after"] if chosen else dict(before),
              "shrink_pct": chosen[0]["shrink_pct"] if chosen else _shrink(before, before),
              "estimates": {p: v["mean"] for c in chosen for p, v in c.get("estimates", {}).items()}}
-    result = {"gap": before, "localisation": loc, "candidates": entries}
+    from .diagnose import rules_fingerprint
+
+    result = {"gap": before, "localisation": loc, "candidates": entries, "rules": rules_fingerprint(library, settings)}
     from ..inference.intervals import observed_band_times
 
     mask = np.asarray(fit.problem.mask)

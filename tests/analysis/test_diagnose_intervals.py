@@ -73,7 +73,8 @@ def test_a_withheld_grade_is_found_in_interval_times(tmp_path):
         code = main(["diagnose", str(tmp_path / "campaign"), "--out", str(tmp_path / "out"), "--no-progress"])
     assert code == 0
     d = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
-    assert set(d) == {"gap", "localisation", "candidates"}
+    assert set(d) == {"gap", "localisation", "candidates", "rules"}  # the rules' fingerprints as the traces'
+    assert {"library_sha256", "thresholds_sha256"} <= set(d["rules"])
     top = d["candidates"][0]
     assert top["effect"] == "track_gradient" and top["supported"]
     est = top["estimates"]["grade_rad"]
