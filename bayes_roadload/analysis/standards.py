@@ -47,7 +47,10 @@ class Standard:
     ``mass_factor``: M_e = factor x test mass when the rotating inertia is unknown (None: the
     fit's M_e is kept).  Wind limits in m/s (None: no limit applied).  ``min_runs_per_direction``
     and ``min_pairs`` are the run counts checked; ``precision_pct`` the GTR 15 statistical
-    precision limit when the standard uses it.
+    precision limit when the standard uses it.  ``speed_range_kph = (high, low)``: the coastdown
+    starts at or above ``high`` and is recorded down to ``low`` or below, by every run
+    (``speed_range_per_run``) or by the runs together (split runs allowed: their ranges must
+    leave no gap between the two speeds).
     """
 
     name: str
@@ -65,6 +68,8 @@ class Standard:
     precision_pct: float | None = None
     air_density_kgpm3: float | None = None
     cda_yaw_deg: float | None = None
+    speed_range_kph: tuple[float, float] | None = None
+    speed_range_per_run: bool = False
 
     @property
     def density_kgpm3(self) -> float:
@@ -79,18 +84,21 @@ STANDARDS: dict[str, Standard] = {
     "gtr15": Standard("gtr15", "UN GTR 15 (WLTP) Annex 4", 293.15, 100_000.0, "SI_kph", "coefficients",
                       min_pairs=MIN_REGULATION_PAIRS, precision_pct=GTR_PRECISION_PCT),
     "j2263": Standard("j2263", "SAE J2263 (on-board anemometry)", 293.15, 98_210.0, "US", "coefficients",
-                      mass_factor=J2263_MASS_FACTOR, min_runs_per_direction=1),
+                      mass_factor=J2263_MASS_FACTOR, min_runs_per_direction=1, speed_range_kph=(115.0, 15.0)),
     "j1263": Standard("j1263", "SAE J1263 (stationary wind station)", 293.15, 98_210.0, "US", "coefficients",
                       max_mean_wind_mps=16.0 * config.KPH_TO_MPS, max_mean_crosswind_mps=8.0 * config.KPH_TO_MPS,
                       ambient_range_k=(278.15, 308.15), min_runs_per_direction=1),
     "cfr1066": Standard("cfr1066", "40 CFR 1066.310 / 1037.528 (heavy vehicles, CdA)", 293.15, 98_210.0, "US",
                         "cda", mass_factor=J2263_MASS_FACTOR, min_runs_per_direction=8,
-                        air_density_kgpm3=1.17, cda_yaw_deg=4.5),
+                        air_density_kgpm3=1.17, cda_yaw_deg=4.5,
+                        speed_range_kph=(70.0 * MPH_KPH, 15.0 * MPH_KPH), speed_range_per_run=True),
 }
 """Per standard.  J1263's reference conditions are taken equal to J2263's (not verified);
 40 CFR 1066.310 follows J1263 / J2263 (hence their temperature and mass convention), states a
 reference air density of 1.17 kg/m^3 for its drag coefficient, and 40 CFR 1037.305(a)(4) adjusts
-each run's drag area to +-4.5 deg yaw for the wind-averaged CdA."""
+each run's drag area to +-4.5 deg yaw for the wind-averaged CdA.  Speed ranges: SAE J2263
+115 -> 15 km/h (split runs allowed where the track is short); 40 CFR 1066.310 each run from
+70 mph or above down to 15 mph or below (STANDARDS_FACTS.md)."""
 
 
 def get_standard(name: str | Standard) -> Standard:
@@ -192,6 +200,23 @@ def _check(rule: str, value, limit, passed: bool, unit: str = "") -> dict:
     return {"rule": rule, "value": value, "limit": limit, "unit": unit, "pass": bool(passed)}
 
 
+def speed_range_per_run(campaign: Campaign) -> pd.DataFrame:
+    """Per run of a speed-trace campaign: the highest and the lowest logged speed (km/h)."""
+    g = campaign.runs.groupby("run", sort=False)["speed_mps"]
+    return pd.DataFrame({"start_kph": g.max() / config.KPH_TO_MPS, "end_kph": g.min() / config.KPH_TO_MPS})
+
+
+def uncovered_kph(ranges: pd.DataFrame, high: float, low: float) -> float:
+    """Total speed (km/h) between ``low`` and ``high`` that no run's [end, start] range covers."""
+    covered, top = 0.0, high
+    for start, end in sorted(zip(ranges["start_kph"], ranges["end_kph"]), reverse=True):
+        hi, lo = min(start, top), max(end, low)
+        if hi > lo:
+            covered += hi - lo
+            top = lo
+    return float(high - low - covered)
+
+
 def wind_per_run(campaign: Campaign) -> pd.DataFrame:
     """Per run: mean head-wind and mean |cross-wind| (m/s) from the on-board airspeed and yaw
     (calibrated by the campaign's anemometer factors): head = v_r cos(psi) - v, cross = v_r sin(psi)."""
@@ -210,7 +235,8 @@ def standard_checks(campaign: Campaign, standard: str | Standard) -> pd.DataFram
     """The standard's checks on the campaign, one row each: ``standard, rule, value, limit,
     unit, pass``.  Run counts per direction, opposite-direction pairs, GTR 15 statistical
     precision per reference speed (:func:`~bayes_roadload.analysis.regulation.gtr15_precision`),
-    mean wind and cross-wind per run (worst run reported), ambient temperature range."""
+    mean wind and cross-wind per run (worst run reported), the speed range (per run, or
+    covered by the runs together: :func:`uncovered_kph`), ambient temperature range."""
     std = get_standard(standard)
     runs = campaign.runs
     rows = []
@@ -237,6 +263,20 @@ def standard_checks(campaign: Campaign, standard: str | Standard) -> pd.DataFram
             worst = float(wind["cross_mps"].max())
             rows.append(_check("mean cross-wind (worst run)", worst, std.max_mean_crosswind_mps,
                                worst <= std.max_mean_crosswind_mps, "m/s"))
+    if std.speed_range_kph is not None and "speed_mps" in runs:
+        high, low = std.speed_range_kph
+        ranges = speed_range_per_run(campaign)
+        if std.speed_range_per_run:
+            worst_start, worst_end = float(ranges["start_kph"].min()), float(ranges["end_kph"].max())
+            rows.append(_check("start speed (lowest run)", worst_start, high, worst_start >= high, "km/h"))
+            rows.append(_check("end speed (highest run)", worst_end, low, worst_end <= low, "km/h"))
+        else:
+            best_start, best_end = float(ranges["start_kph"].max()), float(ranges["end_kph"].min())
+            gap = uncovered_kph(ranges, high, low)
+            rows.append(_check("start speed (highest run)", best_start, high, best_start >= high, "km/h"))
+            rows.append(_check("end speed (lowest run)", best_end, low, best_end <= low, "km/h"))
+            rows.append(_check(f"speed range {high:g} -> {low:g} km/h not covered by any run", gap, 0.0,
+                               gap <= 0.0, "km/h"))
     if std.ambient_range_k is not None and "temperature_k" in runs:
         lo, hi = std.ambient_range_k
         t = runs["temperature_k"].to_numpy(float)

@@ -143,3 +143,41 @@ def test_run_standard_writes_its_files(tmp_path):
     # masses from the campaign's vehicle: scale 1.03 * 1500 / 1540
     direct = standard_result(_draws(), "j2263", mass_kg=1500.0, effective_mass_kg=1540.0)
     np.testing.assert_allclose(res["mean"], direct["mean"], rtol=1e-12)
+
+
+def _ranged_campaign(ranges_kph):
+    """One run per (start, end) km/h range, alternating directions, decelerating at 0.5 m/s^2."""
+    frames = []
+    for i, (hi, lo) in enumerate(ranges_kph):
+        v = np.arange(hi, lo - 1e-9, -1.8) / 3.6  # 0.5 m/s^2 at 1 s steps
+        v[-1] = lo / 3.6
+        frames.append(pd.DataFrame({"run": i + 1, "pair": i // 2 + 1, "direction": 1 if i % 2 == 0 else -1,
+                                    "time_s": np.arange(v.size, dtype=float), "speed_mps": v}))
+    return Campaign(pd.concat(frames, ignore_index=True),
+                    Vehicle(mass_kg=1500.0, frontal_area_m2=2.0, effective_mass_kg=1540.0))
+
+
+def test_j2263_speed_range_may_be_covered_by_split_runs_by_hand():
+    """J2263 115 -> 15 km/h: split runs 118 -> 60 and 65 -> 12 km/h cover it (no gap); 118 -> 70 and
+    60 -> 12 leave 70 - 60 = 10 km/h uncovered; one run 110 -> 20 misses both ends (5 + 5 km/h)."""
+    ok = standard_checks(_ranged_campaign([(118.0, 60.0), (65.0, 12.0)]), "j2263").set_index("rule")
+    gap_rule = "speed range 115 -> 15 km/h not covered by any run"
+    assert ok.loc["start speed (highest run)", "value"] == pytest.approx(118.0)
+    assert ok.loc["end speed (lowest run)", "value"] == pytest.approx(12.0)
+    assert ok.loc[gap_rule, "value"] == pytest.approx(0.0, abs=1e-9) and ok.loc[gap_rule, "pass"]
+    gap = standard_checks(_ranged_campaign([(118.0, 70.0), (60.0, 12.0)]), "j2263").set_index("rule")
+    assert gap.loc[gap_rule, "value"] == pytest.approx(10.0) and not gap.loc[gap_rule, "pass"]
+    short = standard_checks(_ranged_campaign([(110.0, 20.0), (110.0, 20.0)]), "j2263").set_index("rule")
+    assert not short.loc["start speed (highest run)", "pass"] and not short.loc["end speed (lowest run)", "pass"]
+    assert short.loc[gap_rule, "value"] == pytest.approx(10.0)
+
+
+def test_cfr1066_speed_range_is_asked_of_every_run_by_hand():
+    """40 CFR 1066.310: every run from 70 mph (112.654 km/h) or above to 15 mph (24.140 km/h) or
+    below; one run of two starting at 110 km/h fails the start check, with its figure."""
+    chk = standard_checks(_ranged_campaign([(115.0, 20.0), (110.0, 20.0)]), "cfr1066").set_index("rule")
+    start = chk.loc["start speed (lowest run)"]
+    assert start["limit"] == pytest.approx(70 * 1.609344) and start["value"] == pytest.approx(110.0)
+    assert not start["pass"]
+    end = chk.loc["end speed (highest run)"]
+    assert end["limit"] == pytest.approx(15 * 1.609344) and end["value"] == pytest.approx(20.0) and end["pass"]
