@@ -357,26 +357,29 @@ def make_run(
 
     The vehicle is required: ``mass_kg`` M (kg), ``effective_mass_kg`` M_e, the mass plus the
     rotating inertia (kg, eq. 2.5) and ``frontal_area_m2`` A (m^2)."""
-    from .atmosphere import air_density_kgpm3 as rho
+    from .atmosphere import REFERENCE_AIR_DENSITY_KGPM3
 
-    t = jnp.asarray(time_s, float)
-    v = jnp.asarray(speed_mps, float)
-    full = lambda x, d: jnp.broadcast_to(jnp.asarray(d if x is None else x, float), t.shape)  # noqa: E731
-    return RunBatch(
+    # built in NumPy and moved to the device once per field: eager jnp operations would compile
+    # a small program for every run length
+    t = np.asarray(time_s, float)
+    v = np.asarray(speed_mps, float)
+    full = lambda x, d: np.broadcast_to(np.asarray(d if x is None else x, float), t.shape)  # noqa: E731
+    host = RunBatch(
         time_s=t,
         speed_mps=v,
         airspeed_mps=full(airspeed_mps, v if airspeed_mps is None else airspeed_mps),
         yaw_rad=full(yaw_rad, 0.0),
         driveline_force_n=full(driveline_force_n, 0.0),
-        air_density_kgpm3=full(air_density_kgpm3, float(rho())),
+        air_density_kgpm3=full(air_density_kgpm3, REFERENCE_AIR_DENSITY_KGPM3),
         temperature_k=full(temperature_k, config.REFERENCE_TEMPERATURE_K),
-        mask=jnp.ones(t.shape, bool),
-        direction=jnp.asarray(direction, float),
-        start_position_m=jnp.asarray(start_position_m, float),
-        mass_kg=jnp.asarray(mass_kg, float),
-        effective_mass_kg=jnp.asarray(effective_mass_kg, float),
-        frontal_area_m2=jnp.asarray(frontal_area_m2, float),
+        mask=np.ones(t.shape, bool),
+        direction=np.asarray(direction, float),
+        start_position_m=np.asarray(start_position_m, float),
+        mass_kg=np.asarray(mass_kg, float),
+        effective_mass_kg=np.asarray(effective_mass_kg, float),
+        frontal_area_m2=np.asarray(frontal_area_m2, float),
     )
+    return RunBatch(*(jnp.asarray(x) for x in host))
 
 
 def stack_runs(runs: list[RunBatch], length: int | None = None) -> RunBatch:
@@ -386,16 +389,16 @@ def stack_runs(runs: list[RunBatch], length: int | None = None) -> RunBatch:
     n = max([int(r.time_s.shape[0]) for r in runs] + [int(length or 0)])
 
     def pad(x, length):
-        x = jnp.asarray(x)
+        x = np.asarray(x)  # padded on the host: one device transfer per field, no per-shape programs
         if x.ndim == 0:
             return x
         extra = n - length
         if x.dtype == bool:
-            return jnp.concatenate([x, jnp.zeros(extra, bool)])
-        return jnp.concatenate([x, jnp.repeat(x[-1:], extra)])
+            return np.concatenate([x, np.zeros(extra, bool)])
+        return np.concatenate([x, np.repeat(x[-1:], extra)])
 
     padded = [RunBatch(*(pad(f, int(r.time_s.shape[0])) for f in r)) for r in runs]
-    return RunBatch(*(jnp.stack(fields) for fields in zip(*padded)))
+    return RunBatch(*(jnp.asarray(np.stack(fields)) for fields in zip(*padded)))
 
 
 def integrate_batch_forward_sensitivity(
