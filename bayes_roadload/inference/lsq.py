@@ -490,6 +490,64 @@ def fit_lsq(campaign, spec: ModelSpec | str | os.PathLike = "four_term", groupin
         compile_time_s=compile_time, fit_time_s=fit_time, settings=settings)
 
 
+def linear_sensitivities(campaign, spec: ModelSpec | str, shifts: Mapping[str, tuple[Any, Any, float]],
+                         settings: LsqSettings = DEFAULT_LSQ) -> tuple[LsqResult, dict[str, dict[str, float]]]:
+    """First-order sensitivities of the joint least-squares estimate (one group) to changes of
+    the campaign, without refitting: for each ``key -> (campaign_plus, campaign_minus, h)`` (the
+    campaign shifted by +h and -h in some declared value), by the implicit function theorem at
+    the optimum x* of the unshifted campaign (one Gauss-Newton step):
+
+        dx/ds = -(J^T J)^+ J^T dr/ds,   dr/ds = (r(x*; plus) - r(x*; minus)) / (2 h),
+
+    J the residuals' Jacobian at x* (free coefficients and the runs' initial-speed offsets), and
+    for every derived figure q (F50_N, F0_N, ...) ``dq/ds = (dq/dtheta) dtheta/ds`` plus its
+    direct change at fixed coefficients (a mass or an area enters the figures themselves).
+    Equal to central differences of refits to first order in h; one residual evaluation per
+    shifted campaign instead of a refit.  Returns the unshifted fit and key -> quantity ->
+    sensitivity (a key whose shifted campaigns change the model's structure is left out)."""
+    if not isinstance(spec, ModelSpec):
+        spec = load_model_spec(spec)
+    base = fit_lsq(campaign, spec, grouping="all", settings=settings)
+    g0 = base.groups[0]
+    model, fixed, free = spec.build(campaign)
+    fit_v0 = settings.initial_speed == "fitted"
+    fun, jac = _compiled(model, free, settings.integrator, fit_v0)
+    figures_j, figures_jac = _compiled_figures(model, free, settings)
+    scales = np.asarray([config.PARAMETER_SCALES[q] for q in free])
+    theta = np.asarray([g0.estimate[q] for q in free])
+    x = np.concatenate([theta / scales, np.asarray(g0.v0_offset_mps) / V0_OFFSET_SCALE_MPS]) if fit_v0 \
+        else theta / scales
+    batch, run_ids = campaign.to_batch()
+    fixed_j = {k: jnp.asarray(v, float) for k, v in fixed.items()}
+    jmat = np.asarray(jac(jnp.asarray(x), fixed_j, batch))
+    gmat = np.asarray(figures_jac(jnp.asarray(theta), fixed_j, jnp.asarray(_driveline_curve(campaign, run_ids)),
+                                  jnp.asarray([campaign.vehicle.mass_kg, campaign.vehicle.frontal_area_m2])))
+    names = DERIVED + F50_PARTS
+    out: dict[str, dict[str, float]] = {}
+    for key, (plus, minus, h) in shifts.items():
+        parts = []
+        for c in (plus, minus):
+            m, fx, fr = spec.build(c)
+            if m != model or tuple(fr) != tuple(free):
+                break
+            fxj = {k: jnp.asarray(v, float) for k, v in fx.items()}
+            b, ids = c.to_batch()
+            vehicle = jnp.asarray([c.vehicle.mass_kg, c.vehicle.frontal_area_m2])
+            parts.append((np.asarray(fun(jnp.asarray(x), fxj, b)),
+                          np.asarray(figures_j(jnp.asarray(theta), fxj, jnp.asarray(_driveline_curve(c, ids)), vehicle))))
+        if len(parts) < 2:
+            continue
+        dr = (parts[0][0] - parts[1][0]) / (2.0 * h)
+        dx = -np.linalg.lstsq(jmat, dr, rcond=settings.rank_rcond)[0]
+        dtheta = dx[:len(free)] * scales
+        direct = (parts[0][1] - parts[1][1]) / (2.0 * h)
+        dfig = gmat @ dtheta + direct
+        row = {q: float(dtheta[i]) for i, q in enumerate(free)}
+        row.update({q: float(dfig[k]) for k, q in enumerate(names)})
+        out[key] = row
+    return base, out
+
+
 def _per_group_frame(fits: list[GroupFit], quantities) -> pd.DataFrame:
     rows = []
     for f in fits:

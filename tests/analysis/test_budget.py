@@ -32,6 +32,32 @@ def test_mass_sensitivity_matches_the_hand_calculation(clean):
     assert "temperature_k" in typeb.notes and "temperature_k" not in typeb.sources
 
 
+def test_linear_sensitivities_agree_with_the_refits():
+    """One Gauss-Newton step from the optimum (the default) against refitting each shifted
+    campaign, on a noisy campaign with wind and yaw (case 9, 2 pairs).  The step leaves out the
+    residual-weighted curvature of the residuals (Gauss-Newton), so the two differ where the
+    dependence is not linear -- the yaw offset through K_D psi^2 -- and by the refits' tolerance
+    elsewhere.  What matters to the budget is c u: each source's contribution may differ by at
+    most 5 % of the quantity's Type B standard uncertainty (sqrt of the sum of (c u)^2)."""
+    import math
+    import warnings
+
+    quantities = ["F50_N", "F0_N", "AD", "CD0", "KD"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        campaign = simulate_campaign(9, pairs=2, seed=3)
+        linear = type_b_sensitivities(campaign, "four_term", quantities)
+        refit = type_b_sensitivities(campaign, "four_term", quantities, method="refit")
+    assert set(linear.sources) == set(refit.sources) and len(linear.sources) >= 5
+    for q in quantities:
+        row = refit.sensitivity[q]
+        u_b = math.sqrt(sum((c * refit.u[k]) ** 2 for k, c in row.items()))
+        for key, c in row.items():
+            assert abs(linear.sensitivity[q][key] - c) * refit.u[key] <= 0.05 * u_b, (q, key, linear.sensitivity[q][key], c)
+    with pytest.raises(ValueError, match="linear"):
+        type_b_sensitivities(campaign, "four_term", quantities, method="newton")
+
+
 def test_budget_shares_sum_to_one_and_a_switched_off_source_has_none(clean):
     clean.meta["uncertainty"] = {"yaw_factor_rel": 0.0}
     try:
