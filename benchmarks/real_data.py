@@ -268,6 +268,22 @@ def gnss_record(folder: Path = GNSS_DIR):
     return out
 
 
+def gnss_diagnosis(folder: Path = GNSS_DIR) -> dict:
+    """``diagnose`` (speed traces: one MAP fit, the candidates scored about it) of the eco-car
+    campaign with ``split_f0_f2``: the gap, where it lies, every candidate's statement."""
+    from bayes_roadload.analysis.diagnose import diagnose
+
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        d = diagnose(gnss_campaign(folder), "split_f0_f2")
+    keep = ("trend_rms_mps", "trend_floor_mps", "lag1_autocorr", "spread_excess", "spread_p_value")
+    return {"gap": {k: d.result["gap"].get(k) for k in keep}, "where": d.result["localisation"]["where"],
+            "top": d.top, "rules": d.result["rules"], "wall_s": round(time.perf_counter() - t0, 1),
+            "candidates": [{k: c.get(k) for k in ("effect", "rank", "supported", "identifiable", "delta_elpd",
+                                                  "statement")} for c in d.candidates]}
+
+
 def gnss_markdown(rec) -> list[str]:
     lines = ["## Eco-car GNSS coastdowns (speed only)", "",
              "`Finding-Rolling-Resistance-for-Electric-Car/Data/Michelin60{A,A1,B,B1}.csv`: speed in km/h at 1 Hz from",
@@ -286,6 +302,19 @@ def gnss_markdown(rec) -> list[str]:
         lines.append(f"| {model} | {_fmt(p, 'AD', 3)} | {_fmt(p, 'CD0', 3)} | {winds} | {gate} (R-hat "
                      f"{m['max_r_hat']:.3f}, div {m['divergences']}) | {m['wall_s']} s |")
     lines.append("")
+    dg = rec.get("diagnosis")
+    if dg:
+        g = dg["gap"]
+        lines += [f"`bayes-roadload diagnose --model split_f0_f2` on the same runs ({dg['wall_s']} s; rules: library "
+                  f"`{dg['rules']['library_sha256'][:16]}`, thresholds `{dg['rules']['thresholds_sha256'][:16]}`): "
+                  f"residual trend {g['trend_rms_mps']:.3g} m/s against a white-noise floor of "
+                  f"{g['trend_floor_mps']:.3g} m/s, lag-1 autocorrelation {g['lag1_autocorr']:.2f}, residuals "
+                  f"concentrated by {dg['where'][0]}; "
+                  + (f"**{dg['top']}** supported." if dg["top"] else "no candidate supported."), "",
+                  "| rank | candidate | delta_elpd | statement |", "|---|---|---|---|"]
+        for c in dg["candidates"]:
+            d = c["delta_elpd"]
+            lines.append(f"| {c['rank']} | {c['effect']} | {'-' if d is None else f'{d:.1f}'} | {c['statement']} |")
     return lines
 
 
@@ -431,7 +460,8 @@ def main(argv=None):
                     help="read the records in --json, add the drift table and the eco-car GNSS fits, rewrite the markdown")
     ap.add_argument("--markdown-only", action="store_true", help="rewrite the markdown from the records in --json")
     ap.add_argument("--diagnose-only", action="store_true",
-                    help="read the records in --json, run `diagnose` on the interval campaigns, rewrite the markdown")
+                    help="read the records in --json, run `diagnose` on every interval campaign and on the "
+                         "eco-car speed traces, rewrite the markdown")
     args = ap.parse_args(argv)
     if args.markdown_only:
         _write_markdown(json.loads(args.json.read_text()), args.out)
@@ -441,12 +471,15 @@ def main(argv=None):
             print(json.dumps({"skipped": f"{args.data} not found"}))
             return 0
         records = json.loads(args.json.read_text())
-        for name, (files, use_weather) in DATASETS.items():
-            if name in records and "heading_models" in records[name]:   # the campaigns with the +/- question
+        for name, (files, use_weather) in DATASETS.items():  # every interval campaign
+            if name in records:
                 weather = args.data / "meteo" / "AGRICULTR_SPLIT.csv" if use_weather else None
                 camp, _ = import_vbox([args.data / "coastdown" / f for f in files], VEHICLE, weather=weather)
                 records[name]["diagnosis"] = heading_diagnosis(camp)
                 print(f"{name}: diagnosed", file=sys.stderr)
+        if GNSS_DIR.is_dir() and "gnss" in records.get("_extra", {}):
+            records["_extra"]["gnss"]["diagnosis"] = gnss_diagnosis()
+            print("eco-car GNSS: diagnosed", file=sys.stderr)
         args.json.write_text(json.dumps(records, indent=2) + "\n")
         _write_markdown(records, args.out)
         return 0

@@ -196,7 +196,7 @@ def super_model(base: DragModel, library: Mapping[str, Effect]) -> tuple[DragMod
     measured = isinstance(base.air, MeasuredAir)
     for e in library.values():
         available[e.name] = None
-        if e.relative_air and not measured:
+        if (e.relative_air or any(TERMS[t].needs_measured_air for t in e.terms)) and not measured:
             available[e.name] = "needs logged airspeed_mps and yaw_rad (the model uses no measured air)"
             continue
         for t in e.terms:

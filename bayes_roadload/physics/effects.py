@@ -111,6 +111,7 @@ class AnemometerLag(Term):
     name: ClassVar[str] = "anemometer_lag"
     defaults: ClassVar[Mapping[str, float]] = {"cup_lag_m": 0.0}
     speed_affine: ClassVar[bool] = True
+    needs_measured_air: ClassVar[bool] = True
     equation: ClassVar[str] = "2.26 with a first-order cup (thesis 4.7, 6.3)"
 
     def force_n(self, p: Params, c: Conditions) -> Array:

@@ -92,12 +92,15 @@ class Term:
     position or distance: with measured air, a model of such terms has a linear equation of
     motion, which the integrator solves in parallel over time
     (:func:`~bayes_roadload.physics.integrate.integrate_run`).  Conservative default: False.
+    ``needs_measured_air`` marks terms of the anemometer's reading (its lag, its calibration):
+    without a logged airspeed they describe nothing.
     """
 
     name: ClassVar[str] = ""
     defaults: ClassVar[Mapping[str, float]] = {}
     uses_accel: ClassVar[bool] = False
     speed_affine: ClassVar[bool] = False
+    needs_measured_air: ClassVar[bool] = False
     equation: ClassVar[str] = ""
 
     def force_n(self, p: Params, c: Conditions) -> Array:  # pragma: no cover - abstract

@@ -20,6 +20,22 @@ def test_library_has_exactly_the_contract_effects_with_known_parameters():
         assert all(p in config.PARAMETER_UNITS and sd > 0 for p, sd in e.prior_sd.items())
 
 
+def test_candidates_of_the_anemometer_reading_need_a_logged_airspeed():
+    """Without measured air (a speed-only campaign) the cup lag, like the airspeed and yaw
+    calibrations, has no reading to act on: not applicable, never scored."""
+    from bayes_roadload.physics.model import model_from_names
+
+    lib = fx.load_library()
+    still = model_from_names(["tyre_rolling", "aero_drag"], air="still")
+    measured = model_from_names(["tyre_rolling", "aero_drag"], air="measured")
+    _, still_available = fx.super_model(still, lib)
+    _, measured_available = fx.super_model(measured, lib)
+    for name in ("anemometer_dynamics", "airspeed_calibration", "yaw_calibration"):
+        assert "needs logged airspeed_mps" in still_available[name]
+        assert measured_available[name] is None
+    assert still_available["track_gradient"] is None
+
+
 def test_library_refuses_unknown_names(tmp_path):
     bad = tmp_path / "lib.toml"
     bad.write_text('[effects.tyre_pressure]\nterms = []\nkind = "term"\nparameters.AD = { prior_sd = 1.0 }\n')
