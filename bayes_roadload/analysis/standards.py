@@ -50,7 +50,9 @@ class Standard:
     precision limit when the standard uses it.  ``speed_range_kph = (high, low)``: the coastdown
     starts at or above ``high`` and is recorded down to ``low`` or below, by every run
     (``speed_range_per_run``) or by the runs together (split runs allowed: their ranges must
-    leave no gap between the two speeds).
+    leave no gap between the two speeds).  ``two_term``: the standard's coastdown regression has
+    no linear term (F = A + C v^2, B = 0): the coefficients are the least-squares projection of
+    the road-load curve onto {1, v^2} over ``speed_range_kph`` (:func:`two_term_projection`).
     """
 
     name: str
@@ -70,6 +72,7 @@ class Standard:
     cda_yaw_deg: float | None = None
     speed_range_kph: tuple[float, float] | None = None
     speed_range_per_run: bool = False
+    two_term: bool = False
 
     @property
     def density_kgpm3(self) -> float:
@@ -91,14 +94,17 @@ STANDARDS: dict[str, Standard] = {
     "cfr1066": Standard("cfr1066", "40 CFR 1066.310 / 1037.528 (heavy vehicles, CdA)", 293.15, 98_210.0, "US",
                         "cda", mass_factor=J2263_MASS_FACTOR, min_runs_per_direction=8,
                         air_density_kgpm3=1.17, cda_yaw_deg=4.5,
-                        speed_range_kph=(70.0 * MPH_KPH, 15.0 * MPH_KPH), speed_range_per_run=True),
+                        speed_range_kph=(70.0 * MPH_KPH, 15.0 * MPH_KPH), speed_range_per_run=True,
+                        two_term=True),
 }
 """Per standard.  J1263's reference conditions are taken equal to J2263's (not verified);
 40 CFR 1066.310 follows J1263 / J2263 (hence their temperature and mass convention), states a
 reference air density of 1.17 kg/m^3 for its drag coefficient, and 40 CFR 1037.305(a)(4) adjusts
 each run's drag area to +-4.5 deg yaw for the wind-averaged CdA.  Speed ranges: SAE J2263
 115 -> 15 km/h (split runs allowed where the track is short); 40 CFR 1066.310 each run from
-70 mph or above down to 15 mph or below (STANDARDS_FACTS.md)."""
+70 mph or above down to 15 mph or below (STANDARDS_FACTS.md).  40 CFR 1066.310's road-load
+coefficients are A = A_m, B = 0, C = D_adj (the intercept and the density-adjusted slope of the
+force against v^2; eCFR text found by search), hence ``two_term``."""
 
 
 def get_standard(name: str | Standard) -> Standard:
@@ -177,6 +183,11 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
     c = to_conditions(samples, std.temperature_k, std.pressure_pa, mass_scale=scale,
                       air_density_kgpm3=std.density_kgpm3)
     yaw_deg = std.cda_yaw_deg if yaw_deg is None else yaw_deg
+    if std.two_term:
+        alpha, beta = two_term_projection(std.speed_range_kph)
+        f1 = np.asarray(c["F1_N_per_kph"], float)
+        c = dict(c, F0_N=np.asarray(c["F0_N"], float) + alpha * f1, F1_N_per_kph=np.zeros_like(f1),
+                 F2_N_per_kph2=np.asarray(c["F2_N_per_kph2"], float) + beta * f1)
     rows = []
     if std.units == "SI_kph":
         rows += [_row("f0", "N", c["F0_N"]), _row("f1", "N/(km/h)", c["F1_N_per_kph"]),
@@ -194,6 +205,21 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
     out = pd.DataFrame(rows)
     out.insert(0, "standard", std.name)
     return out
+
+
+TWO_TERM_GRID_POINTS = 200
+"""Speeds of the uniform grid over which the road-load curve is projected onto {1, v^2}."""
+
+
+def two_term_projection(speed_range_kph: tuple[float, float]) -> tuple[float, float]:
+    """(alpha, beta) with v ~ alpha + beta v^2 in least squares over a uniform grid of
+    ``speed_range_kph`` (km/h): the two-term fit of F0 + F1 v + F2 v^2 is then
+    A = F0 + alpha F1, C = F2 + beta F1.  Uniform weighting in speed: the regulation's own
+    weighting of its measurement intervals is not verified."""
+    v = np.linspace(min(speed_range_kph), max(speed_range_kph), TWO_TERM_GRID_POINTS)
+    design = np.column_stack([np.ones_like(v), v**2])
+    alpha, beta = np.linalg.lstsq(design, v, rcond=None)[0]
+    return float(alpha), float(beta)
 
 
 def _check(rule: str, value, limit, passed: bool, unit: str = "") -> dict:

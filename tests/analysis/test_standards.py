@@ -67,19 +67,41 @@ def test_mass_convention_needs_the_masses():
         standard_result(_draws(), "j2263")
 
 
+def _two_term_by_hand(lo_kph, hi_kph, n=200):
+    """alpha, beta of v ~ alpha + beta v^2 over n equally spaced speeds, from the 2 x 2 normal
+    equations [n, S2; S2, S4] [alpha, beta] = [S1, S3] by Cramer's rule."""
+    v = [lo_kph + (hi_kph - lo_kph) * i / (n - 1) for i in range(n)]
+    s1, s2, s3, s4 = (sum(x**k for x in v) for k in (1, 2, 3, 4))
+    det = n * s4 - s2 * s2
+    return (s1 * s4 - s2 * s3) / det, (n * s3 - s2 * s1) / det
+
+
 def test_cda_by_hand():
-    """CdA = 2 f2 3.6^2 / rho at the standard's conditions; f2 itself was scaled to that density,
-    so CdA = 2 * 0.03 * 12.96 / rho_ref = 0.65445 m^2 (times the mass scaling, here 1)."""
+    """40 CFR 1066.310 reports A = A_m, B = 0, C = D_adj: the road load at the standard's
+    conditions (F2 scaled to the reference density 1.17 kg/m^3, F0 and F1 to the tyres at
+    20 C), F0' + F1' v + F2' v^2, is refitted as A + C v^2 over 15-70 mph: C = F2' + beta F1'
+    (beta from the normal equations above); CdA = 2 C 3.6^2 / 1.17 (times the mass scaling,
+    here 1)."""
     d = {k: np.full(11, v) for k, v in (("F0_N", 100.0), ("F1_N_per_kph", 0.5), ("F2_N_per_kph2", 0.03))}
     d["CD0"] = np.full(11, 0.35)
     d["KD"] = np.full(11, 0.6)
     res = standard_result(d, "cfr1066", rotating_inertia_known=True, frontal_area_m2=2.0, yaw_deg=4.5)
     res = res.set_index("quantity")
-    assert res.loc["CdA_zero_yaw", "mean"] == pytest.approx(2 * 0.03 * 12.96 / RHO_REF, rel=1e-12)
+    alpha, beta = _two_term_by_hand(15 * 1.609344, 70 * 1.609344)
+    tyre = 1.0 - 0.0086 * (293.15 - 293.2)  # the project's reference is 293.2 K
+    c_kph = 0.03 * 1.17 / RHO_REF + beta * 0.5 * tyre
+    assert res.loc["CdA_zero_yaw", "mean"] == pytest.approx(2 * c_kph * 12.96 / 1.17, rel=1e-9)
     # CdA(psi) = A (CD0 + KD psi^2) = 2 (0.35 + 0.6 (4.5 pi/180)^2) = 0.707401
     assert res.loc["CdA_yaw_4.5deg", "mean"] == pytest.approx(2 * (0.35 + 0.6 * math.radians(4.5) ** 2), rel=1e-12)
-    # 40 CFR 1066.310's reference density 1.17 kg/m^3 sets C: 0.03 * 1.17 / rho_ref * 1.609344^2 / 4.44822
-    assert res.loc["C", "mean"] == pytest.approx(0.03 * 1.17 / RHO_REF * 1.609344**2 / 4.44822, rel=1e-12)
+    assert res.loc["C", "mean"] == pytest.approx(c_kph * 1.609344**2 / 4.44822, rel=1e-9)
+    assert res.loc["B", "mean"] == 0.0
+    # A = F0' + alpha F1'
+    assert res.loc["A", "mean"] == pytest.approx((100.0 + alpha * 0.5) * tyre / 4.44822, rel=1e-9)
+    # the two-term curve is the best A + C v^2 through the three-term one: F - (A + C v^2) has
+    # no component along 1 or v^2 over the range (the residual is orthogonal to both)
+    v = np.linspace(15 * 1.609344, 70 * 1.609344, 200)
+    resid = 0.5 * v - (alpha + beta * v**2) * 0.5
+    assert abs(resid.sum()) < 1e-6 * v.size and abs((resid * v**2).sum()) < 1e-6 * (v**2).sum()
     # the standard's yaw (+-4.5 deg wind-averaged) is the default
     default = standard_result(d, "cfr1066", rotating_inertia_known=True, frontal_area_m2=2.0)
     assert "CdA_yaw_4.5deg" in set(default["quantity"])
