@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import arviz as az
 import jax
@@ -54,6 +55,20 @@ def derived_quantities(fit: NutsFit) -> dict[str, np.ndarray]:
     return fit.problem.derived(fit.samples)
 
 
+PER_DRAW_BATCH_ELEMENTS = 2_000_000
+"""Samples x draws evaluated at once when a function of every draw runs over the speed traces
+(log-likelihood, posterior predictive): the draws go in batches of
+``PER_DRAW_BATCH_ELEMENTS // (runs x samples)`` so that memory does not grow with the number of
+draws (all 4000 draws of a 108-run campaign at once took more than 20 GB)."""
+
+
+def _map_draws(fn, xs, problem) -> Any:
+    """``jax.vmap(fn)(xs)`` in batches of draws (:data:`PER_DRAW_BATCH_ELEMENTS`), compiled once."""
+    per_draw = max(1, int(np.prod(np.shape(problem.batch.speed_mps))))
+    batch = max(1, PER_DRAW_BATCH_ELEMENTS // per_draw)
+    return jax.jit(lambda x: jax.lax.map(fn, x, batch_size=batch))(xs)
+
+
 def _draw_dicts(fit: NutsFit, idx: np.ndarray) -> dict[str, jnp.ndarray]:
     return {k: jnp.asarray(_flat(v)[idx]) for k, v in fit.samples.items()}
 
@@ -82,7 +97,7 @@ def posterior_predictive(fit: NutsFit, n_draws: int | None = None, seed: int = 1
 
     draws_dict = _draw_dicts(fit, idx)
     keys = jax.random.split(key, idx.size)
-    v, rep = jax.jit(jax.vmap(one))(draws_dict, keys)
+    v, rep = _map_draws(lambda a: one(*a), (draws_dict, keys), p)
     mask = np.asarray(batch.mask)
     v = np.where(mask, np.asarray(v), np.nan)
     rep = np.where(mask, np.asarray(rep), np.nan)
@@ -94,7 +109,7 @@ def log_likelihood_per_run(fit: NutsFit) -> np.ndarray:
     p = fit.problem
     chains = next(iter(fit.samples.values())).shape[0]
     flat = {k: jnp.asarray(_flat(v)) for k, v in fit.samples.items()}
-    ll = jax.jit(jax.vmap(lambda s: run_log_likelihood(p, s)))(flat)
+    ll = _map_draws(lambda s: run_log_likelihood(p, s), flat, p)
     return _unflat(np.asarray(ll), chains)
 
 
