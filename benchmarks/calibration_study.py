@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 import time
 from pathlib import Path
@@ -39,6 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
+from doc_sections import replace_section  # noqa: E402
 from bayes_roadload.analysis.calibration import (CONFIRMATORY_SEED0, calibration_jobs,  # noqa: E402
                                                  calibration_markdown, calibration_table)
 
@@ -46,14 +46,6 @@ RECORDS = ROOT / "docs" / "calibration" / "independent_records.csv"
 DOC = ROOT / "docs" / "calibration.md"
 MARK_BEGIN = "<!-- calibration_study:begin -->"
 MARK_END = "<!-- calibration_study:end -->"
-
-
-def write_doc_section(text: str, doc: Path = DOC) -> None:
-    body = doc.read_text()
-    pattern = re.compile(re.escape(MARK_BEGIN) + ".*?" + re.escape(MARK_END), re.S)
-    if not pattern.search(body):
-        raise SystemExit(f"{doc}: markers {MARK_BEGIN} ... {MARK_END} not found")
-    doc.write_text(pattern.sub(lambda _: f"{MARK_BEGIN}\n{text}{MARK_END}", body))
 
 
 def main(argv=None) -> int:
@@ -92,7 +84,7 @@ def main(argv=None) -> int:
     text = calibration_markdown(records, table, wall)
     print(text, file=sys.stderr)
     if args.docs:
-        write_doc_section(text)
+        replace_section(DOC, MARK_BEGIN, MARK_END, text)
     print(json.dumps({"benchmark": "calibration_independent", "campaigns": len(records),
                       "records": str(args.records), "wall_s": wall,
                       "table": json.loads(table.to_json(orient="records"))}, indent=2))

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import subprocess
 import sys
 import tempfile
@@ -24,6 +23,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from doc_sections import replace_section  # noqa: E402
 from tests.robustness.draws import draw, run_draw  # noqa: E402
 
 
@@ -98,14 +98,6 @@ def summarise(records: pd.DataFrame, files: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_doc_section(text: str, doc: Path = DOC) -> None:
-    body = doc.read_text()
-    pattern = re.compile(re.escape(MARK_BEGIN) + ".*?" + re.escape(MARK_END), re.S)
-    if not pattern.search(body):
-        raise SystemExit(f"{doc}: markers {MARK_BEGIN} ... {MARK_END} not found")
-    doc.write_text(pattern.sub(lambda _: f"{MARK_BEGIN}\n{text}{MARK_END}", body))
-
-
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--n", type=int, default=1000, help="valid draws")
@@ -124,7 +116,7 @@ def main(argv=None) -> int:
                          [str(f.relative_to(ROOT)) for f in files])
         print(text)
         if a.docs:
-            write_doc_section(text)
+            replace_section(DOC, MARK_BEGIN, MARK_END, text)
         return 0
     out = RECORDS / f"{a.name}.csv"
     out.parent.mkdir(parents=True, exist_ok=True)
