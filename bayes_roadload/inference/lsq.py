@@ -528,7 +528,10 @@ def linear_sensitivities(campaign, spec: ModelSpec | str, shifts: Mapping[str, t
         parts = []
         for c in (plus, minus):
             m, fx, fr = spec.build(c)
-            if m != model or tuple(fr) != tuple(free):
+            # the same terms and air model (compared by name: terms may hold arrays, e.g. a
+            # tunnel table), so the compiled residual of the unshifted campaign applies
+            if type(m.air) is not type(model.air) or tuple(m.term_names) != tuple(model.term_names) \
+                    or tuple(fr) != tuple(free):
                 break
             fxj = {k: jnp.asarray(v, float) for k, v in fx.items()}
             b, ids = c.to_batch()

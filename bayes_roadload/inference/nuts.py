@@ -298,7 +298,9 @@ def _traced_potential(problem: Problem, init: dict[str, Any]):
             return None
         z0 = transform_fn(inv_transforms, {k: init[k] for k in latent}, invert=True)
         flat = np.asarray(ravel_pytree(z0)[0])  # a leaked tracer fails here
-    except (jax.errors.JAXTypeError, jax.errors.UnexpectedTracerError, TypeError):
+    except Exception as e:  # noqa: BLE001 - numpyro's own initialisation is the fallback
+        log.debug("abstract trace of the model not usable (%s: %s): numpyro's initialisation instead",
+                  type(e).__name__, e)
         return None
     if not np.all(np.isfinite(flat)):
         return None
