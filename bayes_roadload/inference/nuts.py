@@ -659,8 +659,7 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
              "s" if sampler.num_chains > 1 else "", sampler.num_warmup, sampler.num_samples, sampler.target_accept)
     t0 = time.perf_counter()
     # warm-up and sampling are one compiled program: a failure in either is the "sampling" stage
-    with stage("sampling", remedy="more warm-up (--warmup) or a higher --target-accept; the MAP and its "
-                                  "Hessian are in diagnostics.json of a fit with --method lsq for comparison"):
+    with stage("sampling"):
         mcmc.run(key, *args, init_params=init_params, extra_fields=fields)
         raw = jax.block_until_ready(mcmc.get_samples(group_by_chain=True))
     elapsed = time.perf_counter() - t0
