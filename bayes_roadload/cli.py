@@ -335,7 +335,7 @@ def _after_fit(args, out: Path, campaign) -> None:
 
 def _cmd_fit(args) -> int:
     from . import config
-    from .inference.kinds import kind_of, resolve_pooling
+    from .inference.kinds import check_model, kind_of, resolve_pooling
     from .errors import stage
     from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table
     from .output import write_lsq_fit_dir
@@ -348,6 +348,7 @@ def _cmd_fit(args) -> int:
     options = _fit_options(args)
     spec = _model_for(args, entry.default_model(campaign, options))
     entry.check_options(options)
+    check_model(entry, spec)
     runs = _validity(entry, campaign, args, out)
     # --pooling auto: decided on the runs that are fitted (after the validity cut)
     options = resolve_pooling(entry, campaign, spec, dataclasses.replace(options, runs=runs))

@@ -57,6 +57,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scheduler", default=None, metavar="ADDR", help="a running Dask scheduler")
     ap.add_argument("--records", type=Path, default=RECORDS)
     ap.add_argument("--docs", action="store_true", help="regenerate the section of docs/calibration.md")
+    ap.add_argument("--model", default="four_term", help="model variant (default four_term, fit's default)")
     ap.add_argument("--from-records", action="store_true", help="summarise --records without fitting")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
@@ -64,7 +65,7 @@ def main(argv=None) -> int:
     if args.from_records:
         records = pd.read_csv(args.records)
     else:
-        jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs)
+        jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs, model=args.model)
         args.records.parent.mkdir(parents=True, exist_ok=True)
         partial = args.records.with_suffix(".partial.csv")
         done: list[dict] = []

@@ -2,6 +2,8 @@
 
 import dataclasses
 import os
+import shutil
+import tempfile
 import warnings
 
 import pytest
@@ -9,7 +11,34 @@ import pytest
 from bayes_roadload import config
 from bayes_roadload.simulate import get_case, simulate_campaign
 
-os.environ.setdefault("BAYES_ROADLOAD_CACHE_DIR", "")  # no persistent compilation cache in the tests
+
+
+def pytest_configure(config):
+    """One fresh persistent compilation cache for the whole run, shared by the worker processes
+    and the command-line subprocesses (they inherit the environment): the suite compiles many
+    identical programs in separate closures and processes.  Fresh per run, so a run never
+    starts warm from an earlier one; removed at the end."""
+    if hasattr(config, "workerinput") or "BAYES_ROADLOAD_CACHE_DIR" in os.environ:
+        return
+    path = tempfile.mkdtemp(prefix="bayes-roadload-test-cache-")
+    os.environ["BAYES_ROADLOAD_CACHE_DIR"] = path
+    config._bayes_roadload_cache = path
+
+
+def pytest_unconfigure(config):
+    path = getattr(config, "_bayes_roadload_cache", None)
+    if path:
+        shutil.rmtree(path, ignore_errors=True)
+        os.environ.pop("BAYES_ROADLOAD_CACHE_DIR", None)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compilation_cache():
+    """The run's compilation cache in this process too (:func:`pytest_configure`)."""
+    from bayes_roadload._jax import enable_compilation_cache
+
+    enable_compilation_cache()
+    yield
 
 SMALL_SAMPLER = config.SamplerConfig(num_warmup=300, num_samples=800, num_chains=2, seed=3, target_accept=0.95)
 """Small draw counts for tests, and what a two-pair campaign needs to pass the gates: with

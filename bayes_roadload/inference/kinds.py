@@ -82,6 +82,9 @@ class KindEntry:
         linearised candidates; "band_times": candidates refitted by NUTS), None when none
         applies; ``diagnosis_model`` its default model.
     default_pooling : (campaign, spec, options) -> the pooling of ``--pooling auto``.
+    lagged_speed_drop : the kind's integrator supplies the lagged speed drop of a measured
+        speed trace, which terms naming a ``lag_time_constant`` (the tyre thermal lag) read
+        (:func:`check_model`).
     type_b : the Type B uncertainty of the test's declared values and instruments is added to
         the draws, with ``budget.csv`` (:mod:`bayes_roadload.analysis.budget`; its sensitivities
         come from least-squares refits, so the kind needs ``lsq``).
@@ -105,6 +108,19 @@ class KindEntry:
     diagnosis_model: str | None = None
     type_b: bool = False
     default_pooling: Callable[[Any, ModelSpec, FitOptions], str] = lambda campaign, spec, options: "pooled"
+    lagged_speed_drop: bool = False
+
+
+def check_model(entry: KindEntry, spec: ModelSpec) -> None:
+    """Refuse a model whose terms need what the kind's data cannot give: a term reading the
+    lagged speed drop (``lag_time_constant``) needs a measured speed trace."""
+    from ..physics.terms import TERMS
+
+    lagged = [t for t in spec.terms if t in TERMS and TERMS[t].lag_time_constant]
+    if lagged and not entry.lagged_speed_drop:
+        raise ValueError(f"model {spec.name!r}: the term {lagged[0]!r} follows the tyre temperature along a "
+                         f"measured speed trace, which a {entry.label} campaign does not have; use a model "
+                         "without it (bayes-roadload models)")
 
 
 def traces_default_pooling(campaign, spec: ModelSpec, o: FitOptions) -> str:
@@ -243,7 +259,8 @@ def _steady_default_model(campaign, o: FitOptions) -> str:
 KINDS: dict[str, KindEntry] = {e.name: e for e in (
     KindEntry("traces", "speed-trace", Campaign, lambda c, o: "four_term", _check_traces, _fit_traces,
               trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
-              diagnosis_model="three_term", type_b=True, default_pooling=traces_default_pooling),
+              diagnosis_model="three_term", type_b=True, default_pooling=traces_default_pooling,
+              lagged_speed_drop=True),
     KindEntry("intervals", "interval", IntervalCampaign, lambda c, o: "split_f0_f2", _check_intervals,
               _fit_intervals, interval_report, validity_default="reject", diagnosis="band_times",
               diagnosis_model="split_f0_f2"),

@@ -76,7 +76,48 @@ def _conditions(model: DragModel, p, run: RunBatch, v, s, t, u) -> Conditions:
         mass_kg=run.mass_kg,
         frontal_area_m2=run.frontal_area_m2,
         airspeed_rate_mps2=u[5],
+        speed_drop_lagged_mps=u[6] if len(u) > len(_CHANNELS) + 1 else 0.0,
     )
+
+
+def lagged_speed_drop(time_s: Array, speed_mps: Array, time_constant_s: Array) -> Array:
+    """The part of the speed drop since the first sample not yet followed by a first-order lag:
+    L(0) = 0, dL/dt = -L / tau - dv/dt, on the sample grid ([N] arrays, the speed
+    piecewise linear between samples), exact for that speed:
+    L_{k+1} = a_k L_k - (v_{k+1} - v_k) tau (1 - a_k) / h_k with a_k = exp(-h_k / tau).
+    Zero-length steps (padding) leave L unchanged.  Composed as affine maps by
+    ``jax.lax.associative_scan`` (no sequential loop to differentiate).
+    :class:`~bayes_roadload.physics.terms.TyreThermalLag` reads it."""
+    t = jnp.asarray(time_s, float)
+    v = jnp.asarray(speed_mps, float)
+    tau = jnp.asarray(time_constant_s, float)
+    h = jnp.diff(t)
+    a = jnp.exp(-h / tau)
+    ok = h > 0
+    # tau (1 - a) / h, -> 1 as h -> 0
+    ratio = jnp.where(ok, -jnp.expm1(-h / tau) * tau / jnp.where(ok, h, 1.0), 1.0)
+    b = -jnp.diff(v) * ratio
+
+    def compose(first, second):
+        return second[0] * first[0], second[0] * first[1] + second[1]
+
+    _, lag = jax.lax.associative_scan(compose, (a, b))
+    return jnp.concatenate([jnp.zeros_like(v[:1]), lag])
+
+
+def _with_model_channel(model: DragModel, p, run: RunBatch, u, schedule):
+    """Append the lagged speed drop (:func:`lagged_speed_drop`) to the inputs and to the
+    stride-2 schedule when a term of ``model`` reads it; else return them unchanged."""
+    if not model.lag_time_constant:
+        return u, schedule
+    lag = lagged_speed_drop(run.time_s, run.speed_mps, p[model.lag_time_constant])[:, None]
+    u = jnp.concatenate([jnp.asarray(u), lag], axis=-1)
+    if schedule is None:
+        return u, None
+    t0, h, ua, um, uc, dense = schedule
+    _, _, la, lm, lc, _ = stride2_schedule(run.time_s, lag)
+    join = lambda x, y: jnp.concatenate([jnp.asarray(x), jnp.asarray(y)], axis=-1)  # noqa: E731
+    return u, (t0, h, join(ua, la), join(um, lm), join(uc, lc), dense)
 
 
 def stride2_schedule(time_s, inputs) -> tuple:
@@ -203,6 +244,9 @@ def integrate_run(
         k4 = rhs(y + h * k3, ta + h, ub)
         return k1, k2, k3, k4
 
+    if stride == 2 and schedule is None:
+        schedule = stride2_schedule(run.time_s, u)
+    u, schedule = _with_model_channel(model, p, run, u, schedule)
     y0 = jnp.stack([v0, jnp.zeros_like(v0)])
     if stride == 1:
         def step(y, xs):
@@ -220,8 +264,6 @@ def integrate_run(
         _, ys = jax.lax.scan(step, y0, (run.time_s[:-1], run.time_s[1:], u[:-1], u[1:]))
     else:
         n = run.time_s.shape[0]
-        if schedule is None:
-            schedule = stride2_schedule(run.time_s, u)
         if model.speed_affine and integrator.parallel:
             return _integrate_affine(model, p, run, v0, schedule, n)
 

@@ -89,6 +89,16 @@ class DragModel:
         names = [t.name for t in self.terms]
         if len(set(names)) != len(names):
             raise ValueError(f"a drag term appears twice in {names}")
+        lags = {t.lag_time_constant for t in self.terms if t.lag_time_constant}
+        if len(lags) > 1:
+            raise ValueError(f"terms {names} name {len(lags)} lag time constants ({sorted(lags)}); "
+                             "a model carries at most one lagged speed drop")
+
+    @property
+    def lag_time_constant(self) -> str:
+        """The parameter naming the time constant of the lagged speed drop a term reads
+        (:attr:`~bayes_roadload.physics.terms.Term.lag_time_constant`), or ""."""
+        return next((t.lag_time_constant for t in self.terms if t.lag_time_constant), "")
 
     @property
     def term_names(self) -> tuple[str, ...]:

@@ -42,6 +42,10 @@ class Conditions(NamedTuple):
     frontal_area_m2 : frontal area A.
     airspeed_rate_mps2 : d/dt of the airspeed *reading* (the logged channel, before
         calibration), for terms that undo an instrument lag; 0 where no reading is integrated.
+    speed_drop_lagged_mps : the part of the measured speed drop since the start of the run
+        that a first-order lag of the model's time constant has not yet followed
+        (:func:`~bayes_roadload.physics.integrate.lagged_speed_drop`); 0 unless a term of the
+        model names a ``lag_time_constant``.
     """
 
     speed_mps: Array
@@ -58,6 +62,7 @@ class Conditions(NamedTuple):
     mass_kg: Array
     frontal_area_m2: Array
     airspeed_rate_mps2: Array = 0.0
+    speed_drop_lagged_mps: Array = 0.0
 
     @property
     def dynamic_pressure_area_n(self) -> Array:
@@ -94,6 +99,9 @@ class Term:
     (:func:`~bayes_roadload.physics.integrate.integrate_run`).  Conservative default: False.
     ``needs_measured_air`` marks terms of the anemometer's reading (its lag, its calibration):
     without a logged airspeed they describe nothing.
+    ``lag_time_constant`` names the parameter (a time, s) of the lagged speed drop the term
+    reads from :attr:`Conditions.speed_drop_lagged_mps`; the integrator of speed traces
+    computes that channel from the measured speed when a model term names one.
     """
 
     name: ClassVar[str] = ""
@@ -101,6 +109,7 @@ class Term:
     uses_accel: ClassVar[bool] = False
     speed_affine: ClassVar[bool] = False
     needs_measured_air: ClassVar[bool] = False
+    lag_time_constant: ClassVar[str] = ""
     equation: ClassVar[str] = ""
 
     def force_n(self, p: Params, c: Conditions) -> Array:  # pragma: no cover - abstract
@@ -128,6 +137,34 @@ class TyreRolling(Term):
 
     def force_n(self, p: Params, c: Conditions) -> Array:
         return c.weight_n * (p["AD"] + p["BD"] * c.speed_mps) * tyre_temperature_factor(p, c)
+
+
+@register_term
+@dataclass(frozen=True)
+class TyreThermalLag(Term):
+    """Tyre rolling loss away from its speed equilibrium while the tyre temperature lags the
+    falling speed: -M g (A_D + B_D v)[1 - K_T(T_0 - T_s)] G_T L(t).
+
+    A_D and B_D (eq. 2.38) are then the rolling loss with the tyres at the temperature they
+    reach at each steady speed.  In a coastdown the tyres cool more slowly than the speed
+    falls: with a first-order tyre temperature of time constant tau and a steady rise of r
+    kelvin per m/s above ambient, the excess over the equilibrium is dT = r L, where L is the
+    speed drop since the start not yet followed by a lag of time constant tau
+    (dL/dt = -L / tau - dv/dt, :func:`~bayes_roadload.physics.integrate.lagged_speed_drop`),
+    and the rolling loss falls by k dT, k the loss's temperature coefficient (the same law as
+    eq. 2.39 about the equilibrium instead of the ambient temperature).  ``tyre_lag_gain_per_mps``
+    is G_T = k r (1/(m/s)); ``tyre_lag_time_constant_s`` is tau.  The run starts at equilibrium
+    (L(0) = 0, the standards' warm-up at the start speed).  Speed-trace kinds only."""
+
+    name: ClassVar[str] = "tyre_thermal_lag"
+    defaults: ClassVar[Mapping[str, float]] = {"tyre_lag_gain_per_mps": 0.0, "tyre_lag_time_constant_s": 400.0}
+    speed_affine: ClassVar[bool] = True
+    lag_time_constant: ClassVar[str] = "tyre_lag_time_constant_s"
+    equation: ClassVar[str] = "2.38-2.39 with a first-order tyre temperature"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        tyre = c.weight_n * (p["AD"] + p["BD"] * c.speed_mps) * tyre_temperature_factor(p, c)
+        return -tyre * p["tyre_lag_gain_per_mps"] * c.speed_drop_lagged_mps
 
 
 @register_term
