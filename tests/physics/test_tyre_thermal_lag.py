@@ -85,3 +85,18 @@ def test_one_lag_per_model():
 
     with pytest.raises(ValueError, match="at most one lagged speed drop"):
         DragModel((TyreRolling(), TyreThermalLag(), Other()))
+
+
+def test_only_speed_traces_take_the_term():
+    """Kinds without a measured speed trace refuse the model, naming the term; speed traces and
+    models without the term pass."""
+    from bayes_roadload.inference.kinds import KINDS, check_model
+    from bayes_roadload.inference.spec import load_model_spec
+
+    lag, plain = load_model_spec("four_term_tyre_lag"), load_model_spec("four_term")
+    check_model(KINDS["traces"], lag)
+    for name, entry in KINDS.items():
+        check_model(entry, plain)
+        if name != "traces":
+            with pytest.raises(ValueError, match="tyre_thermal_lag"):
+                check_model(entry, lag)
