@@ -39,13 +39,41 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
 from doc_sections import replace_section  # noqa: E402
-from bayes_roadload.analysis.calibration import (CONFIRMATORY_SEED0, calibration_jobs,  # noqa: E402
-                                                 calibration_markdown, calibration_table)
+from bayes_roadload.analysis.calibration import (CONFIRMATORY_SEED0, QUANTITIES,  # noqa: E402
+                                                 calibration_jobs, calibration_markdown, calibration_table)
 
 RECORDS = ROOT / "docs" / "calibration" / "independent_records.csv"
 DOC = ROOT / "docs" / "calibration.md"
 MARK_BEGIN = "<!-- calibration_study:begin -->"
 MARK_END = "<!-- calibration_study:end -->"
+
+
+def comparison_markdown(first: pd.DataFrame, second: pd.DataFrame) -> str:
+    """Per quantity, on the campaigns (``name``) both record sets hold: how many 95 % intervals
+    hold the truth, the mean relative error (%) and, for ``second``, the rms of
+    z = (mean - truth) / sd."""
+    names = sorted(set(first["name"]) & set(second["name"]))
+    a = first[first["name"].isin(names)]
+    b = second[second["name"].isin(names)]
+    n = len(names)
+    lines = [f"campaigns {', '.join(names)}", "",
+             "| quantity | first: held / mean error | second: held / mean error / rms z |",
+             "| --- | --- | --- |"]
+    held = [0, 0]
+    for q in QUANTITIES:
+        cells = []
+        for k, rec in enumerate((a, b)):
+            inside = int(rec[f"{q}_in95"].astype(bool).sum())
+            held[k] += inside
+            err = 100.0 * (rec[f"{q}_mean"] / rec[f"{q}_truth"] - 1.0)
+            cell = f"{inside} / {n}, {err.mean():+.1f} %"
+            if k == 1:
+                z = (rec[f"{q}_mean"] - rec[f"{q}_truth"]) / rec[f"{q}_sd"]
+                cell += f", {float(np.sqrt((z ** 2).mean())):.2f}"
+            cells.append(cell)
+        lines.append(f"| {q} | {cells[0]} | {cells[1]} |")
+    lines.append(f"| all | {held[0]} / {n * len(QUANTITIES)} | {held[1]} / {n * len(QUANTITIES)} |")
+    return "\n".join(lines)
 
 
 def main(argv=None) -> int:
@@ -58,6 +86,8 @@ def main(argv=None) -> int:
     ap.add_argument("--records", type=Path, default=RECORDS)
     ap.add_argument("--docs", action="store_true", help="regenerate the section of docs/calibration.md")
     ap.add_argument("--model", default="four_term", help="model variant (default four_term, fit's default)")
+    ap.add_argument("--compare", type=Path, default=None, metavar="RECORDS",
+                    help="with --from-records: a table of --records beside these records on the seeds both hold")
     ap.add_argument("--from-records", action="store_true", help="summarise --records without fitting")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
@@ -79,6 +109,9 @@ def main(argv=None) -> int:
         wall = time.perf_counter() - t0
         records.to_csv(args.records, index=False)
         partial.unlink(missing_ok=True)
+    if args.compare is not None:
+        print(comparison_markdown(pd.read_csv(args.compare), records))
+        return 0
     if "error" not in records:
         records["error"] = np.nan
     table = calibration_table(records)

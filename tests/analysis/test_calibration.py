@@ -48,6 +48,12 @@ def test_the_rules_pass_calibrated_and_fail_overconfident_posteriors():
     assert "**fail**" in text and "400 campaigns" in text
 
 
+def test_jobs_carry_the_model_asked_for():
+    """The study fits fit's default model unless told otherwise (``--model``)."""
+    assert {j.model for j in calibration_jobs([1, 2], 1, 3)} == {"four_term"}
+    assert {j.model for j in calibration_jobs([1, 2], 1, 3, model="four_term_tyre_lag")} == {"four_term_tyre_lag"}
+
+
 def test_campaign_sizes_come_from_the_seed():
     assert [pairs_of(s, 1, 12) for s in range(50)] == [pairs_of(s, 1, 12) for s in range(50)]
     assert {pairs_of(s, 1, 12) for s in range(200)} == set(range(1, 13))
