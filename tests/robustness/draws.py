@@ -110,7 +110,11 @@ def write_campaign(d: dict, root: Path) -> Path:
     if d["kind"] == "distances":
         from bayes_roadload.simulate.distances import distance_campaign_from_traces
 
-        c = distance_campaign_from_traces(c, tuple(float(x) for x in np.arange(100.0, 1001.0, 100.0)), seed=d["seed"])
+        # markers every 100 m up to 1 km, within the reach of the shortest run (a high stop speed
+        # ends a run early)
+        reach = float(c.runs.groupby("run")["distance_m"].max().min())
+        markers = np.arange(100.0, min(1000.0, reach) + 1.0, 100.0)
+        c = distance_campaign_from_traces(c, tuple(float(x) for x in markers), seed=d["seed"])
     if d["kind"] == "intervals":
         from bayes_roadload.simulate.intervals import interval_campaign_from_traces
 
