@@ -11,7 +11,19 @@ and ``docs/sim_to_real.md`` (every design with records); prints a JSON summary.
 
     python benchmarks/sim_to_real_study.py --design standard --seeds 1 2 --nulls 4 --pairs 3 --workers 1
     python benchmarks/sim_to_real_study.py --design identifying --seeds 1 2 --nulls 4 --workers 2
+    python benchmarks/sim_to_real_study.py --design independent --pairs 6 --seeds 1 2 --nulls 4 --workers 2
+    python benchmarks/sim_to_real_study.py --freeze              # commit the rules before confirmatory seeds
+    python benchmarks/sim_to_real_study.py --design independent --pairs 6 --phase confirmatory \
+        --seeds 101 102 103 104 105 --nulls 20 --null-seed0 2000 --workers 2
     python benchmarks/sim_to_real_study.py --report-only     # rebuild the markdown from the records
+
+The ``independent`` design injects each effect with the independent simulator
+(``bayes_roadload.simulate.independent``: no code or constant shared with the candidates);
+its records are ``records_independent_pP.csv``, one per campaign size, each row tagged with
+its ``phase``.  ``--freeze`` writes ``docs/sim_to_real/frozen_rules.json`` (the rules'
+fingerprint and the design seeds seen so far); a ``--phase confirmatory`` run refuses to
+start unless the shipped rules are the frozen ones and its seeds were never used to design
+them.
     python benchmarks/sim_to_real_study.py --report-only --replay 8   # + the thesis replay (replay.csv)
 """
 
@@ -32,10 +44,64 @@ sys.path.insert(0, str(ROOT))
 from bayes_roadload import config  # noqa: E402
 from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
 from bayes_roadload.analysis.effects import EFFECT_NAMES  # noqa: E402
-from studies.proof_suite import PROOF_DESIGNS, proof_design, withheld_effect_jobs  # noqa: E402
+from studies.proof_suite import (INDEPENDENT_BASE_EFFECTS, INDEPENDENT_INJECTIONS,  # noqa: E402
+                                 INDEPENDENT_MEAN_WIND_MPS, PROOF_DESIGNS, proof_design, withheld_effect_jobs)
 from studies.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
 
 OUT = ROOT / "docs" / "sim_to_real"
+FROZEN = OUT / "frozen_rules.json"
+
+
+def records_path(design: str, pairs: int) -> Path:
+    """``records_DESIGN.csv``; the independent design keeps one file per campaign size."""
+    return OUT / (f"records_{design}_p{pairs}.csv" if design == "independent" else f"records_{design}.csv")
+
+
+def current_rules() -> dict:
+    from bayes_roadload.analysis.diagnose import rules_fingerprint
+    from bayes_roadload.analysis.effects import load_library
+    return rules_fingerprint(load_library(), config.DEFAULT_DIAGNOSIS)
+
+
+def design_seeds_seen() -> dict[str, list[int]]:
+    """Every seed of a design-phase row of the independent records (effects and nulls)."""
+    effects, nulls = set(), set()
+    for path in sorted(OUT.glob("records_independent_p*.csv")):
+        rec = read_records(path)
+        rec = rec[rec.get("phase", pd.Series("design", index=rec.index)).fillna("design") == "design"]
+        for t, sd in zip(rec["true_effect"], rec["seed"]):
+            (nulls if t == "null" else effects).add(int(sd))
+    return {"effect_seeds": sorted(effects), "null_seeds": sorted(nulls)}
+
+
+def freeze() -> dict:
+    """Write :data:`FROZEN`: the shipped rules' fingerprint and the seeds that designed them."""
+    import datetime
+    rules = current_rules()
+    doc = {"library_sha256": rules["library_sha256"], "thresholds_sha256": rules["thresholds_sha256"],
+           "thresholds": rules["thresholds"], "frozen_on": datetime.date.today().isoformat(),
+           "design_seeds": design_seeds_seen(),
+           "note": "rules frozen before any confirmatory seed ran; confirmatory runs refuse other rules and these seeds"}
+    FROZEN.write_text(json.dumps(doc, indent=1) + "\n")
+    return doc
+
+
+def check_confirmatory(seeds, null_seeds) -> dict:
+    """Refuse a confirmatory run whose rules are not the frozen ones or whose seeds designed them."""
+    if not FROZEN.exists():
+        raise SystemExit(f"{FROZEN} missing: run --freeze (and commit it) before a confirmatory run")
+    frozen = json.loads(FROZEN.read_text())
+    now = current_rules()
+    if (now["library_sha256"], now["thresholds_sha256"]) != (frozen["library_sha256"], frozen["thresholds_sha256"]):
+        raise SystemExit("the shipped rules differ from the frozen ones "
+                         f"(library {now['library_sha256'][:16]} vs {frozen['library_sha256'][:16]}, thresholds "
+                         f"{now['thresholds_sha256'][:16]} vs {frozen['thresholds_sha256'][:16]}): confirmatory seeds "
+                         "must run under the frozen rules")
+    used = set(frozen["design_seeds"]["effect_seeds"]) & set(seeds)
+    used |= set(frozen["design_seeds"]["null_seeds"]) & set(null_seeds)
+    if used:
+        raise SystemExit(f"seeds {sorted(used)} designed the rules: a confirmatory run needs fresh seeds")
+    return frozen
 
 
 def outcome(row) -> str:
@@ -219,6 +285,132 @@ def design_section(design: str, records: pd.DataFrame) -> list[str]:
     return lines + [""]
 
 
+TARGETS = {6: {"claimed": 80.0, "ranked_first": 90.0}, 3: {"claimed": 50.0, "ranked_first": 90.0}}
+"""Targets of the independent design on its confirmatory seeds, by campaign size (pairs):
+the true effect claimed (ranked first and supported) and ranked first, in % of the effect
+campaigns; for every size: no wrong claim, no claim on the nulls (>= 20), median shrink
+>= 80 % when claimed, and every unclaimed effect reported 'not identifiable here' or 'not
+distinguishable here' with what would identify it."""
+
+
+def _fmt(v) -> str:
+    return "-" if v is None else (f"{v:.1f}" if isinstance(v, float) else str(v))
+
+
+def phase_of(records: pd.DataFrame) -> pd.Series:
+    return records["phase"].fillna("design") if "phase" in records else pd.Series("design", index=records.index)
+
+
+def independent_section(label: str, records: pd.DataFrame) -> list[str]:
+    """The independent design at one campaign size: the injections, the frozen rules, the
+    summary by phase (design seeds / confirmatory seeds) against the targets, the confusion
+    matrices and every campaign."""
+    ok = records[records["error"].isna()].copy()
+    pairs = int(label.rsplit("_p", 1)[1])
+    phases = [ph for ph in ("design", "confirmatory") if (phase_of(records) == ph).any()]
+    by_phase = {ph: records[phase_of(records) == ph] for ph in phases}
+    sums = {ph: summarise(r) for ph, r in by_phase.items()}
+    lines = [f"## Design `independent`, {pairs} pairs", "",
+             "Each campaign comes from the independent simulator (`bayes_roadload.simulate.independent`, "
+             "[independent_simulator.md](independent_simulator.md)): its own integrator, wind field, tyre, track and "
+             "instrument models, no code or constant shared with the candidates or the analysis.  A random vehicle "
+             f"(small car to truck), {pairs} pairs, {INDEPENDENT_MEAN_WIND_MPS[0]:g} m/s along-track and "
+             f"{INDEPENDENT_MEAN_WIND_MPS[1]:g} m/s cross mean wind, in every campaign, nulls included: "
+             + ", ".join(f"`{e}`" for e in INDEPENDENT_BASE_EFFECTS) + " (an ordinary day; no candidate explains them), "
+             "instrument noise and quantisation, the declared values exact but for the injected error.  Analysed "
+             "with `three_term` (K_D from the campaign's tunnel value).  One injection per campaign "
+             "(`studies.proof_suite.INDEPENDENT_INJECTIONS`), its size drawn from the range stated:", "",
+             "| candidate | injected by the independent simulator |", "| --- | --- |"]
+    lines += [f"| {e} | {t} |" for e, t in INDEPENDENT_INJECTIONS.items()]
+    lines += ["", f"Records: [sim_to_real/records_{label}.csv](sim_to_real/records_{label}.csv) (column `injected`: "
+              "what was drawn).", ""]
+    if FROZEN.exists():
+        fr = json.loads(FROZEN.read_text())
+        ds = fr["design_seeds"]
+        lines += [f"**Frozen rules** ([frozen_rules.json](sim_to_real/frozen_rules.json), {fr['frozen_on']}): library "
+                  f"`{fr['library_sha256'][:16]}`, thresholds `{fr['thresholds_sha256'][:16]}`; designed on effect "
+                  f"seeds {', '.join(map(str, ds['effect_seeds'])) or '-'} and null seeds "
+                  f"{', '.join(map(str, ds['null_seeds'])) or '-'}.  Confirmatory seeds were never looked at before "
+                  "the freeze; `--phase confirmatory` refuses other rules and the design seeds.", ""]
+    for ph, r in by_phase.items():
+        lines.append(f"{ph.capitalize()} phase: " + rules_line(r))
+    lines += ["", "| quantity | " + " | ".join(f"{ph} seeds" for ph in phases) + " |",
+              "| --- |" + " --- |" * len(phases)]
+    for k in (sums[phases[0]] if phases else {}):
+        lines.append(f"| {k} | " + " | ".join(_fmt(sums[ph][k]) for ph in phases) + " |")
+    for ph in phases:
+        seeds = sorted({int(x) for x, t in zip(by_phase[ph]["seed"], by_phase[ph]["true_effect"]) if t != "null"})
+        nseeds = sorted({int(x) for x, t in zip(by_phase[ph]["seed"], by_phase[ph]["true_effect"]) if t == "null"})
+        lines.append(f"\n{ph.capitalize()} seeds: effects {', '.join(map(str, seeds))}; nulls "
+                     f"{', '.join(map(str, nseeds)) or '-'}.")
+    tgt = TARGETS.get(pairs)
+    if "confirmatory" in sums and tgt:
+        c = sums["confirmatory"]
+        eff = ok[(phase_of(ok) == "confirmatory") & (ok["true_effect"] != "null")].copy()
+        eff["outcome"] = eff.apply(outcome, axis=1)
+        unexplained = int((eff["outcome"] == "none").sum())
+        checks = [
+            ("true effect claimed", f">= {tgt['claimed']:g} %", f"{_fmt(c['true_first_pct'])} %",
+             (c["true_first_pct"] or 0) >= tgt["claimed"]),
+            ("true effect ranked first", f">= {tgt['ranked_first']:g} %", f"{_fmt(c['true_ranked_first_pct'])} %",
+             (c["true_ranked_first_pct"] or 0) >= tgt["ranked_first"]),
+            ("wrong claims", "0", str(c["wrong_claim"]), c["wrong_claim"] == 0),
+            ("claims on nulls", f"0 of >= 20", f"{c['null_false_claims']} of {c['null_campaigns']}",
+             c["null_false_claims"] == 0 and c["null_campaigns"] >= 20),
+            ("median shrink when claimed", ">= 80 %", f"{_fmt(c['median_trend_shrink_pct_when_correct'])} %",
+             (c["median_trend_shrink_pct_when_correct"] or 0) >= 80),
+            ("unclaimed effects without a statement", "0", str(unexplained), unexplained == 0),
+        ]
+        lines += ["", "**Targets, confirmatory seeds only:**", "", "| target | asked | measured | met |",
+                  "| --- | --- | --- | --- |"]
+        lines += [f"| {a} | {b} | {m} | {'yes' if ok_ else '**no**'} |" for a, b, m, ok_ in checks]
+    for ph in phases:
+        for by, title in (("top", "claimed effect ('none': nothing claimed)"), ("rank_one", "rank-1 candidate")):
+            cm = confusion(by_phase[ph], by)
+            cols = [c for c in cm.columns if cm[c].sum() > 0 or c == "none"]
+            lines += ["", f"### {ph.capitalize()} seeds: confusion matrix (rows: true effect; columns: {title})", "",
+                      "| true \\ top | " + " | ".join(cols) + " |", "|" + " --- |" * (len(cols) + 1)]
+            for idx, row in cm.iterrows():
+                lines.append(f"| {idx} | " + " | ".join(str(int(row[c])) for c in cols) + " |")
+    ok["outcome"] = ok.apply(outcome, axis=1)
+    ok["true_rank"] = ok.apply(true_rank, axis=1)
+    lines += ["", "### Per campaign", "",
+              "| campaign | phase | vehicle | outcome | true rank | top | supported | not identifiable here | "
+              "trend before (m/s) | after | shrink % |", "| --- |" + " --- |" * 10]
+    for _, r in ok.iterrows():
+        sh = r.get("shrink_trend_rms_mps")
+        rank = "-" if pd.isna(r["true_rank"]) else f"{r['true_rank']:.0f}"
+        lines.append(f"| {r['name']} | {r.get('phase') or 'design'} | {r.get('category') or '-'} | {r['outcome']} | "
+                     f"{rank} | {r['top']} | {r['supported'] or '-'} | {r['not_identifiable'] or '-'} | "
+                     f"{r['before_trend_rms_mps']:.4f} | {r['after_trend_rms_mps']:.4f} | "
+                     f"{'-' if pd.isna(sh) else f'{sh:.0f}'} |")
+    bad = records[records["error"].notna()]
+    if len(bad):
+        lines += ["", "Failed jobs: " + "; ".join(f"{n}: {e}" for n, e in zip(bad["name"], bad["error"]))]
+    return lines + [""]
+
+
+def side_by_side(by_design: dict[str, pd.DataFrame]) -> list[str]:
+    """The designs' headline figures in one table (the independent ones by phase)."""
+    cols: dict[str, dict] = {}
+    for label, rec in by_design.items():
+        if label.startswith("independent"):
+            for ph in ("design", "confirmatory"):
+                sub = rec[phase_of(rec) == ph]
+                if len(sub):
+                    cols[f"{label} ({ph})"] = summarise(sub)
+        else:
+            cols[label] = summarise(rec)
+    keys = ("effect_campaigns", "true_ranked_first_pct", "true_first_pct", "wrong_claim", "null_campaigns",
+            "null_false_claims", "median_trend_shrink_pct_when_correct")
+    lines = ["## The designs side by side", "",
+             "`standard` and `identifying` inject each effect with the candidates' own terms (the same formulas "
+             "the diagnosis fits); `independent` with physics that shares none.", "",
+             "| quantity | " + " | ".join(f"`{c}`" for c in cols) + " |", "| --- |" + " --- |" * len(cols)]
+    lines += [f"| {k} | " + " | ".join(_fmt(s[k]) for s in cols.values()) + " |" for k in keys]
+    return lines + [""]
+
+
 def markdown(by_design: dict[str, pd.DataFrame], args_text: str) -> str:
     cfg = config.DEFAULT_DIAGNOSIS
     lines = ["# Sim-to-real diagnosis: the withheld-effect proof suite", "",
@@ -232,15 +424,21 @@ def markdown(by_design: dict[str, pd.DataFrame], args_text: str) -> str:
              f"signature (distinct share >= {cfg.min_distinct_share:g}) and ahead run by run of every rival that "
              f"explains part of the gap (Vuong z >= {cfg.min_vuong_z:g}; not asked of run-level effects).  "
              "*Ranked first*: the candidate at rank 1 of diagnosis.json (the supported one, else the best by "
-             "delta_elpd); *claimed*: ranked first and supported.  Two designs: `standard` (what a usual "
+             "delta_elpd); *claimed*: ranked first and supported.  Three designs: `standard` (what a usual "
              "campaign can tell: effects it cannot see must be reported 'not identifiable here' or nothing claimed, "
-             "never a wrong effect) and `identifying` (the campaign the effects' *needs* ask for).", "",
+             "never a wrong effect) and `identifying` (the campaign the effects' *needs* ask for) inject each effect "
+             "with the candidates' own terms; `independent` injects it with the independent simulator's physics, "
+             "which shares no formula, code or constant with the candidates, under rules frozen before its "
+             "confirmatory seeds ran.  A candidate whose library entry declares a physical sign (`sign`) is "
+             "scored at its null when its estimate has the other sign.", "",
              "Outcomes: *correct* = the true effect ranked first and supported (nulls: nothing claimed); "
              "*flagged* = nothing claimed and the true effect reported 'not identifiable here'; *indistinct* = nothing "
              "claimed, the true effect among candidates reported 'not distinguishable here'; *none* = nothing "
              "claimed; *wrong* = another effect claimed.  *true rank*: the true effect's place by delta_elpd alone.", ""]
+    lines += side_by_side(by_design)
     for design, records in by_design.items():
-        lines += design_section(design, records)
+        lines += (independent_section(design, records) if design.startswith("independent")
+                  else design_section(design, records))
     before = OUT / "records_identifying_before_vuong.csv"
     if before.exists():
         s = summarise(read_records(before))
@@ -285,14 +483,29 @@ def read_records(path: Path) -> pd.DataFrame:
     return records
 
 
+def all_records() -> dict[str, pd.DataFrame]:
+    """Every design's records, keyed ``standard``, ``identifying``, ``independent_pP``."""
+    out = {d: read_records(OUT / f"records_{d}.csv") for d in PROOF_DESIGNS
+           if d != "independent" and (OUT / f"records_{d}.csv").exists()}
+    for path in sorted(OUT.glob("records_independent_p*.csv"), key=lambda q: -int(q.stem.rsplit("_p", 1)[1])):
+        out[path.stem.removeprefix("records_")] = read_records(path)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--design", choices=PROOF_DESIGNS, default="standard",
-                    help="campaign design of the suite (models/effects/library.toml [proof])")
+                    help="campaign design of the suite (models/effects/library.toml [proof]; independent: the "
+                         "independent simulator)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1])
     ap.add_argument("--nulls", type=int, default=3)
-    ap.add_argument("--pairs", type=int, default=3, help="pairs per campaign (standard design)")
-    ap.add_argument("--effects", nargs="+", default=list(EFFECT_NAMES))
+    ap.add_argument("--null-seed0", type=int, default=1000, help="seed of the first null control")
+    ap.add_argument("--pairs", type=int, default=None, help="pairs per campaign (standard: 3, independent: 6)")
+    ap.add_argument("--effects", nargs="+", default=None, help="effects to inject (default: every one the design has)")
+    ap.add_argument("--phase", choices=("design", "confirmatory"), default="design",
+                    help="independent design: a confirmatory run needs frozen rules and fresh seeds (--freeze)")
+    ap.add_argument("--freeze", action="store_true",
+                    help=f"write {FROZEN.relative_to(ROOT)} (rules fingerprint, design seeds) and stop")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--scheduler", default=None, metavar="ADDR",
                     help="address of a running Dask scheduler (default: a local cluster of --workers processes)")
@@ -303,12 +516,23 @@ def main(argv=None) -> int:
     ap.add_argument("--replay", type=int, default=0, help="pairs per effect of the thesis replay (0: skip)")
     args = ap.parse_args(argv)
     OUT.mkdir(parents=True, exist_ok=True)
-    path = OUT / f"records_{args.design}.csv"
+    if args.freeze:
+        print(json.dumps(freeze(), indent=1))
+        return 0
+    pairs = args.pairs if args.pairs is not None else (6 if args.design == "independent" else 3)
+    path = records_path(args.design, pairs)
     args_text = " ".join(argv if argv is not None else sys.argv[1:])
     if not args.report_only:
-        jobs = withheld_effect_jobs(args.effects, seeds=tuple(args.seeds), pairs=args.pairs, nulls=args.nulls,
-                                    design=args.design)
-        done = []
+        tags = {}
+        if args.design == "independent":
+            tags["phase"] = args.phase
+            if args.phase == "confirmatory":
+                check_confirmatory(args.seeds, range(args.null_seed0, args.null_seed0 + args.nulls))
+        elif args.phase == "confirmatory":
+            raise SystemExit("--phase confirmatory is for the independent design")
+        jobs = withheld_effect_jobs(args.effects, seeds=tuple(args.seeds), pairs=pairs, nulls=args.nulls,
+                                    design=args.design, null_seed0=args.null_seed0, tags=tags)
+        done = read_records(path).to_dict("records") if args.design == "independent" and path.exists() else []
         if args.names:
             wanted = set(args.names)
             jobs = [j for j in jobs if j.name in wanted]
@@ -317,6 +541,11 @@ def main(argv=None) -> int:
                 raise SystemExit(f"no such campaigns in --seeds/--nulls: {sorted(missing)}")
             old = read_records(path)
             done = [r for r in old.to_dict("records") if r["name"] not in wanted]
+        elif done:
+            names = {j.name for j in jobs}
+            clash = sorted(names & {r["name"] for r in done})
+            if clash:
+                raise SystemExit(f"{path.name} has these campaigns already (use --names to redo): {clash[:5]}")
         t0 = time.perf_counter()
 
         def keep(rec):
@@ -333,8 +562,7 @@ def main(argv=None) -> int:
         rep["time_s"] = time.perf_counter() - t0
         rep.to_csv(OUT / "replay.csv", index=False)
         print(rep.round(3).to_string(), flush=True)
-    by_design = {d: read_records(OUT / f"records_{d}.csv") for d in PROOF_DESIGNS
-                 if (OUT / f"records_{d}.csv").exists()}
+    by_design = all_records()
     for d, records in by_design.items():
         confusion(records).to_csv(OUT / f"confusion_{d}.csv")
         confusion(records, "rank_one").to_csv(OUT / f"confusion_rank_one_{d}.csv")

@@ -228,6 +228,10 @@ def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> s
     if kin and not entry["supported"]:
         return (f"not supported: invisible in the dynamics (C_D0 absorbs an airspeed scale); the paired-run kinematics "
                 f"give airspeed_factor {kin['factor']:.4f} +- {kin['se']:.4f} from {kin['n_pairs']} pairs (z = {kin['z']:.1f})")
+    if entry.get("against_sign"):
+        what = ", ".join(f"{p} {v:.3g}" for p, v in entry["against_sign"].items())
+        return (f"not supported: estimated with a sign no {effect.name} has ({what}); scored at its constrained "
+                f"optimum, no effect")
     if entry["supported"]:
         how = " (from the paired-run kinematics)" if kin else ""
         given = entry.get("delta_elpd_given_supported")
@@ -289,15 +293,17 @@ class Diagnosis:
         return c["effect"] if c is not None and c["supported"] else None
 
 
-DIAGNOSIS_CONTRACT = 2
+DIAGNOSIS_CONTRACT = 3
 """Version of ``diagnosis.json``'s contract: the keys ``gap``, ``localisation``,
 ``candidates`` (each candidate with :data:`CANDIDATE_KEYS`), ``contract`` (this number) and
 ``rules`` (:func:`rules_fingerprint`).  Raised whenever a key is added or its meaning changes,
 so a committed diagnosis older than the code is detected."""
 
 CANDIDATE_KEYS = ("effect", "rank", "supported", "qualifies", "delta_elpd", "gap_before", "gap_after", "shrink_pct",
-                  "identifiable", "identification", "estimates", "unavailable", "needs", "statement")
-"""The keys every candidate entry of ``diagnosis.json`` carries."""
+                  "identifiable", "identification", "estimates", "against_sign", "unavailable", "needs", "statement")
+"""The keys every candidate entry of ``diagnosis.json`` carries (``against_sign``: the
+estimates whose sign no physical value of the effect has, :meth:`.effects.Effect.against_sign`;
+empty when none)."""
 
 
 def _sha256_json(obj: Any) -> str:
@@ -349,7 +355,7 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
         entry: dict[str, Any] = {"effect": name, "rank": None, "supported": False, "qualifies": False,
                                  "delta_elpd": math.nan,
                                  "gap_before": before, "gap_after": {}, "shrink_pct": {},
-                                 "identifiable": False, "identification": {}, "estimates": {},
+                                 "identifiable": False, "identification": {}, "estimates": {}, "against_sign": {},
                                  "unavailable": lin.available.get(name)}
         if entry["unavailable"] is None and name in lin.effects:
             sol = fx.fit_effects(lin, (name,), library)
@@ -375,9 +381,16 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
                     identifiable = identifiable or kin["loglik_gain"] - 1.0 >= settings.support_delta_elpd
                     entry["identifiable"] = identifiable
                     entry["estimates"] = {"airspeed_factor": kin["factor"]}
+            against = e.against_sign(entry["estimates"])
+            if against:
+                # the constrained optimum of a one-parameter Gaussian score is the null
+                delta = -float(k)
+                entry["run_gains"] = [-k / lin.n_runs] * lin.n_runs
+                entry["against_sign"] = against
+                sol = base_sol
             entry["delta_elpd"] = float(delta)
             entry["qualifies"] = bool(identifiable and delta >= settings.support_delta_elpd)
-            after = gap_metrics(lin, fx.refit_residual(lin, sol), sol, (name,), library, groups)
+            after = gap_metrics(lin, fx.refit_residual(lin, sol), sol, () if against else (name,), library, groups)
             entry["gap_after"] = after
             if math.isfinite(before["lopo_lpd_per_sample"]):
                 # the same comparison out of sample: leave-one-pair-out log predictive density gain

@@ -47,6 +47,7 @@ STATEMENTS = {
     "airspeed_calibration": "not applicable: interval times carry no anemometer reading to calibrate",
     "yaw_calibration": "not applicable: interval times carry no yaw reading",
     "anemometer_dynamics": "not applicable: interval times carry no anemometer reading",
+    "aero_admittance": "not applicable: interval times carry no anemometer reading",
     "side_force_slip": "not applicable: needs the yaw angle, which interval times do not carry",
     "aero_lift": "not identifiable here: with the air not measured, lift unloading C_L0 A_D q looks like a "
                  "change of C_D0; needs tunnel lift coefficients or wheel loads",

@@ -56,8 +56,11 @@ LIBRARY_PATH = MODELS_DIR / "effects" / "library.toml"
 
 EFFECT_NAMES = ("track_gradient", "tyre_temperature", "airspeed_calibration", "yaw_calibration", "aero_lift",
                 "side_force_slip", "pitch_attitude", "driveline_quadratic", "tyre_speed_exponent", "spatial_wind",
-                "anemometer_dynamics", "run_to_run_variation", "mass_error")
+                "anemometer_dynamics", "run_to_run_variation", "mass_error", "aero_admittance")
 """The effect names of the issue's contract, in library order."""
+
+SIGNS = {"positive": 1, "negative": -1}
+"""The physical signs a one-parameter effect may declare (``sign`` in the library)."""
 
 KINDS = ("term", "air", "run")
 
@@ -77,6 +80,9 @@ class Effect:
     fixed : other parameters of the added terms (SI).
     needs : what a campaign needs to identify the effect.
     confounded_with : coefficients it is known to trade with (documentation).
+    sign : parameter -> +1 or -1, the sign of every physical value away from the null (one-
+        parameter effects only); an estimate of the other sign is no such effect, and the
+        diagnosis scores it at its constrained optimum, the null.
     """
 
     name: str
@@ -88,6 +94,12 @@ class Effect:
     fixed: dict[str, float] = field(default_factory=dict)
     needs: str = ""
     confounded_with: tuple[str, ...] = ()
+    sign: dict[str, int] = field(default_factory=dict)
+
+    def against_sign(self, estimates: Mapping[str, float]) -> dict[str, float]:
+        """The estimates (offsets from the null) whose sign no physical value of the effect has."""
+        return {p: float(v) for p, v in estimates.items()
+                if p in self.sign and float(v) * self.sign[p] < 0.0}
 
     @property
     def parameters(self) -> tuple[str, ...]:
@@ -125,11 +137,21 @@ def load_library(path: str | Path = LIBRARY_PATH) -> dict[str, Effect]:
         for p in list(params) + list(e.get("fixed", {})):
             if p not in config.PARAMETER_UNITS:
                 raise ValueError(f"{where}: unknown parameter {p!r}")
+        sign = {}
+        for p, v in params.items():
+            if "sign" not in v:
+                continue
+            if v["sign"] not in SIGNS:
+                raise ValueError(f"{where}: parameter {p!r}: sign {v['sign']!r} not one of {sorted(SIGNS)}")
+            if len(params) != 1 or kind != "term" or v.get("null", 0.0) != 0.0:
+                raise ValueError(f"{where}: a sign is for a one-parameter term effect whose null is 0")
+            sign[p] = SIGNS[v["sign"]]
         out[name] = Effect(name=name, description=e.get("description", ""), terms=tuple(e.get("terms", [])),
                            kind=kind, prior_sd={p: float(v["prior_sd"]) for p, v in params.items()},
                            null={p: v.get("null", 0.0) for p, v in params.items()},
                            fixed={k: float(v) for k, v in e.get("fixed", {}).items()},
-                           needs=e.get("needs", ""), confounded_with=tuple(e.get("confounded_with", [])))
+                           needs=e.get("needs", ""), confounded_with=tuple(e.get("confounded_with", [])),
+                           sign=sign)
     return out
 
 

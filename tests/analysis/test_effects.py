@@ -30,7 +30,7 @@ def test_candidates_of_the_anemometer_reading_need_a_logged_airspeed():
     measured = model_from_names(["tyre_rolling", "aero_drag"], air="measured")
     _, still_available = fx.super_model(still, lib)
     _, measured_available = fx.super_model(measured, lib)
-    for name in ("anemometer_dynamics", "airspeed_calibration", "yaw_calibration"):
+    for name in ("anemometer_dynamics", "aero_admittance", "airspeed_calibration", "yaw_calibration"):
         assert "needs logged airspeed_mps" in still_available[name]
         assert measured_available[name] is None
     assert still_available["track_gradient"] is None
@@ -167,3 +167,26 @@ def test_fit_noise_recovers_the_local_level_noise_it_was_drawn_from():
     assert np.all(np.abs(np.asarray(theta) - truth) < 4 * se)
     at = lambda th: float(objective(jnp.asarray(th), r))  # noqa: E731
     assert at(theta) <= at(truth) + 1e-9 and at(theta) < at(np.log(np.r_[lin.sigma_mps, lin.q]))
+
+
+def test_a_one_parameter_effect_may_declare_its_physical_sign(tmp_path):
+    """``sign`` in the library: the cup lags (positive distance), the admittance leads
+    (negative); an estimate of the other sign is flagged; a sign on a multi-parameter effect
+    or an unknown sign word is refused."""
+    lib = fx.load_library()
+    assert lib["anemometer_dynamics"].sign == {"cup_lag_m": 1}
+    assert lib["aero_admittance"].sign == {"cup_lag_m": -1}
+    assert lib["anemometer_dynamics"].against_sign({"cup_lag_m": -4.0}) == {"cup_lag_m": -4.0}
+    assert lib["anemometer_dynamics"].against_sign({"cup_lag_m": 1.5}) == {}
+    assert lib["aero_admittance"].against_sign({"cup_lag_m": 1.5}) == {"cup_lag_m": 1.5}
+    assert lib["track_gradient"].against_sign({"grade_rad": -0.01}) == {}
+    head = '[effects.track_gradient]\nterms = ["gradient"]\nkind = "term"\n'
+    bad = tmp_path / "lib.toml"
+    bad.write_text(head + 'parameters.grade_rad = { prior_sd = 0.005, sign = "upward" }\n')
+    with pytest.raises(ValueError, match="not one of"):
+        fx.load_library(bad)
+    bad.write_text('[effects.yaw_calibration]\nterms = []\nkind = "air"\n'
+                   'parameters.yaw_factor = { prior_sd = 0.2, null = "model" }\n'
+                   'parameters.yaw_offset_rad = { prior_sd = 0.05, sign = "positive" }\n')
+    with pytest.raises(ValueError, match="one-parameter term effect"):
+        fx.load_library(bad)

@@ -188,3 +188,27 @@ def test_fit_lsq_recovers_F50_with_perfect_instruments_and_no_effects():
     assert abs(est - c.truth["F50_N"]) < 4.0 * se + 0.05
     for p in ("AD", "BD", "CD0"):
         assert abs(res.weighted_mean[p] - c.truth[p]) < 4.0 * res.weighted_se[p], p
+
+
+def test_set_errors_and_mean_wind_replace_the_draws():
+    """``errors=`` sets the named Type B errors (the others stay zero without ``type_b``, or
+    as drawn with it), ``mean_wind_mps=`` the mean wind; unknown errors are refused."""
+    from bayes_roadload.simulate.independent.campaign import SETTABLE_ERRORS
+    want = {"mass_kg": 25.0, "airspeed_factor_rel": 0.03, "yaw_factor_rel": -0.08, "yaw_offset_rad": 0.03,
+            "track_mean_grade": 0.0007, "rotating_inertia_rel": 0.2}
+    assert set(want) == set(SETTABLE_ERRORS)
+    c = simulate_independent(3, pairs=1, effects=(), sample_rate_hz=1.0, type_b=False, errors=want,
+                             mean_wind_mps=(2.0, -1.5))
+    m = c.truth["meta"]
+    for k, v in want.items():
+        assert m["type_b_errors"][k] == pytest.approx(v, rel=1e-12), k
+    assert m["type_b_errors"]["speed_scale_rel"] == 0.0 and m["type_b_errors"]["pressure_bias_pa"] == 0.0
+    assert c.vehicle.mass_kg == pytest.approx(m["vehicle_true"]["mass_kg"] + 25.0)
+    assert c.anemometer.airspeed_factor == pytest.approx(m["instruments"]["airspeed_factor"] * 1.03)
+    assert m["wind"]["mean_speed_mps"] == pytest.approx(math.hypot(2.0, 1.5))
+    assert m["wind"]["direction_rad"] == pytest.approx(math.atan2(-1.5, 2.0))
+    # the rest of the campaign is the one drawn without them
+    plain = simulate_independent(3, pairs=1, effects=(), sample_rate_hz=1.0, type_b=False)
+    assert plain.truth["meta"]["vehicle_true"] == m["vehicle_true"]
+    with pytest.raises(ValueError, match="unknown"):
+        simulate_independent(3, pairs=1, effects=(), errors={"speed_scale": 0.01})

@@ -2,6 +2,8 @@
 calibration and mass errors, and (slow) null controls and confounded effects through the batch
 door."""
 
+import math
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -75,3 +77,50 @@ def test_a_distorted_yaw_reading_ends_the_run_at_the_logged_limit():
     assert r1["yaw_rad"].abs().max() <= config.MAX_LOGGED_YAW_RAD
     assert len(r1) == int(np.sum(yaw / 0.869 <= config.MAX_LOGGED_YAW_RAD))
     assert len(d.runs[d.runs["run"] == 2]) == t.size
+
+def test_the_independent_design_injects_one_effect_at_its_stated_size():
+    """The ``independent`` design: the independent simulator with the base effects, one
+    injection per candidate drawn inside its stated range, what the campaign must not state
+    stripped, nulls with nothing injected; the factories pickle (the batch door)."""
+    import pickle
+
+    from studies.proof_suite import (INDEPENDENT_BASE_EFFECTS, INDEPENDENT_EFFECTS, INDEPENDENT_INJECTIONS,
+                                     IndependentWithheld, design_effects, independent_withheld_campaign,
+                                     withheld_effect_jobs)
+    assert set(design_effects("independent")) == set(INDEPENDENT_EFFECTS) == set(INDEPENDENT_INJECTIONS)
+    from bayes_roadload.analysis.effects import EFFECT_NAMES
+    assert set(INDEPENDENT_EFFECTS) <= set(EFFECT_NAMES) and "aero_admittance" in INDEPENDENT_EFFECTS
+    assert set(design_effects("standard")) == set(EFFECT_NAMES) - {"aero_admittance"}
+    for seed in range(1, 7):
+        mass = IndependentWithheld("mass_error", seed).arm()
+        rel = mass["errors"]["mass_kg"] / mass["vehicle"].mass_kg
+        assert 0.015 <= abs(rel) <= 0.03
+        air = IndependentWithheld("airspeed_calibration", seed).arm()["errors"]["airspeed_factor_rel"]
+        assert 0.015 <= abs(air) <= 0.04
+        yaw = IndependentWithheld("yaw_calibration", seed).arm()["errors"]
+        assert math.radians(1) <= abs(yaw["yaw_offset_rad"]) <= math.radians(3) and 0.05 <= abs(yaw["yaw_factor_rel"]) <= 0.13
+        grade = IndependentWithheld("track_gradient", seed).arm()["errors"]["track_mean_grade"]
+        assert 0.0002 <= abs(grade) <= 0.001
+        assert 0.02 <= IndependentWithheld("run_to_run_variation", seed).arm()["run_to_run_sd"] <= 0.045
+    # the same seed draws the same vehicle in every arm (a null is the arm's control)
+    assert IndependentWithheld(None, 4).arm()["vehicle"] == IndependentWithheld("aero_lift", 4).arm()["vehicle"]
+    lift, model = independent_withheld_campaign("aero_lift", 2, pairs=1)
+    assert model == "three_term"
+    c = pickle.loads(pickle.dumps(lift))()
+    assert "lift" in c.truth["meta"]["effects"] and not {"CL0", "KL"} & set(c.tunnel)
+    assert c.truth["injected"]["effect"] == "aero_lift"
+    cup = independent_withheld_campaign("anemometer_dynamics", 2, pairs=1)[0]()
+    assert cup.truth["meta"]["anemometer_dynamics"]["distance_constant_m"] >= 1.5
+    assert cup.anemometer.distance_constant_m == 0.0
+    null = independent_withheld_campaign(None, 2, pairs=1)[0]()
+    assert set(null.truth["meta"]["effects"]) == set(INDEPENDENT_BASE_EFFECTS)
+    lead = independent_withheld_campaign("aero_admittance", 2, pairs=1)[0]()
+    assert {"admittance", "anemometer_position"} <= set(lead.truth["meta"]["effects"])
+    assert all(v == 0.0 for v in null.truth["meta"]["type_b_errors"].values())
+    assert null.truth["meta"]["run_to_run_sd"] == 0.0
+    with pytest.raises(ValueError, match="no injection"):
+        independent_withheld_campaign("driveline_quadratic", 1)
+    jobs = withheld_effect_jobs(seeds=(5,), pairs=2, nulls=2, design="independent", null_seed0=3000,
+                                tags={"phase": "design"})
+    assert [j.name for j in jobs] == [f"{e}-s5" for e in INDEPENDENT_EFFECTS] + ["null-s3000", "null-s3001"]
+    assert all(j.tags["phase"] == "design" and j.tags["pairs"] == 2 for j in jobs)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Iterable
+from typing import Iterable, Mapping
 
 import numpy as np
 import pandas as pd
@@ -32,6 +32,10 @@ SAMPLE_RATES_HZ = (1.0, 2.0, 4.0, 5.0, 10.0, 20.0)
 AXLES_OF = {"small_car": 2, "mid_car": 2, "suv_van": 2, "light_truck": 2, "heavy_truck": 5}
 MAX_MEAN_WIND_MPS = 16.0 / 3.6   # SAE J1263: no test with average wind above 16 km/h ...
 MAX_CROSS_WIND_MPS = 8.0 / 3.6   # ... or cross wind above 8 km/h
+
+SETTABLE_ERRORS = ("mass_kg", "rotating_inertia_rel", "airspeed_factor_rel", "yaw_factor_rel", "yaw_offset_rad",
+                   "track_mean_grade")
+"""The Type B errors :func:`simulate_independent` can be given (``errors=``) instead of drawing."""
 YAW_LOG_LIMIT_RAD = math.radians(60.0)
 """A run's record ends before the first sample whose yaw (true or logged) exceeds this: near the
 stop a tail wind gust can turn the relative air beyond any vane calibration (and beyond the
@@ -95,17 +99,20 @@ def true_roadload(vehicle: TrueVehicle, gravity_mps2: float) -> dict:
     return out
 
 
-def _random_wind(rng, wind, effects, start_m, end_m) -> WindField:
+def _random_wind(rng, wind, effects, start_m, end_m, mean_wind_mps=None) -> WindField:
     if isinstance(wind, WindField):
         return wind
     if wind == "calm":
         return WindField()
     if wind != "random":
         raise ValueError(f"wind must be 'random', 'calm' or a WindField, not {wind!r}")
-    while True:  # SAE J1263 wind limits
-        along, cross = rng.uniform(-MAX_MEAN_WIND_MPS, MAX_MEAN_WIND_MPS), rng.uniform(-MAX_CROSS_WIND_MPS, MAX_CROSS_WIND_MPS)
-        if math.hypot(along, cross) <= MAX_MEAN_WIND_MPS:
-            break
+    if mean_wind_mps is not None:
+        along, cross = (float(x) for x in mean_wind_mps)
+    else:
+        while True:  # SAE J1263 wind limits
+            along, cross = rng.uniform(-MAX_MEAN_WIND_MPS, MAX_MEAN_WIND_MPS), rng.uniform(-MAX_CROSS_WIND_MPS, MAX_CROSS_WIND_MPS)
+            if math.hypot(along, cross) <= MAX_MEAN_WIND_MPS:
+                break
     speed, direction = math.hypot(along, cross), math.atan2(cross, along)
     shelter = (random_shelter(rng, start_m, end_m, max_depth=0.4, max_trend=0.2)
                if "wind_spatial" in effects else Shelter())
@@ -132,6 +139,8 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
                          type_b: bool = True, run_to_run_sd: float = 0.01,
                          sample_rate_hz: float | None = None, channels: Iterable[str] = CHANNELS,
                          perfect_instruments: bool = False, speed_noise_sd_mps: float | None = None,
+                         mean_wind_mps: tuple[float, float] | None = None,
+                         errors: Mapping[str, float] | None = None,
                          rtol: float = 1e-9) -> Campaign:
     """Simulate a campaign of opposite-direction coastdown pairs.
 
@@ -153,6 +162,10 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     perfect_instruments : the logger records exactly what the body feels (no instrument
         effect, no Type B error, no quantisation), apart from white speed noise.
     speed_noise_sd_mps : the speed noise (default: drawn with the instrument).
+    mean_wind_mps : (along-track, cross) mean wind in m/s with ``wind="random"``, instead of
+        a draw inside SAE J1263's limits (the shelter and turbulence are still drawn).
+    errors : Type B errors set to these values instead of drawn (or zero without ``type_b``),
+        named as in ``truth.json`` ``meta.type_b_errors``: one of :data:`SETTABLE_ERRORS`.
     rtol : relative tolerance of the integrator on the motion.
 
     Returns
@@ -160,6 +173,11 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     Campaign with ``truth`` (true parameters in the analysis' terms, ``per_run``, ``meta``).
     """
     rng = np.random.default_rng(seed)
+    errors = dict(errors or {})
+    if set(errors) - set(SETTABLE_ERRORS):
+        raise ValueError(f"errors: unknown {sorted(set(errors) - set(SETTABLE_ERRORS))}; settable: {SETTABLE_ERRORS}")
+    if perfect_instruments and errors:
+        raise ValueError("errors: perfect instruments have no Type B errors")
     chosen = frozenset(EFFECTS) if effects is None else frozenset(effects)
     chosen = chosen - frozenset(withhold)
     unknown = (chosen | frozenset(withhold)) - frozenset(EFFECTS)
@@ -192,9 +210,10 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
                          rtol=1e-6)
     length = float(probe.distance_m[-1]) * 1.15 + 100.0
     mean_grade = float(rng.uniform(-sens.GRADE_ACCURACY, sens.GRADE_ACCURACY)) if type_b else 0.0
+    mean_grade = float(errors.get("track_mean_grade", mean_grade))
     undulation = float(rng.uniform(0.0002, 0.001)) if "grade_profile" in chosen else 0.0
     track = surveyed_track(rng, -400.0, length + 400.0, mean_grade=mean_grade, rms_undulation_grade=undulation)
-    field = _random_wind(rng, wind, chosen, -400.0, length + 400.0)
+    field = _random_wind(rng, wind, chosen, -400.0, length + 400.0, mean_wind_mps)
 
     inst = (sens.perfect_instruments(speed_noise_sd_mps if speed_noise_sd_mps is not None else 0.02)
             if perfect_instruments else
@@ -206,6 +225,8 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
                               vane_wavelength_m=float(rng.uniform(4.5, 7.0)))
            if "anemometer_dynamics" in chosen else None)
     ahead = float(rng.uniform(1.5, 2.5)) if "anemometer_position" in chosen else None
+    if "yaw_offset_rad" in errors:
+        inst = dataclasses.replace(inst, yaw_offset_rad=float(errors["yaw_offset_rad"]))
 
     # declared values (Type B)
     u = rng.uniform if type_b else (lambda lo, hi: 0.0)
@@ -216,6 +237,14 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     wind_lim = sens.RELATIVE_WIND_ACCURACY_MPS / sens.RELATIVE_WIND_ACCURACY_AT_MPS
     declared_air = inst.airspeed_factor * (1.0 + float(u(-wind_lim, wind_lim)))
     declared_yaw = inst.yaw_factor * (1.0 + float(u(-sens.YAW_FACTOR_ERROR_LIMIT, sens.YAW_FACTOR_ERROR_LIMIT)))
+    if "mass_kg" in errors:
+        declared_mass = base.mass_kg + float(errors["mass_kg"])
+    if "rotating_inertia_rel" in errors:
+        declared_inertia = base.rotating_inertia_kgm2 * (1.0 + float(errors["rotating_inertia_rel"]))
+    if "airspeed_factor_rel" in errors:
+        declared_air = inst.airspeed_factor * (1.0 + float(errors["airspeed_factor_rel"]))
+    if "yaw_factor_rel" in errors:
+        declared_yaw = inst.yaw_factor * (1.0 + float(errors["yaw_factor_rel"]))
     declared = Vehicle(mass_kg=declared_mass, effective_mass_kg=declared_mass + declared_inertia / declared_radius**2,
                        frontal_area_m2=base.frontal_area_m2, rolling_radius_m=declared_radius, length_m=base.length_m)
 
