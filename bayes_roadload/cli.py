@@ -626,12 +626,56 @@ def _plan_population(args, out: Path):
     return population_from_fit(fit, campaign), campaign
 
 
+DEFAULT_DESIGNS = ("", "extra_mass_kg=300", "cross_wind_factor=2")
+"""`plan --identify` designs when none is given: the campaign's pairs once more ("": as tested),
+with a weighed ballast, on a windier day (the library's `needs` name these)."""
+
+
+def _cmd_plan_identify(args) -> int:
+    import math
+
+    from . import config
+    from .analysis.design_identify import DesignChange, identify_designs
+    from .data import load_campaign
+    from .output import is_fit_dir
+
+    src = Path(args.source)
+    if is_fit_dir(src):
+        raise ValueError(f"{src}: --identify scores a design on a campaign (it fits --model itself); give the campaign")
+    campaign = load_campaign(src)
+    texts = args.design or list(DEFAULT_DESIGNS)
+    changes = [DesignChange.parse(t) for t in texts]
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    echo(f"Scoring {', '.join(args.identify)} on {src} as tested and under {len(changes)} design(s) "
+         f"(model {args.model}; a MAP fit each) ...")
+    table = identify_designs(campaign, args.model, args.identify, changes, seed=args.seed)
+    table.to_csv(out / "identify.csv", index=False)
+    echo(f"\n{'design':<34}{'runs':>5}  {'effect':<22}{'parameter':<24}{'contraction':>11}  {'detectable':>11}")
+    for _, r in table.iterrows():
+        if r.get("parameter") is None or (isinstance(r["parameter"], float) and math.isnan(r["parameter"])):
+            echo(f"{r['design']:<34}{r['runs']:>5}  {r['effect']:<22}{r['note']}")
+            continue
+        mark = "" if r["identifiable"] else "  (not identifiable)"
+        echo(f"{r['design']:<34}{r['runs']:>5}  {r['effect']:<22}{r['parameter']:<24}{r['contraction']:>11.2f}  "
+             f"{r['detectable']:>11.3g}{mark}")
+    echo("(contraction: share of the candidate's prior variance the design's data remove -- identifiable from "
+         f"{config.DEFAULT_DIAGNOSIS.min_contraction:g}; detectable: the smallest size, in the parameter's SI units, "
+         "at which `diagnose` is expected to support it)")
+    echo(f"\nwrote {out / 'identify.csv'}")
+    return 0
+
+
 def _cmd_plan(args) -> int:
     from . import config
     from .analysis.batch import batch_client, run_batch
     from .analysis.planning import Target, plan_jobs, plan_table, plot_plan, recommend
     from .analysis.regulation import regulation_checks
 
+    if args.identify:
+        return _cmd_plan_identify(args)
+    if args.design:
+        raise ValueError("--design scores a design for --identify EFFECT ...; without it `plan` counts pairs")
     targets = [Target.parse(t) for t in (args.target or config.PLAN_TARGETS)]
     if not 0 < args.confidence < 1 or not 0 < args.assurance < 1:
         raise ValueError("--confidence and --assurance are fractions in (0, 1), e.g. 0.95 and 0.8")
@@ -946,6 +990,15 @@ def build_parser() -> argparse.ArgumentParser:
                     help="worker processes of a local Dask cluster for the refits (1: in this process)")
     pl.add_argument("--scheduler", default=None, metavar="ADDR",
                     help="address of a running Dask scheduler for the refits, e.g. tcp://10.0.0.5:8786")
+    pl.add_argument("--identify", nargs="+", metavar="EFFECT", default=None,
+                    help="instead of the pair counts: can a design identify these sim-to-real candidates (library "
+                         "names, see `diagnose`)?  Scores the campaign as tested and each --design (MAP fits, the "
+                         "candidates linearised as `diagnose` does): contraction, identifiable, the smallest "
+                         "detectable size; writes identify.csv (needs a campaign, fitted with --model)")
+    pl.add_argument("--design", action="append", metavar="KEY=VALUE[,KEY=VALUE]", default=None,
+                    help="with --identify, repeatable: runs added to the campaign as tested -- add_pairs=N (default: "
+                         "as many as it has), extra_mass_kg=DM (a weighed ballast), cross_wind_factor=F (a windier "
+                         "day); default: add_pairs, extra_mass_kg=300, cross_wind_factor=2")
     pl.add_argument("--out", required=True)
     _add_nuts_options(pl, seed=0)
     pl.set_defaults(func=_cmd_plan, noise="integrated", robust=False)

@@ -467,7 +467,7 @@ class DiagnosisConfig:
         expected log predictive density (gain in maximised log likelihood minus the parameters
         it adds, Akaike) by at least this much (nats): odds of e^5 ~ 150 to 1.  For one added
         parameter under no effect the gain is chi^2_1 / 2 - 1, so a single null candidate
-        passes with probability P(chi^2_1 > 12) = 5e-4; 13 candidates ~0.7 %.
+        passes with probability P(chi^2_1 > 12) = 5e-4; 14 candidates ~0.7 %.
     min_contraction : a candidate is identifiable here only when the data shrink each of its
         parameters' prior variance (a plausible size of the effect) by at least this share,
         the user's coefficients re-fitted with it (an effect whose signature the coefficients

@@ -217,6 +217,13 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
     return chosen
 
 
+def _plan_hint(effect: fx.Effect) -> str:
+    """Where `plan` scores the test that would identify ``effect``."""
+    if effect.per_run:
+        return " (`plan` counts the pairs)"
+    return f" (`plan --identify {effect.name} --design ...` scores such a test)"
+
+
 def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> str:
     if entry.get("ambiguous_with"):
         return (f"not distinguishable here from {', '.join(entry['ambiguous_with'])} (delta_elpd "
@@ -246,8 +253,12 @@ def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> s
         worst = min(entry["identification"].items(), key=lambda kv: kv[1]["contraction"])
         return (f"not identifiable here ({worst[0]}: the data shrink its prior by {100 * worst[1]['contraction']:.0f} %, "
                 f"{100 * (1 - worst[1]['information_ratio']):.1f} % of its signature is that of {what}), "
-                f"needs {effect.needs}")
-    return f"not supported: delta_elpd {entry['delta_elpd']:.1f} < {cfg.support_delta_elpd:g}"
+                f"needs {effect.needs}{_plan_hint(effect)}")
+    sizes = ", ".join(f"|{p} - null| >= {v['detectable']:.3g}" for p, v in entry["identification"].items()
+                      if math.isfinite(v.get("detectable", math.inf)))
+    seen = f"; this campaign would support it at {sizes}" if sizes else ""
+    return (f"not supported: delta_elpd {entry['delta_elpd']:.1f} < {cfg.support_delta_elpd:g}{seen}; smaller "
+            f"effects need {effect.needs}{_plan_hint(effect)}")
 
 
 def _json_safe(x):
@@ -364,7 +375,7 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
             # each run's share of the gain, less the added parameters spread over the runs
             entry["run_gains"] = [fx.run_loglik_gain(sol, i) - fx.run_loglik_gain(base_sol, i) - k / lin.n_runs
                                   for i in range(lin.n_runs)]
-            ident = fx.identifiability(lin, name, library)
+            ident = fx.identifiability(lin, name, library, settings.support_delta_elpd)
             identifiable = all(v["contraction"] >= settings.min_contraction for v in ident.values())
             entry.update(identification=ident, identifiable=identifiable,
                          estimates={p: v["estimate"] for p, v in ident.items()})

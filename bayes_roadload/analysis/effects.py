@@ -556,24 +556,32 @@ def distinct_share(lin: Linearisation, effect: str, rival: str, library: Mapping
     return float(max(shares))
 
 
-def identifiability(lin: Linearisation, effect: str, library: Mapping[str, Effect]) -> dict[str, Any]:
+def identifiability(lin: Linearisation, effect: str, library: Mapping[str, Effect],
+                    support_delta_elpd: float = config.DEFAULT_DIAGNOSIS.support_delta_elpd) -> dict[str, Any]:
     """For each shared parameter of ``effect`` added to the user's model: the fraction of its
     Fisher information left once the user's coefficients are re-fitted
     (``information_ratio`` = 1 - R^2 of its speed signature on theirs, through the residual
-    covariance) and the contraction of its prior (1 - posterior var / prior var).  Run effects
-    are per run and need no such check (returned empty)."""
+    covariance), the contraction of its prior (1 - posterior var / prior var), and
+    ``detectable``: the smallest offset from its null at which a delta_elpd of
+    ``support_delta_elpd`` is expected, sqrt(2 (support + k / 2) / I_c), with I_c that
+    conditional Fisher information and k the effect's parameters (a true offset theta gains
+    theta^2 I_c / 2 + k / 2 in expectation; delta_elpd subtracts k).  Run effects are per run
+    and need no such check (returned empty)."""
     e = library[effect]
     if e.per_run:
         return {}
     sol = fit_effects(lin, (effect,), library)
+    k = n_added_parameters(lin, (effect,), library)
     shared_names = [lin.columns[j] for j in sol.shared]
     out = {}
     for p in lin.effects[effect]:
         j = shared_names.index(p)
         ratio = _conditional_ratio(sol.information, j)
+        info_c = ratio * float(sol.information[j, j])
         prior_var = e.prior_sd[p] ** 2
         out[p] = {"information_ratio": ratio, "contraction": float(1.0 - sol.cov_shared[j, j] / prior_var),
-                  "estimate": float(lin.values.get(p, 0.0) + sol.beta[j]), "sd": float(math.sqrt(max(sol.cov_shared[j, j], 0.0)))}
+                  "estimate": float(lin.values.get(p, 0.0) + sol.beta[j]), "sd": float(math.sqrt(max(sol.cov_shared[j, j], 0.0))),
+                  "detectable": math.sqrt(2.0 * (support_delta_elpd + k / 2.0) / info_c) if info_c > 0 else math.inf}
     return out
 
 
