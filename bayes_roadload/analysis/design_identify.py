@@ -27,7 +27,6 @@ effect's parameters (the expected log-likelihood gain of a true offset theta is
 from __future__ import annotations
 
 import dataclasses
-import math
 import warnings
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
@@ -175,6 +174,7 @@ def identify_designs(campaign: Campaign, model: str, effects: Sequence[str], cha
     unknown = [e for e in effects if e not in library]
     if unknown:
         raise ValueError(f"unknown candidate effect(s) {unknown}: one of {list(library)}")
+    library = {e: library[e] for e in effects}   # each candidate is scored alone: the others' columns unused
     problem, fit = _fit(campaign, model)
     designs = [("as tested", problem, fit)]
     for change in changes:

@@ -1,8 +1,9 @@
-"""The proof suite of the sim-to-real diagnosis: its campaign designs, the distorted campaigns of
-calibration and mass errors, and (slow) null controls and confounded effects through the batch
-door."""
+"""The proof suite of the sim-to-real diagnosis: its campaign designs (the independent one
+with the admittance it revealed), the distorted campaigns of calibration and mass errors, and
+(slow) null controls and confounded effects through the batch door."""
 
 import math
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -10,6 +11,7 @@ import pytest
 
 from bayes_roadload import config
 from bayes_roadload.analysis.batch import run_batch
+from bayes_roadload.analysis.diagnose import diagnose
 from bayes_roadload.analysis.pooling import CombinedCampaign
 from bayes_roadload.data import Campaign, Vehicle
 from studies.proof_suite import DiagnoseJob, Distorted, proof_design, withheld_campaign
@@ -124,3 +126,23 @@ def test_the_independent_design_injects_one_effect_at_its_stated_size():
                                 tags={"phase": "design"})
     assert [j.name for j in jobs] == [f"{e}-s5" for e in INDEPENDENT_EFFECTS] + ["null-s3000", "null-s3001"]
     assert all(j.tags["phase"] == "design" and j.tags["pairs"] == 2 for j in jobs)
+
+
+def test_a_lead_of_the_reading_is_the_admittance_not_a_cup_lag():
+    """The independent simulator's body feels the wind through its admittance and the
+    anemometer samples the air ahead of the nose: the reading leads the force.  The rate term
+    fits a negative distance; the cup-lag candidate, whose physical distance is positive, is
+    scored at its null (delta_elpd = -1 parameter) and says why; the admittance candidate
+    carries the gain."""
+    from studies.proof_suite import independent_withheld_campaign
+
+    factory, model = independent_withheld_campaign("aero_admittance", 3, pairs=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        d = diagnose(factory(), model)
+    by = {c["effect"]: c for c in d.candidates}
+    cup, adm = by["anemometer_dynamics"], by["aero_admittance"]
+    assert adm["estimates"]["cup_lag_m"] < 0.0 and not adm["against_sign"]
+    assert cup["against_sign"] == {"cup_lag_m": adm["estimates"]["cup_lag_m"]}
+    assert cup["delta_elpd"] == -1.0 and not cup["supported"] and "sign" in cup["statement"]
+    assert adm["delta_elpd"] >= config.DEFAULT_DIAGNOSIS.support_delta_elpd
