@@ -632,7 +632,7 @@ with a weighed ballast, on a windier day (the library's `needs` name these)."""
 
 
 def _cmd_plan_identify(args) -> int:
-    import math
+    import pandas as pd
 
     from . import config
     from .analysis.design_identify import DesignChange, identify_designs
@@ -653,7 +653,7 @@ def _cmd_plan_identify(args) -> int:
     table.to_csv(out / "identify.csv", index=False)
     echo(f"\n{'design':<34}{'runs':>5}  {'effect':<22}{'parameter':<24}{'contraction':>11}  {'detectable':>11}")
     for _, r in table.iterrows():
-        if r.get("parameter") is None or (isinstance(r["parameter"], float) and math.isnan(r["parameter"])):
+        if pd.isna(r["parameter"]):
             echo(f"{r['design']:<34}{r['runs']:>5}  {r['effect']:<22}{r['note']}")
             continue
         mark = "" if r["identifiable"] else "  (not identifiable)"

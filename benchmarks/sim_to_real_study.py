@@ -239,9 +239,7 @@ def rules_line(records: pd.DataFrame) -> str:
 
 def design_section(design: str, records: pd.DataFrame) -> list[str]:
     s = summarise(records)
-    ok = records[records["error"].isna()].copy()
-    ok["outcome"] = ok.apply(outcome, axis=1)
-    ok["true_rank"] = ok.apply(true_rank, axis=1)
+    ok = records[records["error"].isna()]
     pairs = int(ok["pairs"].iloc[0]) if len(ok) and "pairs" in ok else 3
     intro = design_intro(design).replace("{pairs}", str(pairs))
     if design == "standard":
