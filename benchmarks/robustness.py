@@ -1,16 +1,22 @@
 """Long run of the robustness suite (tests/robustness/draws.py): ``--n`` valid draws and
 ``--n-invalid`` invalid ones fitted through the command line, one record per draw in
 ``benchmarks/records/robustness/<name>.csv`` (draw parameters, outcome, exit code, time,
-message), written after every draw so an interrupted run keeps its records.
+message), written after every draw so an interrupted run keeps its records.  The draws go
+through the project's batch door (:func:`bayes_roadload.analysis.batch.batch_map`): one after
+the other in this process by default, on a Dask ``LocalCluster`` with ``--workers N``, or on a
+running cluster with ``--scheduler ADDR``; each draw then runs in a child process of its worker,
+stopped after ``--draw-timeout-s``.
 
     nice python benchmarks/robustness.py --n 1000 --n-invalid 200 --name long
     nice python benchmarks/robustness.py --budget-s 1200 --draw-timeout-s 300 --name short
+    nice python benchmarks/robustness.py --budget-s 3600 --draw-timeout-s 600 --workers 2 --name long_f
     python benchmarks/robustness.py --summarise --docs   # every record file -> docs/robustness.md
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import subprocess
 import sys
@@ -23,6 +29,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bayes_roadload.analysis.batch import batch_client, batch_map  # noqa: E402
 from doc_sections import replace_section  # noqa: E402
 from tests.robustness.draws import draw, run_draw  # noqa: E402
 
@@ -107,6 +114,9 @@ def main(argv=None) -> int:
     p.add_argument("--name", default="long")
     p.add_argument("--draw-timeout-s", type=float, default=None,
                    help="run each draw in a child process and stop it after this long (outcome 'timeout')")
+    p.add_argument("--workers", type=int, default=1,
+                   help="draws at once on a local Dask cluster (default 1: one after the other, no cluster)")
+    p.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (tcp://host:8786)")
     p.add_argument("--summarise", action="store_true", help="summarise every record file instead of drawing")
     p.add_argument("--docs", action="store_true", help="with --summarise: regenerate docs/robustness.md's section")
     a = p.parse_args(argv)
@@ -132,15 +142,26 @@ def main(argv=None) -> int:
             plan.append(draw(a.first_seed + vi))
             vi += 1
     records, t0 = [], time.perf_counter()
-    with tempfile.TemporaryDirectory() as tmp:
-        for d in plan:
+    parallel = a.workers > 1 or a.scheduler is not None
+    # on a cluster every draw runs in a child process of its worker (a time limit, and a crash
+    # of the fit cannot take the worker down)
+    timeout_s = a.draw_timeout_s if a.draw_timeout_s is not None or not parallel else 3600.0
+
+    def record(rec: dict) -> None:
+        records.append(rec)
+        pd.DataFrame(records).to_csv(out, index=False)
+        print(f"{len(records):4d} {rec['seed']:7d} {rec['kind']:9s} {rec['invalid'] or rec['method']:16s} "
+              f"{rec['outcome']:14s} {rec['time_s']:7.1f} s {str(rec['message'])[:80]}", flush=True)
+
+    chunk = max(2 * a.workers, 1) if parallel else 1  # the budget is checked between chunks
+    with tempfile.TemporaryDirectory() as tmp, batch_client(a.workers, a.scheduler) as client:
+        run = functools.partial(run_with_timeout, workdir=Path(tmp), timeout_s=timeout_s)
+        for start in range(0, len(plan), chunk):
             if a.budget_s is not None and time.perf_counter() - t0 > a.budget_s:
                 break
-            rec = run_with_timeout(d, Path(tmp), a.draw_timeout_s)
-            records.append(rec)
-            pd.DataFrame(records).to_csv(out, index=False)
-            print(f"{len(records):4d} {rec['kind']:9s} {rec['invalid'] or rec['method']:16s} {rec['outcome']:14s} "
-                  f"{rec['time_s']:7.1f} s {rec['message'][:80]}", flush=True)
+            batch_map(run, plan[start:start + chunk], client, progress=False, on_result=record,
+                      on_error=lambda d, exc, tb: dict(d, outcome=f"FAILURE: {type(exc).__name__}", rc=None,
+                                                       time_s=float("nan"), message=str(exc)[:300]))
     df = pd.DataFrame(records)
     failures = df["outcome"].str.startswith("FAILURE")
     print(f"\n{len(df)} draws ({(df['invalid'] == '').sum()} valid, {(df['invalid'] != '').sum()} invalid) in "

@@ -15,8 +15,11 @@ traces imply, F/M_e = -dv/dt = c0 + c2 v^2 by least squares over every run, as a
 resistance coefficient c0 M_e / (M g) and a drag area 2 c2 M_e / rho.  A speed logged in
 km/h but read as m/s scales the speeds and the decelerations by 3.6: c0 by 3.6 and c2 by
 1 / 3.6, so the rolling coefficient comes out too large and the drag area too small at the
-same time.  A campaign whose implied road load is implausible in exactly that way, and
-plausible once read in km/h (or mph), is refused with the conversion to make.
+same time.  A campaign is refused with the conversion to make when its implied road load is
+plausible once read in km/h (or mph) and, read in m/s, either implausible in exactly that way,
+or implausible in any way while its speeds exceed :data:`COASTDOWN_TOP_SPEED_MPS` (a large
+vehicle's drag area read 3.6-fold too small can stay above the plausible minimum, but its
+speeds then reach 80-100 "m/s").
 """
 
 from __future__ import annotations
@@ -55,6 +58,11 @@ PLAUSIBLE_ROLLING = (0.003, 0.025)
 
 PLAUSIBLE_DRAG_AREA_M2 = (0.3, 15.0)
 """Implied drag area C_D A (m^2): a small car (~0.5) to a truck with trailer (~10)."""
+
+COASTDOWN_TOP_SPEED_MPS = 50.0
+"""Speed (m/s, 180 km/h) above which a coastdown trace is suspect: the standards' coastdowns
+start below it (J2263 at 115 km/h or more; GTR 15 above its highest reference speed, at most
+130 km/h); a trace above it with an implausible road load is read as a speed unit error."""
 
 
 @dataclass(frozen=True)
@@ -171,14 +179,17 @@ def check_plausible_road_load(df: pd.DataFrame, where: str, effective_mass_kg: f
                               air_density_kgpm3: float) -> dict | None:
     """Refuse speed traces whose implied road load (:func:`implied_road_load`) is implausible
     the way a speed logged in km/h or mph but read as m/s makes it (rolling coefficient above
-    :data:`PLAUSIBLE_ROLLING` and drag area below :data:`PLAUSIBLE_DRAG_AREA_M2` at once) and
+    :data:`PLAUSIBLE_ROLLING` and drag area below :data:`PLAUSIBLE_DRAG_AREA_M2` at once, or
+    either outside its range while the top speed exceeds :data:`COASTDOWN_TOP_SPEED_MPS`) and
     plausible when the speeds are read in that unit; the message names the file, the column
     and the conversion.  Returns the implied road load (None when the data cannot say)."""
     implied = implied_road_load(df, effective_mass_kg, mass_kg, air_density_kgpm3)
     if implied is None:
         return None
     rolling, area = implied["rolling"], implied["drag_area_m2"]
-    if not (rolling > PLAUSIBLE_ROLLING[1] and area < PLAUSIBLE_DRAG_AREA_M2[0]):
+    unit_error_shape = rolling > PLAUSIBLE_ROLLING[1] and area < PLAUSIBLE_DRAG_AREA_M2[0]
+    too_fast = implied["top_speed"] > COASTDOWN_TOP_SPEED_MPS and not _plausible(rolling, area)
+    if not (unit_error_shape or too_fast):
         return implied
     for unit in ("kph", "mph"):
         s = SPEED_UNITS[unit]  # speeds and decelerations both scale by s: c0 by s, c2 by 1/s

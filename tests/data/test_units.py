@@ -9,6 +9,7 @@ import pytest
 
 from bayes_roadload.data import CampaignError, load_campaign, save_campaign
 from bayes_roadload.data.units import (
+    COASTDOWN_TOP_SPEED_MPS,
     PLAUSIBLE_DRAG_AREA_M2,
     PLAUSIBLE_ROLLING,
     convert_units,
@@ -20,10 +21,10 @@ MASS, M_E, RHO = 1100.0, 1130.0, 1.2
 C0, C2 = 0.11, 3.2e-4  # -dv/dt = c0 + c2 v^2 (m/s^2, 1/m): rolling 0.0115, drag area 0.60 m^2
 
 
-def coastdown_frame(dt=0.1, v0=33.0, t_end=60.0, runs=2):
+def coastdown_frame(dt=0.1, v0=33.0, t_end=60.0, runs=2, c0=C0, c2=C2):
     """Exact speeds of -dv/dt = c0 + c2 v^2: v = sqrt(c0/c2) tan(atan(v0 sqrt(c2/c0)) - sqrt(c0 c2) t)."""
     t = np.arange(0.0, t_end, dt)
-    v = math.sqrt(C0 / C2) * np.tan(math.atan(v0 * math.sqrt(C2 / C0)) - math.sqrt(C0 * C2) * t)
+    v = math.sqrt(c0 / c2) * np.tan(math.atan(v0 * math.sqrt(c2 / c0)) - math.sqrt(c0 * c2) * t)
     return pd.DataFrame({"run": np.repeat(np.arange(1, runs + 1), len(t)), "time_s": np.tile(t, runs),
                          "speed_mps": np.tile(v, runs),
                          "direction": np.repeat([1 if i % 2 == 0 else -1 for i in range(runs)], len(t))})
@@ -110,6 +111,38 @@ def test_kph_logged_as_mps_is_refused_with_the_conversion(tmp_path):
     assert "runs.csv, column 'speed_mps'" in str(e.value) and "--speed-unit kph" in str(e.value)
     back = load_campaign(bad, speed_unit="kph")  # the conversion the message names loads it
     np.testing.assert_allclose(back.runs["speed_mps"], load_campaign(good).runs["speed_mps"], rtol=1e-9)
+
+
+def test_kph_logged_as_mps_on_a_large_vehicle_is_refused(tmp_path):
+    """A van's road load (rolling 0.012, drag area 1.76 m^2) logged in km/h reads as rolling
+    0.043 and drag area 0.49 m^2 (x 3.6, / 3.6): the area stays above the plausible minimum,
+    so only the top speed (23.4 m/s -> 84 "m/s", above the coastdown limit) with the
+    implausible rolling coefficient gives the unit error away."""
+    mass, m_e = 2800.0, 2884.0
+    c0, c2 = 0.012 * mass * 9.81 / m_e, 1.76 * RHO / (2 * m_e)
+    df = coastdown_frame(v0=23.4, t_end=120.0, c0=c0, c2=c2)  # stops at 143 s
+    kph = df.assign(speed_mps=df["speed_mps"] * 3.6)
+    read = implied_road_load(kph, m_e, mass, RHO)
+    assert read["rolling"] > PLAUSIBLE_ROLLING[1] and read["drag_area_m2"] > PLAUSIBLE_DRAG_AREA_M2[0]
+    assert read["top_speed"] > COASTDOWN_TOP_SPEED_MPS
+    d = write(tmp_path, kph)
+    (d / "vehicle.toml").write_text(f"[vehicle]\nmass_kg = {mass}\neffective_mass_kg = {m_e}\n"
+                                    "frontal_area_m2 = 3.6\n")
+    with pytest.raises(CampaignError) as e:
+        load_campaign(d)
+    assert "runs.csv, column 'speed_mps'" in str(e.value) and "--speed-unit kph" in str(e.value)
+    np.testing.assert_allclose(load_campaign(d, speed_unit="kph").runs["speed_mps"], df["speed_mps"], rtol=1e-12)
+
+
+@pytest.mark.parametrize("v0, c0, why", [
+    (55.0, C0, "a coastdown from 198 km/h with a plausible road load"),
+    (30.0, 0.36, "an in-gear coastdown whose rolling coefficient (0.038) no km/h reading explains at 30 m/s"),
+])
+def test_implausible_alone_or_fast_alone_is_not_a_unit_error(tmp_path, v0, c0, why):
+    """Only the two together (or the km/h signature: rolling too high and area too low at once)
+    refuse a campaign; each alone loads, whatever the road load."""
+    c = load_campaign(write(tmp_path, coastdown_frame(v0=v0, c0=c0, t_end=40.0)))
+    assert c.runs["speed_mps"].max() == pytest.approx(v0, rel=1e-9), why
 
 
 def test_empty_file_and_empty_cell_are_named(tmp_path):
