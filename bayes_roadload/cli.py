@@ -38,7 +38,7 @@ COMMON_HELP = {
     "cross_wind": "cross winds (m/s) of the sensitivity table",
 }
 """Help of the options that several commands share (set where a command gives none)."""
-STANDARD_NAMES = ("gtr15", "j2263", "j1263", "cfr1066")
+STANDARD_NAMES = ("gtr15", "j2263", "j1263", "cfr1066", "cfr1037")
 WRITES_OUT = ("demo", "simulate", "fit", "fit-driveline", "dyno", "predict", "plan", "diagnose", "import-vbox")
 """Commands whose ``--out`` directory must be empty or new (``--force`` replaces an earlier
 output there); ``report`` writes into its fit directory and ``batch`` resumes in its own."""
@@ -308,6 +308,27 @@ def _validity(entry, campaign, args, out: Path):
     return keep
 
 
+def _standard_options(args) -> dict:
+    """The ``--standard`` options of ``fit`` and ``report`` as keywords of ``run_standard``."""
+    return {"rotating_inertia_known": args.rotating_inertia_known, "tyres_in_contact": args.tyres_in_contact,
+            "delta_f_spin_n": args.delta_f_spin_n, "delta_f_trr_n": args.delta_f_trr_n}
+
+
+def _add_standard_options(p) -> None:
+    p.add_argument("--rotating-inertia-known", action="store_true",
+                   help="with --standard j2263 (cfr1066, cfr1037): the effective mass is measured, not the standard's "
+                        "convention (1.03 x test mass; test mass + 56.7 kg per tyre)")
+    p.add_argument("--tyres-in-contact", type=int, default=None,
+                   help="with --standard cfr1037: tyres on the road, for M_e = M + 56.7 kg per tyre (default: "
+                        "vehicle.toml [vehicle] tyres_in_contact)")
+    p.add_argument("--delta-f-spin-n", type=float, default=0.0,
+                   help="with --standard cfr1037: drive-axle spin loss difference between the high and low speed "
+                        "ranges, N (40 CFR 1037.528(h)(5); default 0)")
+    p.add_argument("--delta-f-trr-n", type=float, default=0.0,
+                   help="with --standard cfr1037: tyre rolling resistance difference between 65 and 15 mi/h, N "
+                        "(40 CFR 1037.528(h)(6); default 0)")
+
+
 def _after_fit(args, out: Path, campaign) -> None:
     """What follows every fit: the standard's result (``--standard``, recorded in ``fit.json``)
     and ``report.html`` / ``report.md`` (unless ``--no-report``)."""
@@ -320,8 +341,8 @@ def _after_fit(args, out: Path, campaign) -> None:
             meta["standard"] = args.standard
             record.write_text(json.dumps(meta, indent=2) + "\n")
         if (out / "posterior.nc").is_file():
-            result, checks = run_standard(out, args.standard, campaign=campaign,
-                                          rotating_inertia_known=args.rotating_inertia_known, out_dir=out)
+            result, checks = run_standard(out, args.standard, campaign=campaign, out_dir=out,
+                                          **_standard_options(args))
             echo(f"\n{args.standard} result (standard_result.csv, standard_checks.csv):")
             echo(format_standard(result, checks))
         else:
@@ -434,8 +455,8 @@ def _cmd_report(args) -> int:
 
         source = read_fit_dir(fit_dir)
         campaign = load_campaign(source.record["campaign"]) if source.record.get("campaign") else None
-        result, checks = run_standard(fit_dir, args.standard, campaign=campaign,
-                                      rotating_inertia_known=args.rotating_inertia_known, out_dir=fit_dir)
+        result, checks = run_standard(fit_dir, args.standard, campaign=campaign, out_dir=fit_dir,
+                                      **_standard_options(args))
         echo(format_standard(result, checks))
     html_path, md_path = render_report(fit_dir, campaign=args.campaign)
     echo(f"wrote {html_path}, {md_path} (+ {md_path.parent / 'report_files'})")
@@ -904,8 +925,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also give the result in a standard's terms (reference conditions, mass convention, units, "
                         "its precision and validity checks): standard_result.csv, standard_checks.csv; recorded in "
                         "fit.json (docs/standards.md)")
-    f.add_argument("--rotating-inertia-known", action="store_true",
-                   help="with --standard j2263: the effective mass is measured, not the 1.03 x test mass convention")
+    _add_standard_options(f)
     f.add_argument("--no-report", action="store_true", help="do not render report.html / report.md")
     f.add_argument("--speed-unit", choices=("mps", "kph", "mph"), default=None,
                    help="speed traces: the unit of the speed column whatever its name says (converted on load and "
@@ -931,14 +951,15 @@ def build_parser() -> argparse.ArgumentParser:
     fd.add_argument("--out", required=True)
     _add_nuts_options(fd, seed=0)
     fd.add_argument("--no-report", action="store_true", help="do not render report.html / report.md")
-    fd.set_defaults(func=_cmd_fit_driveline, standard=None, rotating_inertia_known=False)
+    fd.set_defaults(func=_cmd_fit_driveline, standard=None, rotating_inertia_known=False, tyres_in_contact=None,
+                    delta_f_spin_n=0.0, delta_f_trr_n=0.0)
 
     r = sub.add_parser("report", help="render report.html (self-contained) and report.md from a fit directory")
     r.add_argument("fit_dir", metavar="FIT_DIR", help="the output directory of `fit` or `fit-driveline`")
     r.add_argument("--campaign", default=None, help="campaign directory for truth and vehicle (default: fit.json's)")
     r.add_argument("--standard", choices=STANDARD_NAMES, default=None,
                    help="also write the standard's result and checks into FIT_DIR (see `fit --standard`)")
-    r.add_argument("--rotating-inertia-known", action="store_true", help="as for `fit --standard j2263`")
+    _add_standard_options(r)
     r.set_defaults(func=_cmd_report)
 
     dy = sub.add_parser("dyno", help="chassis-dynamometer set coefficients from a target road-load fit and a coastdown "

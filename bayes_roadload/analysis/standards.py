@@ -53,6 +53,10 @@ class Standard:
     leave no gap between the two speeds).  ``two_term``: the standard's coastdown regression has
     no linear term (F = A + C v^2, B = 0): the coefficients are the least-squares projection of
     the road-load curve onto {1, v^2} over ``speed_range_kph`` (:func:`two_term_projection`).
+    ``mass_per_tyre_kg``: M_e = M + this x the tyres in contact (instead of ``mass_factor``).
+    ``max_mean_along_wind_mps``: limit of each run's mean wind component along the road;
+    ``min_rate_hz``: the slowest recording rate allowed.  ``segment_method``: the standard's
+    own drag-area arithmetic is run on the campaign too (:mod:`~bayes_roadload.analysis.cfr1037`).
     """
 
     name: str
@@ -73,6 +77,10 @@ class Standard:
     speed_range_kph: tuple[float, float] | None = None
     speed_range_per_run: bool = False
     two_term: bool = False
+    mass_per_tyre_kg: float | None = None
+    max_mean_along_wind_mps: float | None = None
+    min_rate_hz: float | None = None
+    segment_method: bool = False
 
     @property
     def density_kgpm3(self) -> float:
@@ -96,6 +104,10 @@ STANDARDS: dict[str, Standard] = {
                         air_density_kgpm3=1.17, cda_yaw_deg=4.5,
                         speed_range_kph=(70.0 * MPH_KPH, 15.0 * MPH_KPH), speed_range_per_run=True,
                         two_term=True),
+    "cfr1037": Standard("cfr1037", "40 CFR 1037.528 (Phase 2 tractors, CdA)", 293.15, 98_210.0, "US", "cda",
+                        mass_per_tyre_kg=56.7, min_runs_per_direction=12, cda_yaw_deg=4.5,
+                        speed_range_kph=(72.0 * MPH_KPH, 8.0 * MPH_KPH), speed_range_per_run=True,
+                        max_mean_along_wind_mps=6.0 * 0.44704, min_rate_hz=10.0, segment_method=True),
 }
 """Per standard.  J1263's reference conditions are taken equal to J2263's (not verified);
 40 CFR 1066.310 follows J1263 / J2263 (hence their temperature and mass convention), states a
@@ -104,7 +116,13 @@ each run's drag area to +-4.5 deg yaw for the wind-averaged CdA.  Speed ranges: 
 115 -> 15 km/h (split runs allowed where the track is short); 40 CFR 1066.310 each run from
 70 mph or above down to 15 mph or below (STANDARDS_FACTS.md).  40 CFR 1066.310's road-load
 coefficients are A = A_m, B = 0, C = D_adj (the intercept and the density-adjusted slope of the
-force against v^2; eCFR text found by search), hence ``two_term``."""
+force against v^2; eCFR text found by search), hence ``two_term``.  40 CFR 1037.528 (Phase 2
+tractors; text of 81 FR 74048 as amended to 89 FR 29783, found by search): M_e = M + 56.7 kg per
+tyre in contact ((h)(1)); complete runs from above 72.0 down to 8.0 mi/h or lower ((d)(1)); the
+mean wind along the road at most 6.0 mi/h per run ((c)(2)); 10 Hz recording ((d)); at least 24
+high-speed ranges after the (h)(11) eliminations, with the same number of runs in each
+direction ((d)(2)), hence 12 per direction; its temperature and pressure are J2263's (it
+follows J2263 sections 1-9) and serve only the coefficient rows: its result is a drag area."""
 
 
 def get_standard(name: str | Standard) -> Standard:
@@ -155,7 +173,8 @@ def _row(quantity, unit, x) -> dict:
 def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard, *,
                     mass_kg: float | None = None, effective_mass_kg: float | None = None,
                     rotating_inertia_known: bool = False, frontal_area_m2: float | None = None,
-                    yaw_deg: float | None = None) -> pd.DataFrame:
+                    yaw_deg: float | None = None, tyres_in_contact: int | None = None,
+                    extra_yaw_deg: Mapping[str, float] | None = None) -> pd.DataFrame:
     """The standard's result quantities with posterior mean, sd, 2.5 and 97.5 % points.
 
     Parameters
@@ -166,8 +185,10 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
     standard : a key of :data:`STANDARDS` or a :class:`Standard`.
     mass_kg, effective_mass_kg : the test mass and the M_e the fit used; with
         ``rotating_inertia_known`` False and a standard with a ``mass_factor``, coefficients are
-        rescaled to M_e = factor x mass_kg.
+        rescaled to M_e = factor x mass_kg (with a ``mass_per_tyre_kg`` standard: to
+        M_e = mass_kg + mass_per_tyre_kg x ``tyres_in_contact``).
     frontal_area_m2, yaw_deg : for CdA(yaw) = A (CD0 + KD yaw^2).
+    extra_yaw_deg : more CdA(yaw) rows, ``{label: yaw in deg}`` (quantity ``CdA_yaw_<label>``).
 
     Returns
     -------
@@ -180,6 +201,12 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
             raise ValueError(f"{std.name}: the mass convention M_e = {std.mass_factor} x M needs mass_kg "
                              "and the fit's effective_mass_kg (or rotating_inertia_known=True)")
         scale = std.mass_factor * mass_kg / effective_mass_kg
+    if std.mass_per_tyre_kg is not None and not rotating_inertia_known:
+        if mass_kg is None or effective_mass_kg is None or tyres_in_contact is None:
+            raise ValueError(f"{std.name}: the effective mass M + {std.mass_per_tyre_kg} kg per tyre in contact needs "
+                             "the number of tyres: [vehicle] tyres_in_contact in vehicle.toml or --tyres-in-contact N "
+                             "(or --rotating-inertia-known to keep the fit's effective mass)")
+        scale = (mass_kg + std.mass_per_tyre_kg * int(tyres_in_contact)) / effective_mass_kg
     c = to_conditions(samples, std.temperature_k, std.pressure_pa, mass_scale=scale,
                       air_density_kgpm3=std.density_kgpm3)
     yaw_deg = std.cda_yaw_deg if yaw_deg is None else yaw_deg
@@ -197,11 +224,15 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
         rows += [_row("A", "lbf", a), _row("B", "lbf/mph", b), _row("C", "lbf/mph^2", cc)]
     if std.result == "cda":
         rows.append(_row("CdA_zero_yaw", "m^2", drag_area_m2(c["F2_N_per_kph2"], std.density_kgpm3)))
-        if yaw_deg is not None and frontal_area_m2 is not None and "CD0" in samples and "KD" in samples:
-            # C_D(psi) = CD0 + KD psi^2 (eq. 2.31) is even in psi: the mean over +-psi is its value at psi
-            psi = math.radians(yaw_deg)
-            cda = frontal_area_m2 * (np.asarray(samples["CD0"], float) + np.asarray(samples["KD"], float) * psi**2)
-            rows.append(_row(f"CdA_yaw_{yaw_deg:g}deg", "m^2", cda))
+        yaws = {} if yaw_deg is None else {f"{yaw_deg:g}deg": yaw_deg}
+        yaws.update(extra_yaw_deg or {})
+        if yaws and frontal_area_m2 is not None and "CD0" in samples and "KD" in samples:
+            for label, deg in yaws.items():
+                # C_D(psi) = CD0 + KD psi^2 (eq. 2.31) is even in psi: the mean over +-psi is its value at psi
+                psi = math.radians(deg)
+                cda = frontal_area_m2 * (np.asarray(samples["CD0"], float)
+                                         + np.asarray(samples["KD"], float) * psi**2)
+                rows.append(_row(f"CdA_yaw_{label}", "m^2", cda))
     out = pd.DataFrame(rows)
     out.insert(0, "standard", std.name)
     return out
@@ -289,6 +320,19 @@ def standard_checks(campaign: Campaign, standard: str | Standard) -> pd.DataFram
             worst = float(wind["cross_mps"].max())
             rows.append(_check("mean cross-wind (worst run)", worst, std.max_mean_crosswind_mps,
                                worst <= std.max_mean_crosswind_mps, "m/s"))
+    if std.max_mean_along_wind_mps is not None:
+        if campaign.has_anemometer:
+            worst = float(wind_per_run(campaign)["head_mps"].abs().max())
+            rows.append(_check("mean wind along the road (worst run, on-board estimate)", worst,
+                               std.max_mean_along_wind_mps, worst <= std.max_mean_along_wind_mps, "m/s"))
+        else:
+            rows.append(_check("mean wind along the road: needs airspeed and yaw", math.nan,
+                               std.max_mean_along_wind_mps, False, "m/s"))
+    if std.min_rate_hz is not None and "time_s" in runs:
+        dt = runs.groupby("run", sort=False)["time_s"].apply(lambda t: float(np.median(np.diff(t.to_numpy(float)))))
+        slowest = float(1.0 / dt.max())
+        rows.append(_check("recording rate (slowest run)", slowest, std.min_rate_hz,
+                           slowest >= std.min_rate_hz * (1 - 1e-6), "Hz"))
     if std.speed_range_kph is not None and "speed_mps" in runs:
         high, low = std.speed_range_kph
         ranges = speed_range_per_run(campaign)
@@ -336,38 +380,97 @@ def run_standard(source: str | Path | Mapping[str, np.ndarray], standard: str | 
                  campaign: Campaign | None = None, mass_kg: float | None = None,
                  effective_mass_kg: float | None = None, rotating_inertia_known: bool = False,
                  frontal_area_m2: float | None = None, yaw_deg: float | None = None,
+                 tyres_in_contact: int | None = None, delta_f_spin_n: float = 0.0, delta_f_trr_n: float = 0.0,
                  out_dir: str | Path | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Result and checks of ``standard`` for a fit directory (or draws) and its campaign.
-    The vehicle's masses and frontal area default to the campaign's.  With ``out_dir``, writes
-    ``standard_result.csv``, ``standard_checks.csv`` and ``standard.json``."""
+    The vehicle's masses, frontal area and tyres in contact default to the campaign's.  A
+    standard with a ``segment_method`` also runs its own drag-area arithmetic on the campaign
+    (:func:`segment_method_result`): its final CdA joins the result (a point value with its
+    standard error, no interval), the posterior's CdA at its effective yaw angle too, and its
+    point count joins the checks.  With ``out_dir``, writes ``standard_result.csv``,
+    ``standard_checks.csv``, ``standard.json`` (and ``standard_segments.csv``)."""
     std = get_standard(standard)
     draws = load_draws(source) if isinstance(source, (str, Path)) else source
     if campaign is not None:
         mass_kg = campaign.vehicle.mass_kg if mass_kg is None else mass_kg
         effective_mass_kg = campaign.vehicle.effective_mass_kg if effective_mass_kg is None else effective_mass_kg
         frontal_area_m2 = campaign.vehicle.frontal_area_m2 if frontal_area_m2 is None else frontal_area_m2
+        tyres_in_contact = campaign.vehicle.tyres_in_contact if tyres_in_contact is None else tyres_in_contact
+    segment = None
+    if std.segment_method and campaign is not None:
+        segment = segment_method_result(campaign, tyres_in_contact, delta_f_spin_n=delta_f_spin_n,
+                                        delta_f_trr_n=delta_f_trr_n)
+    extra = ({"effective": segment["effective_yaw_deg"]}
+             if segment is not None and math.isfinite(segment["effective_yaw_deg"]) else None)
     result = standard_result(draws, std, mass_kg=mass_kg, effective_mass_kg=effective_mass_kg,
                              rotating_inertia_known=rotating_inertia_known, frontal_area_m2=frontal_area_m2,
-                             yaw_deg=yaw_deg)
+                             yaw_deg=yaw_deg, tyres_in_contact=tyres_in_contact, extra_yaw_deg=extra)
     checks = standard_checks(campaign, std) if campaign is not None else \
         pd.DataFrame(columns=["standard", "rule", "value", "limit", "unit", "pass"])
+    if segment is not None:
+        result = pd.concat([result, pd.DataFrame([segment["result_row"]])], ignore_index=True)
+        checks = pd.concat([checks, pd.DataFrame(segment["check_rows"])], ignore_index=True)
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         result.to_csv(out / "standard_result.csv", index=False)
         checks.to_csv(out / "standard_checks.csv", index=False)
-        (out / "standard.json").write_text(json.dumps({
-            "standard": std.name, "title": std.title, "temperature_k": std.temperature_k,
-            "pressure_pa": std.pressure_pa, "units": std.units, "mass_factor": std.mass_factor,
-            "rotating_inertia_known": rotating_inertia_known, "pass": bool(checks["pass"].all())}, indent=2) + "\n")
+        record = {"standard": std.name, "title": std.title, "temperature_k": std.temperature_k,
+                  "pressure_pa": std.pressure_pa, "units": std.units, "mass_factor": std.mass_factor,
+                  "mass_per_tyre_kg": std.mass_per_tyre_kg, "tyres_in_contact": tyres_in_contact,
+                  "rotating_inertia_known": rotating_inertia_known, "pass": bool(checks["pass"].all())}
+        if segment is not None:
+            segment["segments"].to_csv(out / "standard_segments.csv", index=False)
+            record["segment_method"] = {k: segment[k] for k in ("n_points", "effective_yaw_deg", "CdA_m2",
+                                                                 "CdA_se_m2", "delta_f_spin_n", "delta_f_trr_n",
+                                                                 "ambient_logged")}
+        (out / "standard.json").write_text(json.dumps(record, indent=2) + "\n")
     return result, checks
+
+
+def segment_method_result(campaign: Campaign, tyres_in_contact: int | None, *, delta_f_spin_n: float = 0.0,
+                          delta_f_trr_n: float = 0.0) -> dict:
+    """40 CFR 1037.528's own drag area on the campaign (:mod:`~bayes_roadload.analysis.cfr1037`):
+    the (h)(11) outcome of :func:`~bayes_roadload.analysis.cfr1037.final_drag_area` plus
+    ``result_row`` (``CdA_1037.528_segments``: the final CdA as mean, its standard error as sd,
+    no interval) and ``check_rows`` (the (h)(11)(iv) point count; what stops the arithmetic,
+    when something does)."""
+    from . import cfr1037
+
+    base = {"standard": "cfr1037", "delta_f_spin_n": float(delta_f_spin_n), "delta_f_trr_n": float(delta_f_trr_n),
+            "ambient_logged": bool({"temperature_k", "pressure_pa"} <= set(campaign.runs.columns))}
+    empty = {"segments": pd.DataFrame(), "n_points": 0, "effective_yaw_deg": math.nan, "CdA_m2": math.nan,
+             "CdA_se_m2": math.nan}
+    why = None
+    if tyres_in_contact is None:
+        why = "needs the tyres in contact ((h)(1)): [vehicle] tyres_in_contact or --tyres-in-contact"
+    elif not campaign.has_anemometer:
+        why = "needs the on-board airspeed and yaw ((f))"
+    if why is not None:
+        final = empty
+        checks = [dict(base, **_check(f"1037.528(h) segment method {why}", math.nan, cfr1037.MIN_POINTS, False,
+                                      "ranges"))]
+    else:
+        final = cfr1037.final_drag_area(cfr1037.segment_drag_areas(
+            campaign, tyres_in_contact, delta_f_spin_n=delta_f_spin_n, delta_f_trr_n=delta_f_trr_n))
+        checks = [dict(base, **_check("high-speed ranges left after the (h)(11) eliminations", final["n_points"],
+                                      cfr1037.MIN_POINTS, final["enough"], "ranges"))]
+    row = {"standard": "cfr1037", "quantity": "CdA_1037.528_segments", "unit": "m^2", "mean": final["CdA_m2"],
+           "sd": final["CdA_se_m2"], "q2.5": math.nan, "q97.5": math.nan}
+    return dict(base, **final, result_row=row, check_rows=[{k: c[k] for k in
+                                                            ("standard", "rule", "value", "limit", "unit", "pass")}
+                                                           for c in checks])
 
 
 def format_standard(result: pd.DataFrame, checks: pd.DataFrame) -> str:
     """Plain-text table of the result (mean [2.5 %, 97.5 %]) and the checks."""
     lines = []
     for _, r in result.iterrows():
-        lines.append(f"  {r['quantity']:<16} {r['mean']:12.5g} {r['unit']:<12} [{r['q2.5']:.5g}, {r['q97.5']:.5g}]")
+        if np.isfinite(r["q2.5"]):
+            spread = f"[{r['q2.5']:.5g}, {r['q97.5']:.5g}]"
+        else:  # a point value of the standard's own arithmetic: its standard error
+            spread = f"(the standard's method; standard error {r['sd']:.3g})"
+        lines.append(f"  {r['quantity']:<16} {r['mean']:12.5g} {r['unit']:<12} {spread}")
     for _, r in checks.iterrows():
         verdict = "pass" if r["pass"] else "FAIL"
         lines.append(f"  {verdict}  {r['rule']:<40} {r['value']:10.4g} (limit {r['limit']:g} {r['unit']})")

@@ -25,7 +25,7 @@ from .uncertainty import UNCERTAINTY_TABLE, uncertainty_from_toml
 
 VEHICLE_FILE = "vehicle.toml"
 VEHICLE_KEYS = ("mass_kg", "effective_mass_kg", "frontal_area_m2", "rolling_radius_m", "rotating_inertia_kgm2",
-                "length_m")
+                "length_m", "tyres_in_contact")
 ANEMOMETER_KEYS = ("airspeed_factor", "yaw_factor", "distance_constant_m")
 
 
@@ -34,7 +34,9 @@ class Vehicle:
     """``[vehicle]`` of vehicle.toml, SI units.
 
     ``effective_mass_kg`` is M_e = M + I_w / R_r^2 (eq. 2.2); it may be given directly or as
-    ``rotating_inertia_kgm2`` with ``rolling_radius_m``.
+    ``rotating_inertia_kgm2`` with ``rolling_radius_m``.  ``tyres_in_contact`` (optional) is
+    the number of tyres on the road, for a standard whose effective mass counts them (40 CFR
+    1037.528(h)(1): M + 56.7 kg per tyre).
     """
 
     mass_kg: float
@@ -42,6 +44,7 @@ class Vehicle:
     frontal_area_m2: float
     rolling_radius_m: float = 0.28
     length_m: float = 4.5
+    tyres_in_contact: int | None = None
 
 
 @dataclass(frozen=True)
@@ -101,8 +104,11 @@ def vehicle_from_toml(doc: Mapping[str, Any], where: str) -> tuple[Vehicle, Anem
     else:
         refuse(where, "[vehicle] effective_mass_kg", None,
                "required key is missing (or give rotating_inertia_kgm2 and rolling_radius_m)")
+    tyres = t.get("tyres_in_contact")
+    if tyres is not None and (isinstance(tyres, bool) or not isinstance(tyres, int) or not 2 <= tyres <= 64):
+        refuse(where, "[vehicle] tyres_in_contact", None, f"{tyres!r} is not a whole number of tyres in [2, 64]")
     vehicle = Vehicle(float(t["mass_kg"]), me, float(t["frontal_area_m2"]), radius,
-                      float(t.get("length_m", 4.5)))
+                      float(t.get("length_m", 4.5)), tyres)
     validate_vehicle(vehicle, where)
     a = dict(doc.get("anemometer", {}))
     for k in a:
@@ -176,6 +182,8 @@ def vehicle_toml(c) -> str:
     lines = ["[vehicle]"]
     for k in ("mass_kg", "effective_mass_kg", "frontal_area_m2", "rolling_radius_m", "length_m"):
         lines.append(f"{k} = {toml_value(getattr(v, k))}")
+    if v.tyres_in_contact is not None:
+        lines.append(f"tyres_in_contact = {int(v.tyres_in_contact)}")
     lines += ["", "[anemometer]",
               f"airspeed_factor = {toml_value(c.anemometer.airspeed_factor)}",
               f"yaw_factor = {toml_value(c.anemometer.yaw_factor)}"]

@@ -110,7 +110,7 @@ def test_cda_by_hand():
 def test_unknown_standard_is_refused():
     with pytest.raises(ValueError, match="gtr15"):
         get_standard("iso9999")
-    assert set(STANDARDS) == {"gtr15", "j2263", "j1263", "cfr1066"}
+    assert set(STANDARDS) == {"gtr15", "j2263", "j1263", "cfr1066", "cfr1037"}
 
 
 def _run(run, pair, direction, decel, head_mps=0.0, v0=35.0, dt=0.5):

@@ -1,0 +1,215 @@
+"""The drag area by the regulation's own arithmetic: 40 CFR 1037.528 (Phase 2 tractors).
+
+This is the classical result the regulation asks for, computed from the campaign's speed,
+airspeed and yaw traces; it sits beside the posterior's drag area (``--standard cfr1037``,
+:mod:`bayes_roadload.analysis.standards`), not inside the model.  Clauses of 40 CFR 1037.528
+(81 FR 74048, as amended to 89 FR 29783):
+
+* (g)(1) outliers: every channel is filtered by the Hampel method, a window of 3 s either side,
+  standard deviation = 1.4826 x the window's median absolute deviation, a value more than three
+  of them from the window's median is replaced by the median (:func:`hampel_filter`);
+* (h)(1) effective mass: ``M_e = M + 56.7 kg`` per tyre in contact with the road
+  (:func:`effective_mass_kg`);
+* (d), (h)(3) speed ranges 70 -> 60 mi/h (high) and 20 -> 10 mi/h (low); each end point is the
+  mean speed and mean time of the continuous interval from the first sample below
+  ``nominal + 2 mi/h`` to the first sample at or below ``nominal - 2 mi/h``
+  (:func:`speed_point`);
+* (h)(4) road-load force of a range, Eq. 1037.528-7:
+  ``F = M_e (v_start - v_end) / (t_end - t_start) - M a_g (h_end - h_start) / (D_end - D_start)``
+  (:func:`range_force`; the grade term needs ``elevation_m`` and ``distance_m`` columns, else it
+  is 0).  The form is checked against the regulation's worked example (F = 4645.5 N) in the
+  tests;
+* (h)(7)-(h)(9) mean squared airspeed of each range; the low range's force and squared
+  airspeed averaged over each pair of opposite runs; mean air temperature and pressure of the
+  high range;
+* (h)(10), Eq. 1037.528-16, per high-speed range:
+  ``CdA = [(F_hi - F_lo,pair) - (dF_spin + dF_TRR)] / [rho / 2 (v2_air,hi - v2_air,lo,pair)]``
+  with ``rho = P_act / (R T)``, R = 287.058 J/(kg K).  The equation is an image in the text
+  available here; this form is reconstructed from its variables as the clause defines them and
+  is marked not verified in ``docs/standards.md``.  dF_spin (drive-axle spin loss, 1037.560) and
+  dF_TRR (tyre rolling resistance, SAE J2452) are the caller's: 0 when not given, and the result
+  says so;
+* (h)(11) final value: drop ranges whose |yaw| differs from the median |yaw| by more than
+  1.0 deg, then those more than 2.0 standard deviations from the mean CdA; at least 24 must
+  remain; the effective yaw angle is their mean |yaw| rounded to 0.1 deg and the result their
+  mean CdA (:func:`final_drag_area`).  The yaw is taken as its magnitude: a run's sign follows
+  its direction.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from .. import config
+from ..data.campaign import Campaign
+
+MASS_PER_TYRE_KG = 56.7
+"""(h)(1): added to the measured mass per tyre in contact with the road."""
+GAS_CONSTANT_J_PER_KG_K = 287.058
+"""(h)(10): the specific gas constant of air in Eq. 1037.528-16."""
+GRAVITY_MPS2 = 9.8061
+"""a_g of the regulation's worked example (40 CFR 1065.630 gives it by latitude)."""
+HIGH_RANGE_MPH = (70.0, 60.0)
+LOW_RANGE_MPH = (20.0, 10.0)
+POINT_BAND_MPH = 2.0
+"""(h)(3): an end point is averaged from nominal + 2 to nominal - 2 mi/h."""
+HAMPEL_HALF_WINDOW_S = 3.0
+HAMPEL_SIGMA_PER_MAD = 1.4826
+HAMPEL_N_SIGMA = 3.0
+YAW_BAND_DEG = 1.0
+CDA_BAND_SD = 2.0
+MIN_POINTS = 24
+"""(h)(11)(iv): at least 24 high-speed ranges must remain."""
+MIN_RATE_HZ = 10.0
+"""(d), (e), (f): speed, airspeed and yaw recorded at 10 Hz or more."""
+MAX_MEAN_ALONG_WIND_MPH = 6.0
+"""(c)(2): the mean wind component parallel to the road, per run."""
+
+
+def effective_mass_kg(mass_kg: float, tyres_in_contact: int) -> float:
+    """(h)(1): M_e = M + 56.7 kg x tyres in contact."""
+    return float(mass_kg) + MASS_PER_TYRE_KG * int(tyres_in_contact)
+
+
+def hampel_filter(t: np.ndarray, x: np.ndarray, half_window_s: float = HAMPEL_HALF_WINDOW_S,
+                  n_sigma: float = HAMPEL_N_SIGMA) -> np.ndarray:
+    """(g)(1): each value more than ``n_sigma`` x 1.4826 x MAD from the median of the samples
+    within ``half_window_s`` of it (fewer at the ends of the run) is replaced by that median."""
+    t, x = np.asarray(t, float), np.asarray(x, float)
+    lo = np.searchsorted(t, t - half_window_s - 1e-9, side="left")
+    hi = np.searchsorted(t, t + half_window_s + 1e-9, side="right")
+    if x.size == 0:
+        return x.copy()
+    width = int((hi - lo).max())
+    idx = lo[:, None] + np.arange(width)[None, :]
+    windows = np.where(idx < hi[:, None], x[np.minimum(idx, x.size - 1)], np.nan)
+    med = np.nanmedian(windows, axis=1)
+    sigma = HAMPEL_SIGMA_PER_MAD * np.nanmedian(np.abs(windows - med[:, None]), axis=1)
+    return np.where(np.abs(x - med) > n_sigma * sigma, med, x)
+
+
+def speed_point(t: np.ndarray, v: np.ndarray, nominal_mps: float,
+                band_mps: float = POINT_BAND_MPH * config.MPH_TO_MPS) -> tuple[float, float] | None:
+    """(h)(3): (mean speed, mean time) of the continuous interval that begins with the first
+    sample below ``nominal + band`` and ends with the first sample at or below
+    ``nominal - band``; None when the run does not pass through it."""
+    v = np.asarray(v, float)
+    above = np.flatnonzero(v < nominal_mps + band_mps)
+    if above.size == 0 or v[0] < nominal_mps + band_mps:
+        return None  # the run starts inside or below the band: the start of the interval is not seen
+    i0 = int(above[0])
+    below = np.flatnonzero(v[i0:] <= nominal_mps - band_mps)
+    if below.size == 0:
+        return None
+    i1 = i0 + int(below[0])
+    return float(v[i0:i1 + 1].mean()), float(np.asarray(t, float)[i0:i1 + 1].mean())
+
+
+def range_force(m_e: float, mass_kg: float, v_start: float, v_end: float, t_start: float, t_end: float,
+                h_start: float = 0.0, h_end: float = 0.0, d_start: float = 0.0, d_end: float = 1.0,
+                g: float = GRAVITY_MPS2) -> float:
+    """Eq. 1037.528-7: the road-load force (N) of a speed range, the grade's share removed."""
+    return m_e * (v_start - v_end) / (t_end - t_start) - mass_kg * g * (h_end - h_start) / (d_end - d_start)
+
+
+def drag_area(f_hi: float, f_lo_pair: float, v2_air_hi: float, v2_air_lo_pair: float, temperature_k: float,
+              pressure_pa: float, delta_f_spin_n: float = 0.0, delta_f_trr_n: float = 0.0) -> float:
+    """Eq. 1037.528-16 (form reconstructed, module docstring): CdA (m^2) of one high-speed range."""
+    rho = pressure_pa / (GAS_CONSTANT_J_PER_KG_K * temperature_k)
+    return ((f_hi - f_lo_pair) - (delta_f_spin_n + delta_f_trr_n)) / (0.5 * rho * (v2_air_hi - v2_air_lo_pair))
+
+
+@dataclass(frozen=True)
+class _Range:
+    force_n: float
+    v2_air: float
+    yaw_deg: float
+    temperature_k: float
+    pressure_pa: float
+
+
+def _range(g: pd.DataFrame, m_e: float, mass_kg: float, nominal: tuple[float, float],
+           ambient: tuple[float, float]) -> _Range | None:
+    t = g["time_s"].to_numpy(float)
+    filt = {c: hampel_filter(t, g[c].to_numpy(float)) for c in ("speed_mps", "airspeed_mps", "yaw_rad")}
+    start = speed_point(t, filt["speed_mps"], nominal[0] * config.MPH_TO_MPS)
+    end = speed_point(t, filt["speed_mps"], nominal[1] * config.MPH_TO_MPS)
+    if start is None or end is None:
+        return None
+    grade = {}
+    if {"elevation_m", "distance_m"} <= set(g.columns):
+        for key, (_, tp) in (("start", start), ("end", end)):
+            grade[f"h_{key}"] = float(np.interp(tp, t, g["elevation_m"].to_numpy(float)))
+            grade[f"d_{key}"] = float(np.interp(tp, t, g["distance_m"].to_numpy(float)))
+    force = range_force(m_e, mass_kg, start[0], end[0], start[1], end[1], **grade)
+    inside = (t >= start[1]) & (t <= end[1])
+    temperature = float(g["temperature_k"][inside].mean()) if "temperature_k" in g else ambient[0]
+    pressure = float(g["pressure_pa"][inside].mean()) if "pressure_pa" in g else ambient[1]
+    return _Range(force, float(np.mean(filt["airspeed_mps"][inside] ** 2)),
+                  float(np.degrees(np.abs(np.mean(filt["yaw_rad"][inside])))), temperature, pressure)
+
+
+def segment_drag_areas(campaign: Campaign, tyres_in_contact: int, *, delta_f_spin_n: float = 0.0,
+                       delta_f_trr_n: float = 0.0) -> pd.DataFrame:
+    """Per high-speed range of every run: ``run, pair, direction, F_hi_N, F_lo_pair_N,
+    v2_air_hi, v2_air_lo_pair, yaw_deg, temperature_k, pressure_pa, CdA_m2`` ((h)(1)-(h)(10)).
+    A run's low-speed range is taken from the same run (complete runs, (d)(1)); the low range
+    of a pair (:meth:`Campaign.pairs`) is the mean of its two runs' ((h)(8)), a run without a
+    partner keeps its own.  Runs that do not pass through both ranges are left out.  Air
+    temperature and pressure come from ``temperature_k`` / ``pressure_pa`` when logged, else
+    the project's reference conditions are taken."""
+    if not campaign.has_anemometer:
+        raise ValueError("40 CFR 1037.528 needs the on-board airspeed and yaw ((f)); the campaign has none")
+    runs = campaign.runs
+    m_e = effective_mass_kg(campaign.vehicle.mass_kg, tyres_in_contact)
+    # without temperature_k / pressure_pa columns the air is taken at the project's reference
+    # conditions (the result's ``ambient_logged`` says which)
+    ambient = (config.REFERENCE_TEMPERATURE_K, config.REFERENCE_PRESSURE_PA)
+    directions = campaign.directions()
+    pair_of = {r: i for i, pair in enumerate(campaign.pairs()) for r in pair}
+    rows = []
+    for rid, g in runs.groupby("run", sort=False):
+        hi = _range(g, m_e, campaign.vehicle.mass_kg, HIGH_RANGE_MPH, ambient)
+        lo = _range(g, m_e, campaign.vehicle.mass_kg, LOW_RANGE_MPH, ambient)
+        if hi is None or lo is None:
+            continue
+        rows.append({"run": rid, "pair": pair_of.get(rid, f"unpaired {rid}"),
+                     "direction": directions.get(rid, 0), "F_hi_N": hi.force_n, "F_lo_N": lo.force_n,
+                     "v2_air_hi": hi.v2_air, "v2_air_lo": lo.v2_air, "yaw_deg": hi.yaw_deg,
+                     "temperature_k": hi.temperature_k, "pressure_pa": hi.pressure_pa})
+    cols = ["run", "pair", "direction", "F_hi_N", "F_lo_pair_N", "v2_air_hi", "v2_air_lo_pair", "yaw_deg",
+            "temperature_k", "pressure_pa", "CdA_m2"]
+    if not rows:
+        return pd.DataFrame(columns=cols)
+    df = pd.DataFrame(rows)
+    df["F_lo_pair_N"] = df.groupby("pair")["F_lo_N"].transform("mean")
+    df["v2_air_lo_pair"] = df.groupby("pair")["v2_air_lo"].transform("mean")
+    df["CdA_m2"] = [drag_area(r.F_hi_N, r.F_lo_pair_N, r.v2_air_hi, r.v2_air_lo_pair, r.temperature_k,
+                              r.pressure_pa, delta_f_spin_n, delta_f_trr_n) for r in df.itertuples()]
+    return df[cols]
+
+
+def final_drag_area(segments: pd.DataFrame) -> dict:
+    """(h)(11): the ranges kept (``kept`` column added), the effective yaw angle (deg, mean |yaw|
+    of the kept ranges rounded to 0.1 deg), the final CdA (their mean, m^2), its standard error
+    (sd / sqrt(n), not a clause of the regulation) and ``enough`` (n >= 24)."""
+    seg = segments.copy()
+    keep = np.isfinite(seg["CdA_m2"].to_numpy(float))
+    if keep.any():
+        med = float(np.median(seg["yaw_deg"][keep]))
+        keep &= np.abs(seg["yaw_deg"].to_numpy(float) - med) <= YAW_BAND_DEG
+    if keep.sum() > 1:
+        cda = seg["CdA_m2"].to_numpy(float)
+        mean, sd = cda[keep].mean(), cda[keep].std(ddof=1)
+        keep &= np.abs(cda - mean) <= CDA_BAND_SD * sd
+    seg["kept"] = keep
+    n = int(keep.sum())
+    cda = seg["CdA_m2"].to_numpy(float)[keep]
+    return {"segments": seg, "n_points": n, "enough": n >= MIN_POINTS,
+            "effective_yaw_deg": round(float(seg["yaw_deg"][keep].mean()), 1) if n else math.nan,
+            "CdA_m2": float(cda.mean()) if n else math.nan,
+            "CdA_se_m2": float(cda.std(ddof=1) / math.sqrt(n)) if n > 1 else math.nan}
