@@ -130,8 +130,10 @@ class NutsFit:
 
 def _site_scales(problem: Problem, z: dict[str, Any]) -> dict[str, Any]:
     """O(1) scaling of each unconstrained site: real-valued coefficients by their typical
-    magnitude (config.PARAMETER_SCALES), initial speeds by 0.05 m/s, log-transformed
-    positive sites by 1."""
+    magnitude (config.PARAMETER_SCALES), initial speeds by 0.05 m/s, positive sites by 1 (their
+    unconstrained coordinate is already dimensionless: log of the value, or, for a normal prior
+    truncated from below, about (value - bound) / (0.05 x prior scale):
+    :func:`~bayes_roadload.inference.spec.soft_lower_truncated_normal`)."""
     scales = {}
     for name, value in z.items():
         s = 1.0

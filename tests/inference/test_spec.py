@@ -187,3 +187,59 @@ def test_refusals_at_build_time_name_the_key(tmp_path):
 def test_not_toml(tmp_path):
     with pytest.raises(ModelSpecError, match=r"bad\.toml: not valid TOML"):
         load_model_spec(_write(tmp_path, "[model\nterms = 3"))
+
+
+def test_lower_truncated_normal_keeps_its_density_and_samples_through_a_scaled_softplus():
+    """A normal prior truncated from below has numpyro's TruncatedNormal density (checked
+    against scipy's truncnorm); its bijection is y = low + s softplus(x) with s = 0.05 x scale:
+    inverse round trip, slope within 5 % of s from 3 s above the bound (sigmoid(3) = 0.953)."""
+    import jax.numpy as jnp
+    from numpyro.distributions.transforms import biject_to
+    from scipy import stats
+
+    from bayes_roadload.inference.spec import SOFTPLUS_FRACTION, Prior
+
+    loc, scale, low = 0.6, 1.0, 0.1
+    d = Prior("normal", loc, scale, low).to_numpyro()
+    y = np.linspace(0.1001, 4.0, 50)
+    expected = stats.truncnorm.logpdf(y, (low - loc) / scale, np.inf, loc=loc, scale=scale)
+    np.testing.assert_allclose(np.asarray(d.log_prob(jnp.asarray(y))), expected, rtol=1e-10)
+    t = biject_to(d.support)
+    s = SOFTPLUS_FRACTION * scale
+    x = jnp.linspace(-8.0, 60.0, 200)
+    np.testing.assert_allclose(np.asarray(t(x)), low + s * np.logaddexp(0.0, np.asarray(x)), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(t.inv(t(x))), np.asarray(x), atol=1e-9)
+    import jax
+
+    slope = np.asarray(jax.vmap(jax.grad(lambda u: t(u)))(x))
+    above = np.asarray(t(x)) >= low + 3 * s
+    assert np.all(slope[above] >= 0.95 * s) and np.all(slope <= s * (1 + 1e-12))
+
+
+def test_softplus_keeps_a_linear_ridge_straight_where_exp_bends_it():
+    """The geometry the softplus is for: a tight ridge a + k = 1 (a trades linearly with k, like
+    A_D with K_D on one pair) and k ~ N(0.6, 0.12), 3 sd inside 5 s of the bound.  The sampler's whitened coordinates are
+    straight lines through the mode (the Laplace approximation): 3 sd along the ridge's
+    direction the potential should rise by 4.5.  Through the softplus the ridge is straight in
+    (a, x) and it rises by 4.5 to 5 %; through exp (x = log k) the ridge is curved, the straight
+    line leaves it and the potential rises more than tenfold."""
+    import jax
+    import jax.numpy as jnp
+    from numpyro.distributions.transforms import biject_to
+
+    from bayes_roadload.inference.spec import Prior
+
+    soft = biject_to(Prior("normal", 0.6, 1.0, 0.0).to_numpyro().support)
+
+    def rise_at_3_sd(to_k, x0):
+        def potential(z):
+            k = to_k(z[1])
+            return 0.5 * ((z[0] + k - 1.0) / 0.001) ** 2 + 0.5 * ((k - 0.6) / 0.12) ** 2
+
+        mode = jnp.array([0.4, x0])
+        eigval, eigvec = np.linalg.eigh(np.linalg.inv(np.asarray(jax.hessian(potential)(mode))))
+        step = 3.0 * np.sqrt(eigval[-1]) * eigvec[:, -1]
+        return max(float(potential(mode + step) - potential(mode)), float(potential(mode - step) - potential(mode)))
+
+    assert rise_at_3_sd(soft, float(soft.inv(0.6))) == pytest.approx(4.5, rel=0.05)
+    assert rise_at_3_sd(jnp.exp, float(np.log(0.6))) > 45.0
