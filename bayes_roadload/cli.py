@@ -194,10 +194,11 @@ def _parse_markers(values: list[str]) -> list[float]:
 def _sampler(args):
     from . import config
 
+    stated = {} if args.target_accept is None else {"target_accept": args.target_accept,
+                                                    "small_campaign_target_accept": None}
     return config.SamplerConfig(num_warmup=args.warmup, num_samples=args.draws, num_chains=args.chains,
                                 seed=args.seed, progress_bar=console.progress_bars(not args.no_progress),
-                                target_accept=args.target_accept,
-                                precondition="none" if args.no_precondition else "laplace")
+                                precondition="none" if args.no_precondition else "laplace", **stated)
 
 
 def _fit_options(args, runs=None):
@@ -820,8 +821,10 @@ def _add_nuts_options(p: argparse.ArgumentParser, seed: int) -> None:
     p.add_argument("--draws", type=int, default=d.num_samples, help="nuts: draws per chain")
     p.add_argument("--chains", type=int, default=d.num_chains, help="nuts: chains (run in parallel)")
     p.add_argument("--seed", type=int, default=seed)
-    p.add_argument("--target-accept", type=float, default=d.target_accept,
-                   help="nuts: target acceptance probability; raise it (e.g. 0.95) when a fit reports divergences")
+    p.add_argument("--target-accept", type=float, default=None,
+                   help=f"nuts: target acceptance probability for every campaign size; raise it (e.g. 0.95) when a "
+                        f"fit reports divergences (default: {d.target_accept}, and "
+                        f"{d.small_campaign_target_accept} for campaigns of at most {d.small_campaign_runs} runs)")
     p.add_argument("--no-progress", action="store_true", help="nuts: no progress bar")
     p.add_argument("--no-precondition", action="store_true",
                    help="nuts: numpyro's default NUTS without the MAP/Laplace start (slow; for comparison)")

@@ -132,8 +132,10 @@ def test_sampler_options_reach_the_sampler():
                                       "--no-precondition"])
     s = _sampler(args)
     assert (s.target_accept, s.num_samples, s.precondition) == (0.95, 50, "none")
-    assert _sampler(build_parser().parse_args(["fit", "campaign", "--out", "o"])).target_accept == \
-        config.DEFAULT_SAMPLER.target_accept
+    default = _sampler(build_parser().parse_args(["fit", "campaign", "--out", "o"]))
+    assert default.target_accept == config.DEFAULT_SAMPLER.target_accept
+    assert default.small_campaign_target_accept == config.DEFAULT_SAMPLER.small_campaign_target_accept
+    assert s.small_campaign_target_accept is None  # a stated acceptance holds for every campaign size
 
 
 @pytest.mark.slow

@@ -713,11 +713,22 @@ def fit_nuts(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling
     return sample_problem(problem, init, sampler, campaign.truth)
 
 
+def campaign_sampler(sampler: config.SamplerConfig, problem: Problem) -> config.SamplerConfig:
+    """``sampler`` with ``target_accept`` raised to ``small_campaign_target_accept`` when the
+    problem has at most ``small_campaign_runs`` runs (:class:`~bayes_roadload.config.SamplerConfig`)."""
+    small = sampler.small_campaign_target_accept
+    if small is None or len(problem.run_ids) > sampler.small_campaign_runs or sampler.target_accept >= small:
+        return sampler
+    return dataclasses.replace(sampler, target_accept=small)
+
+
 def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
                    truth: dict | None = None) -> NutsFit:
     """MAP from the constrained starting values ``init`` (with the Laplace preconditioning),
     then NUTS (:func:`run_nuts`) on any :class:`~bayes_roadload.inference.problem.Problem`;
-    the fit's ``truth`` is ``truth``."""
+    the fit's ``truth`` is ``truth``.  A campaign of few runs is sampled at the sampler's
+    small-campaign target acceptance (:func:`campaign_sampler`)."""
+    sampler = campaign_sampler(sampler, problem)
     map_result = post = None
     if sampler.precondition == "laplace":
         post = unconstrained_posterior(problem, init)

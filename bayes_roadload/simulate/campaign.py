@@ -539,11 +539,13 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
         cols = {
             "run": np.full(n, rid),
             "time_s": run["time_s"],
-            "speed_mps": np.round(run["speed_mps"] + m * settings.speed_noise_mps * noise[0],
+            # the speed and the airspeed are magnitudes: a sensor's reading never goes below 0
+            # (with a tail wind near the vehicle's speed the relative airspeed nears 0)
+            "speed_mps": np.round(np.maximum(run["speed_mps"] + m * settings.speed_noise_mps * noise[0], 0.0),
                                   settings.speed_decimals),
             "direction": np.full(n, d),
             "pair": np.full(n, (rid + 1) // 2),
-            "airspeed_mps": airspeed + m * settings.airspeed_noise_mps * noise[1],
+            "airspeed_mps": np.maximum(airspeed + m * settings.airspeed_noise_mps * noise[1], 0.0),
             "yaw_rad": yaw + m * settings.yaw_noise_rad * noise[2],
             "distance_m": run["distance_m"],
             "position_m": run["position_m"],

@@ -264,6 +264,23 @@ def test_collect_warmup_keeps_every_draw():
     assert mcmc.get_extra_fields()["num_steps"].shape == (12,)
 
 
+def test_small_campaigns_are_sampled_at_the_small_campaign_acceptance():
+    """At most ``small_campaign_runs`` runs: target acceptance raised to the small-campaign
+    value, never lowered; more runs, or no small-campaign value: unchanged."""
+    from types import SimpleNamespace
+
+    from bayes_roadload.inference.nuts import campaign_sampler
+
+    base = config.SamplerConfig()
+    runs = lambda n: SimpleNamespace(run_ids=tuple(range(n)))  # noqa: E731
+    assert campaign_sampler(base, runs(base.small_campaign_runs)).target_accept == base.small_campaign_target_accept
+    assert campaign_sampler(base, runs(base.small_campaign_runs + 1)) is base
+    high = dataclasses.replace(base, target_accept=0.99)
+    assert campaign_sampler(high, runs(2)).target_accept == 0.99
+    off = dataclasses.replace(base, small_campaign_target_accept=None)
+    assert campaign_sampler(off, runs(2)) is off
+
+
 def test_remedy_answers_each_failed_gate():
     from bayes_roadload.inference.nuts import remedy
 
