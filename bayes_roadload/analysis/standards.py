@@ -329,8 +329,9 @@ def standard_checks(campaign: Campaign, standard: str | Standard) -> pd.DataFram
             rows.append(_check("mean wind along the road: needs airspeed and yaw", math.nan,
                                std.max_mean_along_wind_mps, False, "m/s"))
     if std.min_rate_hz is not None and "time_s" in runs:
-        dt = runs.groupby("run", sort=False)["time_s"].apply(lambda t: float(np.median(np.diff(t.to_numpy(float)))))
-        slowest = float(1.0 / dt.max())
+        dt = runs.groupby("run", sort=False)["time_s"].apply(
+            lambda t: float(np.median(np.diff(t.to_numpy(float)))) if len(t) > 1 else math.nan)
+        slowest = float(1.0 / dt.max())  # NaN (a failed check) when no run has two samples
         rows.append(_check("recording rate (slowest run)", slowest, std.min_rate_hz,
                            slowest >= std.min_rate_hz * (1 - 1e-6), "Hz"))
     if std.speed_range_kph is not None and "speed_mps" in runs:
