@@ -157,11 +157,16 @@ def segment_drag_areas(campaign: Campaign, tyres_in_contact: int, *, delta_f_spi
                        delta_f_trr_n: float = 0.0) -> pd.DataFrame:
     """Per high-speed range of every run: ``run, pair, direction, F_hi_N, F_lo_pair_N,
     v2_air_hi, v2_air_lo_pair, yaw_deg, temperature_k, pressure_pa, CdA_m2`` ((h)(1)-(h)(10)).
-    A run's low-speed range is taken from the same run (complete runs, (d)(1)); the low range
-    of a pair (:meth:`Campaign.pairs`) is the mean of its two runs' ((h)(8)), a run without a
-    partner keeps its own.  Runs that do not pass through both ranges are left out.  Air
-    temperature and pressure come from ``temperature_k`` / ``pressure_pa`` when logged, else
-    the project's reference conditions are taken."""
+
+    Each run gives the ranges it passes through: both (complete runs, (d)(1)) or one (split
+    runs, (d)(2): high-speed segments and low-speed segments logged as runs of their own).  The
+    low range of a pair is the mean over the pair's low ranges ((h)(8): two for complete runs
+    or one split segment per direction, four for two), and every high range of the pair is
+    divided by it.  A pair is the ``pair`` column's group of runs when the column is there (of
+    any size: split segments of both directions), else :meth:`Campaign.pairs`; a run without a
+    pair is its own.  High ranges of a pair without a low range are left out.  Air temperature
+    and pressure come from ``temperature_k`` / ``pressure_pa`` when logged, else the project's
+    reference conditions are taken."""
     if not campaign.has_anemometer:
         raise ValueError("40 CFR 1037.528 needs the on-board airspeed and yaw ((f)); the campaign has none")
     runs = campaign.runs
@@ -170,27 +175,45 @@ def segment_drag_areas(campaign: Campaign, tyres_in_contact: int, *, delta_f_spi
     # conditions (the result's ``ambient_logged`` says which)
     ambient = (config.REFERENCE_TEMPERATURE_K, config.REFERENCE_PRESSURE_PA)
     directions = campaign.directions()
-    pair_of = {r: i for i, pair in enumerate(campaign.pairs()) for r in pair}
-    rows = []
+    if "pair" in runs:
+        pair_of = runs.groupby("run", sort=False)["pair"].first().to_dict()
+    else:
+        pair_of = {r: i for i, pair in enumerate(campaign.pairs()) for r in pair}
+    highs, lows = [], {}
     for rid, g in runs.groupby("run", sort=False):
+        pair = pair_of.get(rid, f"unpaired {rid}")
         hi = _range(g, m_e, campaign.vehicle.mass_kg, HIGH_RANGE_MPH, ambient)
         lo = _range(g, m_e, campaign.vehicle.mass_kg, LOW_RANGE_MPH, ambient)
-        if hi is None or lo is None:
-            continue
-        rows.append({"run": rid, "pair": pair_of.get(rid, f"unpaired {rid}"),
-                     "direction": directions.get(rid, 0), "F_hi_N": hi.force_n, "F_lo_N": lo.force_n,
-                     "v2_air_hi": hi.v2_air, "v2_air_lo": lo.v2_air, "yaw_deg": hi.yaw_deg,
-                     "temperature_k": hi.temperature_k, "pressure_pa": hi.pressure_pa})
+        if lo is not None:
+            lows.setdefault(pair, []).append(lo)
+        if hi is not None:
+            highs.append({"run": rid, "pair": pair, "direction": directions.get(rid, 0), "F_hi_N": hi.force_n,
+                          "v2_air_hi": hi.v2_air, "yaw_deg": hi.yaw_deg, "temperature_k": hi.temperature_k,
+                          "pressure_pa": hi.pressure_pa})
     cols = ["run", "pair", "direction", "F_hi_N", "F_lo_pair_N", "v2_air_hi", "v2_air_lo_pair", "yaw_deg",
             "temperature_k", "pressure_pa", "CdA_m2"]
+    rows = [dict(h, F_lo_pair_N=float(np.mean([lo.force_n for lo in lows[h["pair"]]])),
+                 v2_air_lo_pair=float(np.mean([lo.v2_air for lo in lows[h["pair"]]])))
+            for h in highs if h["pair"] in lows]
     if not rows:
         return pd.DataFrame(columns=cols)
     df = pd.DataFrame(rows)
-    df["F_lo_pair_N"] = df.groupby("pair")["F_lo_N"].transform("mean")
-    df["v2_air_lo_pair"] = df.groupby("pair")["v2_air_lo"].transform("mean")
     df["CdA_m2"] = [drag_area(r.F_hi_N, r.F_lo_pair_N, r.v2_air_hi, r.v2_air_lo_pair, r.temperature_k,
                               r.pressure_pa, delta_f_spin_n, delta_f_trr_n) for r in df.itertuples()]
     return df[cols]
+
+
+def runs_without_a_range(campaign: Campaign) -> list:
+    """Runs that pass through neither the 70 -> 60 nor the 20 -> 10 mi/h range with their
+    end-point bands ((d): a complete run covers 72 -> 8 mi/h, a split segment 72 -> 58 or
+    22 -> 8 mi/h)."""
+    out = []
+    for rid, g in campaign.runs.groupby("run", sort=False):
+        t, v = g["time_s"].to_numpy(float), g["speed_mps"].to_numpy(float)
+        if not any(speed_point(t, v, a * config.MPH_TO_MPS) is not None and
+                   speed_point(t, v, b * config.MPH_TO_MPS) is not None for a, b in (HIGH_RANGE_MPH, LOW_RANGE_MPH)):
+            out.append(rid)
+    return out
 
 
 def final_drag_area(segments: pd.DataFrame) -> dict:

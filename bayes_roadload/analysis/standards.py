@@ -106,7 +106,6 @@ STANDARDS: dict[str, Standard] = {
                         two_term=True),
     "cfr1037": Standard("cfr1037", "40 CFR 1037.528 (Phase 2 tractors, CdA)", 293.15, 98_210.0, "US", "cda",
                         mass_per_tyre_kg=56.7, min_runs_per_direction=12, cda_yaw_deg=4.5,
-                        speed_range_kph=(72.0 * MPH_KPH, 8.0 * MPH_KPH), speed_range_per_run=True,
                         max_mean_along_wind_mps=6.0 * 0.44704, min_rate_hz=10.0, segment_method=True),
 }
 """Per standard.  J1263's reference conditions are taken equal to J2263's (not verified);
@@ -118,7 +117,8 @@ each run's drag area to +-4.5 deg yaw for the wind-averaged CdA.  Speed ranges: 
 coefficients are A = A_m, B = 0, C = D_adj (the intercept and the density-adjusted slope of the
 force against v^2; eCFR text found by search), hence ``two_term``.  40 CFR 1037.528 (Phase 2
 tractors; text of 81 FR 74048 as amended to 89 FR 29783, found by search): M_e = M + 56.7 kg per
-tyre in contact ((h)(1)); complete runs from above 72.0 down to 8.0 mi/h or lower ((d)(1)); the
+tyre in contact ((h)(1)); complete runs from above 72.0 down to 8.0 mi/h or split segments
+72 -> 58 and 22 -> 8 mi/h ((d); checked by the segment method, every run through one range); the
 mean wind along the road at most 6.0 mi/h per run ((c)(2)); 10 Hz recording ((d)); at least 24
 high-speed ranges after the (h)(11) eliminations, with the same number of runs in each
 direction ((d)(2)), hence 12 per direction; its temperature and pressure are J2263's (it
@@ -454,7 +454,10 @@ def segment_method_result(campaign: Campaign, tyres_in_contact: int | None, *, d
     else:
         final = cfr1037.final_drag_area(cfr1037.segment_drag_areas(
             campaign, tyres_in_contact, delta_f_spin_n=delta_f_spin_n, delta_f_trr_n=delta_f_trr_n))
-        checks = [dict(base, **_check("high-speed ranges left after the (h)(11) eliminations", final["n_points"],
+        missing = cfr1037.runs_without_a_range(campaign)
+        checks = [dict(base, **_check("runs through neither 72 -> 58 nor 22 -> 8 mi/h", len(missing), 0,
+                                      not missing, "runs")),
+                  dict(base, **_check("high-speed ranges left after the (h)(11) eliminations", final["n_points"],
                                       cfr1037.MIN_POINTS, final["enough"], "ranges"))]
     row = {"standard": "cfr1037", "quantity": "CdA_1037.528_segments", "unit": "m^2", "mean": final["CdA_m2"],
            "sd": final["CdA_se_m2"], "q2.5": math.nan, "q97.5": math.nan}

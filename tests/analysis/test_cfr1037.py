@@ -81,14 +81,14 @@ M, TYRES, CDA, F_ROLL = 16_000.0, 18, 6.0, 900.0
 RHO = 100_000.0 / (287.058 * 293.2)
 
 
-def _coastdown(run, pair, direction, v0, yaw_deg, dt=0.1, noise=0.0, rng=None):
+def _coastdown(run, pair, direction, v0, yaw_deg, dt=0.1, noise=0.0, rng=None, v_end=3.0):
     """-M_e dv/dt = F_roll + rho/2 CdA v^2 in still air (airspeed = speed), by RK4 at 10 ms,
-    sampled at 10 Hz down to 3 m/s."""
+    sampled at 10 Hz down to ``v_end``."""
     m_e = cfr1037.effective_mass_kg(M, TYRES)
     acc = lambda v: -(F_ROLL + 0.5 * RHO * CDA * v * v) / m_e  # noqa: E731
     h, v, t, ts, vs = 1e-2, v0, 0.0, [], []
     steps = round(dt / h)
-    while v > 3.0:
+    while v > v_end:
         ts.append(t)
         vs.append(v)
         for _ in range(steps):
@@ -210,3 +210,26 @@ def test_report_standard_cfr1037_from_the_command_line(tractor, tmp_path, capsys
     assert json.loads((fit_dir / "standard.json").read_text())["tyres_in_contact"] == TYRES
     assert main(["report", str(fit_dir), "--standard", "cfr1037", "--tyres-in-contact", "10"]) == 0
     assert json.loads((fit_dir / "standard.json").read_text())["tyres_in_contact"] == 10
+
+
+def test_split_runs_recover_the_drag_area(tractor):
+    """(d)(2) split runs: per pair, a high-speed segment (33.5 -> 25 m/s) and a low-speed one
+    (10.5 -> 3 m/s) in each direction, four runs under one ``pair`` id; the low range of the pair
+    is the mean of its two low segments ((h)(8)) and the drag area is recovered as from complete
+    runs (same bound).  A run through neither range is counted by the check."""
+    rng = np.random.default_rng(11)
+    parts, rid = [], 0
+    for k in range(14):
+        for direction in (1, -1):
+            for v0, v_end in ((33.5, 25.0), (10.5, 3.0)):
+                rid += 1
+                parts.append(_coastdown(rid, k + 1, direction, v0, 2.0 + 0.01 * k, noise=0.02, rng=rng, v_end=v_end))
+    split = Campaign(pd.concat(parts, ignore_index=True), tractor.vehicle)
+    seg = cfr1037.segment_drag_areas(split, TYRES)
+    assert len(seg) == 28 and seg.groupby("pair").size().eq(2).all()
+    final = cfr1037.final_drag_area(seg)
+    assert final["n_points"] >= 24
+    assert abs(final["CdA_m2"] - CDA) <= 4 * final["CdA_se_m2"] + 0.005 * CDA
+    assert cfr1037.runs_without_a_range(split) == []
+    short = Campaign(_coastdown(1, 1, 1, 15.0, 2.0, v_end=12.0), tractor.vehicle)
+    assert cfr1037.runs_without_a_range(short) == [1]
