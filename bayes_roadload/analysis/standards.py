@@ -472,8 +472,12 @@ def format_standard(result: pd.DataFrame, checks: pd.DataFrame) -> str:
     for _, r in result.iterrows():
         if np.isfinite(r["q2.5"]):
             spread = f"[{r['q2.5']:.5g}, {r['q97.5']:.5g}]"
-        else:  # a point value of the standard's own arithmetic: its standard error
+        elif np.isfinite(r["mean"]):  # a point value of the standard's own arithmetic: its standard error
             spread = f"(the standard's method; standard error {r['sd']:.3g})"
+        else:
+            lines.append(f"  {r['quantity']:<16} {'-':>12} {r['unit']:<12} (the standard's method: not computed, "
+                         "see the checks)")
+            continue
         lines.append(f"  {r['quantity']:<16} {r['mean']:12.5g} {r['unit']:<12} {spread}")
     for _, r in checks.iterrows():
         verdict = "pass" if r["pass"] else "FAIL"

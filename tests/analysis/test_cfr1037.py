@@ -163,6 +163,9 @@ def test_cfr1037_needs_the_tyres_and_says_so(tractor):
     res, chk = run_standard(draws, "cfr1037", campaign=no_tyres, rotating_inertia_known=True)
     row = chk[chk["rule"].str.contains("segment method")].iloc[0]
     assert not row["pass"] and "tyres" in row["rule"]
+    from bayes_roadload.analysis.standards import format_standard
+
+    assert "CdA_1037.528_segments" in format_standard(res, chk) and "not computed" in format_standard(res, chk)
 
 
 def test_cfr1037_wind_and_rate_limits_by_hand(tractor):
