@@ -28,9 +28,10 @@ from bayes_roadload.analysis.diagnose import diagnose  # noqa: E402
 RECORDS = ROOT / "benchmarks" / "records" / "sim_to_real" / "null_claims_probe.jsonl"
 
 
-def probe(seed: int, drop: tuple[str, ...], yaw_noise_off: bool = False) -> dict:
+def probe(seed: int, drop: tuple[str, ...], yaw_noise_off: bool = False, model: str = "three_term") -> dict:
     """The null campaign of ``seed`` (6 pairs) with the base effects ``drop`` removed (and the
-    vane's random noise set to 0, the random streams unchanged), diagnosed."""
+    vane's random noise set to 0, the random streams unchanged), diagnosed with ``model`` (the
+    design's ``three_term``, K_D fixed at the campaign's tunnel value, or ``four_term``, K_D free)."""
     import dataclasses
 
     import bayes_roadload.simulate.independent.campaign as camp
@@ -44,11 +45,11 @@ def probe(seed: int, drop: tuple[str, ...], yaw_noise_off: bool = False) -> dict
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             campaign = ps.IndependentWithheld(None, seed, 6)()
-            d = diagnose(campaign, "three_term")
+            d = diagnose(campaign, model)
     finally:
         ps.INDEPENDENT_BASE_EFFECTS, camp.sens.random_instruments = base, instruments
     return {"seed": seed, "category": (campaign.meta or {}).get("category"), "removed": list(drop),
-            "yaw_noise_off": yaw_noise_off,
+            "yaw_noise_off": yaw_noise_off, "model": model,
             "top": d.top or "none", "delta_elpd": {c["effect"]: round(float(c["delta_elpd"]), 3) for c in d.candidates},
             "time_s": round(time.perf_counter() - t0, 1)}
 
@@ -58,14 +59,16 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", required=True)
     ap.add_argument("--drop", nargs="+", default=[""], help="comma-separated base effects to remove, one variant each")
     ap.add_argument("--yaw-noise-off", action="store_true", help="the vane's random noise set to 0")
+    ap.add_argument("--model", default="three_term", help="analysis model (the design's: three_term)")
     a = ap.parse_args(argv)
     RECORDS.parent.mkdir(parents=True, exist_ok=True)
     with RECORDS.open("a") as f:
         for seed in a.seeds:
             for variant in a.drop:
-                rec = probe(seed, tuple(x for x in variant.split(",") if x), a.yaw_noise_off)
+                rec = probe(seed, tuple(x for x in variant.split(",") if x), a.yaw_noise_off, a.model)
                 f.write(json.dumps(rec) + "\n")
-                print(f"seed {seed} ({rec['category']}) without [{variant}]{' yaw noise off' if a.yaw_noise_off else ''}: "
+                print(f"seed {seed} ({rec['category']}, {a.model}) without [{variant}]"
+                      f"{' yaw noise off' if a.yaw_noise_off else ''}: "
                       f"top {rec['top']}, "
                       f"yaw_calibration {rec['delta_elpd'].get('yaw_calibration')}", flush=True)
     return 0
