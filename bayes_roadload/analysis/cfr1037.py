@@ -132,10 +132,10 @@ class _Range:
     pressure_pa: float
 
 
-def _range(g: pd.DataFrame, m_e: float, mass_kg: float, nominal: tuple[float, float],
+def _range(g: pd.DataFrame, filt: dict[str, np.ndarray], m_e: float, mass_kg: float, nominal: tuple[float, float],
            ambient: tuple[float, float]) -> _Range | None:
+    """The range ``nominal`` of run ``g`` from its Hampel-filtered channels ``filt``, or None."""
     t = g["time_s"].to_numpy(float)
-    filt = {c: hampel_filter(t, g[c].to_numpy(float)) for c in ("speed_mps", "airspeed_mps", "yaw_rad")}
     start = speed_point(t, filt["speed_mps"], nominal[0] * config.MPH_TO_MPS)
     end = speed_point(t, filt["speed_mps"], nominal[1] * config.MPH_TO_MPS)
     if start is None or end is None:
@@ -182,8 +182,10 @@ def segment_drag_areas(campaign: Campaign, tyres_in_contact: int, *, delta_f_spi
     highs, lows = [], {}
     for rid, g in runs.groupby("run", sort=False):
         pair = pair_of.get(rid, f"unpaired {rid}")
-        hi = _range(g, m_e, campaign.vehicle.mass_kg, HIGH_RANGE_MPH, ambient)
-        lo = _range(g, m_e, campaign.vehicle.mass_kg, LOW_RANGE_MPH, ambient)
+        t = g["time_s"].to_numpy(float)
+        filt = {c: hampel_filter(t, g[c].to_numpy(float)) for c in ("speed_mps", "airspeed_mps", "yaw_rad")}
+        hi = _range(g, filt, m_e, campaign.vehicle.mass_kg, HIGH_RANGE_MPH, ambient)
+        lo = _range(g, filt, m_e, campaign.vehicle.mass_kg, LOW_RANGE_MPH, ambient)
         if lo is not None:
             lows.setdefault(pair, []).append(lo)
         if hi is not None:

@@ -32,6 +32,7 @@ import pandas as pd
 from .. import config
 from ..data.campaign import Campaign
 from ..physics.atmosphere import REFERENCE_AIR_DENSITY_KGPM3
+from . import cfr1037
 from .cycles import COEFFICIENTS
 from .regulation import GTR_PRECISION_PCT, MIN_REGULATION_PAIRS, gtr15_precision
 
@@ -105,8 +106,9 @@ STANDARDS: dict[str, Standard] = {
                         speed_range_kph=(70.0 * MPH_KPH, 15.0 * MPH_KPH), speed_range_per_run=True,
                         two_term=True),
     "cfr1037": Standard("cfr1037", "40 CFR 1037.528 (Phase 2 tractors, CdA)", 293.15, 98_210.0, "US", "cda",
-                        mass_per_tyre_kg=56.7, min_runs_per_direction=12, cda_yaw_deg=4.5,
-                        max_mean_along_wind_mps=6.0 * 0.44704, min_rate_hz=10.0, segment_method=True),
+                        mass_per_tyre_kg=cfr1037.MASS_PER_TYRE_KG, min_runs_per_direction=cfr1037.MIN_POINTS // 2,
+                        cda_yaw_deg=4.5, max_mean_along_wind_mps=cfr1037.MAX_MEAN_ALONG_WIND_MPH * config.MPH_TO_MPS,
+                        min_rate_hz=cfr1037.MIN_RATE_HZ, segment_method=True),
 }
 """Per standard.  J1263's reference conditions are taken equal to J2263's (not verified);
 40 CFR 1066.310 follows J1263 / J2263 (hence their temperature and mass convention), states a
@@ -436,8 +438,6 @@ def segment_method_result(campaign: Campaign, tyres_in_contact: int | None, *, d
     ``result_row`` (``CdA_1037.528_segments``: the final CdA as mean, its standard error as sd,
     no interval) and ``check_rows`` (the (h)(11)(iv) point count; what stops the arithmetic,
     when something does)."""
-    from . import cfr1037
-
     base = {"standard": "cfr1037", "delta_f_spin_n": float(delta_f_spin_n), "delta_f_trr_n": float(delta_f_trr_n),
             "ambient_logged": bool({"temperature_k", "pressure_pa"} <= set(campaign.runs.columns))}
     empty = {"segments": pd.DataFrame(), "n_points": 0, "effective_yaw_deg": math.nan, "CdA_m2": math.nan,
