@@ -293,6 +293,20 @@ AUTO_HIERARCHICAL_MAX_RUNS = 24
 range) and pooled above: the hierarchical fit of 36 runs ran for more than 8 minutes on a
 2-core machine against 95 s pooled (docs/calibration.md, benchmarks/cold_start.py)."""
 
+PARALLEL_CHAIN_GROWTH_BYTES = 27.0
+"""Resident memory that numpyro's parallel chains (one XLA device per chain) gain per
+observation (:attr:`~bayes_roadload.inference.problem.Problem.n_observations`) per iteration of
+each chain, held until the sampler's program ends: 1.3 MB per chain iteration at 54 pairs
+(48,769 samples), measured by ``benchmarks/memory_timeline.py`` and the scaling study
+(docs/performance.md, section *Memory*).  Sequential chains do not grow."""
+
+PARALLEL_CHAIN_MEMORY_FRACTION = 0.25
+"""Parallel chains are used while their projected growth (:data:`PARALLEL_CHAIN_GROWTH_BYTES` x
+observations x chains x iterations) stays within this fraction of the machine's memory; above
+it the chains run one after the other (:func:`bayes_roadload.inference.nuts.chain_method`):
+about 1.7x the sampling time, memory flat.  With the defaults on 24 GB, from about 90 pairs of
+450-sample runs."""
+
 DENSE_MASS_MAX_DIM = 20
 """Largest number of unconstrained dimensions for which ``mass_matrix="auto"`` adapts a dense
 mass matrix (numpyro's first warm-up window has 25 draws)."""

@@ -201,6 +201,11 @@ class FitProblem:
     def hessian_runs(self) -> int:
         return self.n_runs
 
+    @property
+    def n_observations(self) -> int:
+        """Padded samples of every run (``batch.mask``)."""
+        return int(np.size(self.batch.mask))
+
     def settings(self) -> dict[str, Any]:
         """pooling, noise, robust; with undriven wheels (eq. 2.16) their known ``Au``, ``Bu``."""
         out: dict[str, Any] = {"pooling": self.pooling, "noise": self.noise, "robust": self.robust}

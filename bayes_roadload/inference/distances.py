@@ -97,6 +97,11 @@ class DistanceProblem(PooledRunProblem):
     noise_model = "distance-time"
 
     @property
+    def n_observations(self) -> int:
+        """Padded marker records of every run."""
+        return int(np.size(self.runs.mask))
+
+    @property
     def numpyro_model(self):
         return distance_time_model
 

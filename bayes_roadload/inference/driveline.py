@@ -48,6 +48,11 @@ class DrivelineProblem:
     kind = "driveline"
 
     @property
+    def n_observations(self) -> int:
+        """Logged driveline forces."""
+        return int(np.size(self.speed_mps))
+
+    @property
     def hessian_runs(self) -> int:
         return 0   # the samples of all runs are pooled: no per-run sites
 

@@ -107,6 +107,11 @@ class IntervalProblem(PooledRunProblem):
     noise_model = "interval"
 
     @property
+    def n_observations(self) -> int:
+        """Padded interval times of every run."""
+        return int(np.size(self.mask))
+
+    @property
     def numpyro_model(self):
         return interval_model
 

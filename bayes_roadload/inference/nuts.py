@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import os
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -126,6 +127,7 @@ class NutsFit:
     timings: dict[str, float] = field(default_factory=dict)
     truth: dict | None = None
     retries: list[dict[str, Any]] = field(default_factory=list)
+    chain_method: dict[str, str] = field(default_factory=dict)
 
 
 def _site_scales(problem: Problem, z: dict[str, Any]) -> dict[str, Any]:
@@ -593,8 +595,35 @@ def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200,
                      n_eigenvalues_clipped=res["n_eigenvalues_clipped"], hessian_step=res["hessian_step"])
 
 
-def _chain_method(num_chains: int) -> str:
-    return "parallel" if jax.local_device_count() >= num_chains > 1 else "sequential"
+def _physical_memory_bytes() -> float | None:
+    try:
+        return float(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def chain_method(sampler: config.SamplerConfig, problem: Problem) -> tuple[str, str]:
+    """numpyro's ``chain_method`` for ``sampler`` on ``problem``, and why.
+
+    "parallel" (one XLA device per chain) when there are enough devices and the projected
+    growth of resident memory, :data:`~bayes_roadload.config.PARALLEL_CHAIN_GROWTH_BYTES` x
+    observations x chains x (warm-up + draws), stays within
+    :data:`~bayes_roadload.config.PARALLEL_CHAIN_MEMORY_FRACTION` of the machine's memory;
+    else "sequential" (flat memory, about 1.7x the sampling time on two cores)."""
+    chains = sampler.num_chains
+    if chains <= 1:
+        return "sequential", "one chain"
+    if jax.local_device_count() < chains:
+        return "sequential", f"{jax.local_device_count()} XLA device(s) for {chains} chains"
+    growth = config.PARALLEL_CHAIN_GROWTH_BYTES * problem.n_observations * chains \
+        * (sampler.num_warmup + sampler.num_samples)
+    memory = _physical_memory_bytes()
+    if memory is not None and growth > config.PARALLEL_CHAIN_MEMORY_FRACTION * memory:
+        return "sequential", (f"parallel chains would hold ~{growth / 1e9:.1f} GB more while sampling "
+                              f"({problem.n_observations} observations), over "
+                              f"{config.PARALLEL_CHAIN_MEMORY_FRACTION:g} of this machine's "
+                              f"{memory / 1e9:.1f} GB")
+    return "parallel", f"{chains} chains on {jax.local_device_count()} XLA devices"
 
 
 def collect_warmup(mcmc: MCMC) -> None:
@@ -653,9 +682,11 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
     # Warm-up and sampling in one compiled program (``mcmc.warmup`` then ``mcmc.run`` compiles
     # the sampler twice); the warm-up draws are collected only to split the time between the
     # phases by their leapfrog steps, then dropped.
+    method, why = chain_method(sampler, problem)
+    if method == "sequential" and sampler.num_chains > 1:
+        log.info("chains one after the other: %s", why)
     mcmc = MCMC(kernel, num_warmup=sampler.num_warmup, num_samples=sampler.num_samples,
-                num_chains=sampler.num_chains, chain_method=_chain_method(sampler.num_chains),
-                progress_bar=sampler.progress_bar)
+                num_chains=sampler.num_chains, chain_method=method, progress_bar=sampler.progress_bar)
     collect_warmup(mcmc)
     log.info("NUTS: %d chain%s x (%d warm-up + %d draws), target acceptance %.2f ...", sampler.num_chains,
              "s" if sampler.num_chains > 1 else "", sampler.num_warmup, sampler.num_samples, sampler.target_accept)
@@ -688,7 +719,8 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
     log.info("NUTS: %.1f s (warm-up %.1f s, sampling %.1f s)", elapsed, warm_share * elapsed,
              (1.0 - warm_share) * elapsed)
     return NutsFit(problem=problem, samples=samples, stats=extra, map=map_result, sampler=sampler,
-                   timings={"warmup_s": warm_share * elapsed, "sampling_s": (1.0 - warm_share) * elapsed})
+                   timings={"warmup_s": warm_share * elapsed, "sampling_s": (1.0 - warm_share) * elapsed},
+                   chain_method={"method": method, "reason": why})
 
 
 def prepare_problem(problem: FitProblem, campaign: Campaign) -> tuple[FitProblem, dict[str, Any]]:

@@ -64,6 +64,13 @@ class Problem(Protocol):
         that couple several runs, e.g. one per wheel or per pair)."""
         ...
 
+    @property
+    def n_observations(self) -> int:
+        """Size of the problem's per-observation arrays as the likelihood evaluates them
+        (padded samples of every run, interval times, markers, ...): what the cost and the
+        memory of a gradient scale with (:func:`~bayes_roadload.inference.nuts.chain_method`)."""
+        ...
+
     def settings(self) -> dict[str, Any]:
         """The likelihood options of the fit (``pooling``, ``noise``, ``robust``), recorded
         in ``diagnostics.json`` and ``fit.json``."""

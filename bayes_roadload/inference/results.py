@@ -276,6 +276,7 @@ def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
         "bfmi": bfmi,
         "timings_s": {k: round(v, 3) for k, v in fit.timings.items()},
         "retries": list(fit.retries),
+        "chain_method": dict(fit.chain_method),
         "precondition": fit.sampler.precondition,
         "map": None if fit.map is None else {
             "success": fit.map.success, "iterations": fit.map.n_iter, "message": fit.map.message,

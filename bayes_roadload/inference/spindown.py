@@ -71,6 +71,11 @@ class SpindownProblem:
     kind = "spindown"
 
     @property
+    def n_observations(self) -> int:
+        """Padded samples of every wheel's runs."""
+        return int(np.size(self.mask))
+
+    @property
     def n_runs(self) -> int:
         return len(self.run_ids)
 

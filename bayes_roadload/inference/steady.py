@@ -86,6 +86,11 @@ class SteadyProblem:
     kind = "steady"
 
     @property
+    def n_observations(self) -> int:
+        """Steady-state force readings."""
+        return int(np.size(self.force_n))
+
+    @property
     def hessian_runs(self) -> int:
         # 0: the finite-difference Hessian treats every coordinate as shared (the pair winds
         # couple two runs each; the problems are small)

@@ -321,5 +321,8 @@ def test_a_failed_gate_is_retried_once_and_recorded(small_campaign, monkeypatch)
     assert "ess_bulk" in retry["failed"] and (retry["num_warmup"], retry["num_samples"]) == (40, 40)
     assert fit.samples["CD0"].shape == (2, 40) and fit.timings["first_attempt_s"] > 0
     idata = to_inference_data(fit, predictive=False)
-    assert diagnostics(fit, idata, summary_table(fit, idata))["retries"] == fit.retries
+    diag = diagnostics(fit, idata, summary_table(fit, idata))
+    assert diag["retries"] == fit.retries
+    # the chain method of the run that produced the draws, with its reason
+    assert diag["chain_method"]["method"] in ("parallel", "sequential") and diag["chain_method"]["reason"]
 

@@ -14,7 +14,7 @@ from bayes_roadload.inference.spindown import SpindownProblem
 from bayes_roadload.inference.steady import SteadyProblem
 
 PROBLEMS = (FitProblem, IntervalProblem, DistanceProblem, SpindownProblem, SteadyProblem, DrivelineProblem)
-MEMBERS = ("numpyro_model", "hessian_runs", "settings", "postprocess", "derived", "truth_values", "kind")
+MEMBERS = ("numpyro_model", "hessian_runs", "n_observations", "settings", "postprocess", "derived", "truth_values", "kind")
 FIELDS = ("spec", "free", "initial", "run_ids", "priors")
 
 
