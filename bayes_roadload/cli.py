@@ -689,9 +689,13 @@ def _cmd_plan_identify(args) -> int:
 
 
 def _cmd_plan(args) -> int:
+    import math
+
+    import pandas as pd
+
     from . import config
     from .analysis.batch import batch_client, run_batch
-    from .analysis.planning import Target, plan_jobs, plan_table, plot_plan, recommend
+    from .analysis.planning import Target, plan_jobs, plan_table, plot_plan, recommend, undecided_sizes
     from .analysis.regulation import regulation_checks
 
     if args.identify:
@@ -710,13 +714,30 @@ def _cmd_plan(args) -> int:
               "run-to-run variation, so the plan counts measurement noise only; fit with --pooling hierarchical "
               "for a plan that includes it")
     pairs = sorted(set(args.pairs))
-    echo(f"Population: {population.source}; {population.n_draws} draws; refitting {args.simulations} simulated "
-          f"campaigns of each of {pairs} pairs with {fit_model} ({population.pooling}, MAP + Laplace) ...")
-    jobs = plan_jobs(population, pairs, simulations=args.simulations, model=fit_model,
-                     confidence=args.confidence, seed=args.seed)
+    if args.simulations < 1:
+        raise ValueError("--simulations must be at least 1")
+    # adaptive: half the simulations at every size, the other half only where a target's
+    # assurance is still undecided (planning.undecided_sizes); --all-simulations: all at once
+    first = args.simulations if args.all_simulations else max(1, math.ceil(args.simulations / 2))
+    echo(f"Population: {population.source}; {population.n_draws} draws; refitting {first} simulated campaigns of "
+          f"each of {pairs} pairs with {fit_model} ({population.pooling}, MAP + Laplace)"
+          + (f", {args.simulations} where a target stays undecided" if first < args.simulations else "") + " ...")
+    progress = not args.no_progress and _output.isEnabledFor(logging.INFO)
     with batch_client(args.workers, args.scheduler) as client:
         # the batch door draws a bar on a terminal and plain lines elsewhere; --quiet: neither
-        records = run_batch(jobs, client, progress=not args.no_progress and _output.isEnabledFor(logging.INFO))
+        records = run_batch(plan_jobs(population, pairs, simulations=first, model=fit_model,
+                                      confidence=args.confidence, seed=args.seed), client, progress=progress)
+        if first < args.simulations:
+            undecided = undecided_sizes(plan_table(records, targets, args.confidence), args.assurance)
+            if undecided:
+                echo(f"undecided after {first} simulations at {undecided} pairs (a target's assurance within the "
+                      f"Wilson 95 % interval of {args.assurance:g}): {args.simulations - first} more at each ...")
+                more = run_batch(plan_jobs(population, undecided, simulations=args.simulations, model=fit_model,
+                                           confidence=args.confidence, seed=args.seed, first=first),
+                                 client, progress=progress)
+                records = pd.concat([records, more], ignore_index=True)
+            else:
+                echo(f"every target decided at every size after {first} simulations each")
     records.to_csv(out / "plan_records.csv", index=False)
     failed = int(records["error"].notna().sum()) if "error" in records else 0
     not_converged = int((~records["gate_pass"].fillna(False).astype(bool)).sum()) if "gate_pass" in records else 0
@@ -1003,7 +1024,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="recommend the smallest n whose half-width meets the target with this probability")
     pl.add_argument("--pairs", type=int, nargs="+", default=list(config.PLAN_PAIRS),
                     help="campaign sizes (pairs) to simulate")
-    pl.add_argument("--simulations", type=int, default=config.PLAN_SIMULATIONS, help="future campaigns per size")
+    pl.add_argument("--simulations", type=int, default=config.PLAN_SIMULATIONS,
+                    help="future campaigns per size: half of them at every size, the rest only at sizes where a "
+                         "target's assurance is still undecided (Wilson 95 %% interval around --assurance)")
+    pl.add_argument("--all-simulations", action="store_true",
+                    help="simulate --simulations campaigns at every size (no adaptive top-up)")
     pl.add_argument("--model", default="three_term", help="model of the source fit when given a campaign")
     pl.add_argument("--pooling", choices=("pooled", "hierarchical"), default="hierarchical",
                     help="source fit: hierarchical gives the run-to-run spreads the future runs vary by")

@@ -37,6 +37,7 @@ import dataclasses
 import math
 import re
 from dataclasses import dataclass
+from pathlib import PurePath
 from typing import Any, Mapping, Sequence
 
 import jax.numpy as jnp
@@ -314,18 +315,20 @@ def plan_jobs(population: Population, pairs: Sequence[int] = config.PLAN_PAIRS, 
               simulations: int = config.PLAN_SIMULATIONS,
               model: str | None = None, confidence: float = config.PLAN_CONFIDENCE, seed: int = 0,
               method: str = "laplace",
-              tags: Mapping[str, Any] | None = None) -> list[FitJob]:
-    """One fit job per future campaign: ``simulations`` campaigns of each size in ``pairs``,
-    refitted with ``model`` (default: the population's) by ``method`` ("laplace", or "nuts" to
-    confirm the Laplace intervals).  Campaign seeds are shared between methods and models, so
-    arms compare the same campaigns."""
+              tags: Mapping[str, Any] | None = None, first: int = 0) -> list[FitJob]:
+    """One fit job per future campaign: simulations ``first`` .. ``simulations - 1`` of each size
+    in ``pairs``, refitted with ``model`` (default: the population's) by ``method`` ("laplace",
+    or "nuts" to confirm the Laplace intervals).  Campaign seeds depend on the size and the
+    simulation's index only, so arms (methods, models) compare the same campaigns and a top-up
+    (``first`` > 0, :func:`undecided_sizes`) adds new ones."""
     model = model or population.model
+    label = PurePath(str(model)).stem  # a model file's path labels the jobs by the file's name
     start = population.mean_values()
     jobs = []
     for n in pairs:
-        for k in range(simulations):
+        for k in range(first, simulations):
             cseed = seed * 1_000_003 + 1009 * int(n) + k
-            jobs.append(FitJob(f"plan-{model}-{method}-n{n}-{k}", FutureCampaign(population, int(n), cseed),
+            jobs.append(FitJob(f"plan-{label}-{method}-n{n}-{k}", FutureCampaign(population, int(n), cseed),
                                model=model, pooling=population.pooling, method=method,
                                levels=(confidence,), derived=PLAN_DERIVED, start=start,
                                tags={"n_pairs": int(n), "simulation": k, "fit_model": model, **(tags or {})}))
@@ -380,6 +383,22 @@ def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: flo
     if out.empty:
         return out
     return out[cols + [c for c in out.columns if c not in cols]]
+
+
+def undecided_sizes(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE) -> list[int]:
+    """The sizes (``n_pairs``) at which some target is still undecided: the Wilson 95 % interval
+    of its assurance (``assurance`` x ``n_sims`` refits meeting the target) contains the required
+    ``assurance``.  At a decided size more simulations cannot change whether the target is
+    reached there, beyond the interval's 5 %; ``plan`` tops up only the undecided ones."""
+    from .batch import _wilson
+
+    out = set()
+    for _, r in table.iterrows():
+        n = int(r["n_sims"])
+        lo, hi = _wilson(int(round(float(r["assurance"]) * n)), n)
+        if n == 0 or lo < assurance <= hi:
+            out.add(int(r["n_pairs"]))
+    return sorted(out)
 
 
 def recommend(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE, by: Sequence[str] = ()) -> pd.DataFrame:

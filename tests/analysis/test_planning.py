@@ -12,6 +12,7 @@ from scipy import stats
 from bayes_roadload import config
 from bayes_roadload.analysis.batch import run_batch
 from bayes_roadload.analysis.planning import (
+    undecided_sizes,
     Population,
     Target,
     pilot_summary_half_widths,
@@ -21,6 +22,7 @@ from bayes_roadload.analysis.planning import (
     recommend,
     simulate_future,
 )
+from bayes_roadload.inference.spec import MODELS_DIR
 from bayes_roadload.simulate import simulate_campaign
 
 from ..conftest import clean_case
@@ -133,3 +135,38 @@ def test_plan_through_the_batch_door(conditions):
     for q in ("AD", "F50_N"):
         assert table.loc[(q, 4), "median_half_width"] < table.loc[(q, 1), "median_half_width"]
     assert records.groupby("n_pairs")["time_compile_s"].min().max() < 0.5 * records["time_compile_s"].max()
+
+
+def test_undecided_sizes_follow_the_wilson_interval_of_the_assurance():
+    """Only a size where some target's assurance could still be on either side of the required
+    0.8 is topped up.  20 / 20 refits meeting the target: Wilson lower bound (by hand)
+    (1 + z^2/40 - z^2/40) / (1 + z^2/20) = 1 / (1 + z^2/20) = 0.839 > 0.8, decided; 16 / 20 and
+    18 / 20 (0.70-0.97) straddle 0.8; 0 / 20 is decided the other way."""
+    z = 1.959964
+    assert 1.0 / (1.0 + z * z / 20) > 0.8
+    table = pd.DataFrame([
+        {"quantity": "AD", "n_pairs": 1, "assurance": 0.0, "n_sims": 20},
+        {"quantity": "AD", "n_pairs": 4, "assurance": 0.8, "n_sims": 20},
+        {"quantity": "AD", "n_pairs": 8, "assurance": 1.0, "n_sims": 20},
+        {"quantity": "F50_N", "n_pairs": 1, "assurance": 0.0, "n_sims": 20},
+        {"quantity": "F50_N", "n_pairs": 8, "assurance": 0.9, "n_sims": 20},
+        {"quantity": "F50_N", "n_pairs": 12, "assurance": 1.0, "n_sims": 20},
+    ])
+    assert undecided_sizes(table, 0.8) == [4, 8]
+    assert undecided_sizes(table, 0.5) == []  # 16 / 20 is then clearly above, 18 / 20 too
+    # more refits narrow the interval: 180 / 200 (0.85-0.93) is decided, 160 / 200 (0.74-0.85) is not
+    assert undecided_sizes(table.assign(n_sims=200), 0.8) == [4]
+
+
+def test_a_top_up_adds_new_campaigns_with_the_seeds_of_a_full_run(conditions):
+    pop = _population(conditions)
+    full = plan_jobs(pop, pairs=(1, 4), simulations=4, seed=4)
+    half = plan_jobs(pop, pairs=(1, 4), simulations=2, seed=4)
+    more = plan_jobs(pop, pairs=(4,), simulations=4, seed=4, first=2)
+    key = lambda j: (j.tags["n_pairs"], j.tags["simulation"], j.campaign_factory.seed)  # noqa: E731
+    assert sorted(map(key, half + more)) == sorted(key(j) for j in full if j.tags["n_pairs"] == 4 or j.tags["simulation"] < 2)
+    assert {j.tags["simulation"] for j in more} == {2, 3}
+    assert all(j.name.startswith("plan-three_term-laplace-") for j in full)
+    model_file = str(MODELS_DIR / "three_term.toml")  # a fit directory's model is its file
+    assert plan_jobs(dataclasses.replace(pop, model=model_file), pairs=(1,), simulations=1)[0].name \
+        == "plan-three_term-laplace-n1-0"
