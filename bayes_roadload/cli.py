@@ -695,7 +695,7 @@ def _cmd_plan(args) -> int:
 
     from . import config
     from .analysis.batch import batch_client, run_batch
-    from .analysis.planning import Target, plan_jobs, plan_table, plot_plan, recommend, undecided_sizes
+    from .analysis.planning import Target, plan_jobs, plan_table, plot_plan, recommend, refit_work, undecided_sizes
     from .analysis.regulation import regulation_checks
 
     if args.identify:
@@ -726,7 +726,8 @@ def _cmd_plan(args) -> int:
     with batch_client(args.workers, args.scheduler) as client:
         # the batch door draws a bar on a terminal and plain lines elsewhere; --quiet: neither
         records = run_batch(plan_jobs(population, pairs, simulations=first, model=fit_model,
-                                      confidence=args.confidence, seed=args.seed), client, progress=progress)
+                                      confidence=args.confidence, seed=args.seed), client, progress=progress,
+                            weight=refit_work)
         if first < args.simulations:
             undecided = undecided_sizes(plan_table(records, targets, args.confidence), args.assurance)
             if undecided:
@@ -734,7 +735,7 @@ def _cmd_plan(args) -> int:
                       f"Wilson 95 % interval of {args.assurance:g}): {args.simulations - first} more at each ...")
                 more = run_batch(plan_jobs(population, undecided, simulations=args.simulations, model=fit_model,
                                            confidence=args.confidence, seed=args.seed, first=first),
-                                 client, progress=progress)
+                                 client, progress=progress, weight=refit_work)
                 records = pd.concat([records, more], ignore_index=True)
             else:
                 echo(f"every target decided at every size after {first} simulations each")

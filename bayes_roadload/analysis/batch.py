@@ -543,26 +543,32 @@ def _format_seconds(seconds: float) -> str:
 
 class _Progress:
     """One progress bar over a batch: tqdm on a terminal, else a plain line per finished item
-    with the elapsed time and the time left (elapsed / done x remaining)."""
+    with the elapsed time and the time left: elapsed / work done x work left, the work of an
+    item being its ``weight`` (1 each by default; e.g. the pairs of a planning refit, whose
+    cost grows with them)."""
 
-    def __init__(self, total: int, enabled: bool, desc: str, stream=None):
+    def __init__(self, total: int, enabled: bool, desc: str, stream=None, weights: Sequence[float] | None = None):
         self.total, self.done, self.enabled, self.desc = total, 0, enabled, desc
+        self.weights = [1.0] * total if weights is None else [float(w) for w in weights]
+        self.work_total, self.work_done = sum(self.weights), 0.0
         self.stream = sys.stderr if stream is None else stream
         self.t0 = time.perf_counter()
         self.bar = None
         if enabled and total and getattr(self.stream, "isatty", lambda: False)():
             self.bar = tqdm(total=total, desc=desc, unit="job", file=self.stream, dynamic_ncols=True)
 
-    def update(self, label: str, failed: bool = False) -> None:
+    def update(self, label: str, failed: bool = False, index: int | None = None) -> None:
         self.done += 1
+        self.work_done += self.weights[index] if index is not None else 1.0
         if not self.enabled:
             return
+        elapsed = time.perf_counter() - self.t0
+        left = elapsed / max(self.work_done, 1e-12) * max(self.work_total - self.work_done, 0.0)
         if self.bar is not None:
-            self.bar.set_postfix_str(f"last: {label}{' (failed)' if failed else ''}", refresh=False)
+            self.bar.set_postfix_str(f"last: {label}{' (failed)' if failed else ''}; about {_format_seconds(left)} left",
+                                     refresh=False)
             self.bar.update(1)
             return
-        elapsed = time.perf_counter() - self.t0
-        left = elapsed / self.done * (self.total - self.done)
         print(f"{self.desc} {self.done}/{self.total} {label}{': failed' if failed else ''} "
               f"[{_format_seconds(elapsed)} elapsed, about {_format_seconds(left)} left]",
               file=self.stream, flush=True)
@@ -580,7 +586,8 @@ def _label(item: Any, index: int) -> str:
 def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None = None, *,
               progress: bool = True, desc: str = "batch",
               on_result: Callable[[Any], None] | None = None,
-              on_error: Callable[[Any, BaseException, str], Any] | None = None) -> list[Any]:
+              on_error: Callable[[Any, BaseException, str], Any] | None = None,
+              weight: Callable[[Any], float] | None = None) -> list[Any]:
     """``[fn(item) for item in items]`` through the batch door, in item order.
 
     Parameters
@@ -605,6 +612,8 @@ def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None
         ``on_error(item, exception, traceback_text)`` returns the result that stands for a
         failed item, and the batch goes on.  Without it the first failure is raised once the
         items already submitted have finished (Dask) or at once (in this process, executor).
+    weight : callable, optional
+        ``weight(item)``: the item's share of the work, for the time left (default: equal).
 
     Returns
     -------
@@ -612,7 +621,7 @@ def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None
         The results, in the order of ``items``.
     """
     items = list(items)
-    bar = _Progress(len(items), progress, desc)
+    bar = _Progress(len(items), progress, desc, weights=None if weight is None else [weight(x) for x in items])
     results: list[Any] = [None] * len(items)
     first_error: list[BaseException] = []
 
@@ -620,12 +629,12 @@ def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None
         if exc is not None:
             if on_error is None:
                 first_error.append(exc)
-                bar.update(_label(items[i], i), failed=True)
+                bar.update(_label(items[i], i), failed=True, index=i)
                 return
             result = on_error(items[i], exc, tb)
         results[i] = result
         failed = exc is not None or (isinstance(result, Mapping) and result.get("error") is not None)
-        bar.update(_label(items[i], i), failed=failed)
+        bar.update(_label(items[i], i), failed=failed, index=i)
         if on_result is not None:
             on_result(result)
 
@@ -686,7 +695,7 @@ def _error_record(job: Any, exc: BaseException, tb: str) -> dict[str, Any]:
 
 def run_batch(jobs: Iterable[FitJob], client: Any | None = None, *, progress: bool = True,
               on_record: Callable[[dict[str, Any]], None] | None = None,
-              executor: Any | None = None) -> pd.DataFrame:
+              executor: Any | None = None, weight: Callable[[Any], float] | None = None) -> pd.DataFrame:
     """Run many fit jobs and collect their records, one row per job, in job order.
 
     Parameters
@@ -702,6 +711,8 @@ def run_batch(jobs: Iterable[FitJob], client: Any | None = None, *, progress: bo
         Called with every record as it arrives (progress, partial results).
     executor : optional
         Same as ``client`` (the keyword of callers written for ``concurrent.futures``).
+    weight : callable, optional
+        A job's share of the work for the progress bar's time left (:func:`batch_map`).
 
     Returns
     -------
@@ -712,7 +723,7 @@ def run_batch(jobs: Iterable[FitJob], client: Any | None = None, *, progress: bo
     if client is not None and executor is not None:
         raise TypeError("give client or executor, not both")
     records = batch_map(run_job, jobs, client if client is not None else executor, progress=progress,
-                        desc="fits", on_result=on_record, on_error=_error_record)
+                        desc="fits", on_result=on_record, on_error=_error_record, weight=weight)
     return pd.DataFrame.from_records(records)
 
 

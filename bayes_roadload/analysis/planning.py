@@ -385,6 +385,13 @@ def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: flo
     return out[cols + [c for c in out.columns if c not in cols]]
 
 
+def refit_work(job: FitJob) -> float:
+    """A planning refit's share of the work, for the time left of its progress bar: one unit
+    plus one per pair (measured on a 12-pair hierarchical population, one worker: 2 s at 1 pair,
+    12 s at 12, 30 s at 24; docs/planning.md section 7)."""
+    return 1.0 + float(job.tags.get("n_pairs", 0))
+
+
 def undecided_sizes(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE) -> list[int]:
     """The sizes (``n_pairs``) at which some target is still undecided: the Wilson 95 % interval
     of its assurance (``assurance`` x ``n_sims`` refits meeting the target) contains the required

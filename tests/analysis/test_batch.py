@@ -203,3 +203,20 @@ def test_worker_environment_shares_cores(monkeypatch):
     assert [f for f in flags if "device_count" in f] == ["--xla_force_host_platform_device_count=2"]
     assert "intra_op_parallelism_threads=1" in flags and env["OMP_NUM_THREADS"] == "1"
     assert "device_count=1" in worker_environment(4, cores=2)["XLA_FLAGS"]
+
+
+def test_the_time_left_weighs_each_item_by_its_work(monkeypatch):
+    """Items of weights 1 and 9: after the first, done in 10 s, the other is expected to take
+    9 x 10 s (equal weights would say 10 s)."""
+    import io
+
+    from bayes_roadload.analysis import batch
+
+    clock = iter([100.0, 110.0, 200.0])
+    monkeypatch.setattr(batch.time, "perf_counter", lambda: next(clock))
+    out = io.StringIO()
+    bar = batch._Progress(2, True, "fits", stream=out, weights=[1.0, 9.0])
+    bar.update("small", index=0)
+    assert "about " + batch._format_seconds(90.0) + " left" in out.getvalue()
+    bar.update("large", index=1)
+    assert out.getvalue().splitlines()[-1].endswith("about " + batch._format_seconds(0.0) + " left]")
