@@ -42,13 +42,17 @@ def limit_malloc_arenas(n: int | None = None) -> int | None:
     Arenas already attached to running threads are kept; threads started later share the ``n``.
 
     Returns the cap set, or None when nothing was done: not Linux with glibc, ``MALLOC_ARENA_MAX``
-    set in the environment (glibc read it at start), or ``n`` = 0.
+    set in the environment (glibc read it at start), or ``n`` = 0 (or
+    ``$BAYES_ROADLOAD_MALLOC_ARENAS`` not an integer).
     """
     import ctypes
     import sys
 
     if n is None:
-        n = int(os.environ.get(ARENAS_ENV, MALLOC_ARENAS))
+        try:
+            n = int(os.environ.get(ARENAS_ENV, MALLOC_ARENAS))
+        except ValueError:  # not a number: glibc's default, as for 0
+            return None
     if n <= 0 or "MALLOC_ARENA_MAX" in os.environ or not sys.platform.startswith("linux"):
         return None
     try:

@@ -57,6 +57,7 @@ def test_importing_the_package_caps_the_arenas_of_concurrent_threads():
 def test_the_environment_overrides_the_cap():
     assert _arenas("import", **{_jax.ARENAS_ENV: "0"}) > _jax.MALLOC_ARENAS
     assert _arenas("import", **{_jax.ARENAS_ENV: "3"}) == 3
+    assert _arenas("import", **{_jax.ARENAS_ENV: "two"}) > _jax.MALLOC_ARENAS  # not a number: no cap, no error
     assert _jax.limit_malloc_arenas(0) is None
 
 
