@@ -6,7 +6,9 @@ the process starts to its exit.  The record adds the refits per size, their mean
 compile time from ``plan_records.csv``, and the recommendation.
 
 Records: ``benchmarks/records/performance/plan_time.jsonl`` (one line per run);
-``docs/planning.md`` section 7 quotes them.
+``docs/planning.md`` section 7 quotes them.  ``--refits N --pairs P`` instead times N refits of
+P pairs in one process (time, compile time, resident memory, caches cleared), from the same
+fit: the per-refit record (``plan_refits.jsonl``).
 
     python benchmarks/plan_time.py [--extra-args "--workers 2"]
     python benchmarks/plan_time.py --from-run DIR --wall-s S --note TEXT   # a run of the same
@@ -29,18 +31,56 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDS = ROOT / "benchmarks" / "records" / "performance" / "plan_time.jsonl"
+REFIT_RECORDS = ROOT / "benchmarks" / "records" / "performance" / "plan_refits.jsonl"
+
+
+def reference_fit(tmp: Path) -> Path:
+    """The issue's source fit: case 14, 12 pairs, seed 1, ``fit`` with its defaults."""
+    cli = [sys.executable, "-m", "bayes_roadload"]
+    subprocess.run(cli + ["simulate", "--case", "14", "--pairs", "12", "--seed", "1", "--out", str(tmp / "camp")],
+                   check=True, capture_output=True)
+    subprocess.run(cli + ["fit", str(tmp / "camp"), "--out", str(tmp / "fit"), "--no-progress", "--no-report"],
+                   check=True, capture_output=True)
+    return tmp / "fit"
+
+
+def time_refits(fit_dir: Path, pairs: int, refits: int) -> list[dict]:
+    """``refits`` planning refits of ``pairs`` pairs from ``fit_dir``'s posterior, one after the
+    other in this process, as `plan` runs them (``batch.run_job``)."""
+    sys.path.insert(0, str(ROOT))
+    from bayes_roadload.analysis.batch import run_job
+    from bayes_roadload.analysis.planning import plan_jobs, population_from_samples
+    from bayes_roadload.data import load_campaign
+    from bayes_roadload.output import read_fit_dir
+
+    src = read_fit_dir(fit_dir)
+    pop = population_from_samples(src.samples, src.record["free"], src.model, load_campaign(src.record["campaign"]),
+                                  source=str(fit_dir))
+    out = []
+    for job in plan_jobs(pop, [pairs], simulations=refits):
+        t0 = time.perf_counter()
+        r = run_job(job)
+        out.append({"pairs": pairs, "refit": job.tags["simulation"], "wall_s": round(time.perf_counter() - t0, 2),
+                    "compile_s": round(float(r["time_compile_s"]), 2), "rss_mb": round(float(r["rss_mb"])),
+                    "jax_caches_cleared": bool(r["jax_caches_cleared"]), "pareto_k": round(float(r["pareto_k"]), 3),
+                    "error": r.get("error")})
+    return out
 
 
 def summarise(plan_dir: Path, wall_s: float, args: str, note: str = "") -> dict:
     """The record of one plan run from its output directory."""
     rec = pd.read_csv(plan_dir / "plan_records.csv")
     per_size = rec.groupby("n_pairs").agg(refits=("n_pairs", "size"), mean_s=("time_total_s", "mean"),
-                                          compile_s=("time_compile_s", "sum"))
+                                          compile_s=("time_compile_s", "sum"), max_rss_mb=("rss_mb", "max"),
+                                          caches_cleared=("jax_caches_cleared", "sum"))
     recommendation = pd.read_csv(plan_dir / "recommendation.csv")
     return {
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "cpu_count": os.cpu_count(),
         "load_avg_1min_after": round(os.getloadavg()[0], 2), "plan_args": args, "wall_s": round(wall_s, 1),
         "target_s": 180.0, "refits": int(len(rec)), "errors": int(rec["error"].notna().sum()) if "error" in rec else 0,
+        "refit_s": round(float(rec["time_total_s"].sum()), 1), "compile_s": round(float(rec["time_compile_s"].sum()), 1),
+        "refits_compiling_over_3s": int((rec["time_compile_s"] > 3).sum()),
+        "jax_caches_cleared": int(rec["jax_caches_cleared"].sum()),
         "per_size": {int(n): {k: round(float(v), 2) for k, v in r.items()} for n, r in per_size.iterrows()},
         "recommendation": {r["quantity"]: (int(r["n_pairs"]) if r["reached"] else f"> {int(r['max_pairs_simulated'])}")
                            for _, r in recommendation.iterrows()},
@@ -53,7 +93,21 @@ def main() -> None:
     p.add_argument("--from-run", type=Path, default=None, help="summarise a plan output directory instead")
     p.add_argument("--wall-s", type=float, default=None)
     p.add_argument("--note", default="")
+    p.add_argument("--refits", type=int, default=None, help="time this many refits of --pairs pairs instead")
+    p.add_argument("--pairs", type=int, default=24)
+    p.add_argument("--fit-dir", type=Path, default=None, help="source fit of --refits (default: fitted anew)")
     a = p.parse_args()
+    if a.refits is not None:
+        with tempfile.TemporaryDirectory(prefix="plan_refits_") as tmp:
+            rows = time_refits(a.fit_dir or reference_fit(Path(tmp)), a.pairs, a.refits)
+        stamp = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load_avg_1min_after": round(os.getloadavg()[0], 2),
+                 "note": a.note}
+        REFIT_RECORDS.parent.mkdir(parents=True, exist_ok=True)
+        with REFIT_RECORDS.open("a") as f:
+            for row in rows:
+                f.write(json.dumps({**stamp, **row}) + "\n")
+        print(json.dumps(rows, indent=1))
+        return
     if a.from_run is not None:
         if a.wall_s is None:
             sys.exit("--from-run needs --wall-s")
@@ -61,14 +115,10 @@ def main() -> None:
     else:
         with tempfile.TemporaryDirectory(prefix="plan_time_") as tmp:
             tmp = Path(tmp)
-            cli = [sys.executable, "-m", "bayes_roadload"]
-            subprocess.run(cli + ["simulate", "--case", "14", "--pairs", "12", "--seed", "1", "--out", str(tmp / "camp")],
-                           check=True, capture_output=True)
-            subprocess.run(cli + ["fit", str(tmp / "camp"), "--out", str(tmp / "fit"), "--no-progress", "--no-report"],
-                           check=True, capture_output=True)
+            fit_dir = reference_fit(tmp)
             t0 = time.perf_counter()
-            subprocess.run(cli + ["plan", str(tmp / "fit"), "--out", str(tmp / "plan"), *shlex.split(a.extra_args)],
-                           check=True, capture_output=True)
+            subprocess.run([sys.executable, "-m", "bayes_roadload", "plan", str(fit_dir), "--out", str(tmp / "plan"),
+                            *shlex.split(a.extra_args)], check=True, capture_output=True)
             record = summarise(tmp / "plan", time.perf_counter() - t0, a.extra_args, a.note)
     RECORDS.parent.mkdir(parents=True, exist_ok=True)
     with RECORDS.open("a") as f:

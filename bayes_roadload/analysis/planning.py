@@ -34,18 +34,21 @@ posterior mean for relative targets (``CD0=1%``), SI units otherwise (``F50_N=2`
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 from dataclasses import dataclass
 from pathlib import PurePath
 from typing import Any, Mapping, Sequence
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
 from .. import config
 from ..data.campaign import Campaign
+from ..physics import integrate_batch
 from .batch import FitJob, interval_key, quantile_key, successful
 
 QUANTITY_UNITS: dict[str, str] = {**config.PARAMETER_UNITS, "F50_N": "N", "F50_tyre_N": "N", "F0_N": "N",
@@ -222,6 +225,15 @@ def population_from_pilot(means: Mapping[str, float], spreads_pct: Mapping[str, 
 
 # --------------------------------------------------------------------------- future campaigns
 
+@functools.partial(jax.jit, static_argnums=0)
+def _integrated_speed(model, params, batch, v0_mps):
+    """:func:`~bayes_roadload.physics.integrate_batch`'s speeds as one compiled program per
+    model and batch shape.  Called eagerly, the vmapped integration runs (and compiles) its
+    operations one by one: about 100 small programs, 15 s, for the first campaign of a size, and
+    again for later ones whenever JAX's caches had let them go (docs/planning.md section 7)."""
+    return integrate_batch(model, params, batch, v0_mps)[0]
+
+
 def _pad_length(c: Campaign) -> int:
     return int(c.runs.groupby("run", sort=False).size().max())
 
@@ -241,7 +253,6 @@ def simulate_future(population: Population, pairs: int, seed: int) -> Campaign:
     run, so that every future campaign of ``pairs`` pairs has one shape.
     """
     from ..inference.spec import load_model_spec
-    from ..physics import integrate_batch
 
     if pairs < 1:
         raise ValueError("a future campaign needs at least one pair")
@@ -282,7 +293,7 @@ def simulate_future(population: Population, pairs: int, seed: int) -> Campaign:
             rel = v + along
             yaw = np.clip(np.arctan2(cross, rel), -config.MAX_LOGGED_YAW_RAD, config.MAX_LOGGED_YAW_RAD)
             batch = batch._replace(airspeed_mps=jnp.asarray(np.hypot(rel, cross)), yaw_rad=jnp.asarray(yaw))
-        v = np.asarray(integrate_batch(model, dict(fixed, **stacked), batch, jnp.asarray(v_obs[:, 0]))[0])
+        v = np.asarray(_integrated_speed(model, dict(fixed, **stacked), batch, jnp.asarray(v_obs[:, 0])))
     t = np.asarray(batch.time_s)
     dt = np.diff(t, axis=1, prepend=t[:, :1])
     walk = np.cumsum(population.q_mps_per_sqrt_s[s] * np.sqrt(dt) * rng.standard_normal(v.shape), axis=1)

@@ -62,3 +62,25 @@ def test_same_shaped_campaigns_share_one_compilation(two_campaigns):
     c2 = _compile_clock() - first - c1
     assert c1 > 0
     assert c2 < 0.1 * c1, (c1, c2)
+
+
+def test_the_potential_of_many_draws_goes_in_batches_and_equals_one_by_one(two_campaigns, monkeypatch):
+    """``f_many`` (the importance draws' potential) runs over the draws in batches of
+    results.PER_DRAW_BATCH_ELEMENTS / samples; with batches of 3 draws, 7 draws give exactly
+    the one-by-one values (a remainder batch included)."""
+    import jax.numpy as jnp
+
+    from bayes_roadload.inference import laplace
+
+    c = two_campaigns[1]
+    problem = build_problem(c, "three_term")
+    per_draw = int(np.prod(np.shape(problem.batch.speed_mps)))
+    monkeypatch.setattr(laplace, "PER_DRAW_BATCH_ELEMENTS", 3 * per_draw)
+    comp = laplace.CompiledProblem.build(problem, initial_values(problem, c))
+    y0 = np.asarray(comp._fns["to_scaled"]({k: jnp.asarray(v) for k, v in initial_values(problem, c).items()},
+                                           laplace._data(problem)))
+    ys = y0 + 0.01 * np.random.default_rng(0).standard_normal((7, y0.size))
+    many = np.asarray(comp._fns["f_many"](jnp.asarray(ys), laplace._data(problem)))
+    one = np.array([float(comp._fns["f"](jnp.asarray(y), laplace._data(problem))) for y in ys])
+    assert np.all(np.isfinite(one)) and np.ptp(one) > 0
+    np.testing.assert_allclose(many, one, rtol=1e-12, atol=1e-9)
