@@ -728,8 +728,9 @@ def _cmd_plan(args) -> int:
         records = run_batch(plan_jobs(population, pairs, simulations=first, model=fit_model,
                                       confidence=args.confidence, seed=args.seed), client, progress=progress,
                             weight=refit_work)
-        if first < args.simulations:
-            undecided = undecided_sizes(plan_table(records, targets, args.confidence), args.assurance)
+        first_table = plan_table(records, targets, args.confidence)
+        if first < args.simulations and not first_table.empty:
+            undecided = undecided_sizes(first_table, args.assurance)
             if undecided:
                 echo(f"undecided after {first} simulations at {undecided} pairs (a target's assurance within the "
                       f"Wilson 95 % interval of {args.assurance:g}): {args.simulations - first} more at each ...")
