@@ -557,9 +557,9 @@ class _Progress:
         if enabled and total and getattr(self.stream, "isatty", lambda: False)():
             self.bar = tqdm(total=total, desc=desc, unit="job", file=self.stream, dynamic_ncols=True)
 
-    def update(self, label: str, failed: bool = False, index: int | None = None) -> None:
+    def update(self, label: str, index: int, failed: bool = False) -> None:
         self.done += 1
-        self.work_done += self.weights[index] if index is not None else 1.0
+        self.work_done += self.weights[index]
         if not self.enabled:
             return
         elapsed = time.perf_counter() - self.t0

@@ -50,7 +50,7 @@ from .bayes import (
     run_sensitivities,
 )
 from .nuts import MapResult, initial_values, newton_map, site_layout
-from .results import PER_DRAW_BATCH_ELEMENTS
+from .results import draws_at_once
 from .spec import ModelSpec
 
 DEFAULT_LAPLACE_DRAWS = config.LAPLACE_DRAWS
@@ -130,14 +130,13 @@ class CompiledProblem:
             return road_load_summary(tpl.model, dict(tpl.fixed, **values), tpl.mass_kg, tpl.frontal_area_m2,
                                      driveline_curve=tpl.driveline_curve)
 
-        # the potential of many draws in batches (results.PER_DRAW_BATCH_ELEMENTS): all 2000
-        # importance draws of a 24-pair campaign at once held 8.6 GB, and the batch door then
-        # cleared JAX's caches after every other refit (docs/planning.md section 7)
-        per_draw = max(1, int(np.prod(np.shape(tpl.batch.speed_mps))))
-        draws_at_once = max(1, PER_DRAW_BATCH_ELEMENTS // per_draw)
+        # the potential of many draws in batches (results.draws_at_once): all 2000 importance
+        # draws of a 24-pair campaign at once held 8.6 GB, and the batch door then cleared JAX's
+        # caches after every other refit (docs/planning.md section 7)
+        batch = draws_at_once(tpl)
 
         def objective_many(ys, data):
-            return jax.lax.map(lambda y: objective(y, data), ys, batch_size=draws_at_once)
+            return jax.lax.map(lambda y: objective(y, data), ys, batch_size=batch)
 
         self._fns = {
             "f": jax.jit(objective), "g": jax.jit(jax.grad(objective)), "to_scaled": jax.jit(to_scaled),

@@ -62,10 +62,16 @@ PER_DRAW_BATCH_ELEMENTS = 2_000_000
 draws (all 4000 draws of a 108-run campaign at once took more than 20 GB)."""
 
 
-def _map_draws(fn, xs, problem) -> Any:
-    """``jax.vmap(fn)(xs)`` in batches of draws (:data:`PER_DRAW_BATCH_ELEMENTS`), compiled once."""
+def draws_at_once(problem) -> int:
+    """Draws per batch of a function of every draw over ``problem``'s speed traces
+    (:data:`PER_DRAW_BATCH_ELEMENTS` / the batch's samples, at least 1)."""
     per_draw = max(1, int(np.prod(np.shape(problem.batch.speed_mps))))
-    batch = max(1, PER_DRAW_BATCH_ELEMENTS // per_draw)
+    return max(1, PER_DRAW_BATCH_ELEMENTS // per_draw)
+
+
+def _map_draws(fn, xs, problem) -> Any:
+    """``jax.vmap(fn)(xs)`` in batches of draws (:func:`draws_at_once`), compiled once."""
+    batch = draws_at_once(problem)
     return jax.jit(lambda x: jax.lax.map(fn, x, batch_size=batch))(xs)
 
 

@@ -66,16 +66,16 @@ def test_same_shaped_campaigns_share_one_compilation(two_campaigns):
 
 def test_the_potential_of_many_draws_goes_in_batches_and_equals_one_by_one(two_campaigns, monkeypatch):
     """``f_many`` (the importance draws' potential) runs over the draws in batches of
-    results.PER_DRAW_BATCH_ELEMENTS / samples; with batches of 3 draws, 7 draws give exactly
+    results.PER_DRAW_BATCH_ELEMENTS / samples (results.draws_at_once); with batches of 3 draws, 7 draws give exactly
     the one-by-one values (a remainder batch included)."""
     import jax.numpy as jnp
 
-    from bayes_roadload.inference import laplace
+    from bayes_roadload.inference import laplace, results
 
     c = two_campaigns[1]
     problem = build_problem(c, "three_term")
     per_draw = int(np.prod(np.shape(problem.batch.speed_mps)))
-    monkeypatch.setattr(laplace, "PER_DRAW_BATCH_ELEMENTS", 3 * per_draw)
+    monkeypatch.setattr(results, "PER_DRAW_BATCH_ELEMENTS", 3 * per_draw)
     comp = laplace.CompiledProblem.build(problem, initial_values(problem, c))
     y0 = np.asarray(comp._fns["to_scaled"]({k: jnp.asarray(v) for k, v in initial_values(problem, c).items()},
                                            laplace._data(problem)))
