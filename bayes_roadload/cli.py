@@ -234,10 +234,11 @@ def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None
         report = entry.report(fit, campaign)
         tables = entry.extras(fit, campaign, report.summary, options)
     record = fit_record(fit, campaign_path)
-    record["type_b"] = bool(entry.type_b and options.type_b)
+    record["type_b"] = entry.type_b is not None and options.type_b
     if record["type_b"]:
         with stages("type_b"):
-            report, budget, _ = propagate_type_b(report, campaign, spec, seed=options.sampler.seed)
+            report, budget, _ = propagate_type_b(report, campaign, spec, seed=options.sampler.seed,
+                                                 options=options)
         tables = dict(tables, **{"budget.csv": budget})
     with stages("writing"), stage("output"):
         written = write_fit_dir(report, out, record=record, extras=tables, provenance=provenance)
@@ -961,7 +962,7 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--no-type-b", action="store_true",
                    help="leave the Type B uncertainty of the declared values and instruments (vehicle.toml "
                         "[uncertainty], docs/calibration.md) out of the intervals and write no budget.csv "
-                        "(default: added, speed traces)")
+                        "(default: added, every data kind)")
     f.set_defaults(func=_cmd_fit)
     from .analysis.fleet import add_batch_parser
 
@@ -992,8 +993,10 @@ def build_parser() -> argparse.ArgumentParser:
                                      "on the dynamometer (GTR 15 Annex 4 adjustment), the target's posterior carried "
                                      "through, with the tolerance checks")
     dy.add_argument("target_fit_dir", metavar="TARGET_FIT_DIR", help="a NUTS `fit` output directory (the target)")
-    dy.add_argument("dyno_coastdown", metavar="DYNO_COASTDOWN",
-                    help="directory with dyno_coastdown.csv and dyno.toml (see `simulate --kind dyno`)")
+    dy.add_argument("dyno_coastdown", metavar="DYNO_COASTDOWN", nargs="+",
+                    help="directory with dyno_coastdown.csv and dyno.toml (see `simulate --kind dyno`); two or more "
+                         "consecutive coastdowns at one setting are regressed together (GTR 15 8.1.3.4.2 accepts a "
+                         "setting on two)")
     dy.add_argument("--tolerance-n", type=float, default=10.0, help="load tolerance at the check speeds, N")
     dy.add_argument("--out", required=True, help="directory for dyno_set.csv, dyno_checks.csv, dyno.json")
     dy.set_defaults(func=_cmd_dyno)

@@ -253,7 +253,7 @@ def test_import_vbox_and_fit_an_interval_campaign(tmp_path, capsys):
                  "--out", str(out)]) == 0
     assert len(load_campaign(out).run_ids) == 12 and (out / "import_report.json").exists()
     code = main(["fit", "--no-report", str(out), "--out", str(tmp_path / "fit"), "--warmup", "200", "--draws", "300",
-                 "--no-progress"])
+                 "--no-progress", "--no-type-b"])   # the import and the fit; Type B: tests/analysis/test_budget.py
     text = capsys.readouterr().out
     assert code in (0, EXIT_GATES_FAILED)
     assert "rejected run high-3: operator: Run-Use Off" in text and "rejected run high-4: partner of high-3" in text
@@ -372,7 +372,14 @@ def test_spindown_simulate_and_fit_recover_the_undriven_wheels(tmp_path, capsys)
     classical = pd.read_csv(out / "classical.csv").set_index("wheel")
     # the classical eq. 5.14 line is ~30x less precise than the fit of the speeds themselves
     assert classical.loc["total", "Au_se"] > 5 * s.loc["Au", "sd"]
-    assert "table 7.10" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "table 7.10" in printed and "Uncertainty budget" in printed and "F50_undriven_N: data" in printed
+    # the wheel inertias and the speed sensor's Type B uncertainty (analysis.budget), per quantity
+    budget = pd.read_csv(out / "budget.csv")
+    au = budget[budget["quantity"] == "Au"].set_index("source")
+    assert {"data", "rotating_inertia_rel", "speed_scale_rel"} <= set(au.index)
+    assert au["variance_share"].sum() == pytest.approx(1.0)
+    assert json.loads((out / "fit.json").read_text())["type_b"] is True
 
 
 def test_spindown_and_steady_fits_refuse_options_that_do_not_apply(tmp_path, capsys):
@@ -488,3 +495,27 @@ def test_version_and_defaults_in_help(capsys):
     commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
     assert not [(name, a.dest) for name, c in commands.items() for a in c._actions if a.help is None]
 
+
+
+def test_dyno_takes_consecutive_coastdowns(tmp_path, monkeypatch, capsys):
+    """``dyno TARGET DYNO_COASTDOWN [DYNO_COASTDOWN ...]``: every coastdown reaches the analysis
+    (regressed together), and the printout says whether GTR 15 8.1.3.4.2 accepts the setting."""
+    import numpy as np
+
+    from bayes_roadload.analysis import standards
+    from bayes_roadload.data.dyno import save_dyno
+    from bayes_roadload.simulate.dyno import simulate_dyno
+
+    args = build_parser().parse_args(["dyno", "target", "a", "b", "--out", "o"])
+    assert args.dyno_coastdown == ["a", "b"]
+    used, parasitic = (100.0, 0.5, 0.03), (10.0, 0.1, 0.002)
+    for i in (1, 2):
+        save_dyno(simulate_dyno(used, parasitic, 1500.0, speed_noise_mps=0.01, seed=i), tmp_path / f"d{i}")
+    target = np.add(used, parasitic)
+    monkeypatch.setattr(standards, "load_draws", lambda _: {k: np.full(4, v) for k, v in
+                                                            zip(("F0_N", "F1_N_per_kph", "F2_N_per_kph2"), target)})
+    monkeypatch.setattr("bayes_roadload.analysis.dyno.load_draws", standards.load_draws)
+    out = tmp_path / "out"
+    assert main(["dyno", str(tmp_path), str(tmp_path / "d1"), str(tmp_path / "d2"), "--out", str(out)]) == 0
+    assert "within on 2 consecutive coastdowns: setting accepted" in capsys.readouterr().out
+    assert json.loads((out / "dyno.json").read_text())["coastdowns"] == 2

@@ -6,14 +6,19 @@ sensors, the driveline transducer) are not informed by the coastdown: the poster
 fixed at their declared values.  They are marginalised to first order after the fit:
 
 * **sensitivities** ``c_{x,s} = dx/ds`` of every reported quantity x (free coefficients and the
-  derived road load) to every source s: the change of the joint least-squares estimate
-  (:func:`~bayes_roadload.inference.lsq.fit_lsq`, one group: the estimate the posterior
-  centres on) when the campaign's source is shifted by ``+-u_s``
-  (:meth:`~bayes_roadload.data.uncertainty.UncertaintySource.apply`), by central differences
-  of the residuals at the optimum and one Gauss-Newton step
-  (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`; ``method="refit"`` refits each
-  shifted campaign instead, five to seven times slower at 36 runs; the two agree to a few per
-  cent of each source's contribution, tested);
+  derived figures) to every source s, when the campaign's source is shifted by ``+-u_s``
+  (:meth:`~bayes_roadload.data.uncertainty.UncertaintySource.apply`; what it acts on in each
+  kind: :class:`~bayes_roadload.data.uncertainty.TypeBChannels`), as the kind's registry entry
+  computes them (:attr:`~bayes_roadload.inference.kinds.KindEntry.type_b`):
+
+  - speed traces: the change of the joint least-squares estimate
+    (:func:`~bayes_roadload.inference.lsq.fit_lsq`, one group: the estimate the posterior
+    centres on), by central differences of the residuals at the optimum and one Gauss-Newton
+    step (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`; ``method="refit"``
+    refits each shifted campaign instead, five to seven times slower at 36 runs; the two agree
+    to a few per cent of each source's contribution, tested);
+  - intervals, distance-time, spin-down and steady state: central differences of the MAPs of
+    the shifted campaigns (:func:`~bayes_roadload.inference.shift.map_sensitivities`);
 * **draws**: every posterior draw gets ``sum_s c_{x,s} delta_s`` with ``delta_s ~ N(0, u_s^2)``
   drawn once per draw and shared by all quantities (so their correlations through a common
   source are kept) -- the law of propagation of uncertainty (GUM eq. 10) applied draw by draw;
@@ -40,13 +45,15 @@ import numpy as np
 import pandas as pd
 
 from ..data.uncertainty import SOURCES, standard_uncertainties
-from ..inference.lsq import fit_lsq, linear_sensitivities
+from ..inference.kinds import FitOptions, kind_of
+from ..inference.lsq import fit_lsq
 from ..inference.results import SUMMARY_COLUMNS
 from ..inference.spec import ModelSpec, load_model_spec
 
 SAMPLED_BY_MODEL = {"airspeed_factor_rel": "airspeed_factor", "yaw_factor_rel": "yaw_factor"}
 """Sources that a model can sample itself: source key -> the model's free parameter."""
-BUDGET_QUANTITIES = ("AD", "BD", "CD0", "KD", "At", "Bt", "Ct", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
+BUDGET_QUANTITIES = ("AD", "BD", "CD0", "KD", "At", "Bt", "Ct", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2",
+                     "Au", "Bu", "F50_undriven_N")
 """Quantities whose Type B sensitivities are computed (those the model reports)."""
 BUDGET_COLUMNS = ("quantity", "source", "standard_uncertainty", "sensitivity", "variance", "variance_share", "note")
 
@@ -70,14 +77,18 @@ class TypeB:
 
 
 def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[str] = BUDGET_QUANTITIES,
-                         method: str = "linear") -> TypeB:
-    """Central-difference sensitivities of the least-squares estimate (module docstring):
-    ``method="linear"`` by one Gauss-Newton step from the unshifted optimum
-    (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`: one residual evaluation per
-    shifted campaign), ``"refit"`` by refitting each shifted campaign (two least-squares fits
-    per source); equal to first order in the shifts."""
+                         method: str = "linear", options: FitOptions = FitOptions()) -> TypeB:
+    """Central-difference sensitivities of the campaign's estimate (module docstring), as its
+    kind computes them (:attr:`~bayes_roadload.inference.kinds.KindEntry.type_b`; ``options``:
+    the fit's, e.g. the runs fitted).  For speed traces, ``method="linear"`` takes one
+    Gauss-Newton step from the unshifted least-squares optimum, ``"refit"`` refits each shifted
+    campaign (two least-squares fits per source, all runs); equal to first order in the
+    shifts."""
     if method not in ("linear", "refit"):
         raise ValueError(f"method must be 'linear' or 'refit', not {method!r}")
+    entry = kind_of(campaign)
+    if entry.type_b is None:
+        raise ValueError(f"a {entry.label} campaign has no Type B propagation")
     spec = load_model_spec(spec) if isinstance(spec, str) else spec
     t0 = time.perf_counter()
     u = standard_uncertainties(campaign)
@@ -91,13 +102,17 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
         if SAMPLED_BY_MODEL.get(key) in spec.free:
             notes[key] = f"sampled by the model ({SAMPLED_BY_MODEL[key]} is free)"
             continue
-        plus, minus = source.apply(campaign, u[key]), source.apply(campaign, -u[key])
+        try:
+            plus, minus = source.apply(campaign, u[key]), source.apply(campaign, -u[key])
+        except ValueError as e:  # CampaignError: the shifted campaign leaves its checks' ranges
+            notes[key] = f"not propagated (the campaign shifted by +-u is refused: {e})"
+            continue
         if plus is None or minus is None:
             notes[key] = "not applicable (the campaign has no channel it acts on)"
             continue
         shifts[key] = (plus, minus, u[key])
-    if method == "linear" and shifts:
-        _, rows = linear_sensitivities(campaign, spec, shifts)
+    if shifts and (method == "linear" or not entry.lsq):
+        rows = entry.type_b(campaign, spec, shifts, options)
     else:
         rows = {}
         for key, (plus, minus, h) in shifts.items():
@@ -106,7 +121,8 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
                          for q in hi.weighted_mean if q in lo.weighted_mean}
     for key in shifts:
         if key not in rows:
-            notes[key] = "not propagated (the shifted campaign changes the model's structure)"
+            notes[key] = ("not propagated (the shifted campaign changes the model's structure, or its fit "
+                          "failed: the log says which)")
             continue
         for q in quantities:
             c = rows[key].get(q)
@@ -157,8 +173,10 @@ def budget_table(typeb: TypeB, data_sd: dict[str, float]) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(BUDGET_COLUMNS))
 
 
-def format_budget(budget: pd.DataFrame, quantities: Sequence[str] = ("F50_N", "CD0"), top: int = 3) -> str:
-    """A few lines for the terminal: each quantity's data share and its largest sources."""
+def format_budget(budget: pd.DataFrame, quantities: Sequence[str] = ("F50_N", "CD0", "F50_undriven_N"),
+                  top: int = 3) -> str:
+    """A few lines for the terminal: each quantity's data share and its largest sources (those
+    of ``quantities`` the budget has)."""
     lines = ["Uncertainty budget (share of the variance; budget.csv has every source):"]
     for q in quantities:
         g = budget[budget["quantity"] == q]
@@ -181,7 +199,7 @@ def add_type_b_to_idata(idata, typeb: TypeB, seed: int = 0) -> list[str]:
     return names
 
 
-def propagate_type_b(report, campaign, spec: ModelSpec | str, seed: int = 0):
+def propagate_type_b(report, campaign, spec: ModelSpec | str, seed: int = 0, options: FitOptions = FitOptions()):
     """A fit report with the Type B uncertainty in its draws and summary, and its budget.
 
     Returns ``(report, budget, typeb)``: the report's posterior draws of every quantity with a
@@ -189,7 +207,7 @@ def propagate_type_b(report, campaign, spec: ModelSpec | str, seed: int = 0):
     quantiles; R-hat and ESS stay the sampler's, the added draws being independent), and
     ``budget`` is :func:`budget_table` with the data's own sd from the summary before."""
     quantities = [q for q in BUDGET_QUANTITIES if q in report.idata.posterior]
-    typeb = type_b_sensitivities(campaign, spec, quantities)
+    typeb = type_b_sensitivities(campaign, spec, quantities, options=options)
     summary = report.summary.set_index("parameter")
     data_sd = {q: float(summary.loc[q, "sd"]) for q in quantities if q in summary.index}
     changed = add_type_b_to_idata(report.idata, typeb, seed)

@@ -26,9 +26,21 @@ airspeed and yaw traces; it sits beside the posterior's drag area (``--standard 
   ``CdA = [(F_hi - F_lo,pair) - (dF_spin + dF_TRR)] / [rho / 2 (v2_air,hi - v2_air,lo,pair)]``
   with ``rho = P_act / (R T)``, R = 287.058 J/(kg K).  The equation is an image in the text
   available here; this form is reconstructed from its variables as the clause defines them and
-  is marked not verified in ``docs/standards.md``.  dF_spin (drive-axle spin loss, 1037.560) and
-  dF_TRR (tyre rolling resistance, SAE J2452) are the caller's: 0 when not given, and the result
-  says so;
+  is marked not verified in ``docs/standards.md``;
+* (h)(5) drive-axle spin loss: ``F_spin = P_loss(f) / v_seg`` with ``f = v_seg TRPM`` the
+  wheel speed (r/s) and ``P_loss = c0 + c1 f + c2 f^2`` the axle's zero-torque power loss
+  (1037.560), ``v_seg`` the mean speed of the segment; dF_spin = F_spin,hi - F_spin,lo, Eq.
+  1037.528-10 (:func:`spin_loss_force_n`);
+* (h)(6) tyre rolling resistance per axle position, SAE J2452's regression
+  ``F = n_t p^alpha (L / n_t)^beta (a + b v + c v^2)`` (p in kPa, L in N, v in km/h), summed over
+  the positions and adjusted to the segment's air temperature by ``[1 + 0.006 (24 - T)]`` (T in
+  deg C); dF_TRR = F_TRR,hi - F_TRR,lo (:func:`tyre_rolling_force_n`).  The (h)(5) and (h)(6)
+  equations are images in the text available here; these forms are reconstructed from their
+  variables and reproduce every figure of the regulation's worked examples (tests).  With a
+  ``[cfr1037]`` table in vehicle.toml (:mod:`bayes_roadload.data.heavy_duty`) both are computed
+  per high-speed range from its segment and its pair's low segments; without it they are the
+  caller's constants (``--delta-f-spin-n``, ``--delta-f-trr-n``; 0 when not given, and the result
+  says so);
 * (h)(11) final value: drop ranges whose |yaw| differs from the median |yaw| by more than
   1.0 deg, then those more than 2.0 standard deviations from the mean CdA; at least 24 must
   remain; the effective yaw angle is their mean |yaw| rounded to 0.1 deg and the result their
@@ -46,6 +58,7 @@ import pandas as pd
 
 from .. import config
 from ..data.campaign import Campaign
+from ..data.heavy_duty import CFR1037_TABLE
 
 MASS_PER_TYRE_KG = 56.7
 """(h)(1): added to the measured mass per tyre in contact with the road."""
@@ -68,6 +81,10 @@ MIN_RATE_HZ = 10.0
 """(d), (e), (f): speed, airspeed and yaw recorded at 10 Hz or more."""
 MAX_MEAN_ALONG_WIND_MPH = 6.0
 """(c)(2): the mean wind component parallel to the road, per run."""
+MILE_M = 1609.344
+TRR_TEMPERATURE_COEFFICIENT = 0.006
+TRR_REFERENCE_C = 24.0
+"""(h)(6)(iv): F_TRR x [1 + 0.006 (24 - T)], T in deg C."""
 
 
 def effective_mass_kg(mass_kg: float, tyres_in_contact: int) -> float:
@@ -116,6 +133,39 @@ def range_force(m_e: float, mass_kg: float, v_start: float, v_end: float, t_star
     return m_e * (v_start - v_end) / (t_end - t_start) - mass_kg * g * (h_end - h_start) / (d_end - d_start)
 
 
+def spin_loss_force_n(v_seg_mps: float, tyre_revolutions_per_mile: float, coefficients) -> float:
+    """(h)(5)(iii): the drive-axle spin loss force (N) at the segment's mean speed: the axle's
+    power loss ``c0 + c1 f + c2 f^2`` (W) at the wheel speed ``f = v TRPM`` (r/s), divided by v."""
+    f = v_seg_mps * tyre_revolutions_per_mile / MILE_M
+    c0, c1, c2 = coefficients
+    return (c0 + c1 * f + c2 * f * f) / v_seg_mps
+
+
+def tyre_rolling_force_n(v_seg_mps: float, axles, temperature_k: float | None = None) -> float:
+    """(h)(6)(ii)-(iv): the tyres' rolling resistance force (N) at the segment's mean speed,
+    SAE J2452's ``n_t p^alpha (L / n_t)^beta (a + b v + c v^2)`` (v in km/h) summed over the axle
+    positions (dicts as :func:`~bayes_roadload.data.heavy_duty.cfr1037_from_toml` gives them),
+    times ``1 + 0.006 (24 - T)`` at the segment's air temperature ``T`` (none when None)."""
+    v = v_seg_mps * 3.6
+    total = sum(a["tyres"] * a["pressure_kpa"] ** a["alpha"] * (a["load_n"] / a["tyres"]) ** a["beta"]
+                * (a["a"] + a["b"] * v + a["c"] * v * v) for a in axles)
+    if temperature_k is None:
+        return total
+    return total * (1.0 + TRR_TEMPERATURE_COEFFICIENT * (TRR_REFERENCE_C - (temperature_k - 273.15)))
+
+
+def delta_forces_n(inputs, v_hi_mps: float, v_lo_mps: float, t_hi_k: float, t_lo_k: float) -> tuple[float, float]:
+    """(h)(5)(iv), (h)(6)(v): (dF_spin, dF_TRR) between a high and a low segment from the
+    ``[cfr1037]`` inputs; a part the inputs do not give is NaN."""
+    spin = trr = math.nan
+    if "axle_spin_loss_coefficients" in inputs:
+        args = (inputs["tyre_revolutions_per_mile"], inputs["axle_spin_loss_coefficients"])
+        spin = spin_loss_force_n(v_hi_mps, *args) - spin_loss_force_n(v_lo_mps, *args)
+    if "axle" in inputs:
+        trr = tyre_rolling_force_n(v_hi_mps, inputs["axle"], t_hi_k) - tyre_rolling_force_n(v_lo_mps, inputs["axle"], t_lo_k)
+    return spin, trr
+
+
 def drag_area(f_hi: float, f_lo_pair: float, v2_air_hi: float, v2_air_lo_pair: float, temperature_k: float,
               pressure_pa: float, delta_f_spin_n: float = 0.0, delta_f_trr_n: float = 0.0) -> float:
     """Eq. 1037.528-16 (form reconstructed, module docstring): CdA (m^2) of one high-speed range."""
@@ -130,6 +180,7 @@ class _Range:
     yaw_deg: float
     temperature_k: float
     pressure_pa: float
+    mean_speed_mps: float
 
 
 def _range(g: pd.DataFrame, filt: dict[str, np.ndarray], m_e: float, mass_kg: float, nominal: tuple[float, float],
@@ -150,13 +201,20 @@ def _range(g: pd.DataFrame, filt: dict[str, np.ndarray], m_e: float, mass_kg: fl
     temperature = float(g["temperature_k"][inside].mean()) if "temperature_k" in g else ambient[0]
     pressure = float(g["pressure_pa"][inside].mean()) if "pressure_pa" in g else ambient[1]
     return _Range(force, float(np.mean(filt["airspeed_mps"][inside] ** 2)),
-                  float(np.degrees(np.abs(np.mean(filt["yaw_rad"][inside])))), temperature, pressure)
+                  float(np.degrees(np.abs(np.mean(filt["yaw_rad"][inside])))), temperature, pressure,
+                  float(np.mean(filt["speed_mps"][inside])))
 
 
 def segment_drag_areas(campaign: Campaign, tyres_in_contact: int, *, delta_f_spin_n: float = 0.0,
                        delta_f_trr_n: float = 0.0) -> pd.DataFrame:
     """Per high-speed range of every run: ``run, pair, direction, F_hi_N, F_lo_pair_N,
-    v2_air_hi, v2_air_lo_pair, yaw_deg, temperature_k, pressure_pa, CdA_m2`` ((h)(1)-(h)(10)).
+    v2_air_hi, v2_air_lo_pair, yaw_deg, temperature_k, pressure_pa, v_seg_hi_mps,
+    v_seg_lo_pair_mps, delta_f_spin_n, delta_f_trr_n, CdA_m2`` ((h)(1)-(h)(10)).
+
+    dF_spin and dF_TRR: from the campaign's ``[cfr1037]`` inputs (``meta["cfr1037"]``) per range,
+    at the high segment's and the pair's low segments' mean speed (and air temperature), where
+    the inputs give them; else the constants ``delta_f_spin_n``, ``delta_f_trr_n``.  A constant
+    other than 0 for a part the inputs give is refused as ambiguous.
 
     Each run gives the ranges it passes through: both (complete runs, (d)(1)) or one (split
     runs, (d)(2): high-speed segments and low-speed segments logged as runs of their own).  The
@@ -169,6 +227,12 @@ def segment_drag_areas(campaign: Campaign, tyres_in_contact: int, *, delta_f_spi
     reference conditions are taken."""
     if not campaign.has_anemometer:
         raise ValueError("40 CFR 1037.528 needs the on-board airspeed and yaw ((f)); the campaign has none")
+    inputs = campaign.meta.get(CFR1037_TABLE) or {}
+    for part, key, value in (("axle_spin_loss_coefficients", "--delta-f-spin-n", delta_f_spin_n),
+                             ("axle", "--delta-f-trr-n", delta_f_trr_n)):
+        if part in inputs and value != 0.0:
+            raise ValueError(f"{key} {value:g} and vehicle.toml [cfr1037] {part} both give the correction: "
+                             "ambiguous; give one")
     runs = campaign.runs
     m_e = effective_mass_kg(campaign.vehicle.mass_kg, tyres_in_contact)
     # without temperature_k / pressure_pa columns the air is taken at the project's reference
@@ -191,17 +255,27 @@ def segment_drag_areas(campaign: Campaign, tyres_in_contact: int, *, delta_f_spi
         if hi is not None:
             highs.append({"run": rid, "pair": pair, "direction": directions.get(rid, 0), "F_hi_N": hi.force_n,
                           "v2_air_hi": hi.v2_air, "yaw_deg": hi.yaw_deg, "temperature_k": hi.temperature_k,
-                          "pressure_pa": hi.pressure_pa})
+                          "pressure_pa": hi.pressure_pa, "v_seg_hi_mps": hi.mean_speed_mps})
     cols = ["run", "pair", "direction", "F_hi_N", "F_lo_pair_N", "v2_air_hi", "v2_air_lo_pair", "yaw_deg",
-            "temperature_k", "pressure_pa", "CdA_m2"]
-    rows = [dict(h, F_lo_pair_N=float(np.mean([lo.force_n for lo in lows[h["pair"]]])),
-                 v2_air_lo_pair=float(np.mean([lo.v2_air for lo in lows[h["pair"]]])))
-            for h in highs if h["pair"] in lows]
+            "temperature_k", "pressure_pa", "v_seg_hi_mps", "v_seg_lo_pair_mps", "delta_f_spin_n", "delta_f_trr_n",
+            "CdA_m2"]
+    rows = []
+    for h in highs:
+        if h["pair"] not in lows:
+            continue
+        low = lows[h["pair"]]
+        v_lo = float(np.mean([lo.mean_speed_mps for lo in low]))
+        spin, trr = delta_forces_n(inputs, h["v_seg_hi_mps"], v_lo, h["temperature_k"],
+                                   float(np.mean([lo.temperature_k for lo in low])))
+        rows.append(dict(h, F_lo_pair_N=float(np.mean([lo.force_n for lo in low])),
+                         v2_air_lo_pair=float(np.mean([lo.v2_air for lo in low])), v_seg_lo_pair_mps=v_lo,
+                         delta_f_spin_n=delta_f_spin_n if math.isnan(spin) else spin,
+                         delta_f_trr_n=delta_f_trr_n if math.isnan(trr) else trr))
     if not rows:
         return pd.DataFrame(columns=cols)
     df = pd.DataFrame(rows)
     df["CdA_m2"] = [drag_area(r.F_hi_N, r.F_lo_pair_N, r.v2_air_hi, r.v2_air_lo_pair, r.temperature_k,
-                              r.pressure_pa, delta_f_spin_n, delta_f_trr_n) for r in df.itertuples()]
+                              r.pressure_pa, r.delta_f_spin_n, r.delta_f_trr_n) for r in df.itertuples()]
     return df[cols]
 
 

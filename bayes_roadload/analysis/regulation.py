@@ -45,6 +45,13 @@ GTR_REFERENCE_SPEEDS_KPH = (20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0, 100.
 
 MIN_REGULATION_PAIRS = 3
 """GTR 15 needs at least three pairs."""
+GTR_ONBOARD_MIN_PAIRS = 5
+"""GTR 15 with on-board anemometry: "a minimum of 5 pairs of coastdown runs" (Regulation (EU)
+2017/1151 Annex XXI Sub-Annex 4, 4.3.2.4, which transposes GTR 15 Annex 4)."""
+GTR_MIN_SPEED_RATE_HZ = 10.0
+"""GTR 15: vehicle speed "with a measurement frequency of at least 10 Hz" (Regulation (EU)
+2017/1151 Annex XXI Sub-Annex 4, 3.1(a)); the on-board procedure's own 5 Hz (4.3.2.3) is the
+lower of the two."""
 
 REGULATION_MAX_PAIRS = 200
 """Largest number of pairs searched for the pairs a failing criterion still needs."""

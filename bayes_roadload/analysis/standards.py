@@ -31,10 +31,17 @@ import pandas as pd
 
 from .. import config
 from ..data.campaign import Campaign
+from ..data.heavy_duty import CFR1037_TABLE
 from ..physics.atmosphere import REFERENCE_AIR_DENSITY_KGPM3
 from . import cfr1037
 from .cycles import COEFFICIENTS
-from .regulation import GTR_PRECISION_PCT, MIN_REGULATION_PAIRS, gtr15_precision
+from .regulation import (
+    GTR_MIN_SPEED_RATE_HZ,
+    GTR_ONBOARD_MIN_PAIRS,
+    GTR_PRECISION_PCT,
+    MIN_REGULATION_PAIRS,
+    gtr15_precision,
+)
 
 LBF_N = 4.44822
 MPH_KPH = 1.609344
@@ -56,7 +63,8 @@ class Standard:
     the road-load curve onto {1, v^2} over ``speed_range_kph`` (:func:`two_term_projection`).
     ``mass_per_tyre_kg``: M_e = M + this x the tyres in contact (instead of ``mass_factor``).
     ``max_mean_along_wind_mps``: limit of each run's mean wind component along the road;
-    ``min_rate_hz``: the slowest recording rate allowed.  ``segment_method``: the standard's
+    ``min_rate_hz``: the slowest recording rate allowed.  ``min_pairs_onboard``: the pairs needed
+    instead of ``min_pairs`` when the campaign has on-board anemometry.  ``segment_method``: the standard's
     own drag-area arithmetic is run on the campaign too (:mod:`~bayes_roadload.analysis.cfr1037`).
     """
 
@@ -81,6 +89,7 @@ class Standard:
     mass_per_tyre_kg: float | None = None
     max_mean_along_wind_mps: float | None = None
     min_rate_hz: float | None = None
+    min_pairs_onboard: int = 0
     segment_method: bool = False
 
     @property
@@ -94,7 +103,10 @@ class Standard:
 
 STANDARDS: dict[str, Standard] = {
     "gtr15": Standard("gtr15", "UN GTR 15 (WLTP) Annex 4", 293.15, 100_000.0, "SI_kph", "coefficients",
-                      min_pairs=MIN_REGULATION_PAIRS, precision_pct=GTR_PRECISION_PCT),
+                      min_pairs=MIN_REGULATION_PAIRS, precision_pct=GTR_PRECISION_PCT,
+                      min_pairs_onboard=GTR_ONBOARD_MIN_PAIRS, min_rate_hz=GTR_MIN_SPEED_RATE_HZ,
+                      max_mean_wind_mps=config.WIND_LIMITS["gtr_onboard"]["mean_wind_mps"],
+                      max_mean_crosswind_mps=config.WIND_LIMITS["gtr_onboard"]["mean_cross_wind_mps"]),
     "j2263": Standard("j2263", "SAE J2263 (on-board anemometry)", 293.15, 98_210.0, "US", "coefficients",
                       mass_factor=J2263_MASS_FACTOR, min_runs_per_direction=1, speed_range_kph=(115.0, 15.0)),
     "j1263": Standard("j1263", "SAE J1263 (stationary wind station)", 293.15, 98_210.0, "US", "coefficients",
@@ -124,7 +136,11 @@ tyre in contact ((h)(1)); complete runs from above 72.0 down to 8.0 mi/h or spli
 mean wind along the road at most 6.0 mi/h per run ((c)(2)); 10 Hz recording ((d)); at least 24
 high-speed ranges after the (h)(11) eliminations, with the same number of runs in each
 direction ((d)(2)), hence 12 per direction; its temperature and pressure are J2263's (it
-follows J2263 sections 1-9) and serve only the coefficient rows: its result is a drag area."""
+follows J2263 sections 1-9) and serve only the coefficient rows: its result is a drag area.
+GTR 15 (as transposed in Regulation (EU) 2017/1151 Annex XXI Sub-Annex 4, text found by search):
+5 pairs with on-board anemometry (4.3.2.4), vehicle speed at 10 Hz or more (3.1(a)); its wind
+limits are ``config.WIND_LIMITS["gtr_onboard"]`` (mean and cross-wind; the figures are not in the
+text found, see there)."""
 
 
 def get_standard(name: str | Standard) -> Standard:
@@ -305,9 +321,12 @@ def standard_checks(campaign: Campaign, standard: str | Standard) -> pd.DataFram
         n = int(counts.get(d, 0))
         rows.append(_check(f"runs in direction {d:+d}", n, std.min_runs_per_direction,
                            n >= std.min_runs_per_direction, "runs"))
-    if std.min_pairs:
+    if std.min_pairs or std.min_pairs_onboard:
         n_pairs = len(campaign.pairs())
-        rows.append(_check("opposite-direction pairs", n_pairs, std.min_pairs, n_pairs >= std.min_pairs, "pairs"))
+        onboard = bool(std.min_pairs_onboard) and campaign.has_anemometer
+        need = std.min_pairs_onboard if onboard else std.min_pairs
+        rows.append(_check("opposite-direction pairs" + (" (on-board anemometry)" if onboard else ""), n_pairs,
+                           need, n_pairs >= need, "pairs"))
     if std.precision_pct is not None and "pair" in runs:
         for r in gtr15_precision(campaign, limit_pct=std.precision_pct).itertuples():
             rows.append(_check(f"statistical precision at {r.speed_kph:g} km/h", r.precision_pct, r.limit_pct,
@@ -426,6 +445,7 @@ def run_standard(source: str | Path | Mapping[str, np.ndarray], standard: str | 
             segment["segments"].to_csv(out / "standard_segments.csv", index=False)
             record["segment_method"] = {k: segment[k] for k in ("n_points", "effective_yaw_deg", "CdA_m2",
                                                                  "CdA_se_m2", "delta_f_spin_n", "delta_f_trr_n",
+                                                                 "delta_f_spin_from", "delta_f_trr_from",
                                                                  "ambient_logged")}
         (out / "standard.json").write_text(json.dumps(record, indent=2) + "\n")
     return result, checks
@@ -438,7 +458,10 @@ def segment_method_result(campaign: Campaign, tyres_in_contact: int | None, *, d
     ``result_row`` (``CdA_1037.528_segments``: the final CdA as mean, its standard error as sd,
     no interval) and ``check_rows`` (the (h)(11)(iv) point count; what stops the arithmetic,
     when something does)."""
+    inputs = campaign.meta.get(CFR1037_TABLE) or {}
     base = {"standard": "cfr1037", "delta_f_spin_n": float(delta_f_spin_n), "delta_f_trr_n": float(delta_f_trr_n),
+            "delta_f_spin_from": "[cfr1037] per range" if "axle_spin_loss_coefficients" in inputs else "constant",
+            "delta_f_trr_from": "[cfr1037] per range" if "axle" in inputs else "constant",
             "ambient_logged": bool({"temperature_k", "pressure_pa"} <= set(campaign.runs.columns))}
     empty = {"segments": pd.DataFrame(), "n_points": 0, "effective_yaw_deg": math.nan, "CdA_m2": math.nan,
              "CdA_se_m2": math.nan}
@@ -454,6 +477,10 @@ def segment_method_result(campaign: Campaign, tyres_in_contact: int | None, *, d
     else:
         final = cfr1037.final_drag_area(cfr1037.segment_drag_areas(
             campaign, tyres_in_contact, delta_f_spin_n=delta_f_spin_n, delta_f_trr_n=delta_f_trr_n))
+        kept = final["segments"][final["segments"]["kept"]] if final["n_points"] else final["segments"].iloc[:0]
+        for part in ("spin", "trr"):   # per-range corrections: their mean over the ranges kept
+            if base[f"delta_f_{part}_from"] != "constant" and len(kept):
+                base[f"delta_f_{part}_n"] = float(kept[f"delta_f_{part}_n"].mean())
         missing = cfr1037.runs_without_a_range(campaign)
         checks = [dict(base, **_check("runs through neither 72 -> 58 nor 22 -> 8 mi/h", len(missing), 0,
                                       not missing, "runs")),

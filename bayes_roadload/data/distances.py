@@ -43,6 +43,7 @@ from .checks import (
     subset_table,
     truth_files,
 )
+from .uncertainty import TypeBChannels
 from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
 
 KIND = "distances"
@@ -94,6 +95,7 @@ class DistanceCampaign:
     meta: dict[str, Any] = field(default_factory=dict)
 
     kind = KIND
+    type_b_channels = TypeBChannels("markers")  # surveyed markers and a clock: no speed sensor
     has_anemometer = False
     has_driveline = False
 

@@ -41,6 +41,7 @@ from .checks import (
     subset_table,
     truth_files,
 )
+from .uncertainty import TypeBChannels
 from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
 
 KIND = "intervals"
@@ -97,6 +98,7 @@ class IntervalCampaign:
     meta: dict[str, Any] = field(default_factory=dict)
 
     kind = KIND
+    type_b_channels = TypeBChannels("intervals", speed=("speed_start_mps", "speed_end_mps"))
 
     def __post_init__(self):
         self.intervals = validate_intervals(self.intervals, "intervals")

@@ -16,7 +16,9 @@ column                    unit   required  meaning
 inertia about its axle, one number for every wheel or a table ``{nearside = 0.9, ...}``),
 ``undriven_wheels`` (how many undriven wheels the vehicle has, default 2: the vehicle's
 A_u, B_u are their sum) and optionally ``rolling_radius_m`` (else ``[vehicle] rolling_radius_m``;
-both given and different is refused as ambiguous).  Speeds in rpm, km/h, Hz or degrees per
+both given and different is refused as ambiguous), and optionally ``[uncertainty]`` (Type B
+standard uncertainties, :mod:`.uncertainty`: the speed scale and the wheel inertias,
+``rotating_inertia_rel``).  Speeds in rpm, km/h, Hz or degrees per
 second are refused with the conversion to make.  The samples are shifted so each run starts at
 t = 0 and speeds are kept as tread speeds (m/s).
 """
@@ -52,6 +54,7 @@ from .checks import (
     run_rows,
     truth_files,
 )
+from .uncertainty import UNCERTAINTY_TABLE, TypeBChannels, uncertainty_from_toml
 from .vehicle import VEHICLE_FILE, read_toml_file, toml_table, toml_value
 
 KIND = "spindown"
@@ -98,6 +101,7 @@ class SpindownCampaign:
     truth: dict[str, Any] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
     kind = KIND
+    type_b_channels = TypeBChannels("runs", speed=("wheel_speed_mps",), vehicle=False, wheel_inertia=True)
 
     def __post_init__(self):
         self.runs = validate_spindown(self.runs, "spindown", self.rolling_radius_m)
@@ -208,7 +212,10 @@ def read_spindown_setup(vehicle_file: Path | None, *, wheel_inertia_kgm2: float 
         refuse(where, "[spindown] wheel_inertia_kgm2", None,
               "missing: the wheel's polar moment of inertia (kg m^2) is needed to turn deceleration into drag")
     undriven = table.get("undriven_wheels", config.DEFAULT_UNDRIVEN_WHEELS)
-    return inertia, next(iter(radii.values())), undriven, dict(doc.get("meta", {}))
+    meta = dict(doc.get("meta", {}))
+    if UNCERTAINTY_TABLE in doc:  # Type B standard uncertainties (data.uncertainty), carried in meta
+        meta[UNCERTAINTY_TABLE] = uncertainty_from_toml(doc[UNCERTAINTY_TABLE], where)
+    return inertia, next(iter(radii.values())), undriven, meta
 
 
 def inertia_per_wheel(inertia, wheels) -> dict[str, float]:
@@ -239,11 +246,12 @@ load_spindown = load
 
 
 def spindown_toml(c: SpindownCampaign) -> str:
-    """The vehicle.toml text of a spin-down campaign: ``[spindown]`` and ``[meta]``."""
+    """The vehicle.toml text of a spin-down campaign: ``[spindown]``, ``[meta]`` and ``[uncertainty]``."""
     lines = ["[spindown]", f"rolling_radius_m = {toml_value(float(c.rolling_radius_m))}",
              f"undriven_wheels = {toml_value(int(c.undriven_wheels))}", "", "[spindown.wheel_inertia_kgm2]"]
     lines += [f"{json.dumps(str(w))} = {toml_value(float(v))}" for w, v in c.wheel_inertia_kgm2.items()]
-    return "\n".join(lines + toml_table("meta", c.meta)) + "\n"
+    meta = {k: v for k, v in c.meta.items() if k != UNCERTAINTY_TABLE}
+    return "\n".join(lines + toml_table("meta", meta) + toml_table(UNCERTAINTY_TABLE, c.meta.get(UNCERTAINTY_TABLE))) + "\n"
 
 
 def files(c: SpindownCampaign, fmt: str = "csv") -> dict[str, str]:

@@ -67,6 +67,7 @@ from .checks import (
     truth_files,
     wheel_torque_force_n,
 )
+from .uncertainty import TypeBChannels
 from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
 
 KIND = "steady"
@@ -114,6 +115,7 @@ class SteadyCampaign:
     meta: dict[str, Any] = field(default_factory=dict)
     accel_source: str = "logged"
     kind = KIND
+    type_b_channels = TypeBChannels("runs", speed=("speed_mps",), force=("tractive_force_n", "gearbox_input_force_n"))
 
     def __post_init__(self):
         self.runs, source = validate_steady(self.runs, "steady", self.vehicle.rolling_radius_m)

@@ -47,6 +47,7 @@ from .checks import (
     wheel_torque_force_n,
 )
 from .units import check_plausible_road_load, convert_units
+from .uncertainty import TypeBChannels
 from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
 
 KIND = "traces"
@@ -95,6 +96,8 @@ class Campaign:
     meta: dict[str, Any] = field(default_factory=dict)
 
     kind = KIND
+    type_b_channels = TypeBChannels("runs", speed=("speed_mps", "distance_m", "position_m"),
+                                    force=("driveline_force_n",))
 
     def __post_init__(self):
         self.runs = validate_runs(self.runs, "runs")

@@ -5,7 +5,8 @@ taken from the accuracy the standards ask of the test (an accuracy limit ``a`` r
 rectangular distribution, ``u = a / sqrt(3)``, GUM 4.3.7), and a transformation of the campaign
 that shifts the source by ``delta`` (:meth:`UncertaintySource.apply`): the analysis of the
 shifted campaign is the analysis of a test whose declared value or instrument was off by
-``delta``.  ``vehicle.toml`` may state its own uncertainties in an ``[uncertainty]`` table (keys
+``delta``.  What a source acts on in each data kind is the campaign class's
+:class:`TypeBChannels` (its speed-sensor and transducer columns, its vehicle or wheel inertias).  ``vehicle.toml`` may state its own uncertainties in an ``[uncertainty]`` table (keys
 as in :data:`SOURCES`, standard uncertainties in the key's unit; 0 switches a source off);
 :func:`uncertainty_from_toml` validates it and the campaign carries it in
 ``meta["uncertainty"]``.  How the sources reach the posterior: :mod:`bayes_roadload.analysis.budget`.
@@ -16,69 +17,107 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable, Mapping
+from typing import Any, Callable, Mapping
 
 from .checks import refuse
 
-if TYPE_CHECKING:  # the campaign classes read vehicle.toml, whose [uncertainty] this module checks
-    from .traces import Campaign
+import pandas as pd
 
 UNCERTAINTY_TABLE = "uncertainty"
 
 
-def _scale_column(column: str) -> Callable[[Campaign, float], Campaign | None]:
-    def apply(c: Campaign, delta: float) -> Campaign | None:
-        if column not in c.runs:
-            return None
-        runs = c.runs.copy()
-        runs[column] = runs[column] * (1.0 + delta)
-        return dataclasses.replace(c, runs=runs)
+@dataclass(frozen=True)
+class TypeBChannels:
+    """What of a campaign the Type B sources act on: every campaign class declares one as its
+    class attribute ``type_b_channels`` (the data contract, docs/architecture.md).
+
+    Attributes
+    ----------
+    table : the attribute holding the measured table (``runs``, ``intervals``, ``markers``);
+        the temperature, pressure, yaw and per-run mass columns are shifted where it has them.
+    speed : its columns read from the vehicle-speed sensor (scaled by ``speed_scale_rel``).
+    force : its columns from a force or torque transducer (scaled by ``driveline_scale_rel``).
+    vehicle : the campaign has a ``vehicle`` (declared mass and rotating inertia) and an
+        ``anemometer`` (airspeed factor, yaw factor).
+    wheel_inertia : the campaign declares wheel inertias ``wheel_inertia_kgm2`` (a spin-down),
+        which ``rotating_inertia_rel`` scales.
+    """
+
+    table: str
+    speed: tuple[str, ...] = ()
+    force: tuple[str, ...] = ()
+    vehicle: bool = True
+    wheel_inertia: bool = False
+
+
+def _channels(c) -> TypeBChannels:
+    return type(c).type_b_channels
+
+
+def _with_table(c, transform: Callable[[pd.DataFrame], pd.DataFrame | None]):
+    ch = _channels(c)
+    table = transform(getattr(c, ch.table).copy())
+    return None if table is None else dataclasses.replace(c, **{ch.table: table})
+
+
+def _scale_columns(columns_of: Callable[[TypeBChannels], tuple[str, ...]]) -> Callable[[Any, float], Any]:
+    def apply(c, delta: float):
+        def scale(t: pd.DataFrame) -> pd.DataFrame | None:
+            cols = [col for col in columns_of(_channels(c)) if col in t]
+            if not cols:
+                return None
+            for col in cols:
+                t[col] = t[col] * (1.0 + delta)
+            return t
+        return _with_table(c, scale)
     return apply
 
 
-def _shift_column(column: str) -> Callable[[Campaign, float], Campaign | None]:
-    def apply(c: Campaign, delta: float) -> Campaign | None:
-        if column not in c.runs:
-            return None
-        runs = c.runs.copy()
-        runs[column] = runs[column] + delta
-        return dataclasses.replace(c, runs=runs)
+def _shift_column(column: str) -> Callable[[Any, float], Any]:
+    def apply(c, delta: float):
+        def shift(t: pd.DataFrame) -> pd.DataFrame | None:
+            if column not in t:
+                return None
+            t[column] = t[column] + delta
+            return t
+        return _with_table(c, shift)
     return apply
 
 
-def _speed_scale(c: Campaign, delta: float) -> Campaign | None:
-    runs = c.runs.copy()
-    for col in ("speed_mps", "distance_m", "position_m"):
-        if col in runs:
-            runs[col] = runs[col] * (1.0 + delta)
-    return dataclasses.replace(c, runs=runs)
-
-
-def _airspeed_factor(c: Campaign, delta: float) -> Campaign | None:
-    if "airspeed_mps" not in c.runs:
+def _airspeed_factor(c, delta: float):
+    if not _channels(c).vehicle or "airspeed_mps" not in getattr(c, _channels(c).table):
         return None
     return dataclasses.replace(c, anemometer=dataclasses.replace(
         c.anemometer, airspeed_factor=c.anemometer.airspeed_factor * (1.0 + delta)))
 
 
-def _yaw_factor(c: Campaign, delta: float) -> Campaign | None:
-    if "yaw_rad" not in c.runs:
+def _yaw_factor(c, delta: float):
+    if not _channels(c).vehicle or "yaw_rad" not in getattr(c, _channels(c).table):
         return None
     return dataclasses.replace(c, anemometer=dataclasses.replace(
         c.anemometer, yaw_factor=c.anemometer.yaw_factor * (1.0 + delta)))
 
 
-def _mass(c: Campaign, delta: float) -> Campaign | None:
+def _mass(c, delta: float):
+    ch = _channels(c)
+    if not ch.vehicle:
+        return None
     v = c.vehicle
-    runs = c.runs
-    if "mass_kg" in runs:
-        runs = runs.copy()
-        runs["mass_kg"] = runs["mass_kg"] + delta
-    return dataclasses.replace(c, runs=runs, vehicle=dataclasses.replace(
+    table = getattr(c, ch.table)
+    if "mass_kg" in table:
+        table = table.copy()
+        table["mass_kg"] = table["mass_kg"] + delta
+    return dataclasses.replace(c, **{ch.table: table}, vehicle=dataclasses.replace(
         v, mass_kg=v.mass_kg + delta, effective_mass_kg=v.effective_mass_kg + delta))
 
 
-def _rotating_inertia(c: Campaign, delta: float) -> Campaign | None:
+def _rotating_inertia(c, delta: float):
+    ch = _channels(c)
+    if ch.wheel_inertia:
+        return dataclasses.replace(c, wheel_inertia_kgm2={w: i * (1.0 + delta)
+                                                          for w, i in c.wheel_inertia_kgm2.items()})
+    if not ch.vehicle:
+        return None
     v = c.vehicle
     rotating = v.effective_mass_kg - v.mass_kg
     return dataclasses.replace(c, vehicle=dataclasses.replace(
@@ -97,9 +136,9 @@ class UncertaintySource:
     key: str
     default: float
     accuracy: str
-    transform: Callable[[Campaign, float], Campaign | None]
+    transform: Callable[[Any, float], Any]
 
-    def apply(self, campaign: Campaign, delta: float) -> Campaign | None:
+    def apply(self, campaign, delta: float):
         return self.transform(campaign, float(delta))
 
 
@@ -107,7 +146,8 @@ _SQRT3 = math.sqrt(3.0)
 
 SOURCES: dict[str, UncertaintySource] = {s.key: s for s in (
     UncertaintySource("speed_scale_rel", 0.0017 / _SQRT3,
-                      "SAE J2263 vehicle speed +-0.2 km/h, as a scale error at 115 km/h (+-0.17 %)", _speed_scale),
+                      "SAE J2263 vehicle speed +-0.2 km/h, as a scale error at 115 km/h (+-0.17 %)",
+                      _scale_columns(lambda ch: ch.speed)),
     UncertaintySource("airspeed_factor_rel", 0.0093 / _SQRT3,
                       "SAE J2263 relative wind speed +-1 km/h, as a factor error at 108 km/h (+-0.93 %)",
                       _airspeed_factor),
@@ -125,7 +165,7 @@ SOURCES: dict[str, UncertaintySource] = {s.key: s for s in (
     UncertaintySource("pressure_pa", 700.0 / _SQRT3, "SAE J1263 atmospheric pressure +-0.7 kPa",
                       _shift_column("pressure_pa")),
     UncertaintySource("driveline_scale_rel", 0.01 / _SQRT3, "wheel-torque transducer +-1 % (class 0.5-1)",
-                      _scale_column("driveline_force_n")),
+                      _scale_columns(lambda ch: ch.force)),
 )}
 """Every Type B source by its ``[uncertainty]`` key."""
 
@@ -145,7 +185,7 @@ def uncertainty_from_toml(table: Mapping[str, Any] | None, where: str) -> dict[s
     return out
 
 
-def standard_uncertainties(campaign: Campaign) -> dict[str, float]:
+def standard_uncertainties(campaign) -> dict[str, float]:
     """Every source's standard uncertainty for ``campaign``: its ``[uncertainty]`` values
     (``meta["uncertainty"]``) over the defaults."""
     stated = campaign.meta.get(UNCERTAINTY_TABLE) or {}

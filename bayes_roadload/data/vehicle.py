@@ -3,7 +3,8 @@
 Every kind of campaign but the wheel spin-down (whose ``[spindown]`` table is read by
 :mod:`~bayes_roadload.data.spindown`) has a ``vehicle.toml`` with ``[vehicle]`` (SI units),
 optionally ``[anemometer]``, ``[tunnel]``, ``[uncertainty]`` (Type B standard uncertainties,
-:mod:`.uncertainty`, carried in the campaign's ``meta["uncertainty"]``) and ``[meta]``; the format is in
+:mod:`.uncertainty`, carried in the campaign's ``meta["uncertainty"]``), ``[cfr1037]`` (40 CFR
+1037.528 bench-test inputs, :mod:`.heavy_duty`, in ``meta["cfr1037"]``) and ``[meta]``; the format is in
 ``docs/data-format.md``.  Reading validates and refuses with the file's name and the key.
 """
 
@@ -21,6 +22,7 @@ import numpy as np
 
 from .. import config
 from .checks import CampaignError, refuse
+from .heavy_duty import CFR1037_TABLE, cfr1037_from_toml, cfr1037_toml_lines
 from .uncertainty import UNCERTAINTY_TABLE, uncertainty_from_toml
 
 VEHICLE_FILE = "vehicle.toml"
@@ -130,6 +132,8 @@ def vehicle_from_toml(doc: Mapping[str, Any], where: str) -> tuple[Vehicle, Anem
     meta = dict(doc.get("meta", {}))
     if UNCERTAINTY_TABLE in doc:  # Type B standard uncertainties (data.uncertainty), carried in meta
         meta[UNCERTAINTY_TABLE] = uncertainty_from_toml(doc[UNCERTAINTY_TABLE], where)
+    if CFR1037_TABLE in doc:  # 40 CFR 1037.528 (h)(5)/(h)(6) bench-test inputs (data.heavy_duty)
+        meta[CFR1037_TABLE] = cfr1037_from_toml(doc[CFR1037_TABLE], where)
     return vehicle, anem, tunnel, meta
 
 
@@ -189,7 +193,8 @@ def vehicle_toml(c) -> str:
               f"yaw_factor = {toml_value(c.anemometer.yaw_factor)}"]
     if c.anemometer.distance_constant_m > 0.0:
         lines.append(f"distance_constant_m = {toml_value(c.anemometer.distance_constant_m)}")
-    meta = {k: v for k, v in c.meta.items() if k not in (UNCERTAINTY_TABLE, "conversions")}  # saved in SI
+    meta = {k: v for k, v in c.meta.items() if k not in (UNCERTAINTY_TABLE, CFR1037_TABLE, "conversions")}
     lines += (toml_table("tunnel", c.tunnel) + toml_table("meta", meta)
-              + toml_table(UNCERTAINTY_TABLE, c.meta.get(UNCERTAINTY_TABLE)))
+              + toml_table(UNCERTAINTY_TABLE, c.meta.get(UNCERTAINTY_TABLE))
+              + cfr1037_toml_lines(c.meta.get(CFR1037_TABLE), toml_value))
     return "\n".join(lines) + "\n"

@@ -24,15 +24,18 @@ import pandas as pd
 from .. import config
 from ..data import Campaign, DistanceCampaign, IntervalCampaign, SpindownCampaign, SteadyCampaign
 from .distances import DEFAULT_MODEL as DISTANCE_DEFAULT_MODEL
-from .distances import distance_report, fit_distances_nuts
+from .distances import build_distance_problem, distance_report
 from .bayes import HIERARCHICAL_PARAMETERS
 from .driveline import off_load_channel, on_load_channel
-from .intervals import fit_intervals_nuts, interval_report
-from .nuts import NutsFit, fit_nuts
+from .intervals import build_interval_problem, interval_report
+from .lsq import linear_sensitivities
+from .nuts import NutsFit, fit_nuts, sample_problem
+from .problem import Problem
 from .results import FitReport, trace_report
 from .spec import ModelSpec
-from .spindown import fit_spindown_nuts, spindown_extras, spindown_report
-from .steady import compare_with_coastdown, fit_steady_nuts, resolve_wind, steady_extras, steady_report
+from .shift import Shifts, map_sensitivities
+from .spindown import build_spindown_problem, spindown_extras, spindown_report
+from .steady import build_steady_problem, compare_with_coastdown, resolve_wind, steady_extras, steady_report
 
 
 @dataclass(frozen=True)
@@ -85,9 +88,18 @@ class KindEntry:
     lagged_speed_drop : the kind's integrator supplies the lagged speed drop of a measured
         speed trace, which terms naming a ``lag_time_constant`` (the tyre thermal lag) read
         (:func:`check_model`).
-    type_b : the Type B uncertainty of the test's declared values and instruments is added to
-        the draws, with ``budget.csv`` (:mod:`bayes_roadload.analysis.budget`; its sensitivities
-        come from least-squares refits, so the kind needs ``lsq``).
+    type_b : (campaign, spec, shifts, options) -> source -> quantity -> sensitivity: how the
+        Type B uncertainty of the test's declared values and instruments reaches the kind's
+        figures (:mod:`bayes_roadload.analysis.budget`, which adds it to the draws and writes
+        ``budget.csv``; ``shifts`` as :data:`~bayes_roadload.inference.shift.Shifts`): the
+        least-squares step of :func:`~bayes_roadload.inference.lsq.linear_sensitivities` for
+        speed traces, the MAPs of the shifted campaigns
+        (:func:`~bayes_roadload.inference.shift.map_sensitivities`) for the kinds fitted through
+        their ``problem``; None when the kind has none.
+    problem : (campaign, spec, options) -> the kind's
+        :class:`~bayes_roadload.inference.problem.Problem`, for the kinds whose fit is
+        :func:`~bayes_roadload.inference.nuts.sample_problem` on it; None for speed traces
+        (:func:`~bayes_roadload.inference.nuts.fit_nuts` prepares its own).
     """
 
     name: str
@@ -106,7 +118,8 @@ class KindEntry:
     driveline_channel: Callable[[Any], Any] | None = None
     diagnosis: str | None = None
     diagnosis_model: str | None = None
-    type_b: bool = False
+    type_b: Callable[[Any, ModelSpec, Shifts, FitOptions], dict[str, dict[str, float]]] | None = None
+    problem: Callable[[Any, ModelSpec, FitOptions], Problem] | None = None
     default_pooling: Callable[[Any, ModelSpec, FitOptions], str] = lambda campaign, spec, options: "pooled"
     lagged_speed_drop: bool = False
 
@@ -199,21 +212,52 @@ def _fit_traces(campaign, spec, o: FitOptions) -> NutsFit:
     return fit_nuts(campaign, spec, pooling=pooling, noise=o.noise, robust=o.robust, sampler=o.sampler)
 
 
-def _fit_intervals(campaign, spec, o: FitOptions) -> NutsFit:
-    return fit_intervals_nuts(campaign, spec, sampler=o.sampler, runs=o.runs)
+def _intervals_problem(campaign, spec, o: FitOptions) -> Problem:
+    return build_interval_problem(campaign, spec, runs=o.runs)
 
 
-def _fit_distances(campaign, spec, o: FitOptions) -> NutsFit:
-    return fit_distances_nuts(campaign, spec, sampler=o.sampler, runs=o.runs)
+def _distances_problem(campaign, spec, o: FitOptions) -> Problem:
+    return build_distance_problem(campaign, spec, runs=o.runs)
 
 
-def _fit_spindown(campaign, spec, o: FitOptions) -> NutsFit:
-    return fit_spindown_nuts(campaign, spec, pooling=resolve_pooling(KINDS["spindown"], campaign, spec, o).pooling,
-                             sampler=o.sampler)
+def _spindown_problem(campaign, spec, o: FitOptions) -> Problem:
+    return build_spindown_problem(campaign, spec, pooling=resolve_pooling(KINDS["spindown"], campaign, spec, o).pooling)
 
 
-def _fit_steady(campaign, spec, o: FitOptions) -> NutsFit:
-    return fit_steady_nuts(campaign, spec, wind=resolve_wind(campaign, o.steady_wind), sampler=o.sampler)
+def _steady_problem(campaign, spec, o: FitOptions) -> Problem:
+    return build_steady_problem(campaign, spec, wind=resolve_wind(campaign, o.steady_wind))
+
+
+def _sampled(build: Callable[[Any, ModelSpec, FitOptions], Problem]) -> Callable[[Any, ModelSpec, FitOptions], NutsFit]:
+    """The fit of a kind fitted through its problem: MAP, Laplace whitening, NUTS and gates."""
+    def fit(campaign, spec, o: FitOptions) -> NutsFit:
+        problem = build(campaign, spec, o)
+        return sample_problem(problem, problem.initial, o.sampler, campaign.truth)
+    return fit
+
+
+# ----------------------------------------------------------------------------- Type B sensitivities
+
+def _traces_type_b(campaign, spec, shifts: Shifts, o: FitOptions) -> dict[str, dict[str, float]]:
+    """The least-squares step (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`) on
+    the fitted runs."""
+    if o.runs is not None and list(o.runs) != list(campaign.run_ids):
+        campaign = campaign.subset(o.runs)
+        shifts = {k: (p.subset(o.runs), m.subset(o.runs), h) for k, (p, m, h) in shifts.items()}
+    return linear_sensitivities(campaign, spec, shifts)[1]
+
+
+def _map_type_b(build: Callable[[Any, ModelSpec, FitOptions], Problem]):
+    """The MAPs of the shifted campaigns (:func:`~bayes_roadload.inference.shift.map_sensitivities`)."""
+    def type_b(campaign, spec, shifts: Shifts, o: FitOptions) -> dict[str, dict[str, float]]:
+        return map_sensitivities(lambda c: build(c, spec, o), shifts)
+    return type_b
+
+
+def _through_problem(build: Callable[[Any, ModelSpec, FitOptions], Problem]) -> dict[str, Any]:
+    """The members of a kind fitted through its problem ``build``: the problem, its fit
+    (:func:`_sampled`) and its Type B sensitivities (:func:`_map_type_b`)."""
+    return {"problem": build, "fit": _sampled(build), "type_b": _map_type_b(build)}
 
 
 # ----------------------------------------------------------------------------- printing and extras
@@ -259,19 +303,20 @@ def _steady_default_model(campaign, o: FitOptions) -> str:
 KINDS: dict[str, KindEntry] = {e.name: e for e in (
     KindEntry("traces", "speed-trace", Campaign, lambda c, o: "four_term", _check_traces, _fit_traces,
               trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
-              diagnosis_model="three_term", type_b=True, default_pooling=traces_default_pooling,
+              diagnosis_model="three_term", type_b=_traces_type_b, default_pooling=traces_default_pooling,
               lagged_speed_drop=True),
     KindEntry("intervals", "interval", IntervalCampaign, lambda c, o: "split_f0_f2", _check_intervals,
-              _fit_intervals, interval_report, validity_default="reject", diagnosis="band_times",
-              diagnosis_model="split_f0_f2"),
+              report=interval_report, validity_default="reject", diagnosis="band_times",
+              diagnosis_model="split_f0_f2", **_through_problem(_intervals_problem)),
     KindEntry("distances", "distance-time", DistanceCampaign, lambda c, o: DISTANCE_DEFAULT_MODEL,
-              _nuts_only("distance-time"), _fit_distances, distance_report, preamble=_distance_preamble,
-              diagnosis="band_times", diagnosis_model=DISTANCE_DEFAULT_MODEL),
+              _nuts_only("distance-time"), report=distance_report, preamble=_distance_preamble,
+              diagnosis="band_times", diagnosis_model=DISTANCE_DEFAULT_MODEL, **_through_problem(_distances_problem)),
     KindEntry("spindown", "spin-down", SpindownCampaign, lambda c, o: "undriven_spindown", _check_spindown,
-              _fit_spindown, spindown_report, extras=lambda f, c, s, o: spindown_extras(f, c, s),
-              notes=_spindown_notes),
-    KindEntry("steady", "steady-state", SteadyCampaign, _steady_default_model, _check_steady, _fit_steady,
-              steady_report, extras=_steady_extras, notes=_steady_notes, driveline_channel=on_load_channel),
+              report=spindown_report, extras=lambda f, c, s, o: spindown_extras(f, c, s), notes=_spindown_notes,
+              **_through_problem(_spindown_problem)),
+    KindEntry("steady", "steady-state", SteadyCampaign, _steady_default_model, _check_steady,
+              report=steady_report, extras=_steady_extras, notes=_steady_notes, driveline_channel=on_load_channel,
+              **_through_problem(_steady_problem)),
 )}
 """kind name -> :class:`KindEntry`, one line per data kind."""
 

@@ -236,3 +236,97 @@ def test_split_runs_recover_the_drag_area(tractor):
     assert cfr1037.runs_without_a_range(split) == []
     short = Campaign(_coastdown(1, 1, 1, 15.0, 2.0, v_end=12.0), tractor.vehicle)
     assert cfr1037.runs_without_a_range(short) == [1]
+
+
+# the regulation's worked examples of (h)(5) and (h)(6)
+SPIN = {"tyre_revolutions_per_mile": 508.0, "axle_spin_loss_coefficients": [-206.841, 239.8279, 21.27505]}
+AXLES = [
+    {"position": "steer", "tyres": 2, "pressure_kpa": 758.4, "load_n": 51421.2, "alpha": -0.2435, "beta": 0.9576,
+     "a": 0.0434, "b": 5.4e-5, "c": 5.53e-7},
+    {"position": "drive", "tyres": 8, "pressure_kpa": 689.5, "load_n": 55958.4, "alpha": -0.3146, "beta": 0.9914,
+     "a": 0.0504, "b": 1.11e-4, "c": 2.86e-7},
+    {"position": "trailer", "tyres": 8, "pressure_kpa": 689.5, "load_n": 45727.5, "alpha": -0.3982, "beta": 0.9756,
+     "a": 0.0656, "b": 1.51e-4, "c": 2.94e-7},
+]
+V_HI, V_LO = 28.86, 5.84
+
+
+def test_spin_loss_reproduces_the_regulations_example():
+    """(h)(5) example: F_spin,hi = 129.7 N, F_spin,lo = 52.7 N, dF_spin = 77.0 N.  Printed to
+    0.1 N (+-0.05) from speeds printed to 0.01 m/s: dF_spin/dv = -c0 / v^2 + c2 TRPM^2 is at most
+    8.2 N per m/s (low range), +-0.04 N for +-0.005 m/s; tolerance 0.1 N."""
+    hi = cfr1037.spin_loss_force_n(V_HI, SPIN["tyre_revolutions_per_mile"], SPIN["axle_spin_loss_coefficients"])
+    lo = cfr1037.spin_loss_force_n(V_LO, SPIN["tyre_revolutions_per_mile"], SPIN["axle_spin_loss_coefficients"])
+    assert hi == pytest.approx(129.7, abs=0.1) and lo == pytest.approx(52.7, abs=0.1)
+    spin, trr = cfr1037.delta_forces_n(SPIN, V_HI, V_LO, 298.65, 298.25)
+    assert spin == pytest.approx(77.0, abs=0.1) and math.isnan(trr)
+
+
+def _printed_tolerance(axle, v_mps):
+    """Half a unit of the last printed digit of each J2452 coefficient, through the force's
+    sensitivity to it, plus 0.05 N for the printed result's own rounding."""
+    half = {"alpha": 5e-5, "beta": 5e-5, "a": 5e-5, "b": 0.05 * 10 ** math.floor(math.log10(axle["b"])),
+            "c": 0.005 * 10 ** math.floor(math.log10(axle["c"]))}
+    base = cfr1037.tyre_rolling_force_n(v_mps, [axle])
+    return 0.05 + sum(abs(cfr1037.tyre_rolling_force_n(v_mps, [dict(axle, **{k: axle[k] + h})]) - base)
+                      for k, h in half.items())
+
+
+def test_tyre_rolling_resistance_reproduces_the_regulations_example():
+    """(h)(6) example, per axle position (steer, drive, trailer): 365.6 / 431.4 / 231.7 N at
+    103.896 km/h and 297.8 / 350.7 / 189.0 N at 21.024 km/h; their sums 1028.7 and 837.5 N;
+    at 25.5 and 25.1 deg C 1019.4 and 832.0 N; dF_TRR = 187.4 N.  Tolerance: the coefficients'
+    printed precision (:func:`_printed_tolerance`, 0.1-0.4 N)."""
+    for v, printed in ((V_HI, (365.6, 431.4, 231.7)), (V_LO, (297.8, 350.7, 189.0))):
+        for axle, want in zip(AXLES, printed):
+            assert cfr1037.tyre_rolling_force_n(v, [axle]) == pytest.approx(want, abs=_printed_tolerance(axle, v))
+    tol = {v: sum(_printed_tolerance(a, v) for a in AXLES) for v in (V_HI, V_LO)}
+    assert cfr1037.tyre_rolling_force_n(V_HI, AXLES) == pytest.approx(1028.7, abs=tol[V_HI])
+    assert cfr1037.tyre_rolling_force_n(V_LO, AXLES) == pytest.approx(837.5, abs=tol[V_LO])
+    hi = cfr1037.tyre_rolling_force_n(V_HI, AXLES, 273.15 + 25.5)
+    lo = cfr1037.tyre_rolling_force_n(V_LO, AXLES, 273.15 + 25.1)
+    assert hi == pytest.approx(1028.7 * (1 + 0.006 * (24 - 25.5)), rel=tol[V_HI] / 1028.7)
+    assert hi == pytest.approx(1019.4, abs=tol[V_HI]) and lo == pytest.approx(832.0, abs=tol[V_LO])
+    _, trr = cfr1037.delta_forces_n({"axle": AXLES}, V_HI, V_LO, 273.15 + 25.5, 273.15 + 25.1)
+    assert trr == pytest.approx(187.4, abs=tol[V_HI] + tol[V_LO])
+
+
+def test_cfr1037_table_round_trips_and_is_refused_when_wrong(tractor, tmp_path):
+    from bayes_roadload.data import load_campaign, save_campaign
+    from bayes_roadload.data.checks import CampaignError
+    from bayes_roadload.data.heavy_duty import cfr1037_from_toml
+
+    c = Campaign(tractor.runs, tractor.vehicle, meta={"cfr1037": dict(SPIN, axle=AXLES)})
+    save_campaign(c, tmp_path / "c")
+    assert load_campaign(tmp_path / "c").meta["cfr1037"] == dict(SPIN, axle=AXLES)
+    with pytest.raises(CampaignError, match=r"\[cfr1037\] axle_spin_loss_coefficients.*needed with"):
+        cfr1037_from_toml({"tyre_revolutions_per_mile": 508}, "v.toml")
+    with pytest.raises(CampaignError, match=r"1 tyres.*whole number"):
+        cfr1037_from_toml({"axle": [dict(AXLES[0], tyres=0)]}, "v.toml")
+    with pytest.raises(CampaignError, match=r"2 load_n.*missing"):
+        cfr1037_from_toml({"axle": [AXLES[0], {k: v for k, v in AXLES[1].items() if k != "load_n"}]}, "v.toml")
+    with pytest.raises(CampaignError, match=r"pressure_kpa.*not an inflation pressure in kPa"):
+        cfr1037_from_toml({"axle": [dict(AXLES[0], pressure_kpa=7.584e5)]}, "v.toml")
+    with pytest.raises(CampaignError, match=r"\[cfr1037\] trpm.*unknown key"):
+        cfr1037_from_toml({"trpm": 508}, "v.toml")
+
+
+def test_segment_method_subtracts_each_ranges_own_corrections(tractor):
+    """With ``[cfr1037]`` every high-speed range gets dF_spin and dF_TRR at its own segment's
+    mean speed and its pair's low segments' (by hand through the clause functions), and its
+    CdA drops by (dF_spin + dF_TRR) / (rho/2 (v2_hi - v2_lo)); a constant given as well is
+    refused as ambiguous."""
+    plain = cfr1037.segment_drag_areas(tractor, TYRES)
+    inputs = dict(SPIN, axle=AXLES)
+    c = Campaign(tractor.runs, tractor.vehicle, meta={"cfr1037": inputs})
+    seg = cfr1037.segment_drag_areas(c, TYRES)
+    for r, p in zip(seg.itertuples(), plain.itertuples()):
+        spin, trr = cfr1037.delta_forces_n(inputs, r.v_seg_hi_mps, r.v_seg_lo_pair_mps, 293.2, 293.2)
+        assert (r.delta_f_spin_n, r.delta_f_trr_n) == pytest.approx((spin, trr), rel=1e-12)
+        assert 60.0 < spin < 90.0 and 150.0 < trr < 200.0   # the example's tractor at these speeds
+        rho = r.pressure_pa / (287.058 * r.temperature_k)
+        assert r.CdA_m2 == pytest.approx(p.CdA_m2 - (spin + trr) / (0.5 * rho * (r.v2_air_hi - r.v2_air_lo_pair)),
+                                         rel=1e-12)
+    assert plain["delta_f_spin_n"].eq(0.0).all()
+    with pytest.raises(ValueError, match="--delta-f-spin-n 50.*ambiguous"):
+        cfr1037.segment_drag_areas(c, TYRES, delta_f_spin_n=50.0)

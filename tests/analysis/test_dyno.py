@@ -52,8 +52,10 @@ def test_iterative_adjustment_recovers_the_parasitic_losses():
     assert np.abs(load_err).max() <= 2 * bound  # two coastdowns' truncation errors
     # first pass runs with set = target (no losses assumed): error = the parasitic load itself
     assert res.iterations["max_abs_error_n"].iloc[0] == pytest.approx(40 + 0.3 * 120 + 0.004 * 120**2, abs=bound)
-    # the loss does not depend on the set load: one correction suffices
-    assert len(res.iterations) == 2
+    # the loss does not depend on the set load: one correction suffices; the corrected setting is
+    # accepted on the regression of two consecutive coastdowns (GTR 15 8.1.3.4.2)
+    assert len(res.iterations) == 2 and list(res.iterations["coastdowns"]) == [1, 2]
+    assert res.accepted and res.coastdowns == 2
     np.testing.assert_allclose(res.set_coefficients, np.subtract(TARGET, PARASITIC), atol=1e-3)
 
 
@@ -119,3 +121,36 @@ def test_smoothed_derivative_recovers_losses_from_a_noisy_coastdown():
     raw = measured_load_coefficients(cd, INERTIA)
     err_raw = (raw[0] - total[0]) + (raw[1] - total[1]) * speeds + (raw[2] - total[2]) * speeds**2
     assert np.abs(err).max() < np.abs(err_raw).max()
+
+
+def test_two_consecutive_coastdowns_are_regressed_together(tmp_path):
+    """Two coastdowns at one setting (speed noise of their own): the pooled regression is the
+    least squares over both coastdowns' samples, by hand; the setting is accepted (GTR 15
+    8.1.3.4.2) only on two; coastdowns at different settings are refused."""
+    used = (100.0, 0.8, 0.025)
+    first = simulate_dyno(used, PARASITIC, INERTIA, dt_s=DT, speed_noise_mps=0.01, seed=1)
+    second = simulate_dyno(used, PARASITIC, INERTIA, dt_s=DT, speed_noise_mps=0.01, seed=2)
+    pooled = measured_load_coefficients([first.runs, second.runs], INERTIA)
+    rows = []
+    for c in (first, second):
+        t, v = c.runs["time_s"].to_numpy(), c.runs["speed_mps"].to_numpy()
+        f, vk = -INERTIA * np.gradient(v, t), v * 3.6
+        keep = (vk >= 10.0) & (vk <= 130.0)
+        keep[0] = keep[-1] = False
+        rows.append(np.column_stack([np.ones(keep.sum()), vk[keep], vk[keep] ** 2, f[keep]]))
+    x = np.vstack(rows)
+    np.testing.assert_allclose(pooled, np.linalg.lstsq(x[:, :3], x[:, 3], rcond=None)[0], rtol=1e-12)
+    target = np.add(used, PARASITIC)   # the setting already gives the target: within tolerance
+    draws = {k: np.full(4, v) for k, v in zip(("F0_N", "F1_N_per_kph", "F2_N_per_kph2"), target)}
+    for i, c in enumerate((first, second)):
+        save_dyno(c, tmp_path / f"d{i}")
+    one = run_dyno(draws, tmp_path / "d0")
+    assert one.converged and not one.accepted
+    two = run_dyno(draws, [tmp_path / "d0", tmp_path / "d1"], out_dir=tmp_path / "out")
+    assert two.accepted and two.coastdowns == 2
+    import json
+    record = json.loads((tmp_path / "out" / "dyno.json").read_text())
+    assert record["coastdowns"] == 2 and record["accepted"] is True
+    save_dyno(simulate_dyno((90.0, 0.8, 0.025), PARASITIC, INERTIA, dt_s=DT), tmp_path / "other")
+    with pytest.raises(ValueError, match="at one setting"):
+        run_dyno(draws, [tmp_path / "d0", tmp_path / "other"])

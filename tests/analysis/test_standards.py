@@ -132,7 +132,16 @@ def test_gtr15_checks_count_pairs_and_precision():
     decels = [0.50, 0.52, 0.49, 0.51, 0.50, 0.50]
     chk = standard_checks(_campaign(decels), "gtr15").set_index("rule")
     assert chk.loc["runs in direction +1", "value"] == 3 and chk.loc["runs in direction -1", "value"] == 3
-    assert chk.loc["opposite-direction pairs", "pass"]
+    # with on-board anemometry GTR 15 (EU 2017/1151 Sub-Annex 4, 4.3.2.4) asks for 5 pairs
+    row = chk.loc["opposite-direction pairs (on-board anemometry)"]
+    assert (row["value"], row["limit"], row["pass"]) == (3, 5, False)
+    no_anemometer = _campaign(decels)
+    no_anemometer.runs = no_anemometer.runs.drop(columns=["airspeed_mps", "yaw_rad"])
+    stationary = standard_checks(no_anemometer, "gtr15").set_index("rule")
+    assert stationary.loc["opposite-direction pairs", "limit"] == 3 and stationary.loc["opposite-direction pairs", "pass"]
+    # speed logged every 0.5 s: 2 Hz against 3.1(a)'s 10 Hz
+    assert chk.loc["recording rate (slowest run)", "value"] == pytest.approx(2.0)
+    assert not chk.loc["recording rate (slowest run)", "pass"]
     pair_t = [2.0 / (decels[i] / (10 / 3.6) + decels[i + 1] / (10 / 3.6)) for i in (0, 2, 4)]
     expected = stats.t.ppf(0.975, 2) * np.std(pair_t, ddof=1) / math.sqrt(3) / np.mean(pair_t) * 100
     row = chk.loc["statistical precision at 50 km/h"]
@@ -150,6 +159,17 @@ def test_j1263_wind_limit_by_hand():
     assert calm.loc["mean wind speed (worst run)", "pass"]
     assert calm.loc["mean cross-wind (worst run)", "value"] == pytest.approx(0.0, abs=1e-12)
     assert calm.loc["ambient temperature min", "pass"] and calm.loc["ambient temperature max", "pass"]
+
+
+def test_gtr15_onboard_wind_limits_by_hand():
+    """The on-board limits of config.WIND_LIMITS["gtr_onboard"] (7 m/s mean, 4 m/s cross): a
+    steady 7.5 m/s head wind fails, 6.5 m/s passes; no cross-wind (yaw 0)."""
+    windy = standard_checks(_campaign([0.5, 0.5], head_mps=7.5), "gtr15").set_index("rule")
+    row = windy.loc["mean wind speed (worst run)"]
+    assert row["value"] == pytest.approx(7.5, abs=1e-9) and row["limit"] == 7.0 and not row["pass"]
+    calm = standard_checks(_campaign([0.5, 0.5], head_mps=6.5), "gtr15").set_index("rule")
+    assert calm.loc["mean wind speed (worst run)", "pass"]
+    assert calm.loc["mean cross-wind (worst run)", "limit"] == 4.0 and calm.loc["mean cross-wind (worst run)", "pass"]
 
 
 def test_cfr1066_requires_eight_runs_each_way():

@@ -76,3 +76,76 @@ def test_each_source_shifts_what_it_names(campaign):
     assert SOURCES["temperature_k"].apply(campaign, 1.0) is None
     assert SOURCES["driveline_scale_rel"].apply(campaign, d) is None
 
+
+
+def test_every_kind_declares_what_its_sources_act_on():
+    """The data contract: each registered campaign class names its measured table, and its
+    speed-sensor and transducer columns are columns the kind knows."""
+    import dataclasses
+
+    from bayes_roadload.data import distances, intervals, spindown, steady, traces
+    from bayes_roadload.data.uncertainty import TypeBChannels
+    from bayes_roadload.inference.kinds import KINDS
+
+    known = {"traces": traces.KNOWN_COLUMNS, "intervals": intervals.INTERVAL_COLUMNS,
+             "distances": distances.DISTANCE_COLUMNS, "spindown": spindown.KNOWN_COLUMNS,
+             "steady": steady.KNOWN_COLUMNS}
+    for name, entry in KINDS.items():
+        ch = entry.campaign_type.type_b_channels
+        assert isinstance(ch, TypeBChannels), name
+        assert ch.table in {f.name for f in dataclasses.fields(entry.campaign_type)}, name
+        assert set(ch.speed + ch.force) <= set(known[name]), name
+
+
+def test_sources_act_on_each_kinds_own_channels():
+    """Interval band speeds come from the speed sensor; distance markers are surveyed (no speed
+    sensor); a spin-down has wheel inertias and no vehicle; a steady-state force is a
+    transducer reading."""
+    from bayes_roadload.simulate.distances import distance_campaign_from_traces
+    from bayes_roadload.simulate.intervals import interval_campaign_from_traces
+    from bayes_roadload.simulate.spindown import simulate_spindown
+    from bayes_roadload.simulate.steady import simulate_steady
+
+    d = 0.01
+    traces = simulate_campaign(1, pairs=1, seed=0)
+    iv = interval_campaign_from_traces(traces)
+    s = SOURCES["speed_scale_rel"].apply(iv, d)
+    for col in ("speed_start_mps", "speed_end_mps"):
+        assert (s.intervals[col] / iv.intervals[col]).to_numpy() == pytest.approx(1 + d)
+    assert s.intervals["interval_s"].equals(iv.intervals["interval_s"])
+    assert SOURCES["airspeed_factor_rel"].apply(iv, d) is None
+
+    dc = distance_campaign_from_traces(traces)
+    assert SOURCES["speed_scale_rel"].apply(dc, d) is None
+    m = SOURCES["mass_kg"].apply(dc, 3.0)
+    assert m.vehicle.mass_kg == dc.vehicle.mass_kg + 3.0
+    if "mass_kg" in dc.markers:
+        assert (m.markers["mass_kg"] - dc.markers["mass_kg"]).to_numpy() == pytest.approx(3.0)
+
+    sd = simulate_spindown()
+    assert SOURCES["mass_kg"].apply(sd, 3.0) is None and SOURCES["airspeed_factor_rel"].apply(sd, d) is None
+    ri = SOURCES["rotating_inertia_rel"].apply(sd, 0.1)
+    assert ri.wheel_inertia_kgm2 == pytest.approx({w: 1.1 * i for w, i in sd.wheel_inertia_kgm2.items()})
+    w = SOURCES["speed_scale_rel"].apply(sd, d)
+    assert (w.runs["wheel_speed_mps"] / sd.runs["wheel_speed_mps"]).to_numpy() == pytest.approx(1 + d)
+
+    st = simulate_steady(9, pairs=1, seed=0)
+    f = SOURCES["driveline_scale_rel"].apply(st, d)
+    assert (f.runs["tractive_force_n"] / st.runs["tractive_force_n"]).to_numpy() == pytest.approx(1 + d)
+    assert f.runs["speed_mps"].equals(st.runs["speed_mps"])
+
+
+def test_spindown_uncertainty_round_trips_through_its_vehicle_toml(tmp_path):
+    from bayes_roadload.data.spindown import load_spindown, save_spindown
+    from bayes_roadload.simulate.spindown import simulate_spindown
+
+    sd = simulate_spindown()
+    sd.meta["uncertainty"] = {"rotating_inertia_rel": 0.02}
+    save_spindown(sd, tmp_path / "sd")
+    back = load_spindown(tmp_path / "sd")
+    assert back.meta["uncertainty"] == {"rotating_inertia_rel": 0.02}
+    assert standard_uncertainties(back)["rotating_inertia_rel"] == 0.02
+    (tmp_path / "sd" / "vehicle.toml").write_text((tmp_path / "sd" / "vehicle.toml").read_text()
+                                                  .replace("rotating_inertia_rel", "inertia_rel"))
+    with pytest.raises(CampaignError, match=r"\[uncertainty\] inertia_rel"):
+        load_spindown(tmp_path / "sd")
