@@ -48,6 +48,10 @@ MIN_REGULATION_PAIRS = 3
 GTR_ONBOARD_MIN_PAIRS = 5
 """GTR 15 with on-board anemometry: "a minimum of 5 pairs of coastdown runs" (Regulation (EU)
 2017/1151 Annex XXI Sub-Annex 4, 4.3.2.4, which transposes GTR 15 Annex 4)."""
+GTR_ROTATING_MASS_SHARE = 0.03
+GTR_ROTATING_MASS_OFFSET_KG = 25.0
+"""GTR 15: "m_r may be estimated to be 3 per cent of the sum of the mass in running order and
+25 kg" (Regulation (EU) 2017/1151 Annex XXI Sub-Annex 4, 2.5.1)."""
 GTR_MIN_SPEED_RATE_HZ = 10.0
 """GTR 15: vehicle speed "with a measurement frequency of at least 10 Hz" (Regulation (EU)
 2017/1151 Annex XXI Sub-Annex 4, 3.1(a)); the on-board procedure's own 5 Hz (4.3.2.3) is the

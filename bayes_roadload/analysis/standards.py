@@ -37,6 +37,8 @@ from . import cfr1037
 from .cycles import COEFFICIENTS
 from .regulation import (
     GTR_MIN_SPEED_RATE_HZ,
+    GTR_ROTATING_MASS_OFFSET_KG,
+    GTR_ROTATING_MASS_SHARE,
     GTR_ONBOARD_MIN_PAIRS,
     GTR_PRECISION_PCT,
     MIN_REGULATION_PAIRS,
@@ -62,6 +64,9 @@ class Standard:
     no linear term (F = A + C v^2, B = 0): the coefficients are the least-squares projection of
     the road-load curve onto {1, v^2} over ``speed_range_kph`` (:func:`two_term_projection`).
     ``mass_per_tyre_kg``: M_e = M + this x the tyres in contact (instead of ``mass_factor``).
+    ``rotating_mass_share``, ``rotating_mass_offset_kg``: M_e = M + share x (mass in running order
+    + offset) when the vehicle states its mass in running order (GTR 15's estimate of m_r), the
+    fit's M_e otherwise.
     ``max_mean_along_wind_mps``: limit of each run's mean wind component along the road;
     ``min_rate_hz``: the slowest recording rate allowed.  ``min_pairs_onboard``: the pairs needed
     instead of ``min_pairs`` when the campaign has on-board anemometry.  ``segment_method``: the standard's
@@ -91,6 +96,8 @@ class Standard:
     min_rate_hz: float | None = None
     min_pairs_onboard: int = 0
     segment_method: bool = False
+    rotating_mass_share: float | None = None
+    rotating_mass_offset_kg: float = 0.0
 
     @property
     def density_kgpm3(self) -> float:
@@ -106,7 +113,8 @@ STANDARDS: dict[str, Standard] = {
                       min_pairs=MIN_REGULATION_PAIRS, precision_pct=GTR_PRECISION_PCT,
                       min_pairs_onboard=GTR_ONBOARD_MIN_PAIRS, min_rate_hz=GTR_MIN_SPEED_RATE_HZ,
                       max_mean_wind_mps=config.WIND_LIMITS["gtr_onboard"]["mean_wind_mps"],
-                      max_mean_crosswind_mps=config.WIND_LIMITS["gtr_onboard"]["mean_cross_wind_mps"]),
+                      max_mean_crosswind_mps=config.WIND_LIMITS["gtr_onboard"]["mean_cross_wind_mps"],
+                      rotating_mass_share=GTR_ROTATING_MASS_SHARE, rotating_mass_offset_kg=GTR_ROTATING_MASS_OFFSET_KG),
     "j2263": Standard("j2263", "SAE J2263 (on-board anemometry)", 293.15, 98_210.0, "US", "coefficients",
                       mass_factor=J2263_MASS_FACTOR, min_runs_per_direction=1, speed_range_kph=(115.0, 15.0)),
     "j1263": Standard("j1263", "SAE J1263 (stationary wind station)", 293.15, 98_210.0, "US", "coefficients",
@@ -138,7 +146,8 @@ high-speed ranges after the (h)(11) eliminations, with the same number of runs i
 direction ((d)(2)), hence 12 per direction; its temperature and pressure are J2263's (it
 follows J2263 sections 1-9) and serve only the coefficient rows: its result is a drag area.
 GTR 15 (as transposed in Regulation (EU) 2017/1151 Annex XXI Sub-Annex 4, text found by search):
-5 pairs with on-board anemometry (4.3.2.4), vehicle speed at 10 Hz or more (3.1(a)); its wind
+5 pairs with on-board anemometry (4.3.2.4), vehicle speed at 10 Hz or more (3.1(a)), the rotating
+mass estimated as 3 % of (mass in running order + 25 kg) when it is not measured (2.5.1); its wind
 limits are ``config.WIND_LIMITS["gtr_onboard"]`` (mean and cross-wind; the figures are not in the
 text found, see there)."""
 
@@ -181,6 +190,18 @@ def drag_area_m2(f2_n_per_kph2, air_density_kgpm3: float):
     return 2.0 * np.asarray(f2_n_per_kph2) * 3.6**2 / air_density_kgpm3
 
 
+def standard_effective_mass_kg(std: Standard, mass_kg: float | None, mass_in_running_order_kg: float | None,
+                               rotating_inertia_known: bool = False) -> float | None:
+    """GTR 15's estimate of the effective mass, M + 0.03 (mass in running order + 25 kg)
+    (``Standard.rotating_mass_share``), or None where it does not apply: a standard without the
+    rule, a measured rotating inertia, or no mass in running order stated (the fit's M_e then
+    stands)."""
+    if std.rotating_mass_share is None or rotating_inertia_known or mass_in_running_order_kg is None \
+            or mass_kg is None:
+        return None
+    return float(mass_kg) + std.rotating_mass_share * (float(mass_in_running_order_kg) + std.rotating_mass_offset_kg)
+
+
 def _row(quantity, unit, x) -> dict:
     x = np.asarray(x, float).reshape(-1)
     return {"quantity": quantity, "unit": unit, "mean": float(x.mean()),
@@ -192,7 +213,8 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
                     mass_kg: float | None = None, effective_mass_kg: float | None = None,
                     rotating_inertia_known: bool = False, frontal_area_m2: float | None = None,
                     yaw_deg: float | None = None, tyres_in_contact: int | None = None,
-                    extra_yaw_deg: Mapping[str, float] | None = None) -> pd.DataFrame:
+                    extra_yaw_deg: Mapping[str, float] | None = None,
+                    mass_in_running_order_kg: float | None = None) -> pd.DataFrame:
     """The standard's result quantities with posterior mean, sd, 2.5 and 97.5 % points.
 
     Parameters
@@ -204,7 +226,9 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
     mass_kg, effective_mass_kg : the test mass and the M_e the fit used; with
         ``rotating_inertia_known`` False and a standard with a ``mass_factor``, coefficients are
         rescaled to M_e = factor x mass_kg (with a ``mass_per_tyre_kg`` standard: to
-        M_e = mass_kg + mass_per_tyre_kg x ``tyres_in_contact``).
+        M_e = mass_kg + mass_per_tyre_kg x ``tyres_in_contact``; with a ``rotating_mass_share``
+        standard and ``mass_in_running_order_kg`` given: M_e = mass_kg + share x (that mass +
+        offset)).
     frontal_area_m2, yaw_deg : for CdA(yaw) = A (CD0 + KD yaw^2).
     extra_yaw_deg : more CdA(yaw) rows, ``{label: yaw in deg}`` (quantity ``CdA_yaw_<label>``).
 
@@ -225,6 +249,11 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
                              "the number of tyres: [vehicle] tyres_in_contact in vehicle.toml or --tyres-in-contact N "
                              "(or --rotating-inertia-known to keep the fit's effective mass)")
         scale = (mass_kg + std.mass_per_tyre_kg * int(tyres_in_contact)) / effective_mass_kg
+    me = standard_effective_mass_kg(std, mass_kg, mass_in_running_order_kg, rotating_inertia_known)
+    if me is not None:
+        if effective_mass_kg is None:
+            raise ValueError(f"{std.name}: rescaling to its effective mass needs the fit's effective_mass_kg")
+        scale = me / effective_mass_kg
     c = to_conditions(samples, std.temperature_k, std.pressure_pa, mass_scale=scale,
                       air_density_kgpm3=std.density_kgpm3)
     yaw_deg = std.cda_yaw_deg if yaw_deg is None else yaw_deg
@@ -413,6 +442,7 @@ def run_standard(source: str | Path | Mapping[str, np.ndarray], standard: str | 
     ``standard_checks.csv``, ``standard.json`` (and ``standard_segments.csv``)."""
     std = get_standard(standard)
     draws = load_draws(source) if isinstance(source, (str, Path)) else source
+    mass_in_running_order_kg = None if campaign is None else campaign.vehicle.mass_in_running_order_kg
     if campaign is not None:
         mass_kg = campaign.vehicle.mass_kg if mass_kg is None else mass_kg
         effective_mass_kg = campaign.vehicle.effective_mass_kg if effective_mass_kg is None else effective_mass_kg
@@ -426,7 +456,8 @@ def run_standard(source: str | Path | Mapping[str, np.ndarray], standard: str | 
              if segment is not None and math.isfinite(segment["effective_yaw_deg"]) else None)
     result = standard_result(draws, std, mass_kg=mass_kg, effective_mass_kg=effective_mass_kg,
                              rotating_inertia_known=rotating_inertia_known, frontal_area_m2=frontal_area_m2,
-                             yaw_deg=yaw_deg, tyres_in_contact=tyres_in_contact, extra_yaw_deg=extra)
+                             yaw_deg=yaw_deg, tyres_in_contact=tyres_in_contact, extra_yaw_deg=extra,
+                             mass_in_running_order_kg=mass_in_running_order_kg)
     checks = standard_checks(campaign, std) if campaign is not None else \
         pd.DataFrame(columns=["standard", "rule", "value", "limit", "unit", "pass"])
     if segment is not None:
@@ -440,7 +471,11 @@ def run_standard(source: str | Path | Mapping[str, np.ndarray], standard: str | 
         record = {"standard": std.name, "title": std.title, "temperature_k": std.temperature_k,
                   "pressure_pa": std.pressure_pa, "units": std.units, "mass_factor": std.mass_factor,
                   "mass_per_tyre_kg": std.mass_per_tyre_kg, "tyres_in_contact": tyres_in_contact,
-                  "rotating_inertia_known": rotating_inertia_known, "pass": bool(checks["pass"].all())}
+                  "rotating_inertia_known": rotating_inertia_known,
+                  "mass_in_running_order_kg": mass_in_running_order_kg,
+                  "effective_mass_kg_standard": standard_effective_mass_kg(std, mass_kg, mass_in_running_order_kg,
+                                                                           rotating_inertia_known),
+                  "pass": bool(checks["pass"].all())}
         if segment is not None:
             segment["segments"].to_csv(out / "standard_segments.csv", index=False)
             record["segment_method"] = {k: segment[k] for k in ("n_points", "effective_yaw_deg", "CdA_m2",

@@ -27,7 +27,7 @@ from .uncertainty import UNCERTAINTY_TABLE, uncertainty_from_toml
 
 VEHICLE_FILE = "vehicle.toml"
 VEHICLE_KEYS = ("mass_kg", "effective_mass_kg", "frontal_area_m2", "rolling_radius_m", "rotating_inertia_kgm2",
-                "length_m", "tyres_in_contact")
+                "length_m", "tyres_in_contact", "mass_in_running_order_kg")
 ANEMOMETER_KEYS = ("airspeed_factor", "yaw_factor", "distance_constant_m")
 
 
@@ -38,7 +38,9 @@ class Vehicle:
     ``effective_mass_kg`` is M_e = M + I_w / R_r^2 (eq. 2.2); it may be given directly or as
     ``rotating_inertia_kgm2`` with ``rolling_radius_m``.  ``tyres_in_contact`` (optional) is
     the number of tyres on the road, for a standard whose effective mass counts them (40 CFR
-    1037.528(h)(1): M + 56.7 kg per tyre).
+    1037.528(h)(1): M + 56.7 kg per tyre).  ``mass_in_running_order_kg`` (optional, at most the
+    test mass ``mass_kg``) is for GTR 15's estimate of the rotating mass, 3 % of (mass in running
+    order + 25 kg).
     """
 
     mass_kg: float
@@ -47,6 +49,7 @@ class Vehicle:
     rolling_radius_m: float = 0.28
     length_m: float = 4.5
     tyres_in_contact: int | None = None
+    mass_in_running_order_kg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -109,8 +112,13 @@ def vehicle_from_toml(doc: Mapping[str, Any], where: str) -> tuple[Vehicle, Anem
     tyres = t.get("tyres_in_contact")
     if tyres is not None and (isinstance(tyres, bool) or not isinstance(tyres, int) or not 2 <= tyres <= 64):
         refuse(where, "[vehicle] tyres_in_contact", None, f"{tyres!r} is not a whole number of tyres in [2, 64]")
+    mro = t.get("mass_in_running_order_kg")
+    if mro is not None and (isinstance(mro, bool) or not isinstance(mro, (int, float))
+                            or not 0.0 < float(mro) <= float(t["mass_kg"])):
+        refuse(where, "[vehicle] mass_in_running_order_kg", None,
+               f"{mro!r} is not a mass in (0, mass_kg = {t['mass_kg']}]: the test mass includes the mass in running order")
     vehicle = Vehicle(float(t["mass_kg"]), me, float(t["frontal_area_m2"]), radius,
-                      float(t.get("length_m", 4.5)), tyres)
+                      float(t.get("length_m", 4.5)), tyres, None if mro is None else float(mro))
     validate_vehicle(vehicle, where)
     a = dict(doc.get("anemometer", {}))
     for k in a:
@@ -188,6 +196,8 @@ def vehicle_toml(c) -> str:
         lines.append(f"{k} = {toml_value(getattr(v, k))}")
     if v.tyres_in_contact is not None:
         lines.append(f"tyres_in_contact = {int(v.tyres_in_contact)}")
+    if v.mass_in_running_order_kg is not None:
+        lines.append(f"mass_in_running_order_kg = {toml_value(v.mass_in_running_order_kg)}")
     lines += ["", "[anemometer]",
               f"airspeed_factor = {toml_value(c.anemometer.airspeed_factor)}",
               f"yaw_factor = {toml_value(c.anemometer.yaw_factor)}"]

@@ -172,6 +172,31 @@ def test_gtr15_onboard_wind_limits_by_hand():
     assert calm.loc["mean cross-wind (worst run)", "limit"] == 4.0 and calm.loc["mean cross-wind (worst run)", "pass"]
 
 
+def test_gtr15_rotating_mass_estimate_by_hand(tmp_path):
+    """GTR 15 2.5.1: with the mass in running order stated, M_e = TM + 0.03 (MRO + 25 kg): a
+    1500 kg test mass, 1400 kg in running order, fitted with M_e = 1540 kg, rescales every
+    coefficient by (1500 + 0.03 x 1425) / 1540; a measured rotating inertia keeps the fit's M_e;
+    without the mass in running order nothing is rescaled."""
+    d = _draws()
+    plain = standard_result(d, "gtr15", mass_kg=1500.0, effective_mass_kg=1540.0).set_index("quantity")
+    est = standard_result(d, "gtr15", mass_kg=1500.0, effective_mass_kg=1540.0,
+                          mass_in_running_order_kg=1400.0).set_index("quantity")
+    scale = (1500.0 + 0.03 * (1400.0 + 25.0)) / 1540.0
+    for q in ("f0", "f1", "f2"):
+        assert est.loc[q, "mean"] == pytest.approx(plain.loc[q, "mean"] * scale, rel=1e-12)
+    kept = standard_result(d, "gtr15", mass_kg=1500.0, effective_mass_kg=1540.0, mass_in_running_order_kg=1400.0,
+                           rotating_inertia_known=True).set_index("quantity")
+    assert kept.loc["f0", "mean"] == pytest.approx(plain.loc["f0", "mean"], rel=1e-12)
+    # from vehicle.toml through run_standard, recorded in standard.json
+    c = _campaign([0.5, 0.5])
+    c.vehicle = Vehicle(mass_kg=1500.0, frontal_area_m2=2.0, effective_mass_kg=1540.0, mass_in_running_order_kg=1400.0)
+    res, _ = run_standard(d, "gtr15", campaign=c, out_dir=tmp_path)
+    assert res.set_index("quantity").loc["f0", "mean"] == pytest.approx(est.loc["f0", "mean"], rel=1e-12)
+    import json
+    assert json.loads((tmp_path / "standard.json").read_text())["effective_mass_kg_standard"] == \
+        pytest.approx(1500.0 + 0.03 * 1425.0)
+
+
 def test_cfr1066_requires_eight_runs_each_way():
     chk = standard_checks(_campaign([0.5] * 6), "cfr1066").set_index("rule")
     assert chk.loc["runs in direction +1", "limit"] == 8

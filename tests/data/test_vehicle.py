@@ -32,6 +32,7 @@ def runs_frame(n=40, runs=2):
         (VEHICLE_TOML.replace("effective_mass_kg = 1130.0", ""), "[vehicle] effective_mass_kg"),
         (VEHICLE_TOML.replace("1130.0", "1000.0"), "less than the test mass"),
         (VEHICLE_TOML + "colour = 'red'\n", "[vehicle] colour"),
+        (VEHICLE_TOML + "mass_in_running_order_kg = 1200.0\n", "the test mass includes the mass in running order"),
         (VEHICLE_TOML + "[anemometer]\nairspeed_factor = 10.8\n", "[anemometer] airspeed_factor"),
         ("[vehicle\n", "not valid TOML"),
     ],
@@ -69,3 +70,11 @@ def test_rotating_inertia_gives_the_effective_mass():
     doc = tomllib.loads(VEHICLE_TOML.replace("effective_mass_kg = 1130.0", "rotating_inertia_kgm2 = 2.352"))
     vehicle, *_ = vehicle_from_toml(doc, "vehicle.toml")
     assert vehicle.effective_mass_kg == pytest.approx(1100.0 + 2.352 / 0.28**2)  # eq. 2.2
+
+
+def test_mass_in_running_order_reads_back():
+    doc = tomllib.loads(VEHICLE_TOML + "mass_in_running_order_kg = 1020.0\n")
+    vehicle, anem, tunnel, meta = vehicle_from_toml(doc, "vehicle.toml")
+    assert vehicle.mass_in_running_order_kg == 1020.0
+    c = Campaign(runs_frame(), vehicle, anem, tunnel, meta=meta)
+    assert vehicle_from_toml(tomllib.loads(vehicle_toml(c)), "vehicle.toml")[0] == vehicle
