@@ -238,7 +238,7 @@ def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None
     if record["type_b"]:
         with stages("type_b"):
             report, budget, _ = propagate_type_b(report, campaign, spec, seed=options.sampler.seed,
-                                                 options=options)
+                                                 options=options, fit=fit)
         tables = dict(tables, **{"budget.csv": budget})
     with stages("writing"), stage("output"):
         written = write_fit_dir(report, out, record=record, extras=tables, provenance=provenance)

@@ -77,10 +77,11 @@ class TypeB:
 
 
 def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[str] = BUDGET_QUANTITIES,
-                         method: str = "linear", options: FitOptions = FitOptions()) -> TypeB:
+                         method: str = "linear", options: FitOptions = FitOptions(), fit=None) -> TypeB:
     """Central-difference sensitivities of the campaign's estimate (module docstring), as its
     kind computes them (:attr:`~bayes_roadload.inference.kinds.KindEntry.type_b`; ``options``:
-    the fit's, e.g. the runs fitted).  For speed traces, ``method="linear"`` takes one
+    the fit's, e.g. the runs fitted; ``fit``: the NUTS fit, whose problem and MAP the kinds
+    refitting MAPs share their compilation with).  For speed traces, ``method="linear"`` takes one
     Gauss-Newton step from the unshifted least-squares optimum, ``"refit"`` refits each shifted
     campaign (two least-squares fits per source, all runs); equal to first order in the
     shifts."""
@@ -112,7 +113,7 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
             continue
         shifts[key] = (plus, minus, u[key])
     if shifts and (method == "linear" or not entry.lsq):
-        rows = entry.type_b(campaign, spec, shifts, options)
+        rows = entry.type_b(campaign, spec, shifts, options, fit)
     else:
         rows = {}
         for key, (plus, minus, h) in shifts.items():
@@ -199,7 +200,8 @@ def add_type_b_to_idata(idata, typeb: TypeB, seed: int = 0) -> list[str]:
     return names
 
 
-def propagate_type_b(report, campaign, spec: ModelSpec | str, seed: int = 0, options: FitOptions = FitOptions()):
+def propagate_type_b(report, campaign, spec: ModelSpec | str, seed: int = 0, options: FitOptions = FitOptions(),
+                     fit=None):
     """A fit report with the Type B uncertainty in its draws and summary, and its budget.
 
     Returns ``(report, budget, typeb)``: the report's posterior draws of every quantity with a
@@ -207,7 +209,7 @@ def propagate_type_b(report, campaign, spec: ModelSpec | str, seed: int = 0, opt
     quantiles; R-hat and ESS stay the sampler's, the added draws being independent), and
     ``budget`` is :func:`budget_table` with the data's own sd from the summary before."""
     quantities = [q for q in BUDGET_QUANTITIES if q in report.idata.posterior]
-    typeb = type_b_sensitivities(campaign, spec, quantities, options=options)
+    typeb = type_b_sensitivities(campaign, spec, quantities, options=options, fit=fit)
     summary = report.summary.set_index("parameter")
     data_sd = {q: float(summary.loc[q, "sd"]) for q in quantities if q in summary.index}
     changed = add_type_b_to_idata(report.idata, typeb, seed)

@@ -88,14 +88,15 @@ class KindEntry:
     lagged_speed_drop : the kind's integrator supplies the lagged speed drop of a measured
         speed trace, which terms naming a ``lag_time_constant`` (the tyre thermal lag) read
         (:func:`check_model`).
-    type_b : (campaign, spec, shifts, options) -> source -> quantity -> sensitivity: how the
+    type_b : (campaign, spec, shifts, options, fit) -> source -> quantity -> sensitivity: how the
         Type B uncertainty of the test's declared values and instruments reaches the kind's
         figures (:mod:`bayes_roadload.analysis.budget`, which adds it to the draws and writes
         ``budget.csv``; ``shifts`` as :data:`~bayes_roadload.inference.shift.Shifts`): the
         least-squares step of :func:`~bayes_roadload.inference.lsq.linear_sensitivities` for
         speed traces, the MAPs of the shifted campaigns
-        (:func:`~bayes_roadload.inference.shift.map_sensitivities`) for the kinds fitted through
-        their ``problem``; None when the kind has none.
+        (:func:`~bayes_roadload.inference.shift.map_sensitivities`, sharing the compilation of
+        ``fit``'s problem when the fit is given) for the kinds fitted through their ``problem``;
+        None when the kind has none.
     problem : (campaign, spec, options) -> the kind's
         :class:`~bayes_roadload.inference.problem.Problem`, for the kinds whose fit is
         :func:`~bayes_roadload.inference.nuts.sample_problem` on it; None for speed traces
@@ -118,7 +119,7 @@ class KindEntry:
     driveline_channel: Callable[[Any], Any] | None = None
     diagnosis: str | None = None
     diagnosis_model: str | None = None
-    type_b: Callable[[Any, ModelSpec, Shifts, FitOptions], dict[str, dict[str, float]]] | None = None
+    type_b: Callable[[Any, ModelSpec, Shifts, FitOptions, NutsFit | None], dict[str, dict[str, float]]] | None = None
     problem: Callable[[Any, ModelSpec, FitOptions], Problem] | None = None
     default_pooling: Callable[[Any, ModelSpec, FitOptions], str] = lambda campaign, spec, options: "pooled"
     lagged_speed_drop: bool = False
@@ -238,7 +239,8 @@ def _sampled(build: Callable[[Any, ModelSpec, FitOptions], Problem]) -> Callable
 
 # ----------------------------------------------------------------------------- Type B sensitivities
 
-def _traces_type_b(campaign, spec, shifts: Shifts, o: FitOptions) -> dict[str, dict[str, float]]:
+def _traces_type_b(campaign, spec, shifts: Shifts, o: FitOptions, fit: NutsFit | None = None
+                   ) -> dict[str, dict[str, float]]:
     """The least-squares step (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`) on
     the fitted runs."""
     if o.runs is not None and list(o.runs) != list(campaign.run_ids):
@@ -249,8 +251,10 @@ def _traces_type_b(campaign, spec, shifts: Shifts, o: FitOptions) -> dict[str, d
 
 def _map_type_b(build: Callable[[Any, ModelSpec, FitOptions], Problem]):
     """The MAPs of the shifted campaigns (:func:`~bayes_roadload.inference.shift.map_sensitivities`)."""
-    def type_b(campaign, spec, shifts: Shifts, o: FitOptions) -> dict[str, dict[str, float]]:
-        return map_sensitivities(lambda c: build(c, spec, o), shifts)
+    def type_b(campaign, spec, shifts: Shifts, o: FitOptions, fit: NutsFit | None = None
+               ) -> dict[str, dict[str, float]]:
+        base = (fit.problem, fit.map) if fit is not None and fit.map is not None else None
+        return map_sensitivities(lambda c: build(c, spec, o), shifts, base)
     return type_b
 
 

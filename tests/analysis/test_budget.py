@@ -187,3 +187,31 @@ def test_a_source_whose_refit_fails_is_left_out_not_fatal(interval_campaign, mon
     typeb = type_b_sensitivities(interval_campaign, "split_f0_f2", ["F50_N"])
     assert "mass_kg" in typeb.notes and "mass_kg" not in typeb.sensitivity["F50_N"]
     assert {"speed_scale_rel", "rotating_inertia_rel"} <= set(typeb.sensitivity["F50_N"])
+
+
+def test_shared_compilation_gives_the_same_sensitivities(interval_campaign):
+    """The shifted campaigns' MAPs with one shared compilation (the fit's problem and MAP as
+    ``base``, a start of its own) equal those each compiled on its own, to the optimiser's
+    tolerance: each contribution c u within 1e-4 of the quantity's largest (the two starts stop
+    at scaled gradients below 1e-3, and a budget reads contributions to 1 %); a problem of
+    another structure (another model variant) is not taken by the shared compilation."""
+    from bayes_roadload.data.uncertainty import standard_uncertainties
+    from bayes_roadload.inference.kinds import FitOptions, kind_of
+    from bayes_roadload.inference.shift import SharedPotential, map_sensitivities, mode_of
+    from bayes_roadload.inference.spec import load_model_spec
+
+    spec = load_model_spec("split_f0_f2")
+    entry = kind_of(interval_campaign)
+    problem = entry.problem(interval_campaign, spec, FitOptions())
+    u = standard_uncertainties(interval_campaign)
+    shifts = {k: (SOURCES[k].apply(interval_campaign, u[k]), SOURCES[k].apply(interval_campaign, -u[k]), u[k])
+              for k in ("mass_kg", "speed_scale_rel")}
+    build = lambda c: entry.problem(c, spec, FitOptions())  # noqa: E731
+    own = map_sensitivities(build, shifts)
+    shared = map_sensitivities(build, shifts, (problem, mode_of(problem)))
+    for q in ("F50_N", "CD0", "AD"):
+        largest = max(abs(own[k][q]) * u[k] for k in shifts)
+        for key in shifts:
+            assert abs(shared[key][q] - own[key][q]) * u[key] <= 1e-4 * largest, (key, q)
+    other = entry.problem(interval_campaign, load_model_spec("three_term"), FitOptions())
+    assert SharedPotential(problem, mode_of(problem)).data_of(other) is None
