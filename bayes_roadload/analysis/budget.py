@@ -156,12 +156,15 @@ def add_type_b(posterior: dict[str, np.ndarray], typeb: TypeB, seed: int = 0) ->
 def budget_table(typeb: TypeB, data_sd: dict[str, float]) -> pd.DataFrame:
     """``budget.csv``: per quantity, a row per source (standard uncertainty, sensitivity, its
     variance c^2 u^2 and share) and a ``data`` row (the posterior's own variance), then a row
-    per source left out with the reason."""
+    per source left out with the reason.  A quantity without variance (a constant of the
+    model, e.g. F50_undriven_N of a fit without undriven wheels) has no rows."""
     rows = []
     for q, sd in data_sd.items():
         row = typeb.sensitivity.get(q, {})
         var = {s: (c * typeb.u[s]) ** 2 for s, c in row.items()}
         total = sd**2 + sum(var.values())
+        if not total > 0.0:   # a quantity the fit holds constant (no undriven-wheel loss modelled): no budget
+            continue
         rows.append({"quantity": q, "source": "data", "standard_uncertainty": math.nan, "sensitivity": math.nan,
                      "variance": sd**2, "variance_share": sd**2 / total if total > 0 else math.nan, "note": ""})
         for s in sorted(var, key=var.get, reverse=True):

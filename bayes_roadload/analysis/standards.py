@@ -541,7 +541,8 @@ def format_standard(result: pd.DataFrame, checks: pd.DataFrame) -> str:
                          "see the checks)")
             continue
         lines.append(f"  {r['quantity']:<16} {r['mean']:12.5g} {r['unit']:<12} {spread}")
+    width = max([40] + [len(str(x)) for x in checks["rule"]])
     for _, r in checks.iterrows():
         verdict = "pass" if r["pass"] else "FAIL"
-        lines.append(f"  {verdict}  {r['rule']:<40} {r['value']:10.4g} (limit {r['limit']:g} {r['unit']})")
+        lines.append(f"  {verdict}  {r['rule']:<{width}} {r['value']:10.4g} (limit {r['limit']:g} {r['unit']})")
     return "\n".join(lines)

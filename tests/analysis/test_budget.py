@@ -72,6 +72,9 @@ def test_budget_shares_sum_to_one_and_a_switched_off_source_has_none(clean):
     data = rows[rows["source"] == "data"].iloc[0]
     assert data["variance"] == pytest.approx(0.25)
     assert "F50_N: data" in format_budget(budget)
+    # a quantity the model holds constant (no undriven-wheel loss) has no budget rows, nor NaN shares
+    held = budget_table(typeb, {"F50_N": 0.5, "F50_undriven_N": 0.0})
+    assert "F50_undriven_N" not in set(held["quantity"]) and "nan" not in format_budget(held)
 
 
 def test_added_draws_have_the_propagated_variance():
