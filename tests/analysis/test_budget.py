@@ -93,12 +93,19 @@ def test_added_draws_have_the_propagated_variance():
 
 
 def _mode(campaign, model):
-    """The quantities at the MAP of ``campaign``'s own problem (its kind's registry entry)."""
+    """The quantities at the MAP of ``campaign``'s own problem (its kind's registry entry), and
+    a fit holding that MAP (what ``fit`` hands the budget: the shifted campaigns share its
+    compilation)."""
+    from bayes_roadload import config
     from bayes_roadload.inference.kinds import FitOptions, kind_of
+    from bayes_roadload.inference.nuts import NutsFit
     from bayes_roadload.inference.shift import mode_of, quantities_at
+    from bayes_roadload.inference.spec import load_model_spec
 
-    problem = kind_of(campaign).problem(campaign, model, FitOptions())
-    return quantities_at(problem, mode_of(problem).constrained)
+    problem = kind_of(campaign).problem(campaign, load_model_spec(model) if isinstance(model, str) else model,
+                                        FitOptions())
+    m = mode_of(problem)
+    return quantities_at(problem, m.constrained), NutsFit(problem, {}, {}, m, config.DEFAULT_SAMPLER)
 
 
 @pytest.fixture(scope="module")
@@ -118,8 +125,9 @@ def test_interval_sensitivities_follow_the_equation_of_motion(interval_campaign)
     from bayes_roadload.inference.spec import load_model_spec
 
     spec = load_model_spec("split_f0_f2")
-    typeb = type_b_sensitivities(interval_campaign, spec, ["F50_N"])
-    f50 = _mode(interval_campaign, spec)["F50_N"]
+    mode, fit = _mode(interval_campaign, spec)
+    typeb = type_b_sensitivities(interval_campaign, spec, ["F50_N"], fit=fit)
+    f50 = mode["F50_N"]
     v = interval_campaign.vehicle
     row = typeb.sensitivity["F50_N"]
     assert row["mass_kg"] == pytest.approx(f50 / v.effective_mass_kg, rel=0.01)
@@ -136,8 +144,8 @@ def test_spindown_sensitivities_scale_with_the_wheel_inertia_and_speed():
     from bayes_roadload.simulate.spindown import simulate_spindown
 
     sd = simulate_spindown()
-    typeb = type_b_sensitivities(sd, "undriven_spindown", ["Au", "Bu"])
-    mode = _mode(sd, "undriven_spindown")
+    mode, fit = _mode(sd, "undriven_spindown")
+    typeb = type_b_sensitivities(sd, "undriven_spindown", ["Au", "Bu"], fit=fit)
     assert typeb.sensitivity["Au"]["rotating_inertia_rel"] == pytest.approx(mode["Au"], rel=0.01)
     assert typeb.sensitivity["Bu"]["rotating_inertia_rel"] == pytest.approx(mode["Bu"], rel=0.01)
     assert typeb.sensitivity["Au"]["speed_scale_rel"] == pytest.approx(mode["Au"], rel=0.01)
@@ -154,8 +162,8 @@ def test_steady_state_sensitivities_to_the_anemometer_and_the_force_transducer()
     from bayes_roadload.simulate.steady import simulate_steady
 
     st = simulate_steady(9, pairs=1, seed=0)
-    typeb = type_b_sensitivities(st, "four_term", ["CD0", "F50_N"])
-    mode = _mode(st, "four_term")
+    mode, fit = _mode(st, "four_term")
+    typeb = type_b_sensitivities(st, "four_term", ["CD0", "F50_N"], fit=fit)
     assert typeb.sensitivity["CD0"]["airspeed_factor_rel"] == pytest.approx(-2.0 * mode["CD0"], rel=0.05)
     assert typeb.sensitivity["F50_N"]["driveline_scale_rel"] == pytest.approx(mode["F50_N"], rel=0.05)
 
@@ -163,14 +171,15 @@ def test_steady_state_sensitivities_to_the_anemometer_and_the_force_transducer()
 def test_distance_time_mass_sensitivity(clean):
     """Distance-time records (surveyed markers, a clock: no speed-sensor source), like band
     times, depend on F / M_e: dF50/dM = F50 / M_e to 1 %.  The rotating inertia is switched off
-    in ``[uncertainty]`` to keep the test to two MAPs."""
+    in ``[uncertainty]`` to keep the test to two shifted MAPs."""
     from bayes_roadload.simulate.distances import distance_campaign_from_traces
 
     dc = distance_campaign_from_traces(clean)
     dc.meta["uncertainty"] = {"rotating_inertia_rel": 0.0}
-    typeb = type_b_sensitivities(dc, "three_term", ["F50_N"])
+    mode, fit = _mode(dc, "three_term")
+    typeb = type_b_sensitivities(dc, "three_term", ["F50_N"], fit=fit)
     assert typeb.sources == ["mass_kg"] and "not applicable" in typeb.notes["speed_scale_rel"]
-    f50 = _mode(dc, "three_term")["F50_N"]
+    f50 = mode["F50_N"]
     assert typeb.sensitivity["F50_N"]["mass_kg"] == pytest.approx(f50 / dc.vehicle.effective_mass_kg, rel=0.01)
 
 
