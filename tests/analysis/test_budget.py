@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -162,6 +164,8 @@ def test_steady_state_sensitivities_to_the_anemometer_and_the_force_transducer()
     from bayes_roadload.simulate.steady import simulate_steady
 
     st = simulate_steady(9, pairs=1, seed=0)
+    # the two sources checked here; the others switched off to keep the test to four shifted MAPs
+    st.meta["uncertainty"] = {k: 0.0 for k in SOURCES if k not in ("airspeed_factor_rel", "driveline_scale_rel")}
     mode, fit = _mode(st, "four_term")
     typeb = type_b_sensitivities(st, "four_term", ["CD0", "F50_N"], fit=fit)
     assert typeb.sensitivity["CD0"]["airspeed_factor_rel"] == pytest.approx(-2.0 * mode["CD0"], rel=0.05)
@@ -196,9 +200,10 @@ def test_a_source_whose_refit_fails_is_left_out_not_fatal(interval_campaign, mon
         return real(problem)
 
     monkeypatch.setattr(shift, "mode_of", failing)
-    typeb = type_b_sensitivities(interval_campaign, "split_f0_f2", ["F50_N"])
+    campaign = dataclasses.replace(interval_campaign, meta={"uncertainty": {"rotating_inertia_rel": 0.0}})
+    typeb = type_b_sensitivities(campaign, "split_f0_f2", ["F50_N"])
     assert "mass_kg" in typeb.notes and "mass_kg" not in typeb.sensitivity["F50_N"]
-    assert {"speed_scale_rel", "rotating_inertia_rel"} <= set(typeb.sensitivity["F50_N"])
+    assert set(typeb.sensitivity["F50_N"]) == {"speed_scale_rel"}
 
 
 def test_shared_compilation_gives_the_same_sensitivities(interval_campaign):
