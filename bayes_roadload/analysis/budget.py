@@ -18,7 +18,8 @@ fixed at their declared values.  They are marginalised to first order after the 
     refits each shifted campaign instead, five to seven times slower at 36 runs; the two agree
     to a few per cent of each source's contribution, tested);
   - intervals, distance-time, spin-down and steady state: central differences of the MAPs of
-    the shifted campaigns (:func:`~bayes_roadload.inference.shift.map_sensitivities`);
+    the shifted campaigns (:func:`~bayes_roadload.inference.shift.map_sensitivities`; they
+    share one compilation of the fit's potential and start at its MAP);
 * **draws**: every posterior draw gets ``sum_s c_{x,s} delta_s`` with ``delta_s ~ N(0, u_s^2)``
   drawn once per draw and shared by all quantities (so their correlations through a common
   source are kept) -- the law of propagation of uncertainty (GUM eq. 10) applied draw by draw;
@@ -80,8 +81,8 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
                          method: str = "linear", options: FitOptions = FitOptions(), fit=None) -> TypeB:
     """Central-difference sensitivities of the campaign's estimate (module docstring), as its
     kind computes them (:attr:`~bayes_roadload.inference.kinds.KindEntry.type_b`; ``options``:
-    the fit's, e.g. the runs fitted; ``fit``: the NUTS fit, whose problem and MAP the kinds
-    refitting MAPs share their compilation with).  For speed traces, ``method="linear"`` takes one
+    the fit's, e.g. the runs fitted; ``fit``: the NUTS fit, whose problem's compilation and MAP
+    the kinds that refit MAPs reuse).  For speed traces, ``method="linear"`` takes one
     Gauss-Newton step from the unshifted least-squares optimum, ``"refit"`` refits each shifted
     campaign (two least-squares fits per source, all runs); equal to first order in the
     shifts."""
