@@ -696,7 +696,8 @@ def _cmd_plan(args) -> int:
 
     from . import config
     from .analysis.batch import batch_client, run_batch
-    from .analysis.planning import Target, plan_jobs, plan_table, plot_plan, recommend, refit_work, undecided_sizes
+    from .analysis.planning import (Target, plan_jobs, plan_table, plot_plan, recommend, refit_work, sizes_to_fit,
+                                    undecided_sizes)
     from .analysis.regulation import regulation_checks
 
     if args.identify:
@@ -717,30 +718,50 @@ def _cmd_plan(args) -> int:
     pairs = sorted(set(args.pairs))
     if args.simulations < 1:
         raise ValueError("--simulations must be at least 1")
-    # adaptive: half the simulations at every size, the other half only where a target's
-    # assurance is still undecided (planning.undecided_sizes); --all-simulations: all at once
+    # adaptive in two ways: the sizes by bisection on each target's smallest size meeting it
+    # (planning.sizes_to_fit; --all-sizes: every size), and half the simulations at a size, the
+    # other half only where a target's assurance is still undecided (planning.undecided_sizes;
+    # --all-simulations: all at once)
     first = args.simulations if args.all_simulations else max(1, math.ceil(args.simulations / 2))
     echo(f"Population: {population.source}; {population.n_draws} draws; refitting {first} simulated campaigns of "
-          f"each of {pairs} pairs with {fit_model} ({population.pooling}, MAP + Laplace)"
+          + (f"each of {pairs} pairs" if args.all_sizes else
+             f"the sizes among {pairs} pairs that locate each target (bisection)")
+          + f" with {fit_model} ({population.pooling}, MAP + Laplace)"
           + (f", {args.simulations} where a target stays undecided" if first < args.simulations else "") + " ...")
     progress = not args.no_progress and _output.isEnabledFor(logging.INFO)
+    quantities = [t.quantity for t in targets]
+    records = pd.DataFrame()
+    simulated: list[int] = []
+    rounds = math.ceil(math.log2(len(pairs) + 1))  # bisection over len + 1 outcomes (the last: not reached)
     with batch_client(args.workers, args.scheduler) as client:
-        # the batch door draws a bar on a terminal and plain lines elsewhere; --quiet: neither
-        records = run_batch(plan_jobs(population, pairs, simulations=first, model=fit_model,
+        for round_ in range(1, len(pairs) + 1):
+            table = plan_table(records, targets, args.confidence) if len(records) else pd.DataFrame()
+            todo = [n for n in pairs if n not in simulated] if args.all_sizes else \
+                sizes_to_fit(table, pairs, quantities, args.assurance, simulated)
+            if not todo:
+                break
+            if not args.all_sizes:
+                echo(f"round {round_} (at most {rounds}): {todo} pairs")
+            # the batch door draws a bar on a terminal and plain lines elsewhere; --quiet: neither
+            new = run_batch(plan_jobs(population, todo, simulations=first, model=fit_model,
                                       confidence=args.confidence, seed=args.seed), client, progress=progress,
                             weight=refit_work)
-        first_table = plan_table(records, targets, args.confidence)
-        if first < args.simulations and not first_table.empty:
-            undecided = undecided_sizes(first_table, args.assurance)
-            if undecided:
-                echo(f"undecided after {first} simulations at {undecided} pairs (a target's assurance within the "
-                      f"Wilson 95 % interval of {args.assurance:g}): {args.simulations - first} more at each ...")
-                more = run_batch(plan_jobs(population, undecided, simulations=args.simulations, model=fit_model,
-                                           confidence=args.confidence, seed=args.seed, first=first),
-                                 client, progress=progress, weight=refit_work)
-                records = pd.concat([records, more], ignore_index=True)
-            else:
-                echo(f"every target decided at every size after {first} simulations each")
+            simulated += todo
+            if first < args.simulations:
+                new_table = plan_table(new, targets, args.confidence)
+                undecided = undecided_sizes(new_table, args.assurance) if not new_table.empty else []
+                if undecided:
+                    echo(f"undecided after {first} simulations at {undecided} pairs (a target's assurance within the "
+                          f"Wilson 95 % interval of {args.assurance:g}): {args.simulations - first} more at each ...")
+                    more = run_batch(plan_jobs(population, undecided, simulations=args.simulations, model=fit_model,
+                                               confidence=args.confidence, seed=args.seed, first=first),
+                                     client, progress=progress, weight=refit_work)
+                    new = pd.concat([new, more], ignore_index=True)
+            records = pd.concat([records, new], ignore_index=True)
+    skipped = [n for n in pairs if n not in simulated]
+    if skipped:
+        echo(f"not simulated: {skipped} pairs (no target's smallest size can lie there, the assurance taken as "
+              "increasing with pairs; --all-sizes simulates them)")
     records.to_csv(out / "plan_records.csv", index=False)
     failed = int(records["error"].notna().sum()) if "error" in records else 0
     not_converged = int((~records["gate_pass"].fillna(False).astype(bool)).sum()) if "gate_pass" in records else 0
@@ -1034,14 +1055,18 @@ def build_parser() -> argparse.ArgumentParser:
                          "target's assurance is still undecided (Wilson 95 %% interval around --assurance)")
     pl.add_argument("--all-simulations", action="store_true",
                     help="simulate --simulations campaigns at every size (no adaptive top-up)")
+    pl.add_argument("--all-sizes", action="store_true",
+                    help="simulate every size of --pairs (default: only the sizes that locate each target's "
+                         "smallest size by bisection, the assurance taken as increasing with pairs)")
     pl.add_argument("--model", default="three_term", help="model of the source fit when given a campaign")
     pl.add_argument("--pooling", choices=("pooled", "hierarchical"), default="hierarchical",
                     help="source fit: hierarchical gives the run-to-run spreads the future runs vary by")
     pl.add_argument("--fit-model", default=None,
                     help="model the future campaigns are fitted with (default: the source's); e.g. a constrained "
                          "one (three_term, two_term_tyres)")
-    pl.add_argument("--workers", type=int, default=1,
-                    help="worker processes of a local Dask cluster for the refits (1: in this process)")
+    pl.add_argument("--workers", type=int, default=None,
+                    help="worker processes of a local Dask cluster for the refits (default: one per usable core; "
+                         "1: in this process, no cluster)")
     pl.add_argument("--scheduler", default=None, metavar="ADDR",
                     help="address of a running Dask scheduler for the refits, e.g. tcp://10.0.0.5:8786")
     pl.add_argument("--identify", nargs="+", metavar="EFFECT", default=None,

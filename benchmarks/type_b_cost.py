@@ -1,6 +1,8 @@
 """Cost of the Type B sensitivities of the MAP-refitting kinds: one compilation per shifted
 campaign against one shared compilation (``inference.shift.SharedPotential``), and the
-largest difference of a contribution c u between the two, relative to its quantity's largest.
+largest difference of a contribution c u between the two, relative to its quantity's largest
+(quantities the model holds constant, below ``analysis.budget.CONSTANT_SD``, have no budget and
+are left out).
 
     python benchmarks/type_b_cost.py   # appends to benchmarks/records/performance/type_b_cost.jsonl
 """
@@ -18,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bayes_roadload import config  # noqa: E402
-from bayes_roadload.analysis.budget import type_b_sensitivities  # noqa: E402
+from bayes_roadload.analysis.budget import CONSTANT_SD, type_b_sensitivities  # noqa: E402
 from bayes_roadload.inference.kinds import FitOptions, kind_of  # noqa: E402
 from bayes_roadload.inference.nuts import NutsFit  # noqa: E402
 from bayes_roadload.inference.shift import mode_of  # noqa: E402
@@ -53,7 +55,7 @@ def main() -> int:
             # each contribution c u against the largest of its quantity (what a budget reads)
             rel = max((abs(shared.sensitivity[q][k] - c) * own.u[k] / max(abs(x) * own.u[s] for s, x in row.items())
                        for q, row in own.sensitivity.items() for k, c in row.items()
-                       if max(abs(x) for x in row.values()) > 0.0), default=0.0)
+                       if max(abs(x) * own.u[s] for s, x in row.items()) > CONSTANT_SD), default=0.0)
             rec = {"commit": commit, "kind": kind, "model": model, "sources": len(own.sources),
                    "own_s": round(t1 - t0, 2), "shared_s": round(t2 - t1, 2), "max_contribution_difference": rel}
             f.write(json.dumps(rec) + "\n")

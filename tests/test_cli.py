@@ -211,7 +211,7 @@ def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys):
                                                   "campaign": str(tmp_path / "campaign")}))
     out = tmp_path / "plan"
     code = main(["plan", str(fit_dir), "--target", "CD0=1%", "--target", "F50_N=0.5%", "--confidence", "0.95",
-                 "--pairs", "4", "--simulations", "2", "--out", str(out)])
+                 "--pairs", "4", "--simulations", "2", "--workers", "1", "--out", str(out)])
     assert code == 0
     plan = pd.read_csv(out / "plan.csv")
     assert list(plan.columns[:4]) == ["quantity", "n_pairs", "median_half_width", "assurance"]

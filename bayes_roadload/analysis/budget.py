@@ -56,6 +56,14 @@ SAMPLED_BY_MODEL = {"airspeed_factor_rel": "airspeed_factor", "yaw_factor_rel": 
 BUDGET_QUANTITIES = ("AD", "BD", "CD0", "KD", "At", "Bt", "Ct", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2",
                      "Au", "Bu", "F50_undriven_N")
 """Quantities whose Type B sensitivities are computed (those the model reports)."""
+CONSTANT_SD = 1e-9
+"""Standard uncertainty (data and Type B together, in the quantity's units) below which a
+quantity is a constant of the model and has no budget.  Rounding leaves such a constant at
+~1e-13 and below: F1_N_per_kph of a model without a linear term is the least-squares fit
+(``physics.roadload.road_load_summary``) of forces up to ~1e4 N, exact to eps * 1e4 N / 10 km/h
+~ 2e-13.  A fitted quantity's uncertainty is above ~1e-6 (AD, the smallest, is ~1e-2 known to
+~1 %), so the floor sits three orders of magnitude from either."""
+
 BUDGET_COLUMNS = ("quantity", "source", "standard_uncertainty", "sensitivity", "variance", "variance_share", "note")
 
 
@@ -158,13 +166,14 @@ def budget_table(typeb: TypeB, data_sd: dict[str, float]) -> pd.DataFrame:
     """``budget.csv``: per quantity, a row per source (standard uncertainty, sensitivity, its
     variance c^2 u^2 and share) and a ``data`` row (the posterior's own variance), then a row
     per source left out with the reason.  A quantity without variance (a constant of the
-    model, e.g. F50_undriven_N of a fit without undriven wheels) has no rows."""
+    model, e.g. F50_undriven_N of a fit without undriven wheels, F1_N_per_kph of one without a
+    linear term: total standard uncertainty below :data:`CONSTANT_SD`) has no rows."""
     rows = []
     for q, sd in data_sd.items():
         row = typeb.sensitivity.get(q, {})
         var = {s: (c * typeb.u[s]) ** 2 for s, c in row.items()}
         total = sd**2 + sum(var.values())
-        if not total > 0.0:   # a quantity the fit holds constant (no undriven-wheel loss modelled): no budget
+        if not total > CONSTANT_SD**2:
             continue
         rows.append({"quantity": q, "source": "data", "standard_uncertainty": math.nan, "sensitivity": math.nan,
                      "variance": sd**2, "variance_share": sd**2 / total if total > 0 else math.nan, "note": ""})

@@ -419,6 +419,37 @@ def undecided_sizes(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANC
     return sorted(out)
 
 
+def sizes_to_fit(table: pd.DataFrame, pairs: Sequence[int], quantities: Sequence[str],
+                 assurance: float = config.PLAN_ASSURANCE, simulated: Sequence[int] = ()) -> list[int]:
+    """The sizes (of ``pairs``) to simulate next so that each quantity's smallest size meeting
+    its target is located by bisection, taking the assurance as increasing with the number of
+    pairs.  ``table`` (:func:`plan_table`, possibly empty) holds the sizes simulated so far.
+
+    For each quantity, P is the smallest simulated size whose assurance reaches ``assurance``
+    (none: beyond the largest size) and F the largest simulated size below P that does not;
+    the answer lies in (F, P].  While sizes lie strictly between F and P, the middle one of
+    them (the lower of two: a refit costs more the more pairs it has) is returned, so that
+    both outcomes at it leave at most half of them; when none do, the quantity is located: its answer is P, the size
+    :func:`recommend` reads (or "not reached", the largest size having been simulated).  Sizes
+    above P and below F are never needed: at 9 sizes a quantity takes at most 4 of them
+    instead of 9.  A quantity absent from the table so far (nothing simulated, or not a
+    quantity of the model) starts from the whole range.  Sizes in ``simulated`` are not
+    returned again (a size whose refits all raised has no row), so the sequence ends.  Returns
+    the union, sorted."""
+    sizes = sorted(set(int(n) for n in pairs))
+    out = set()
+    for q in quantities:
+        rows = table[table["quantity"] == q] if not table.empty else table
+        reached = {int(n): float(a) >= assurance for n, a in zip(rows.get("n_pairs", []), rows.get("assurance", []))}
+        passing = [i for i, n in enumerate(sizes) if reached.get(n) is True]
+        hi = passing[0] if passing else len(sizes)          # index of P (len: beyond the range)
+        failing = [i for i, n in enumerate(sizes[:hi]) if reached.get(n) is False]
+        lo = failing[-1] + 1 if failing else 0              # first index above F
+        if lo < hi:
+            out.add(sizes[(lo + hi - 1) // 2])
+    return sorted(out - {int(n) for n in simulated})
+
+
 def recommend(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE, by: Sequence[str] = ()) -> pd.DataFrame:
     """The smallest ``n_pairs`` whose assurance reaches ``assurance``, per (group and) quantity;
     ``n_pairs`` is None (and ``reached`` False) when no simulated size reaches it."""

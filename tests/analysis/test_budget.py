@@ -128,7 +128,7 @@ def test_interval_sensitivities_follow_the_equation_of_motion(interval_campaign)
 
     spec = load_model_spec("split_f0_f2")
     mode, fit = _mode(interval_campaign, spec)
-    typeb = type_b_sensitivities(interval_campaign, spec, ["F50_N"], fit=fit)
+    typeb = type_b_sensitivities(interval_campaign, spec, ["F50_N", "F1_N_per_kph"], fit=fit)
     f50 = mode["F50_N"]
     v = interval_campaign.vehicle
     row = typeb.sensitivity["F50_N"]
@@ -137,6 +137,10 @@ def test_interval_sensitivities_follow_the_equation_of_motion(interval_campaign)
                                                         rel=0.01)
     assert row["speed_scale_rel"] < 0.0   # faster bands for the same times: more kinetic energy per band
     assert {"airspeed_factor_rel", "yaw_offset_rad", "temperature_k"} <= set(typeb.notes)
+    # F = F0 + F2 v^2: F1 is 0 but for the rounding of its least squares, and has no budget
+    assert all(abs(c) * typeb.u[s] < 1e-12 for s, c in typeb.sensitivity["F1_N_per_kph"].items())
+    budget = budget_table(typeb, {"F50_N": 1.0, "F1_N_per_kph": abs(mode["F1_N_per_kph"])})
+    assert set(budget["quantity"]) - {""} == {"F50_N"}
 
 
 def test_spindown_sensitivities_scale_with_the_wheel_inertia_and_speed():

@@ -21,6 +21,7 @@ from bayes_roadload.analysis.planning import (
     predictive_half_widths,
     recommend,
     simulate_future,
+    sizes_to_fit,
 )
 from bayes_roadload.inference.spec import MODELS_DIR
 from bayes_roadload.simulate import simulate_campaign
@@ -135,6 +136,43 @@ def test_plan_through_the_batch_door(conditions):
     for q in ("AD", "F50_N"):
         assert table.loc[(q, 4), "median_half_width"] < table.loc[(q, 1), "median_half_width"]
     assert records.groupby("n_pairs")["time_compile_s"].min().max() < 0.5 * records["time_compile_s"].max()
+
+
+def _bisect(pairs, curves, assurance=0.8):
+    """Run sizes_to_fit to its end against assurance curves (quantity -> size -> assurance);
+    returns the table of the simulated sizes and the rounds taken."""
+    rows, simulated = [], []
+    for rounds in range(len(pairs) + 1):
+        todo = sizes_to_fit(pd.DataFrame(rows), pairs, list(curves), assurance, simulated)
+        if not todo:
+            return pd.DataFrame(rows), rounds
+        rows += [{"quantity": q, "n_pairs": n, "assurance": c[n], "target": 1.0, "unit": "%", "n_sims": 20}
+                 for n in todo for q, c in curves.items()]
+        simulated += todo
+    raise AssertionError("sizes_to_fit did not end")
+
+
+def test_bisection_over_sizes_finds_what_every_size_would():
+    """For every placement of each target's smallest passing size (including never), with the
+    assurance increasing in the pairs, the sizes the bisection simulates give the recommendation
+    of simulating every size, within ceil(log2(9 + 1)) = 4 rounds and 4 sizes per target; the
+    issue's 12-pair plan (AD 8, BD 8, CD0 6, F50_N 3) needs 6 of the 9 sizes."""
+    pairs = list(config.PLAN_PAIRS)
+    for placement in [(a, b) for a in pairs + [None] for b in pairs + [None]]:
+        curves = {q: {n: (0.9 if t is not None and n >= t else 0.5) for n in pairs}
+                  for q, t in zip(("AD", "CD0"), placement)}
+        table, rounds = _bisect(pairs, curves)
+        full = pd.DataFrame([{"quantity": q, "n_pairs": n, "assurance": c[n], "target": 1.0, "unit": "%"}
+                             for q, c in curves.items() for n in pairs])
+        got = recommend(table, 0.8).set_index("quantity")
+        want = recommend(full, 0.8).set_index("quantity")
+        assert got["n_pairs"].fillna(0).to_dict() == want["n_pairs"].fillna(0).to_dict(), placement
+        assert rounds <= 4 and table["n_pairs"].nunique() <= 4 * len(curves)
+    issue = {q: {n: (0.9 if n >= t else 0.5) for n in pairs} for q, t in (("AD", 8), ("BD", 8), ("CD0", 6), ("F50_N", 3))}
+    table, _ = _bisect(pairs, issue)
+    assert sorted(set(table["n_pairs"])) == [2, 3, 4, 6, 8, 12]
+    # a quantity the model never yields ends the sequence once its first size is simulated
+    assert sizes_to_fit(pd.DataFrame(columns=["quantity", "n_pairs", "assurance"]), pairs, ["KD"], 0.8, [6]) == []
 
 
 def test_undecided_sizes_follow_the_wilson_interval_of_the_assurance():
