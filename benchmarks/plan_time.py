@@ -1,8 +1,9 @@
 """Wall time of ``bayes-roadload plan`` with its defaults on a 12-pair hierarchical fit (the
 issue's reference): thesis case 14, 12 pairs, seed 1 (``simulate --case 14 --pairs 12 --seed 1``),
 fitted with ``fit`` and its defaults (hierarchical at 24 runs), then ``plan FIT_DIR --out DIR``
-with every default (9 sizes, 40 simulations per size at most, one worker), timed from before
-the process starts to its exit.  The record adds the refits per size, their mean time and the
+with every default (the sizes that locate each target by bisection among 9, 40 simulations
+per size at most, one worker per usable core), timed from before the process starts to its
+exit.  The record adds the refits per size, their mean time and the
 compile time from ``plan_records.csv``, and the recommendation.
 
 Records: ``benchmarks/records/performance/plan_time.jsonl`` (one line per run);
@@ -81,6 +82,7 @@ def summarise(plan_dir: Path, wall_s: float, args: str, note: str = "") -> dict:
         "refit_s": round(float(rec["time_total_s"].sum()), 1), "compile_s": round(float(rec["time_compile_s"].sum()), 1),
         "refits_compiling_over_3s": int((rec["time_compile_s"] > 3).sum()),
         "jax_caches_cleared": int(rec["jax_caches_cleared"].sum()),
+        "sizes_simulated": sorted(int(n) for n in rec["n_pairs"].unique()),
         "per_size": {int(n): {k: round(float(v), 2) for k, v in r.items()} for n, r in per_size.iterrows()},
         "recommendation": {r["quantity"]: (int(r["n_pairs"]) if r["reached"] else f"> {int(r['max_pairs_simulated'])}")
                            for _, r in recommendation.iterrows()},
@@ -95,7 +97,7 @@ def main() -> None:
     p.add_argument("--note", default="")
     p.add_argument("--refits", type=int, default=None, help="time this many refits of --pairs pairs instead")
     p.add_argument("--pairs", type=int, default=24)
-    p.add_argument("--fit-dir", type=Path, default=None, help="source fit of --refits (default: fitted anew)")
+    p.add_argument("--fit-dir", type=Path, default=None, help="the source fit (default: fitted anew)")
     a = p.parse_args()
     if a.refits is not None:
         with tempfile.TemporaryDirectory(prefix="plan_refits_") as tmp:
@@ -115,7 +117,7 @@ def main() -> None:
     else:
         with tempfile.TemporaryDirectory(prefix="plan_time_") as tmp:
             tmp = Path(tmp)
-            fit_dir = reference_fit(tmp)
+            fit_dir = a.fit_dir or reference_fit(tmp)
             t0 = time.perf_counter()
             subprocess.run([sys.executable, "-m", "bayes_roadload", "plan", str(fit_dir), "--out", str(tmp / "plan"),
                             *shlex.split(a.extra_args)], check=True, capture_output=True)
