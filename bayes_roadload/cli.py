@@ -723,9 +723,9 @@ def _cmd_plan(args) -> int:
     # other half only where a target's assurance is still undecided (planning.undecided_sizes;
     # --all-simulations: all at once)
     first = args.simulations if args.all_simulations else max(1, math.ceil(args.simulations / 2))
-    echo(f"Population: {population.source}; {population.n_draws} draws; refitting {first} simulated campaigns of "
+    echo(f"Population: {population.source}; {population.n_draws} draws; refitting {first} simulated campaigns at "
           + (f"each of {pairs} pairs" if args.all_sizes else
-             f"the sizes among {pairs} pairs that locate each target (bisection)")
+             f"the sizes among {pairs} pairs that locate each target's smallest passing size (bisection)")
           + f" with {fit_model} ({population.pooling}, MAP + Laplace)"
           + (f", {args.simulations} where a target stays undecided" if first < args.simulations else "") + " ...")
     progress = not args.no_progress and _output.isEnabledFor(logging.INFO)
