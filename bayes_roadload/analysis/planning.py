@@ -429,8 +429,9 @@ def sizes_to_fit(table: pd.DataFrame, pairs: Sequence[int], quantities: Sequence
     (none: beyond the largest size) and F the largest simulated size below P that does not;
     the answer lies in (F, P].  While sizes lie strictly between F and P, the middle one of
     them (the lower of two: a refit costs more the more pairs it has) is returned, so that
-    both outcomes at it leave at most half of them; when none do, the quantity is located: its answer is P, the size
-    :func:`recommend` reads (or "not reached", the largest size having been simulated).  Sizes
+    both outcomes at it leave at most half of them; when none do, the quantity is located:
+    its answer is P, the size :func:`recommend` reads (or "not reached", the largest size
+    having been simulated).  Sizes
     above P and below F are never needed: at 9 sizes a quantity takes at most 4 of them
     instead of 9.  A quantity absent from the table so far (nothing simulated, or not a
     quantity of the model) starts from the whole range.  Sizes in ``simulated`` are not
