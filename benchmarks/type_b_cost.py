@@ -23,8 +23,7 @@ sys.path.insert(0, str(ROOT))
 from bayes_roadload import config  # noqa: E402
 from bayes_roadload.analysis.budget import CONSTANT_SD, type_b_sensitivities  # noqa: E402
 from bayes_roadload.inference.kinds import FitOptions, kind_of  # noqa: E402
-from bayes_roadload.inference.nuts import NutsFit  # noqa: E402
-from bayes_roadload.inference.nuts import unconstrained_posterior  # noqa: E402
+from bayes_roadload.inference.nuts import NutsFit, unconstrained_posterior  # noqa: E402
 from bayes_roadload.inference.shift import mode_of  # noqa: E402
 from bayes_roadload.inference.spec import load_model_spec  # noqa: E402
 from bayes_roadload.simulate import simulate_campaign  # noqa: E402
@@ -74,9 +73,11 @@ def main() -> int:
             shared = type_b_sensitivities(campaign, spec, fit=fit)
             t2 = time.perf_counter()
             # each contribution c u against the largest of its quantity (what a budget reads)
-            rel = max((abs(shared.sensitivity[q][k] - c) * own.u[k] / max(abs(x) * own.u[s] for s, x in row.items())
-                       for q, row in own.sensitivity.items() for k, c in row.items()
-                       if max(abs(x) * own.u[s] for s, x in row.items()) > CONSTANT_SD), default=0.0)
+            largest = {q: max((abs(x) * own.u[s] for s, x in row.items()), default=0.0)
+                       for q, row in own.sensitivity.items()}
+            rel = max((abs(shared.sensitivity[q][k] - c) * own.u[k] / largest[q]
+                       for q, row in own.sensitivity.items() if largest[q] > CONSTANT_SD
+                       for k, c in row.items()), default=0.0)
             rec = {"commit": commit, "kind": kind, "model": model, "sources": len(own.sources),
                    "own_s": round(t1 - t0, 2), "shared_s": round(t2 - t1, 2), "max_contribution_difference": rel,
                    "gradient_compile_s": round(compile_s, 2), "gradient_eval_ms": round(eval_ms, 3)}

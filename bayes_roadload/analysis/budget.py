@@ -176,10 +176,10 @@ def budget_table(typeb: TypeB, data_sd: dict[str, float]) -> pd.DataFrame:
         if not total > CONSTANT_SD**2:
             continue
         rows.append({"quantity": q, "source": "data", "standard_uncertainty": math.nan, "sensitivity": math.nan,
-                     "variance": sd**2, "variance_share": sd**2 / total if total > 0 else math.nan, "note": ""})
+                     "variance": sd**2, "variance_share": sd**2 / total, "note": ""})
         for s in sorted(var, key=var.get, reverse=True):
             rows.append({"quantity": q, "source": s, "standard_uncertainty": typeb.u[s], "sensitivity": row[s],
-                         "variance": var[s], "variance_share": var[s] / total if total > 0 else math.nan,
+                         "variance": var[s], "variance_share": var[s] / total,
                          "note": ""})
     for s, why in typeb.notes.items():
         rows.append({"quantity": "", "source": s, "standard_uncertainty": typeb.u[s], "sensitivity": math.nan,

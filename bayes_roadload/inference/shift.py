@@ -13,8 +13,9 @@ coefficient.  Compiling is most of a small MAP's time (a distance-time gradient:
 compile, 0.9 ms to evaluate, ``benchmarks/type_b_cost.py``), and the shifted campaigns differ
 from the fitted one only in their data: :class:`SharedPotential` compiles the potential once
 with the data as arguments and starts each shifted MAP at the fit's (1.7-3.2x faster than a
-compilation per campaign, the same sensitivities: ``docs/calibration.md``).  One Newton step from the unshifted mode instead of
-each refit was off by up to 30 % on a spin-down's wheel inertia, so the MAPs are refitted.
+compilation per campaign, the same sensitivities: ``docs/calibration.md``).  One Newton step
+from the unshifted mode instead of each refit was off by up to 30 % on a spin-down's wheel
+inertia, so the MAPs are refitted.
 The speed-trace kind has the least-squares analogue
 (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`)."""
 
