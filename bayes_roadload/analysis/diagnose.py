@@ -79,7 +79,7 @@ def gap_metrics(lin: fx.Linearisation, residual: np.ndarray, sol: fx.Solution | 
     # the spread against what the noise left by this model predicts (its noise levels refitted
     # to its residuals: a misfit inflates the integrated error, and with it every covariance)
     spread = fx.coefficient_spread(fx.with_noise(lin, *fx.fit_noise(lin, residual)), sol, library)
-    if any(library[e].per_run for e in effects if e in library):
+    if any(library[e].run_coefficients for e in effects if e in library):
         # each run its own coefficients: no spread left to compare (the refit is the spread)
         spread = {k: math.nan for k in spread}
     out.update(spread)
@@ -224,6 +224,12 @@ def _plan_hint(effect: fx.Effect) -> str:
     return f" (`plan --identify {effect.name} --design ...` scores such a test)"
 
 
+def _shape_text(entry: dict) -> str:
+    """``; shape P = v`` for a family's profiled shape (empty otherwise)."""
+    values = (entry.get("shape") or {}).get("values", {})
+    return "; shape " + ", ".join(f"{p} = {v:.3g}" for p, v in values.items()) if values else ""
+
+
 def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> str:
     if entry.get("ambiguous_with"):
         return (f"not distinguishable here from {', '.join(entry['ambiguous_with'])} (delta_elpd "
@@ -243,7 +249,7 @@ def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> s
         how = " (from the paired-run kinematics)" if kin else ""
         given = entry.get("delta_elpd_given_supported")
         extra = f", {given:.1f} given the effects ranked above it" if given is not None else ""
-        return f"supported{how}: delta_elpd {entry['delta_elpd']:.1f} >= {cfg.support_delta_elpd:g}{extra}"
+        return f"supported{how}: delta_elpd {entry['delta_elpd']:.1f} >= {cfg.support_delta_elpd:g}{extra}{_shape_text(entry)}"
     if entry.get("qualifies"):
         given = entry.get("delta_elpd_given_supported")
         return (f"not supported: explained by the effects ranked above it" +
@@ -257,7 +263,7 @@ def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> s
     sizes = ", ".join(f"|{p} - null| >= {v['detectable']:.3g}" for p, v in entry["identification"].items()
                       if math.isfinite(v.get("detectable", math.inf)))
     seen = f"; this campaign would support it at {sizes}" if sizes else ""
-    return (f"not supported: delta_elpd {entry['delta_elpd']:.1f} < {cfg.support_delta_elpd:g}{seen}; smaller "
+    return (f"not supported: delta_elpd {entry['delta_elpd']:.1f} < {cfg.support_delta_elpd:g}{_shape_text(entry)}{seen}; smaller "
             f"effects need {effect.needs}{_plan_hint(effect)}")
 
 
@@ -304,17 +310,19 @@ class Diagnosis:
         return c["effect"] if c is not None and c["supported"] else None
 
 
-DIAGNOSIS_CONTRACT = 3
+DIAGNOSIS_CONTRACT = 4
 """Version of ``diagnosis.json``'s contract: the keys ``gap``, ``localisation``,
 ``candidates`` (each candidate with :data:`CANDIDATE_KEYS`), ``contract`` (this number) and
 ``rules`` (:func:`rules_fingerprint`).  Raised whenever a key is added or its meaning changes,
 so a committed diagnosis older than the code is detected."""
 
 CANDIDATE_KEYS = ("effect", "rank", "supported", "qualifies", "delta_elpd", "gap_before", "gap_after", "shrink_pct",
-                  "identifiable", "identification", "estimates", "against_sign", "unavailable", "needs", "statement")
+                  "identifiable", "identification", "estimates", "against_sign", "unavailable", "needs", "statement",
+                  "shape")
 """The keys every candidate entry of ``diagnosis.json`` carries (``against_sign``: the
 estimates whose sign no physical value of the effect has, :meth:`.effects.Effect.against_sign`;
-empty when none)."""
+empty when none; ``shape``: for a family, its profiled shape and the gain at every grid point,
+:func:`.effects.fit_shapes`, else empty)."""
 
 
 def _sha256_json(obj: Any) -> str:
@@ -353,6 +361,9 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
     lin = fx.linearise(problem, fit.constrained, library)
     timings["linearise_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    lin, shapes = fx.fit_shapes(lin, library)
+    timings["shapes_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     groups = _pair_groups(campaign, problem.run_ids)
     base_sol = fx.fit_effects(lin, (), library)
     before = gap_metrics(lin, lin.residual, None, (), library, groups)
@@ -367,7 +378,7 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
                                  "delta_elpd": math.nan,
                                  "gap_before": before, "gap_after": {}, "shrink_pct": {},
                                  "identifiable": False, "identification": {}, "estimates": {}, "against_sign": {},
-                                 "unavailable": lin.available.get(name)}
+                                 "unavailable": lin.available.get(name), "shape": shapes.get(name, {})}
         if entry["unavailable"] is None and name in lin.effects:
             sol = fx.fit_effects(lin, (name,), library)
             k = fx.n_added_parameters(lin, (name,), library)

@@ -21,6 +21,11 @@ The gain in expected log predictive density is estimated as the gain in maximise
 likelihood minus the number of added parameters (Akaike's estimate of elpd; ``delta_elpd``).
 Leave-one-pair-out predictive densities come from the same quadratic form (:func:`lopo_lpd`).
 
+A candidate may be a *family*: shape parameters of its terms (a time constant, an exponent)
+declared with a grid (``shape`` in the library) are not held at one value but profiled over
+their grid (:func:`fit_shapes`), the grid points carrying equal prior mass (log-uniform or
+uniform over the stated range), and each shape parameter is charged as one more added parameter.
+
 Identifiability (:func:`evaluate`): for each candidate parameter, the fraction of its
 information that survives re-fitting the user's coefficients, ``1 - R^2`` of its signature on
 theirs (``information_ratio``), and how much the data contract its prior (``contraction``).  A
@@ -33,6 +38,7 @@ scale is then judged from the paired runs' kinematics (thesis 4.7.3,
 
 from __future__ import annotations
 
+import itertools
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -83,6 +89,10 @@ class Effect:
     sign : parameter -> +1 or -1, the sign of every physical value away from the null (one-
         parameter effects only); an estimate of the other sign is no such effect, and the
         diagnosis scores it at its constrained optimum, the null.
+    shape : fixed parameter -> its grid: the family of shapes the candidate is profiled over
+        (:func:`fit_shapes`); the ``fixed`` value is the shape before profiling.
+    each_run : a term effect whose parameters take one value per run (the shape stays shared):
+        e.g. each run's tyres starting at their own temperature.
     """
 
     name: str
@@ -95,6 +105,8 @@ class Effect:
     needs: str = ""
     confounded_with: tuple[str, ...] = ()
     sign: dict[str, int] = field(default_factory=dict)
+    shape: dict[str, tuple[float, ...]] = field(default_factory=dict)
+    each_run: bool = False
 
     def against_sign(self, estimates: Mapping[str, float]) -> dict[str, float]:
         """The estimates (offsets from the null) whose sign no physical value of the effect has."""
@@ -107,7 +119,13 @@ class Effect:
 
     @property
     def per_run(self) -> bool:
-        """Kind "run": one value of each parameter per run (a run-to-run variation)."""
+        """One value of each parameter per run: kind "run" (the model's coefficients vary from
+        run to run) or a term effect with ``each_run``."""
+        return self.run_coefficients or self.each_run
+
+    @property
+    def run_coefficients(self) -> bool:
+        """Kind "run": its parameters are the model's own coefficients, one value per run."""
         return self.kind == "run"
 
     @property
@@ -116,9 +134,32 @@ class Effect:
         return self.kind == "air"
 
 
+SHAPE_SCALES = ("log", "linear")
+"""How a shape grid spaces its points: geometrically (a log-uniform prior) or evenly."""
+
+
+def shape_grid(where: str, param: str, spec: Mapping[str, Any]) -> tuple[float, ...]:
+    """The grid of a shape parameter, ``{low, high, points, scale}`` (``scale`` "log" by
+    default): ``points`` values spaced evenly in log or in value from ``low`` to ``high``,
+    ends included, each carrying the same prior mass."""
+    try:
+        low, high, n = float(spec["low"]), float(spec["high"]), int(spec["points"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: shape.{param} needs numbers low, high and points ({exc})") from None
+    scale = spec.get("scale", "log")
+    if scale not in SHAPE_SCALES:
+        raise ValueError(f"{where}: shape.{param}: scale {scale!r} not one of {SHAPE_SCALES}")
+    if not (math.isfinite(low) and math.isfinite(high) and low < high and n >= 2):
+        raise ValueError(f"{where}: shape.{param}: needs low < high (finite) and at least 2 points")
+    if scale == "log" and low <= 0.0:
+        raise ValueError(f"{where}: shape.{param}: a log grid needs low > 0")
+    grid = np.geomspace(low, high, n) if scale == "log" else np.linspace(low, high, n)
+    return tuple(float(v) for v in grid)
+
+
 def load_library(path: str | Path = LIBRARY_PATH) -> dict[str, Effect]:
     """Read the candidate library (``models/effects/library.toml``); refuses unknown effect
-    names, kinds, terms and parameters."""
+    names, kinds, terms and parameters, and shape grids of parameters the effect does not fix."""
     doc = tomllib.loads(Path(path).read_text())
     out: dict[str, Effect] = {}
     for name, e in doc.get("effects", {}).items():
@@ -146,12 +187,20 @@ def load_library(path: str | Path = LIBRARY_PATH) -> dict[str, Effect]:
             if len(params) != 1 or kind != "term" or v.get("null", 0.0) != 0.0:
                 raise ValueError(f"{where}: a sign is for a one-parameter term effect whose null is 0")
             sign[p] = SIGNS[v["sign"]]
+        each_run = bool(e.get("each_run", False))
+        if each_run and kind != "term":
+            raise ValueError(f"{where}: each_run is for a term effect (kind \"run\" is per run already)")
+        shape = {}
+        for p, spec in e.get("shape", {}).items():
+            if p not in e.get("fixed", {}) or kind != "term":
+                raise ValueError(f"{where}: shape.{p}: a shape is a fixed parameter of a term effect's terms")
+            shape[p] = shape_grid(where, p, spec)
         out[name] = Effect(name=name, description=e.get("description", ""), terms=tuple(e.get("terms", [])),
                            kind=kind, prior_sd={p: float(v["prior_sd"]) for p, v in params.items()},
                            null={p: v.get("null", 0.0) for p, v in params.items()},
                            fixed={k: float(v) for k, v in e.get("fixed", {}).items()},
                            needs=e.get("needs", ""), confounded_with=tuple(e.get("confounded_with", [])),
-                           sign=sign)
+                           sign=sign, shape=shape, each_run=each_run)
     return out
 
 
@@ -256,7 +305,7 @@ def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effe
         if available[e.name] is not None:
             continue
         values.update(e.fixed)
-        if e.per_run:
+        if e.run_coefficients:
             cols = tuple(p for p in e.parameters if p in problem.free)
             if not cols:
                 available[e.name] = "the model frees none of its coefficients"
@@ -276,6 +325,9 @@ def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effe
             available[e.name] = "its parameters are already free in the model"
             continue
         effects[e.name] = tuple(cols)
+    # shape parameters are columns too (never solved for: at the null their signature is
+    # zero), so that fit_shapes can move them without a new compilation
+    columns += [p for name in effects for p in library[name].shape if p not in columns]
     columns.append("v0_mps")
     for p, v in model.defaults.items():
         values.setdefault(p, float(v))
@@ -415,12 +467,58 @@ def fit_effects(lin: Linearisation, effects: tuple[str, ...], library: Mapping[s
 
 
 def n_added_parameters(lin: Linearisation, effects: tuple[str, ...], library: Mapping[str, Effect]) -> int:
-    """Parameters the effects add (run effects: one per run and coefficient, less the shared one)."""
+    """Parameters the effects add (run effects: one per run and coefficient, less the shared
+    one; each-run term effects: one per run and parameter; families: one more per shape
+    parameter, profiled over its grid)."""
     k = 0
     for name in effects:
         e = library[name]
-        k += len(lin.effects[name]) * (lin.n_runs - 1 if e.per_run else 1)
+        per_param = lin.n_runs - 1 if e.run_coefficients else lin.n_runs if e.each_run else 1
+        k += len(lin.effects[name]) * per_param + len(e.shape)
     return k
+
+
+def fit_shapes(lin: Linearisation, library: Mapping[str, Effect]) -> tuple[Linearisation, dict[str, dict]]:
+    """Profile every family's shape parameters (``Effect.shape``) over their grids, each family
+    alone on top of the user's model: the grid point whose fit gains the most log likelihood
+    (an estimate of a sign no physical value has scores the null, as in the diagnosis).  Where
+    no point gains anything the family keeps its ``fixed`` shape.
+
+    Returns the linearisation at every family's best shape -- the other candidates' signatures
+    are unchanged, since at the null a shape moves no speed -- and, per family,
+    ``{"values": {param: value}, "profile": [{param: value, ..., "loglik_gain": gain}, ...]}``
+    (gains over the user's model, one per grid point)."""
+    families = [n for n in lin.effects if library[n].shape]
+    if not families:
+        return lin, {}
+    base_gain = fit_effects(lin, (), library).loglik_gain
+    x = lin.x.copy()
+    values = dict(lin.values)
+    out: dict[str, dict] = {}
+    for name in families:
+        e = library[name]
+        params = list(e.shape)
+        j = lin.index(params)
+        profile, best = [], (0.0, None)
+        for point in itertools.product(*(e.shape[p] for p in params)):
+            xs = lin.x.copy()
+            xs[:, j] = point
+            ls = relinearise(lin, xs)
+            sol = fit_effects(ls, (name,), library)
+            shared = [ls.columns[i] for i in sol.shared]
+            est = {p: float(ls.values.get(p, 0.0) + sol.beta[shared.index(p)]) for p in lin.effects[name]
+                   if p in shared}
+            gain = 0.0 if e.against_sign(est) else sol.loglik_gain - base_gain
+            profile.append({**dict(zip(params, point)), "loglik_gain": float(gain)})
+            if gain > best[0]:
+                best = (gain, point)
+        if best[1] is not None:
+            x[:, j] = best[1]
+            values.update(zip(params, best[1]))
+        out[name] = {"values": {p: float(values[p]) for p in params}, "profile": profile}
+    shaped = relinearise(lin, x)
+    shaped.values = values
+    return shaped, out
 
 
 _effect_terms_jit = jax.jit(_effect_terms)
@@ -623,6 +721,8 @@ def coefficient_spread(lin: Linearisation, sol: Solution | None, library: Mappin
     shared = sol.shared if sol is not None else lin.index(lin.base)
     beta = sol.beta if sol is not None else np.zeros(len(shared))
     own = lin.index(["v0_mps"] + coeffs)
+    # a refit's own steps of effect parameters (a run-level term family) held at their values
+    held = [(k, j) for k, j in enumerate(sol.own) if j not in own] if sol is not None else []
     # each run's own coefficients (and initial speed) given the shared fit: run-level estimates
     r = lin.n_runs
     est = np.zeros((r, len(coeffs)))
@@ -632,6 +732,8 @@ def coefficient_spread(lin: Linearisation, sol: Solution | None, library: Mappin
         g, b = lin.gram[i], lin.score[i]
         d = g[np.ix_(own, own)]
         rhs = b[own] - g[np.ix_(own, shared)] @ beta
+        if held:
+            rhs = rhs - g[np.ix_(own, [j for _, j in held])] @ sol.gamma[i, [k for k, _ in held]]
         dinv = np.linalg.pinv(d)
         est[i] = (dinv @ rhs)[1:]
         var[i] = np.diag(dinv)[1:]
