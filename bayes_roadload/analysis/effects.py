@@ -154,7 +154,7 @@ def shape_grid(where: str, param: str, spec: Mapping[str, Any]) -> tuple[float, 
     if scale == "log" and low <= 0.0:
         raise ValueError(f"{where}: shape.{param}: a log grid needs low > 0")
     grid = np.geomspace(low, high, n) if scale == "log" else np.linspace(low, high, n)
-    return tuple(float(v) for v in grid)
+    return tuple(float(f"{v:.12g}") for v in grid)   # 40.0, not 40.00000000000001
 
 
 def load_library(path: str | Path = LIBRARY_PATH) -> dict[str, Effect]:

@@ -190,3 +190,52 @@ def test_a_one_parameter_effect_may_declare_its_physical_sign(tmp_path):
                    'parameters.yaw_offset_rad = { prior_sd = 0.05, sign = "positive" }\n')
     with pytest.raises(ValueError, match="one-parameter term effect"):
         fx.load_library(bad)
+
+
+def test_a_family_declares_its_shape_grid_and_each_run_amplitudes(tmp_path):
+    """``shape.P`` in the library: P must be a fixed parameter of a term effect; the grid spaces
+    ``points`` values from ``low`` to ``high`` (log or linear, ends included); ``each_run`` is for
+    term effects only.  The shipped tyre candidates are families."""
+    lib = fx.load_library()
+    tau = lib["tyre_temperature"].shape["tyre_time_constant_s"]
+    assert tau[0] == pytest.approx(20.0) and tau[-1] == pytest.approx(1280.0) and len(tau) == 7
+    assert np.allclose(np.diff(np.log(tau)), math.log(2.0))
+    assert lib["tyre_speed_exponent"].shape["tyre_speed_exponent"] == pytest.approx((2.0, 3.0, 4.0, 5.0))
+    assert lib["tyre_temperature"].each_run and lib["tyre_temperature"].per_run
+    assert not lib["tyre_temperature"].run_coefficients and lib["run_to_run_variation"].run_coefficients
+    head = ('[effects.tyre_temperature]\nterms = ["tyre_temperature_transient"]\nkind = "term"\n'
+            'parameters.tyre_transient = { prior_sd = 0.2 }\n')
+    bad = tmp_path / "lib.toml"
+    bad.write_text(head + 'shape.tyre_time_constant_s = { low = 20.0, high = 100.0, points = 3 }\n')
+    with pytest.raises(ValueError, match="a shape is a fixed parameter"):
+        fx.load_library(bad)
+    fixed = 'fixed = { tyre_time_constant_s = 40.0 }\n'
+    for spec, match in (("{ low = 0.0, high = 100.0, points = 3 }", "log grid needs low > 0"),
+                        ("{ low = 50.0, high = 20.0, points = 3 }", "low < high"),
+                        ("{ low = 20.0, high = 100.0, points = 1 }", "at least 2 points"),
+                        ("{ low = 20.0, high = 100.0, points = 3, scale = \"cubic\" }", "not one of"),
+                        ("{ low = 20.0, points = 3 }", "needs numbers")):
+        bad.write_text(head + fixed + f"shape.tyre_time_constant_s = {spec}\n")
+        with pytest.raises(ValueError, match=match):
+            fx.load_library(bad)
+    bad.write_text('[effects.yaw_calibration]\nterms = []\nkind = "air"\neach_run = true\n'
+                   'parameters.yaw_offset_rad = { prior_sd = 0.05 }\n')
+    with pytest.raises(ValueError, match="each_run is for a term effect"):
+        fx.load_library(bad)
+    ok = tmp_path / "ok.toml"
+    ok.write_text(head + fixed + 'shape.tyre_time_constant_s = { low = 10.0, high = 30.0, points = 3, scale = "linear" }\n')
+    assert fx.load_library(ok)["tyre_temperature"].shape == {"tyre_time_constant_s": (10.0, 20.0, 30.0)}
+
+
+def test_added_parameters_count_each_run_amplitudes_and_shapes():
+    """delta_elpd charges a family one parameter per shape, an each-run effect one per run, a
+    run-coefficient effect one per run and coefficient less the shared one."""
+    lib = fx.load_library()
+    lin = SimpleNamespace(n_runs=6, effects={"tyre_temperature": ("tyre_transient",),
+                                             "tyre_speed_exponent": ("tyre_power_coeff",),
+                                             "track_gradient": ("grade_rad",),
+                                             "run_to_run_variation": ("AD", "BD", "CD0")})
+    assert fx.n_added_parameters(lin, ("tyre_temperature",), lib) == 6 + 1
+    assert fx.n_added_parameters(lin, ("tyre_speed_exponent",), lib) == 1 + 1
+    assert fx.n_added_parameters(lin, ("track_gradient",), lib) == 1
+    assert fx.n_added_parameters(lin, ("run_to_run_variation",), lib) == 3 * 5
