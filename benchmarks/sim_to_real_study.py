@@ -50,6 +50,9 @@ from studies.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # 
 
 OUT = ROOT / "docs" / "sim_to_real"
 FROZEN = OUT / "frozen_rules.json"
+EARLIER = OUT / "earlier_rules"
+"""Records of the independent design made under earlier rules (``records_independent_pP_<library
+sha256 prefix>.csv``): every seed in them was looked at before the current rules were frozen."""
 
 
 def records_path(design: str, pairs: int) -> Path:
@@ -64,11 +67,15 @@ def current_rules() -> dict:
 
 
 def design_seeds_seen() -> dict[str, list[int]]:
-    """Every seed of a design-phase row of the independent records (effects and nulls)."""
+    """Every seed the current rules may have been designed on: the design-phase rows of the
+    independent records, and every row (either phase) of the records made under earlier rules
+    (:data:`EARLIER`), whose outcomes were seen before these rules were written."""
     effects, nulls = set(), set()
-    for path in sorted(OUT.glob("records_independent_p*.csv")):
+    paths = sorted(OUT.glob("records_independent_p*.csv")) + sorted(EARLIER.glob("records_independent_p*.csv"))
+    for path in paths:
         rec = read_records(path)
-        rec = rec[rec.get("phase", pd.Series("design", index=rec.index)).fillna("design") == "design"]
+        if path.parent == OUT:
+            rec = rec[rec.get("phase", pd.Series("design", index=rec.index)).fillna("design") == "design"]
         for t, sd in zip(rec["true_effect"], rec["seed"]):
             (nulls if t == "null" else effects).add(int(sd))
     return {"effect_seeds": sorted(effects), "null_seeds": sorted(nulls)}
@@ -426,8 +433,19 @@ def reading_lines(records: pd.DataFrame) -> list[str]:
     return lines
 
 
+def earlier_records() -> dict[str, pd.DataFrame]:
+    """The independent design's records under earlier rules (:data:`EARLIER`), keyed
+    ``independent_pP, rules <sha256 prefix>``."""
+    out = {}
+    for path in sorted(EARLIER.glob("records_independent_p*.csv")):
+        size, _, sha = path.stem.removeprefix("records_").rpartition("_")
+        out[f"{size}, rules {sha}"] = read_records(path)
+    return out
+
+
 def side_by_side(by_design: dict[str, pd.DataFrame]) -> list[str]:
-    """The designs' headline figures in one table (the independent ones by phase)."""
+    """The designs' headline figures in one table (the independent ones by phase, with the
+    confirmatory runs under earlier rules)."""
     cols: dict[str, dict] = {}
     for label, rec in by_design.items():
         if label.startswith("independent"):
@@ -437,11 +455,17 @@ def side_by_side(by_design: dict[str, pd.DataFrame]) -> list[str]:
                     cols[f"{label} ({ph})"] = summarise(sub)
         else:
             cols[label] = summarise(rec)
+    for label, rec in earlier_records().items():
+        sub = rec[phase_of(rec) == "confirmatory"]
+        if len(sub):
+            cols[f"{label} (confirmatory)"] = summarise(sub)
     keys = ("effect_campaigns", "true_ranked_first_pct", "true_first_pct", "wrong_claim", "null_campaigns",
             "null_false_claims", "median_trend_shrink_pct_when_correct")
     lines = ["## The designs side by side", "",
              "`standard` and `identifying` inject each effect with the candidates' own terms (the same formulas "
-             "the diagnosis fits); `independent` with physics that shares none.", "",
+             "the diagnosis fits); `independent` with physics that shares none.  Columns `rules ...`: the "
+             "confirmatory runs of the rules frozen before the current ones (records in `sim_to_real/earlier_rules/`); "
+             "the `standard` and `identifying` records were made under earlier rules too (their sections say which).", "",
              "| quantity | " + " | ".join(f"`{c}`" for c in cols) + " |", "| --- |" + " --- |" * len(cols)]
     lines += [f"| {k} | " + " | ".join(_fmt(s[k]) for s in cols.values()) + " |" for k in keys]
     return lines + [""]
