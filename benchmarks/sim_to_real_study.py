@@ -81,13 +81,14 @@ def design_seeds_seen() -> dict[str, list[int]]:
     return {"effect_seeds": sorted(effects), "null_seeds": sorted(nulls)}
 
 
-def freeze() -> dict:
-    """Write :data:`FROZEN`: the shipped rules' fingerprint and the seeds that designed them."""
+def freeze(changes: str = "") -> dict:
+    """Write :data:`FROZEN`: the shipped rules' fingerprint, the seeds that designed them and
+    ``changes``, what these rules change against the ones frozen before (for the report)."""
     import datetime
     rules = current_rules()
     doc = {"library_sha256": rules["library_sha256"], "thresholds_sha256": rules["thresholds_sha256"],
            "thresholds": rules["thresholds"], "frozen_on": datetime.date.today().isoformat(),
-           "design_seeds": design_seeds_seen(),
+           "design_seeds": design_seeds_seen(), "changes": changes,
            "note": "rules frozen before any confirmatory seed ran; confirmatory runs refuse other rules and these seeds"}
     FROZEN.write_text(json.dumps(doc, indent=1) + "\n")
     return doc
@@ -350,7 +351,8 @@ def independent_section(label: str, records: pd.DataFrame) -> list[str]:
                   f"`{fr['library_sha256'][:16]}`, thresholds `{fr['thresholds_sha256'][:16]}`; designed on effect "
                   f"seeds {', '.join(map(str, ds['effect_seeds'])) or '-'} and null seeds "
                   f"{', '.join(map(str, ds['null_seeds'])) or '-'}.  Confirmatory seeds were never looked at before "
-                  "the freeze; `--phase confirmatory` refuses other rules and the design seeds.", ""]
+                  "the freeze; `--phase confirmatory` refuses other rules and the design seeds."
+                  + (f"  What these rules change: {fr['changes']}" if fr.get("changes") else ""), ""]
     for ph, r in by_phase.items():
         lines.append(f"{ph.capitalize()} phase: " + rules_line(r))
     lines += ["", "| quantity | " + " | ".join(f"{ph} seeds" for ph in phases) + " |",
@@ -566,6 +568,7 @@ def main(argv=None) -> int:
                     help="independent design: a confirmatory run needs frozen rules and fresh seeds (--freeze)")
     ap.add_argument("--freeze", action="store_true",
                     help=f"write {FROZEN.relative_to(ROOT)} (rules fingerprint, design seeds) and stop")
+    ap.add_argument("--changes", default="", help="with --freeze: what the rules change against the last frozen ones")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--scheduler", default=None, metavar="ADDR",
                     help="address of a running Dask scheduler (default: a local cluster of --workers processes)")
@@ -577,7 +580,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     OUT.mkdir(parents=True, exist_ok=True)
     if args.freeze:
-        print(json.dumps(freeze(), indent=1))
+        print(json.dumps(freeze(args.changes), indent=1))
         return 0
     pairs = args.pairs if args.pairs is not None else (6 if args.design == "independent" else 3)
     path = records_path(args.design, pairs)
