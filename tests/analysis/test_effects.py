@@ -201,8 +201,7 @@ def test_a_family_declares_its_shape_grid_and_each_run_amplitudes(tmp_path):
     assert tau[0] == pytest.approx(20.0) and tau[-1] == pytest.approx(1280.0) and len(tau) == 7
     assert np.allclose(np.diff(np.log(tau)), math.log(2.0))
     assert lib["tyre_speed_exponent"].shape["tyre_speed_exponent"] == pytest.approx((2.0, 3.0, 4.0, 5.0))
-    assert lib["tyre_temperature"].each_run and lib["tyre_temperature"].per_run
-    assert not lib["tyre_temperature"].run_coefficients and lib["run_to_run_variation"].run_coefficients
+    assert not lib["tyre_temperature"].per_run and lib["run_to_run_variation"].run_coefficients
     head = ('[effects.tyre_temperature]\nterms = ["tyre_temperature_transient"]\nkind = "term"\n'
             'parameters.tyre_transient = { prior_sd = 0.2 }\n')
     bad = tmp_path / "lib.toml"
@@ -223,19 +222,26 @@ def test_a_family_declares_its_shape_grid_and_each_run_amplitudes(tmp_path):
     with pytest.raises(ValueError, match="each_run is for a term effect"):
         fx.load_library(bad)
     ok = tmp_path / "ok.toml"
-    ok.write_text(head + fixed + 'shape.tyre_time_constant_s = { low = 10.0, high = 30.0, points = 3, scale = "linear" }\n')
-    assert fx.load_library(ok)["tyre_temperature"].shape == {"tyre_time_constant_s": (10.0, 20.0, 30.0)}
+    ok.write_text(head + fixed + 'each_run = true\n'
+                  'shape.tyre_time_constant_s = { low = 10.0, high = 30.0, points = 3, scale = "linear" }\n')
+    each = fx.load_library(ok)["tyre_temperature"]
+    assert each.shape == {"tyre_time_constant_s": (10.0, 20.0, 30.0)}
+    assert each.each_run and each.per_run and not each.run_coefficients
 
 
 def test_added_parameters_count_each_run_amplitudes_and_shapes():
     """delta_elpd charges a family one parameter per shape, an each-run effect one per run, a
     run-coefficient effect one per run and coefficient less the shared one."""
+    import dataclasses
+
     lib = fx.load_library()
+    each = dict(lib, tyre_temperature=dataclasses.replace(lib["tyre_temperature"], each_run=True))
     lin = SimpleNamespace(n_runs=6, effects={"tyre_temperature": ("tyre_transient",),
                                              "tyre_speed_exponent": ("tyre_power_coeff",),
                                              "track_gradient": ("grade_rad",),
                                              "run_to_run_variation": ("AD", "BD", "CD0")})
-    assert fx.n_added_parameters(lin, ("tyre_temperature",), lib) == 6 + 1
+    assert fx.n_added_parameters(lin, ("tyre_temperature",), lib) == 1 + 1
+    assert fx.n_added_parameters(lin, ("tyre_temperature",), each) == 6 + 1
     assert fx.n_added_parameters(lin, ("tyre_speed_exponent",), lib) == 1 + 1
     assert fx.n_added_parameters(lin, ("track_gradient",), lib) == 1
     assert fx.n_added_parameters(lin, ("run_to_run_variation",), lib) == 3 * 5
