@@ -65,8 +65,15 @@ def main(argv=None) -> int:
                            tags={"source": "independent", "case": seed, "pairs": pairs}, **common))
     args.records.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    done: list[dict] = []
+
+    def keep(rec):
+        # each fit's record as it finishes: a run stopped early keeps what it did
+        done.append(rec)
+        pd.DataFrame.from_records(done).to_csv(args.records, index=False)
+
     with batch_client(args.workers) as client:
-        records = run_batch(jobs, client)
+        records = run_batch(jobs, client, on_record=keep)
     wall = time.perf_counter() - t0
     records.to_csv(args.records, index=False)
     ok = records[records["error"].isna()] if "error" in records else records
