@@ -51,8 +51,10 @@ from studies.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # 
 OUT = ROOT / "docs" / "sim_to_real"
 FROZEN = OUT / "frozen_rules.json"
 EARLIER = OUT / "earlier_rules"
-"""Records of the independent design made under earlier rules (``records_independent_pP_<library
-sha256 prefix>.csv``): every seed in them was looked at before the current rules were frozen."""
+"""Records of the independent design made under rules other than the shipped ones
+(``records_independent_pP_<library sha256 prefix>.csv``, with ``frozen_rules_<prefix>.json`` when
+those rules were frozen and ``rules_<prefix>.txt`` saying what they were): every seed in them
+counts as seen at the next freeze."""
 
 
 def records_path(design: str, pairs: int) -> Path:
@@ -68,7 +70,7 @@ def current_rules() -> dict:
 
 def design_seeds_seen() -> dict[str, list[int]]:
     """Every seed the current rules may have been designed on: the design-phase rows of the
-    independent records, and every row (either phase) of the records made under earlier rules
+    independent records, and every row (either phase) of the records made under other rules
     (:data:`EARLIER`), whose outcomes were seen before these rules were written."""
     effects, nulls = set(), set()
     paths = sorted(OUT.glob("records_independent_p*.csv")) + sorted(EARLIER.glob("records_independent_p*.csv"))
@@ -334,14 +336,19 @@ def independent_section(label: str, records: pd.DataFrame, earlier: str | None =
     sums = {ph: summarise(r) for ph, r in by_phase.items()}
     if earlier is not None:
         frozen = EARLIER / f"frozen_rules_{earlier}.json"
-        lines = [f"## Design `independent`, {pairs} pairs, under the earlier rules `{earlier}`", "",
-                 f"The same design as above, diagnosed under rules frozen before the current ones (records: "
+        lines = [f"## Design `independent`, {pairs} pairs, under the other rules `{earlier}`", "",
+                 f"The same design as above, diagnosed under rules other than the shipped ones (records: "
                  f"[sim_to_real/earlier_rules/records_independent_p{pairs}_{earlier}.csv]"
                  f"(sim_to_real/earlier_rules/records_independent_p{pairs}_{earlier}.csv)).", ""]
         if frozen.exists():
             fr = json.loads(frozen.read_text())
             lines += [f"Frozen on {fr['frozen_on']}." + (f"  What those rules changed: {fr['changes']}"
                                                          if fr.get("changes") else ""), ""]
+        else:
+            lines += ["Never frozen: evaluated on design seeds only.", ""]
+        about = EARLIER / f"rules_{earlier}.txt"
+        if about.exists():
+            lines += [about.read_text().strip(), ""]
     else:
         lines = [f"## Design `independent`, {pairs} pairs", "",
              "Each campaign comes from the independent simulator (`bayes_roadload.simulate.independent`, "
@@ -456,7 +463,7 @@ def reading_lines(records: pd.DataFrame) -> list[str]:
 
 
 def earlier_records() -> dict[str, pd.DataFrame]:
-    """The independent design's records under earlier rules (:data:`EARLIER`), keyed
+    """The independent design's records under other rules (:data:`EARLIER`), keyed
     ``independent_pP, rules <sha256 prefix>``."""
     out = {}
     for path in sorted(EARLIER.glob("records_independent_p*.csv")):
@@ -467,7 +474,7 @@ def earlier_records() -> dict[str, pd.DataFrame]:
 
 def side_by_side(by_design: dict[str, pd.DataFrame]) -> list[str]:
     """The designs' headline figures in one table (the independent ones by phase, with the
-    confirmatory runs under earlier rules)."""
+    confirmatory runs under other rules)."""
     cols: dict[str, dict] = {}
     for label, rec in by_design.items():
         if label.startswith("independent"):
@@ -486,8 +493,8 @@ def side_by_side(by_design: dict[str, pd.DataFrame]) -> list[str]:
     lines = ["## The designs side by side", "",
              "`standard` and `identifying` inject each effect with the candidates' own terms (the same formulas "
              "the diagnosis fits); `independent` with physics that shares none.  Columns `rules ...`: the "
-             "confirmatory runs of the rules frozen before the current ones (records in `sim_to_real/earlier_rules/`); "
-             "the `standard` and `identifying` records were made under earlier rules too (their sections say which).", "",
+             "confirmatory runs of rules other than the shipped ones (records in `sim_to_real/earlier_rules/`); "
+             "each section names the rules its records ran under.", "",
              "| quantity | " + " | ".join(f"`{c}`" for c in cols) + " |", "| --- |" + " --- |" * len(cols)]
     lines += [f"| {k} | " + " | ".join(_fmt(s[k]) for s in cols.values()) + " |" for k in keys]
     return lines + [""]

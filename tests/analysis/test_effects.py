@@ -195,12 +195,9 @@ def test_a_one_parameter_effect_may_declare_its_physical_sign(tmp_path):
 def test_a_family_declares_its_shape_grid_and_each_run_amplitudes(tmp_path):
     """``shape.P`` in the library: P must be a fixed parameter of a term effect; the grid spaces
     ``points`` values from ``low`` to ``high`` (log or linear, ends included); ``each_run`` is for
-    term effects only.  The shipped tyre candidates are families."""
+    term effects only.  No shipped candidate is a family or each run's."""
     lib = fx.load_library()
-    tau = lib["tyre_temperature"].shape["tyre_time_constant_s"]
-    assert tau[0] == pytest.approx(20.0) and tau[-1] == pytest.approx(1280.0) and len(tau) == 7
-    assert np.allclose(np.diff(np.log(tau)), math.log(2.0))
-    assert lib["tyre_speed_exponent"].shape["tyre_speed_exponent"] == pytest.approx((2.0, 3.0, 4.0, 5.0))
+    assert not any(e.shape or e.each_run for e in lib.values())
     assert not lib["tyre_temperature"].per_run and lib["run_to_run_variation"].run_coefficients
     head = ('[effects.tyre_temperature]\nterms = ["tyre_temperature_transient"]\nkind = "term"\n'
             'parameters.tyre_transient = { prior_sd = 0.2 }\n')
@@ -227,6 +224,10 @@ def test_a_family_declares_its_shape_grid_and_each_run_amplitudes(tmp_path):
     each = fx.load_library(ok)["tyre_temperature"]
     assert each.shape == {"tyre_time_constant_s": (10.0, 20.0, 30.0)}
     assert each.each_run and each.per_run and not each.run_coefficients
+    ok.write_text(head + fixed + 'shape.tyre_time_constant_s = { low = 20.0, high = 1280.0, points = 7 }\n')
+    tau = fx.load_library(ok)["tyre_temperature"].shape["tyre_time_constant_s"]
+    assert tau[0] == 20.0 and tau[-1] == 1280.0 and len(tau) == 7 and 40.0 in tau   # rounded, not 40.000...01
+    assert np.allclose(np.diff(np.log(tau)), math.log(2.0))
 
 
 def test_added_parameters_count_each_run_amplitudes_and_shapes():
@@ -235,6 +236,10 @@ def test_added_parameters_count_each_run_amplitudes_and_shapes():
     import dataclasses
 
     lib = fx.load_library()
+    grid = {"tyre_time_constant_s": (20.0, 40.0, 80.0)}
+    lib = dict(lib, tyre_temperature=dataclasses.replace(lib["tyre_temperature"], shape=grid),
+               tyre_speed_exponent=dataclasses.replace(lib["tyre_speed_exponent"],
+                                                       shape={"tyre_speed_exponent": (2.0, 4.0)}))
     each = dict(lib, tyre_temperature=dataclasses.replace(lib["tyre_temperature"], each_run=True))
     lin = SimpleNamespace(n_runs=6, effects={"tyre_temperature": ("tyre_transient",),
                                              "tyre_speed_exponent": ("tyre_power_coeff",),
