@@ -57,6 +57,9 @@ from ..physics.model import DragModel, MeasuredAir
 from ..physics.residuals import _effect_terms, local_level_loglik_batch
 from ..physics.terms import TERMS
 
+_effect_terms_jit = jax.jit(_effect_terms)
+_loglik_batch_jit = jax.jit(local_level_loglik_batch)
+
 LIBRARY_PATH = MODELS_DIR / "effects" / "library.toml"
 """The candidate library shipped with the package (``models/effects/library.toml``)."""
 
@@ -367,9 +370,10 @@ def relinearise(lin: Linearisation, x: np.ndarray) -> Linearisation:
     y, jac = lin.speed_fn(jnp.asarray(x))
     jac = np.where(mask[..., None], np.asarray(jac), 0.0)
     resid = np.where(mask, np.asarray(batch.speed_mps) - np.asarray(y), 0.0)
-    g, b = _effect_terms(jnp.asarray(resid), batch.time_s, batch.mask, jnp.asarray(lin.sigma_mps), lin.q,
-                         jnp.asarray(jac))
-    ll = local_level_loglik_batch(jnp.asarray(resid), batch.time_s, batch.mask, jnp.asarray(lin.sigma_mps), lin.q)
+    g, b = _effect_terms_jit(jnp.asarray(resid), jnp.asarray(batch.time_s), jnp.asarray(batch.mask, bool),
+                             jnp.asarray(lin.sigma_mps), jnp.asarray(lin.q), jnp.asarray(jac))
+    ll = _loglik_batch_jit(jnp.asarray(resid), jnp.asarray(batch.time_s), jnp.asarray(batch.mask, bool),
+                           jnp.asarray(lin.sigma_mps), jnp.asarray(lin.q))
     out = Linearisation(**{**lin.__dict__})
     out.jacobian, out.residual = jac, resid
     out.gram, out.score, out.loglik = np.asarray(g), np.asarray(b), np.asarray(ll)
@@ -521,7 +525,6 @@ def fit_shapes(lin: Linearisation, library: Mapping[str, Effect]) -> tuple[Linea
     return shaped, out
 
 
-_effect_terms_jit = jax.jit(_effect_terms)
 
 
 def noise_objective(lin: Linearisation):

@@ -5,6 +5,7 @@ the shipped library has none)."""
 import dataclasses
 import math
 import warnings
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,6 +19,60 @@ from bayes_roadload.simulate.campaign import SimulationSettings
 from bayes_roadload.simulate.cases import get_case
 
 TRUE_TAU_S = 160.0
+TAU_GRID = {"low": 20.0, "high": 1280.0, "points": 7}
+
+
+def family_library():
+    """The shipped library with the tyre candidate a family over its time constant."""
+    lib = fx.load_library()
+    lib["tyre_temperature"] = dataclasses.replace(lib["tyre_temperature"], shape={
+        "tyre_time_constant_s": fx.shape_grid("test", "tyre_time_constant_s", TAU_GRID)})
+    return lib
+
+
+def linear_transient(amplitude: float, runs: int = 2, n: int = 200, sigma: float = 0.01):
+    """A linearisation of an analytic speed model, v = v0 + s t + a (tau / 100 s) (1 - exp(-t / tau)),
+    at a = 0 (columns: the slope s as the model's coefficient ``AD``, the amplitude as the tyre
+    candidate's ``tyre_transient``, tau as its shape, v0), its data noise-free with amplitude
+    ``amplitude`` and tau = TRUE_TAU_S."""
+    t = np.tile(np.arange(n, dtype=float), (runs, 1))
+    cols = ("AD", "tyre_transient", "tyre_time_constant_s", "v0_mps")
+
+    def speed(x):
+        s, a, tau, v0 = (np.asarray(x)[:, i][:, None] for i in range(4))
+        shape = (tau / 100.0) * (1.0 - np.exp(-t / tau))
+        y = v0 + s * t + a * shape
+        dshape = (1.0 - np.exp(-t / tau)) / 100.0 - (tau / 100.0) * np.exp(-t / tau) * t / tau**2
+        jac = np.stack([t, np.broadcast_to(shape, t.shape), a * dshape, np.ones_like(t)], axis=-1)
+        return y, jac
+
+    truth = np.column_stack([np.full(runs, -0.1), np.full(runs, amplitude), np.full(runs, TRUE_TAU_S), np.full(runs, 30.0)])
+    batch = SimpleNamespace(time_s=t, mask=np.ones_like(t, bool), speed_mps=speed(truth)[0])
+    lin = fx.Linearisation(columns=cols, base=("AD",), effects={"tyre_temperature": ("tyre_transient",)},
+                           available={"tyre_temperature": None}, values={"AD": -0.1, "tyre_transient": 0.0,
+                                                                         "tyre_time_constant_s": 40.0},
+                           jacobian=np.zeros(0), residual=np.zeros(0), gram=np.zeros(0), score=np.zeros(0),
+                           loglik=np.zeros(0), sigma_mps=np.full(runs, sigma), q=0.0, model=None, batch=batch,
+                           run_ids=tuple(range(runs)), speed_fn=speed)
+    x0 = truth.copy()
+    x0[:, 1], x0[:, 2] = 0.0, 40.0
+    return fx.relinearise(lin, x0)
+
+
+def test_the_profile_finds_the_shape_of_a_noise_free_transient_and_keeps_the_fixed_one_without():
+    """On an analytic model the grid point of the true time constant gains the most (the gain
+    falls off on both sides of it), the shaped linearisation sits there; without a transient
+    nothing gains and the family keeps its fixed shape."""
+    lib = family_library()
+    shaped, shapes = fx.fit_shapes(linear_transient(0.5), lib)
+    fam = shapes["tyre_temperature"]
+    gains = {p["tyre_time_constant_s"]: p["loglik_gain"] for p in fam["profile"]}
+    assert fam["values"] == {"tyre_time_constant_s": TRUE_TAU_S}
+    assert gains[80.0] < gains[TRUE_TAU_S] > gains[320.0] and gains[TRUE_TAU_S] > 100.0
+    assert np.all(shaped.x[:, 2] == TRUE_TAU_S) and shaped.values["tyre_time_constant_s"] == TRUE_TAU_S
+    _, none = fx.fit_shapes(linear_transient(0.0), lib)
+    assert none["tyre_temperature"]["values"] == {"tyre_time_constant_s": 40.0}
+    assert max(p["loglik_gain"] for p in none["tyre_temperature"]["profile"]) < 1e-6
 
 
 @pytest.fixture(scope="module")
@@ -27,10 +82,7 @@ def tyre_transient_linearisation():
     settings = dataclasses.replace(SimulationSettings(), extra_terms=(pe.TyreTemperatureTransient(),),
                                    extra_params={"tyre_transient": 0.2, "tyre_time_constant_s": TRUE_TAU_S})
     campaign = SimulatedCampaign(get_case(7), pairs=1, seed=1, settings=settings)()
-    lib = fx.load_library()
-    # the tyre candidate as a family over its time constant (the shipped library has none)
-    lib["tyre_temperature"] = dataclasses.replace(lib["tyre_temperature"], shape={
-        "tyre_time_constant_s": fx.shape_grid("test", "tyre_time_constant_s", {"low": 20.0, "high": 1280.0, "points": 7})})
+    lib = family_library()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         problem, init = prepare_problem(build_problem(campaign, "three_term"), campaign)
@@ -40,6 +92,7 @@ def tyre_transient_linearisation():
     return lib, lin, shaped, shapes
 
 
+@pytest.mark.slow   # a MAP fit of a simulated campaign (~25 s); the analytic test above is the fast one
 def test_the_profiled_time_constant_is_within_one_grid_step_of_the_truth(tyre_transient_linearisation):
     """The grid doubles tau from point to point; the gains are those of a Gauss-Newton step at
     the model's fit, where A_D and B_D have absorbed part of a slow transient, so the profile
@@ -62,6 +115,7 @@ def test_the_profiled_time_constant_is_within_one_grid_step_of_the_truth(tyre_tr
     assert sol.loglik_gain - base.loglik_gain == pytest.approx(max(gains), rel=1e-6)
 
 
+@pytest.mark.slow
 def test_a_shape_leaves_every_other_candidate_unchanged(tyre_transient_linearisation):
     """At the null a shape moves no speed: the signatures of the other candidates and of the
     model's coefficients are the same before and after profiling."""
