@@ -336,7 +336,8 @@ def rules_fingerprint(library: Mapping[str, fx.Effect],
     thresholds (:class:`~bayes_roadload.config.DiagnosisConfig`), both as sorted JSON, with
     the thresholds themselves.  A study records it before its confirmatory seeds run; a
     committed report whose fingerprint differs from the code's was made under other rules."""
-    # a library that uses no family and no each-run effect hashes as it did before those existed
+    # options an effect leaves unused (no shape grid, not each-run) are not hashed: declaring them
+    # changes the fingerprint, their existence does not
     lib = {name: {k: v for k, v in dataclasses.asdict(e).items() if not (k in ("shape", "each_run") and not v)}
            for name, e in sorted(library.items())}
     thresholds = dataclasses.asdict(settings)

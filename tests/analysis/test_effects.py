@@ -250,3 +250,25 @@ def test_added_parameters_count_each_run_amplitudes_and_shapes():
     assert fx.n_added_parameters(lin, ("tyre_speed_exponent",), lib) == 1 + 1
     assert fx.n_added_parameters(lin, ("track_gradient",), lib) == 1
     assert fx.n_added_parameters(lin, ("run_to_run_variation",), lib) == 3 * 5
+
+
+def test_the_rules_fingerprint_sees_a_family_but_not_the_unused_option():
+    """Declaring a shape grid or each_run changes the library's SHA-256; the shipped library,
+    which uses neither, hashes as the rules frozen in docs/sim_to_real/frozen_rules.json."""
+    import dataclasses
+
+    from bayes_roadload.analysis.diagnose import rules_fingerprint
+
+    lib = fx.load_library()
+    base = rules_fingerprint(lib)["library_sha256"]
+    tyre = lib["tyre_temperature"]
+    shaped = dict(lib, tyre_temperature=dataclasses.replace(tyre, shape={"tyre_time_constant_s": (20.0, 40.0)}))
+    each = dict(lib, tyre_temperature=dataclasses.replace(tyre, each_run=True))
+    hashes = {base, rules_fingerprint(shaped)["library_sha256"], rules_fingerprint(each)["library_sha256"]}
+    assert len(hashes) == 3
+    # the shipped rules are the ones frozen for the sim-to-real proof suite
+    import json
+    from pathlib import Path
+
+    frozen = Path(__file__).resolve().parents[2] / "docs" / "sim_to_real" / "frozen_rules.json"
+    assert json.loads(frozen.read_text())["library_sha256"] == base
