@@ -195,7 +195,8 @@ def _sampler(args):
     from . import config
 
     stated = {} if args.target_accept is None else {"target_accept": args.target_accept,
-                                                    "small_campaign_target_accept": None}
+                                                    "small_campaign_target_accept": None,
+                                                    "quiet_trace_target_accept": None}
     return config.SamplerConfig(num_warmup=args.warmup, num_samples=args.draws, num_chains=args.chains,
                                 seed=args.seed, progress_bar=console.progress_bars(not args.no_progress),
                                 precondition="none" if args.no_precondition else "laplace", **stated)
@@ -869,7 +870,8 @@ def _add_nuts_options(p: argparse.ArgumentParser, seed: int) -> None:
     p.add_argument("--target-accept", type=float, default=None,
                    help=f"nuts: target acceptance probability for every campaign size; raise it (e.g. 0.95) when a "
                         f"fit reports divergences (default: {d.target_accept}, and "
-                        f"{d.small_campaign_target_accept} for campaigns of at most {d.small_campaign_runs} runs)")
+                        f"{d.small_campaign_target_accept} for campaigns of at most {d.small_campaign_runs} runs "
+                        f"and for speed traces logged with less noise than the likelihood's floor)")
     p.add_argument("--no-progress", action="store_true", help="nuts: no progress bar")
     p.add_argument("--no-precondition", action="store_true",
                    help="nuts: numpyro's default NUTS without the MAP/Laplace start (slow; for comparison)")

@@ -238,6 +238,14 @@ class SamplerConfig:
         size adapted to the bulk (a funnel): thesis case 18 at one pair gave 12 divergences in
         2000 draws at 0.8, 27 at 0.9 and 0 at 0.95 (14.96 leapfrog steps per draw against
         12.1).  ``--target-accept`` sets the acceptance of every campaign size.
+    quiet_trace_target_accept : target acceptance (when higher) of a fit whose MAP puts the
+        speed noise ``sigma_mps`` of the median run below the likelihood's floor
+        (:data:`SPEED_NOISE_FLOOR_MPS`; None: never).  Below the floor the likelihood hardly
+        sees ``sigma_mps``, and the noise scales' posteriors (``sigma_mps``, q, tau) meet a
+        likelihood that is Gaussian in the scale: in numpyro's log coordinate a wall whose
+        curvature grows as e^(2 log q), where a step size adapted to the bulk diverges now
+        and then (thesis case 1 at 6 pairs, hierarchical: see docs/calibration.md, "The sampler
+        and its gates").  ``--target-accept`` turns it off.
     max_tree_depth : NUTS tree-depth limit (2^depth - 1 leapfrog steps).
     precondition : "laplace" (default) runs NUTS on coordinates whitened by the Laplace
         covariance at the MAP, chains starting from Laplace draws; "none" is numpyro's default
@@ -266,6 +274,7 @@ class SamplerConfig:
     target_accept: float = 0.8
     small_campaign_runs: int = 4
     small_campaign_target_accept: float | None = 0.95
+    quiet_trace_target_accept: float | None = 0.95
     max_tree_depth: int = 10
     precondition: str = "laplace"
     mass_matrix: str = "auto"

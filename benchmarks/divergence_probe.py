@@ -1,9 +1,15 @@
-"""Where a one-pair fit's divergent draws sit: thesis case C at one pair, the default model and
-likelihood, no retry, at a given target acceptance; per coordinate the mean percentile of the
-divergent draws among all draws and the share below the 10th percentile.
+"""Where a fit's divergent draws sit: thesis case C at ``--pairs`` pairs (one by default), the
+default model and likelihood, no retry, at a given target acceptance; per coordinate the mean
+percentile of the divergent draws among all draws and the share below the 10th percentile.  For
+every positive site sampled through numpyro's log transform (noise scales, run-to-run spreads)
+the record also holds the skewness of its log draws and their sd over the Laplace sd
+(``log_shape``), and with ``--profile`` the potential energy along that log coordinate from the
+MAP, the other coordinates held at the MAP (``profile``: offsets -8..8 in log units).
 
     python benchmarks/divergence_probe.py --case 9 --target-accept 0.8
     python benchmarks/divergence_probe.py --case 18 --target-accept 0.8 0.9 0.95
+    python benchmarks/divergence_probe.py --case 1 --pairs 6 --pooling hierarchical \
+        --target-accept 0.8 0.9 --sampler-seeds 0 1 --profile
 
 Records (JSON lines): ``benchmarks/records/gates/divergence_probe.jsonl``, with the commit.  The
 figures of docs/method.md 4.5 and docs/calibration.md's gate section came from this probe: those
@@ -32,13 +38,15 @@ from bayes_roadload.simulate import simulate_campaign  # noqa: E402
 RECORDS = ROOT / "benchmarks" / "records" / "gates" / "divergence_probe.jsonl"
 
 
-def probe(case: int, target_accept: float, seed: int = 0, noise: str = "integrated") -> dict:
+def probe(case: int, target_accept: float, seed: int = 0, noise: str = "integrated", pairs: int = 1,
+          pooling: str = "pooled", sampler_seed: int = 0, profile: bool = False) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        campaign = simulate_campaign(case, pairs=1, seed=seed)
+        campaign = simulate_campaign(case, pairs=pairs, seed=seed)
         sampler = dataclasses.replace(config.DEFAULT_SAMPLER, retry=False, target_accept=target_accept,
-                                      small_campaign_target_accept=None)
-        fit = fit_nuts(campaign, "four_term", sampler=sampler, noise=noise)
+                                      small_campaign_target_accept=None, quiet_trace_target_accept=None,
+                                      seed=sampler_seed)
+        fit = fit_nuts(campaign, "four_term", sampler=sampler, noise=noise, pooling=pooling)
     div = np.asarray(fit.stats["diverging"]).reshape(-1)
     where = {}
     for name, value in fit.samples.items():
@@ -50,9 +58,67 @@ def probe(case: int, target_accept: float, seed: int = 0, noise: str = "integrat
                                      "below_p10": float(np.mean(pct[div] < 0.1)) if div.any() else None}
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                             text=True).stdout.strip()
-    return {"case": case, "seed": seed, "noise": noise, "target_accept": target_accept, "commit": commit,
-            "divergences": int(div.sum()), "steps_per_draw": float(np.mean(fit.stats["num_steps"])),
-            "divergent_draws": where}
+    rec = {"case": case, "seed": seed, "pairs": pairs, "pooling": pooling, "sampler_seed": sampler_seed,
+           "noise": noise, "target_accept": target_accept, "commit": commit,
+           "divergences": int(div.sum()), "steps_per_draw": float(np.mean(fit.stats["num_steps"])),
+           "divergent_draws": where, "log_shape": log_shape(fit)}
+    if profile:
+        rec["profile"] = log_profiles(fit.problem, fit.map)
+    return rec
+
+
+def _log_sites(z_map: dict) -> list[str]:
+    """Sites whose unconstrained value is the log of the constrained one (numpyro's exp)."""
+    return [k for k in z_map if k in POSITIVE_SITES or k.startswith("tau_")]
+
+
+POSITIVE_SITES = ("sigma_mps", "q_mps_per_sqrt_s", "airspeed_calibration_sd", "sigma_driveline_n")
+
+
+def log_shape(fit) -> dict:
+    """Per positive site and element: skewness of the log draws, and their sd over the Laplace
+    sd of that coordinate at the MAP."""
+    from jax.flatten_util import ravel_pytree
+
+    z = fit.map.z
+    sd_map = np.sqrt(np.diag(fit.map.cov))
+    offsets, start = {}, 0
+    for k, v in z.items():
+        offsets[k] = (start, int(np.size(v)))
+        start += int(np.size(v))
+    assert start == np.asarray(ravel_pytree(z)[0]).size
+    out = {}
+    for k in _log_sites(z):
+        a = np.log(np.asarray(fit.samples[k]))
+        a = a.reshape(a.shape[0] * a.shape[1], -1)
+        i0, n = offsets[k]
+        for j in range(n):
+            x = a[:, j]
+            skew = float(np.mean((x - x.mean()) ** 3) / x.std() ** 3)
+            out[f"{k}[{j}]"] = {"skew": round(skew, 3), "sd_over_laplace": round(float(x.std() / sd_map[i0 + j]), 3)}
+    return out
+
+
+def log_profiles(problem, map_result) -> dict:
+    """Potential energy (minus its value at the MAP) along each positive site's log coordinate
+    (first element of a per-run site), every other coordinate at the MAP."""
+    import jax
+
+    from bayes_roadload.inference.nuts import unconstrained_posterior
+
+    post = unconstrained_posterior(problem, map_result.constrained)
+    u = jax.jit(post.potential_fn)
+    u0 = float(u(map_result.z))
+    grid = [-8, -6, -4, -3, -2, -1, -0.5, 0.5, 1, 2, 3, 4, 5, 6, 7, 8]
+    out = {}
+    for k in _log_sites(map_result.z):
+        vals = []
+        for d in grid:
+            z = dict(map_result.z)
+            z[k] = z[k].at[0].add(d) if np.ndim(z[k]) else z[k] + d
+            vals.append(round(float(u(z)) - u0, 4))
+        out[k] = {"offsets": grid, "potential": vals}
+    return out
 
 
 def main(argv=None) -> int:
@@ -60,14 +126,22 @@ def main(argv=None) -> int:
     ap.add_argument("--case", type=int, required=True)
     ap.add_argument("--target-accept", type=float, nargs="+", default=[0.8])
     ap.add_argument("--noise", default="integrated", choices=("integrated", "white"))
+    ap.add_argument("--pairs", type=int, default=1)
+    ap.add_argument("--pooling", default="pooled", choices=("pooled", "hierarchical"))
+    ap.add_argument("--sampler-seeds", type=int, nargs="+", default=[0])
+    ap.add_argument("--profile", action="store_true", help="the potential along each positive site's log coordinate")
     a = ap.parse_args(argv)
     RECORDS.parent.mkdir(parents=True, exist_ok=True)
+    first = True
     for ta in a.target_accept:
-        rec = probe(a.case, ta, noise=a.noise)
-        with RECORDS.open("a") as f:
-            f.write(json.dumps(rec) + "\n")
-        print(f"case {a.case} at {ta}: {rec['divergences']} divergences, {rec['steps_per_draw']:.1f} steps per draw",
-              flush=True)
+        for sampler_seed in a.sampler_seeds:
+            rec = probe(a.case, ta, noise=a.noise, pairs=a.pairs, pooling=a.pooling, sampler_seed=sampler_seed,
+                        profile=a.profile and first)
+            first = False
+            with RECORDS.open("a") as f:
+                f.write(json.dumps(rec) + "\n")
+            print(f"case {a.case}, {a.pairs} pairs {a.pooling}, sampler seed {sampler_seed} at {ta}: "
+                  f"{rec['divergences']} divergences, {rec['steps_per_draw']:.1f} steps per draw", flush=True)
     return 0
 
 

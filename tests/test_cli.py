@@ -136,6 +136,7 @@ def test_sampler_options_reach_the_sampler():
     assert default.target_accept == config.DEFAULT_SAMPLER.target_accept
     assert default.small_campaign_target_accept == config.DEFAULT_SAMPLER.small_campaign_target_accept
     assert s.small_campaign_target_accept is None  # a stated acceptance holds for every campaign size
+    assert s.quiet_trace_target_accept is None
 
 
 @pytest.mark.slow

@@ -754,17 +754,36 @@ def campaign_sampler(sampler: config.SamplerConfig, problem: Problem) -> config.
     return dataclasses.replace(sampler, target_accept=small)
 
 
+def quiet_trace_sampler(sampler: config.SamplerConfig, map_result: MapResult | None) -> config.SamplerConfig:
+    """``sampler`` with ``target_accept`` raised to ``quiet_trace_target_accept`` when the MAP
+    puts the speed noise ``sigma_mps`` of the median run below the likelihood's floor
+    (:data:`~bayes_roadload.config.SPEED_NOISE_FLOOR_MPS`): the trace was logged with less
+    noise than the model's floor, and the noise scales' posteriors then meet walls that diverge
+    at a step size adapted to the bulk (:class:`~bayes_roadload.config.SamplerConfig`)."""
+    quiet = sampler.quiet_trace_target_accept
+    if quiet is None or map_result is None or sampler.target_accept >= quiet:
+        return sampler
+    sigma = map_result.constrained.get("sigma_mps")
+    if sigma is None or not float(np.median(np.asarray(sigma))) < config.SPEED_NOISE_FLOOR_MPS:
+        return sampler
+    log.info("speed noise below the likelihood's floor (median MAP sigma %.2g m/s): target acceptance %.2f",
+             float(np.median(np.asarray(sigma))), quiet)
+    return dataclasses.replace(sampler, target_accept=quiet)
+
+
 def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
                    truth: dict | None = None) -> NutsFit:
     """MAP from the constrained starting values ``init`` (with the Laplace preconditioning),
     then NUTS (:func:`run_nuts`) on any :class:`~bayes_roadload.inference.problem.Problem`;
     the fit's ``truth`` is ``truth``.  A campaign of few runs is sampled at the sampler's
-    small-campaign target acceptance (:func:`campaign_sampler`)."""
+    small-campaign target acceptance (:func:`campaign_sampler`), a trace logged with less noise
+    than the likelihood's floor at its quiet-trace acceptance (:func:`quiet_trace_sampler`)."""
     sampler = campaign_sampler(sampler, problem)
     map_result = post = None
     if sampler.precondition == "laplace":
         post = unconstrained_posterior(problem, init)
         map_result = find_map(problem, {}, posterior=post, progress=sampler.progress_bar)
+        sampler = quiet_trace_sampler(sampler, map_result)
     fit = run_nuts(problem, sampler=sampler, map_result=map_result, posterior=post)
     if sampler.retry and sampler.num_warmup >= config.DEFAULT_SAMPLER.num_warmup \
             and sampler.num_samples >= config.DEFAULT_SAMPLER.num_samples:

@@ -281,6 +281,28 @@ def test_small_campaigns_are_sampled_at_the_small_campaign_acceptance():
     assert campaign_sampler(off, runs(2)) is off
 
 
+def test_quiet_traces_are_sampled_at_the_quiet_trace_acceptance():
+    """The median run's MAP speed noise below the likelihood's floor: target acceptance raised
+    to the quiet-trace value, never lowered; at or above the floor, without a speed-noise site,
+    without a MAP or without a quiet-trace value: unchanged."""
+    from types import SimpleNamespace
+
+    from bayes_roadload.inference.nuts import quiet_trace_sampler
+
+    floor = config.SPEED_NOISE_FLOOR_MPS
+    base = config.SamplerConfig()
+    at = lambda *sigma: SimpleNamespace(constrained={"sigma_mps": np.array(sigma)})  # noqa: E731
+    assert quiet_trace_sampler(base, at(5e-5, 6e-5, 0.05)).target_accept == base.quiet_trace_target_accept
+    assert quiet_trace_sampler(base, at(5e-5, floor, 0.05)) is base      # the median run at the floor
+    assert quiet_trace_sampler(base, at(0.02, 0.05)) is base
+    assert quiet_trace_sampler(base, SimpleNamespace(constrained={"CD0": 0.4})) is base
+    assert quiet_trace_sampler(base, None) is base
+    high = dataclasses.replace(base, target_accept=0.99)
+    assert quiet_trace_sampler(high, at(5e-5)).target_accept == 0.99
+    off = dataclasses.replace(base, quiet_trace_target_accept=None)
+    assert quiet_trace_sampler(off, at(5e-5)) is off
+
+
 def test_remedy_answers_each_failed_gate():
     from bayes_roadload.inference.nuts import remedy
 
