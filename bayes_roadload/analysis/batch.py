@@ -297,6 +297,9 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
         "map_converged": bool(fit.map.success) if fit.map is not None else None,
         "retries": len(fit.retries),
         "retry_failed": ",".join(fit.retries[0]["failed"]) if fit.retries else "",
+        # the acceptance of the reported run: the job's, or the small-campaign / quiet-trace
+        # value (nuts.campaign_sampler, nuts.quiet_trace_sampler), or the retry's
+        "target_accept_sampled": float(fit.sampler.target_accept),
     })
     rec.update({f"time_{k}": float(v) for k, v in fit.timings.items()})
     return rec

@@ -135,8 +135,11 @@ def test_record_keys_and_values(batch):
     assert all(np.ndim(v) == 0 for v in good.to_dict().values())
     for key in ("gate_pass", "gates_failed", "divergences", "max_r_hat", "min_ess_bulk", "time_map_s",
                 "time_warmup_s", "time_sampling_s", "time_fit_s", "time_total_s", "time_compile_s", "rss_mb",
-                "jax_caches_cleared", "sigma_mps_mean"):
+                "jax_caches_cleared", "sigma_mps_mean", "target_accept_sampled"):
         assert key in df.columns, key
+    # the job asked for 0.8; two runs are sampled at the small-campaign acceptance
+    assert good["target_accept"] == TINY_SAMPLER.target_accept
+    assert good["target_accept_sampled"] == TINY_SAMPLER.small_campaign_target_accept
     # the 1-pair posterior is tight: the truth is well inside +-10 sd of the mean (a loose check
     # that the record is about this fit, not a statistical test)
     assert abs(good["CD0_mean"] - good["CD0_truth"]) < 10 * good["CD0_sd"]
