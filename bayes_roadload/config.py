@@ -241,7 +241,7 @@ class SamplerConfig:
     quiet_trace_target_accept : target acceptance (when higher) of a fit whose MAP puts the
         speed noise ``sigma_mps`` of the median run below the likelihood's floor
         (:data:`SPEED_NOISE_FLOOR_MPS`; None: never).  Below the floor the likelihood hardly
-        sees ``sigma_mps``, and the noise scales' posteriors (``sigma_mps``, q, tau) meet a
+        sees ``sigma_mps``, and the noise scales' posteriors (``sigma_mps``, q) meet a
         likelihood that is Gaussian in the scale: in numpyro's log coordinate a wall whose
         curvature grows as e^(2 log q), where a step size adapted to the bulk diverges now
         and then (thesis case 1 at 6 pairs, hierarchical: see docs/calibration.md, "The sampler
