@@ -67,35 +67,32 @@ def probe(case: int, target_accept: float, seed: int = 0, noise: str = "integrat
     return rec
 
 
-def _log_sites(z_map: dict) -> list[str]:
-    """Sites whose unconstrained value is the log of the constrained one (numpyro's exp)."""
-    return [k for k in z_map if k in POSITIVE_SITES or k.startswith("tau_")]
-
-
-POSITIVE_SITES = ("sigma_mps", "q_mps_per_sqrt_s", "airspeed_calibration_sd", "sigma_driveline_n")
+def _log_sites(z_map: dict, constrained: dict) -> list[str]:
+    """Sites whose unconstrained value is the log of the constrained one (numpyro's exp
+    transform of a positive support), read off the MAP: exp(z) equals the constrained value."""
+    return [k for k, z in z_map.items() if k in constrained and np.shape(constrained[k]) == np.shape(z)
+            and np.allclose(np.exp(np.asarray(z, float)), np.asarray(constrained[k], float), rtol=1e-9, atol=0.0)]
 
 
 def log_shape(fit) -> dict:
     """Per positive site and element: skewness of the log draws, and their sd over the Laplace
     sd of that coordinate at the MAP."""
+    import jax.numpy as jnp
     from jax.flatten_util import ravel_pytree
 
     z = fit.map.z
     sd_map = np.sqrt(np.diag(fit.map.cov))
-    offsets, start = {}, 0
-    for k, v in z.items():
-        offsets[k] = (start, int(np.size(v)))
-        start += int(np.size(v))
-    assert start == np.asarray(ravel_pytree(z)[0]).size
+    # each site's positions in the flat vector, in ravel_pytree's own order (a leaf is row-major)
+    ids = {k: i for i, k in enumerate(z)}
+    flat_id = np.asarray(ravel_pytree({k: jnp.full(np.shape(v), float(ids[k])) for k, v in z.items()})[0])
     out = {}
-    for k in _log_sites(z):
+    for k in _log_sites(z, fit.map.constrained):
         a = np.log(np.asarray(fit.samples[k]))
         a = a.reshape(a.shape[0] * a.shape[1], -1)
-        i0, n = offsets[k]
-        for j in range(n):
+        for j, i in enumerate(np.flatnonzero(flat_id == ids[k])):
             x = a[:, j]
             skew = float(np.mean((x - x.mean()) ** 3) / x.std() ** 3)
-            out[f"{k}[{j}]"] = {"skew": round(skew, 3), "sd_over_laplace": round(float(x.std() / sd_map[i0 + j]), 3)}
+            out[f"{k}[{j}]"] = {"skew": round(skew, 3), "sd_over_laplace": round(float(x.std() / sd_map[i]), 3)}
     return out
 
 
@@ -111,7 +108,7 @@ def log_profiles(problem, map_result) -> dict:
     u0 = float(u(map_result.z))
     grid = [-8, -6, -4, -3, -2, -1, -0.5, 0.5, 1, 2, 3, 4, 5, 6, 7, 8]
     out = {}
-    for k in _log_sites(map_result.z):
+    for k in _log_sites(map_result.z, map_result.constrained):
         vals = []
         for d in grid:
             z = dict(map_result.z)

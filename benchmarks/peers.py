@@ -10,6 +10,9 @@ four_term, pooled, integrated noise) is sampled by
 * ``ours_diag``: ours with a diagonal instead of a dense metric in the whitened coordinates;
 * ``blackjax_meads``: BlackJAX generalised HMC with MEADS adaptation, same density, and
   ``blackjax_meads_whitened`` on our whitened coordinates;
+* ``blackjax_chees``: BlackJAX ChEES-HMC (jittered trajectory lengths adapted across chains,
+  with its diagonal metric estimated from the ensemble), and ``blackjax_chees_whitened`` on our
+  whitened coordinates;
 * ``nutpie``: nutpie on the same JAX log density (``nutpie.from_pyfunc``);
 * ``stan_default``: Stan (PyStan) with its default adaptation, on the same unconstrained space;
 * ``stan_whitened``: Stan on the MAP-whitened coordinates ``u`` of ours.
@@ -60,6 +63,7 @@ from jax.flatten_util import ravel_pytree
 from bayes_roadload import config
 from bayes_roadload.inference.bayes import build_problem
 from bayes_roadload.inference.nuts import find_map, prepare_problem, run_nuts, unconstrained_posterior
+from bayes_roadload.inference.spec import SOFTPLUS_FRACTION
 from bayes_roadload.physics import integrate as integ
 from bayes_roadload.simulate import get_case, simulate_campaign
 
@@ -86,10 +90,13 @@ data {
   array[R, G, 3] vector[K + 1] beta_basis;
   vector[K] prior_loc;
   vector[K] prior_scale;
-  array[K] int<lower=0, upper=1> positive;    // coefficient truncated at 0 (log-transformed)
+  array[K] int<lower=0, upper=1> positive;    // coefficient truncated from below: low + s softplus(x)
+  vector[K] low;                  // its lower bound
+  vector[K] soft_scale;           // its softplus scale s (spec.soft_lower_truncated_normal)
   vector[R] v0_loc;
   real v0_scale;
-  real sigma_scale;
+  real sigma_rate;                // Gamma(2, rate) prior of each run's speed noise
+  real sigma_floor;               // the likelihood's white noise is sqrt(sigma^2 + floor^2)
   real q_rate;
   // layout of the unconstrained vector x (numpyro's ravel order) and its affine map x = shift + L u
   array[K] int idx_coef;
@@ -110,8 +117,8 @@ model {
   target += x[idx_q];                               // Jacobian of exp
   for (k in 1:K) {
     if (positive[k] == 1) {
-      theta[k] = exp(x[idx_coef[k]]);
-      target += x[idx_coef[k]];
+      theta[k] = low[k] + soft_scale[k] * log1p_exp(x[idx_coef[k]]);
+      target += log(soft_scale[k]) + log_inv_logit(x[idx_coef[k]]);   // Jacobian of the softplus
     } else {
       theta[k] = x[idx_coef[k]];
     }
@@ -126,7 +133,7 @@ model {
     vector[N] speed;
     target += x[idx_sigma[r]];
     v0 ~ normal(v0_loc[r], v0_scale);
-    sigma ~ normal(0, sigma_scale);
+    sigma ~ gamma(2, sigma_rate);
     {
       real v = v0;
       int j = 1;
@@ -154,7 +161,7 @@ model {
     {  // local-level (white + integrated noise) likelihood: Kalman filter over the real samples
       real m = 0;
       real p = 0;
-      real var_e = square(sigma);
+      real var_e = square(sigma) + square(sigma_floor);
       for (i in 1:n_obs[r]) {
         real p_pred = p + square(q) * dt[r, i];
         real s = p_pred + var_e;
@@ -275,6 +282,9 @@ def stan_data(setup: Setup, whitened: bool) -> dict:
     idx = layout(setup)
     d = setup.flat0.size
     priors = [problem.priors[k] for k in COEFFS]
+    for k, p in zip(COEFFS, priors):  # the Stan program writes these two kinds only
+        if p.dist != "normal" or p.high is not None:
+            raise ValueError(f"{k}: the Stan program has normal priors, optionally truncated from below; got {p}")
     return {
         "R": r, "N": n, "G": h.shape[1], "K": len(COEFFS), "D": d,
         "n_obs": mask.sum(axis=1).astype(int).tolist(),
@@ -282,8 +292,11 @@ def stan_data(setup: Setup, whitened: bool) -> dict:
         "alpha_basis": alpha, "beta_basis": beta,
         "prior_loc": np.array([p.loc for p in priors]), "prior_scale": np.array([p.scale for p in priors]),
         "positive": [int(p.low is not None) for p in priors],
+        "low": np.array([p.low if p.low is not None else 0.0 for p in priors]),
+        "soft_scale": np.array([SOFTPLUS_FRACTION * p.scale for p in priors]),
         "v0_loc": np.asarray(b.speed_mps)[:, 0], "v0_scale": config.NOISE_PRIORS["v0_scale_mps"],
-        "sigma_scale": config.NOISE_PRIORS["sigma_mps"], "q_rate": 2.0 / config.NOISE_PRIORS["q_mps_per_sqrt_s"],
+        "sigma_rate": 2.0 / config.NOISE_PRIORS["sigma_speed_mean_mps"], "sigma_floor": config.SPEED_NOISE_FLOOR_MPS,
+        "q_rate": 2.0 / config.NOISE_PRIORS["q_mps_per_sqrt_s"],
         "idx_coef": [int(idx[k]) for k in COEFFS], "idx_q": int(idx["q_mps_per_sqrt_s"]),
         "idx_v0": idx["v0_mps"].tolist(), "idx_sigma": idx["sigma_mps"].tolist(),
         "shift": setup.flat_map if whitened else np.zeros(d),
@@ -393,45 +406,91 @@ def run_blackjax_window(setup: Setup, args) -> dict:
                     {"warmup": warm, "includes": "LSQ start + window adaptation (diagonal) + NUTS, chains pmapped/vmapped (compile inside)"})
 
 
-def run_blackjax_meads(setup: Setup, args, whitened: bool = False) -> dict:
-    import blackjax
-
+def _ensemble_density(setup: Setup, args, whitened: bool):
+    """Log density, chain starts and warm-up length of the ensemble samplers (MEADS, ChEES):
+    on numpyro's unconstrained space from jittered least-squares starts, or on ours' whitened
+    coordinates ``x = x_MAP + L u`` from standard-normal draws."""
     warm = args.warmup if whitened else args.peer_warmup
-    key = jax.random.PRNGKey(args.seed)
-    k1, k2 = jax.random.split(key)
-    c0, t0 = cpu_seconds(), time.perf_counter()
     shift, chol = jnp.asarray(setup.flat_map), jnp.asarray(setup.chol)
-    if whitened:  # ours' coordinates x = x_MAP + L u, chains from standard-normal draws
+    if whitened:
         logdensity = jax.jit(lambda u: setup.logdensity(shift + chol @ u))
         starts = jnp.asarray(np.random.default_rng(args.seed).standard_normal((args.meads_chains, setup.flat0.size)))
     else:
         logdensity = setup.logdensity
         starts = jnp.asarray(start_points(setup, args.meads_chains, args.seed))
-    adapt = blackjax.meads_adaptation(logdensity, args.meads_chains)
-    (state, params), _ = jax.block_until_ready(adapt.run(k1, starts, num_steps=warm))
-    kernel = blackjax.ghmc(logdensity, **params).step
+    return logdensity, starts, warm
+
+
+def _ensemble_run(name: str, setup: Setup, args, whitened: bool, kernel, state, key, c0: float, t0: float,
+                  warm: int, includes: str, note: str) -> dict:
+    """``args.draws`` transitions of ``kernel`` on every chain at once (vmapped), then the
+    record: leapfrog steps per draw from the transition's ``num_integration_steps`` where the
+    kernel reports it (generalised HMC takes one step per transition)."""
 
     @jax.jit
     def sample(state, key):
         def body(state, k):
             state, info = jax.vmap(kernel)(jax.random.split(k, args.meads_chains), state)
-            return state, (state.position, info.is_divergent)
+            steps = getattr(info, "num_integration_steps", jnp.ones(args.meads_chains))
+            return state, (state.position, info.is_divergent, steps)
 
         return jax.lax.scan(body, state, jax.random.split(key, args.draws))[1]
 
-    x, div = jax.block_until_ready(sample(state, k2))
-    wall = time.perf_counter() - t0 + setup.setup_s
+    x, div, steps = jax.block_until_ready(sample(state, key))
+    wall = time.perf_counter() - t0 + setup.setup_s + (setup.map_s if whitened else 0.0)
     cpu = cpu_seconds() - c0
     x = np.swapaxes(np.asarray(x), 0, 1)
     if whitened:
-        x = np.asarray(shift)[None, None, :] + np.einsum("cdj,ij->cdi", x, np.asarray(chol))
-    steps = np.ones(x.shape[:2])  # generalised HMC: one leapfrog step per transition
-    if whitened:
-        wall += setup.map_s
-    return diagnose("blackjax_meads_whitened" if whitened else "blackjax_meads", constrained_draws(setup, x), steps,
+        x = np.asarray(setup.flat_map)[None, None, :] + np.einsum("cdj,ij->cdi", x, np.asarray(setup.chol))
+    return diagnose(name, constrained_draws(setup, x), np.swapaxes(np.asarray(steps, float), 0, 1),
                     np.swapaxes(np.asarray(div), 0, 1), wall, cpu, None,
-                    {"warmup": warm, "includes": ("LSQ start + MAP/Laplace + " if whitened else "LSQ start + ") + f"MEADS adaptation + GHMC, {args.meads_chains} chains vectorised (compile inside)",
-                     "note": "GHMC takes one leapfrog step per transition; ESS counts all chains' draws"})
+                    {"warmup": warm, "includes": ("LSQ start + MAP/Laplace + " if whitened else "LSQ start + ")
+                     + f"{includes}, {args.meads_chains} chains vectorised (compile inside)", "note": note})
+
+
+def run_blackjax_meads(setup: Setup, args, whitened: bool = False) -> dict:
+    import blackjax
+
+    k1, k2 = jax.random.split(jax.random.PRNGKey(args.seed))
+    c0, t0 = cpu_seconds(), time.perf_counter()
+    logdensity, starts, warm = _ensemble_density(setup, args, whitened)
+    adapt = blackjax.meads_adaptation(logdensity, args.meads_chains)
+    (state, params), _ = jax.block_until_ready(adapt.run(k1, starts, num_steps=warm))
+    kernel = blackjax.ghmc(logdensity, **params).step
+    return _ensemble_run("blackjax_meads_whitened" if whitened else "blackjax_meads", setup, args, whitened, kernel,
+                         state, k2, c0, t0, warm, "MEADS adaptation + GHMC",
+                         "GHMC takes one leapfrog step per transition; ESS counts all chains' draws")
+
+
+ENSEMBLE = ("blackjax_meads", "blackjax_chees")
+"""Samplers that run ``--meads-chains`` chains (their adaptation works across chains)."""
+
+CHEES_STEP_SIZE = 0.1
+CHEES_LEARNING_RATE = 0.025
+"""ChEES-HMC's starting step size and the Adam learning rate of its trajectory length (the
+values of BlackJAX's documented example)."""
+
+
+def run_blackjax_chees(setup: Setup, args, whitened: bool = False) -> dict:
+    """ChEES-HMC (Hoffman, Radul and Sountsov 2021): jittered-length HMC whose step size and
+    trajectory length are adapted across the chains (``blackjax.chees_adaptation``; on the
+    unwhitened density with its ensemble-estimated diagonal metric), then
+    ``blackjax.dynamic_hmc`` with the adapted parameters."""
+    import blackjax
+    import optax
+
+    k1, k2 = jax.random.split(jax.random.PRNGKey(args.seed))
+    c0, t0 = cpu_seconds(), time.perf_counter()
+    logdensity, starts, warm = _ensemble_density(setup, args, whitened)
+    adapt = blackjax.chees_adaptation(logdensity, args.meads_chains,
+                                      mass_matrix_estimation=None if whitened else "diagonal")
+    (state, params), _ = jax.block_until_ready(
+        adapt.run(k1, starts, CHEES_STEP_SIZE, optax.adam(CHEES_LEARNING_RATE), num_steps=warm))
+    kernel = blackjax.dynamic_hmc(logdensity, **params).step
+    return _ensemble_run("blackjax_chees_whitened" if whitened else "blackjax_chees", setup, args, whitened, kernel,
+                         state, k2, c0, t0, warm,
+                         "ChEES adaptation + jittered-length HMC" + ("" if whitened else " (diagonal metric)"),
+                         "ESS counts all chains' draws")
 
 
 def run_nutpie(setup: Setup, args) -> dict:
@@ -522,6 +581,8 @@ SAMPLERS = {
     "blackjax_window": run_blackjax_window,
     "blackjax_meads": run_blackjax_meads,
     "blackjax_meads_whitened": lambda s, a: run_blackjax_meads(s, a, whitened=True),
+    "blackjax_chees": run_blackjax_chees,
+    "blackjax_chees_whitened": lambda s, a: run_blackjax_chees(s, a, whitened=True),
     "nutpie": run_nutpie,
     "stan_default": lambda s, a: run_stan(s, a, whitened=False),
     "stan_whitened": lambda s, a: run_stan(s, a, whitened=True),
@@ -538,8 +599,8 @@ def render(records: list[dict], meta: dict) -> str:
     lines = [BEGIN, "## Peers", "",
              f"Generated by `benchmarks/peers.py` ({meta['date']}): {meta['pairs']} pairs ({2 * meta['pairs']} runs) at "
              f"thesis case 14 conditions, basic drag model, model four_term pooled, integrated noise; "
-             f"{meta['chains']} chains x {meta['draws']} draws for every sampler (MEADS runs {meta['meads_chains']} "
-             "chains, as its cross-chain adaptation needs).  Min ESS is the min bulk ESS (arviz) over AD, BD, CD0, KD, "
+             f"{meta['chains']} chains x {meta['draws']} draws for every sampler (MEADS and ChEES run "
+             f"{meta['meads_chains']} chains, as their cross-chain adaptation needs).  Min ESS is the min bulk ESS (arviz) over AD, BD, CD0, KD, "
              "the per-run noise sigma and q; ESS/s divides it by the wall time including compilation and the "
              "common LSQ start (and the MAP for the whitened samplers).  Process CPU s: the sampler's whole process "
              "(imports, set-up, compilation, sampling, children included).  Each sampler runs in its own process "
@@ -547,23 +608,34 @@ def render(records: list[dict], meta: dict) -> str:
              f"{meta['timeout_s']:.0f} s; default-adaptation peers start from the least-squares start (jittered), "
              "ours and whitened Stan from draws of the Laplace approximation.", "",
              f"Machine: {meta['machine']['cpu_count']} cores, {meta['machine']['platform']}; 1-min load average "
-             f"{meta['load_before'][0]} before and {meta['load_after'][0]} after the run."]
-    if max(meta["load_before"][0], meta["load_after"][0]) > 2:
+             f"{meta['load_before'][0]} before and {meta['load_after'][0]} after the latest run (`--only` reruns "
+             "some samplers: each row is that sampler's latest record; load: the 1-min load average when its "
+             "process started, where recorded)."]
+    loads = [r["load_average_1min_at_start"] for r in records if "load_average_1min_at_start" in r]
+    if max([meta["load_before"][0], meta["load_after"][0], *loads]) > 2:
         lines += ["", "**Wall times were measured under load** (the machine was shared; load average above 2 on "
                       "2 cores): compare the CPU seconds too, and rerun on a quiet machine for the record."]
-    lines += ["", "| sampler | warm-up | wall s | process CPU s | compile s | min ESS | ESS/s | vs ours | max R-hat | divergences | steps/draw |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines += ["", "| sampler | warm-up | wall s | process CPU s | compile s | min ESS | ESS/s | vs ours | max R-hat | divergences | steps/draw | load |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in records:
+        load = r.get("load_average_1min_at_start", "")
         if "error" in r:
-            lines.append(f"| {r['sampler']} | | not run: {r['error']} | {r.get('process_cpu_s', '')} | | | | | | | |")
+            bound = r.get("min_ess_per_s_upper_bound")
+            if bound and r["sampler"].startswith(ENSEMBLE):  # all chains' draws, not --chains'
+                bound = round(meta["meads_chains"] * meta["draws"] / meta["timeout_s"], 3)
+            vs = "" if ours is None or not bound else f">= {ours['min_ess_per_s'] / bound:.1f}x"
+            ess = "" if not bound else f"<= {bound}"
+            lines.append(f"| {r['sampler']} | | not run: {r['error']} | {r.get('process_cpu_s', '')} | | | {ess} | {vs} "
+                         f"| | | | {load} |")
             continue
         vs = "" if ours is None else f"{ours['min_ess_per_s'] / max(r['min_ess_per_s'], 1e-12):.1f}x"
         lines.append(f"| {r['sampler']} | {r['warmup']} | {r['wall_s']} | {r.get('process_cpu_s', r['cpu_s'])} | {r['compile_s'] if r['compile_s'] is not None else '-'} | "
-                     f"{r['min_ess_bulk']} | {r['min_ess_per_s']} | {vs} | {r['max_r_hat']} | {r['divergences']} | "
-                     f"{r['mean_leapfrog_steps']} |")
-    lines += ["", "\"vs ours\" is ours' ESS/s over the peer's (above 1: ours is faster).  Stan's log density was "
-              "checked against ours before timing (records: `log_density_check`).  Records: "
-              "`benchmarks/records/peers/`.", END]
+                     f"{r['min_ess_bulk']} | {r['min_ess_per_s']} | {vs} | {r['max_r_hat']:.4g} | {r['divergences']} | "
+                     f"{r['mean_leapfrog_steps']} | {load} |")
+    lines += ["", "\"vs ours\" is ours' ESS/s over the peer's (above 1: ours is faster); for a sampler stopped at "
+              "the time limit, its ESS/s is at most all its draws over the limit, so ours leads by at least the "
+              "ratio shown.  Stan's log density is checked against ours before timing (records: "
+              "`log_density_check`).  Records: `benchmarks/records/peers/`.", END]
     return "\n".join(lines) + "\n"
 
 
@@ -604,7 +676,7 @@ def main() -> None:
     ap.add_argument("--warmup", type=int, default=config.DEFAULT_SAMPLER.num_warmup, help="ours and whitened Stan")
     ap.add_argument("--peer-warmup", type=int, default=1000, help="default-adaptation peers (their default length)")
     ap.add_argument("--draws", type=int, default=config.DEFAULT_SAMPLER.num_samples)
-    ap.add_argument("--meads-chains", type=int, default=8)
+    ap.add_argument("--meads-chains", type=int, default=8, help="chains of the ensemble samplers (MEADS, ChEES)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", nargs="+", choices=list(SAMPLERS), default=list(SAMPLERS))
     ap.add_argument("--timeout-s", type=float, default=3600.0,
@@ -637,6 +709,7 @@ def main() -> None:
         # each sampler in its own process: cold compilation caches, a time limit, CPU time of its tree
         cmd = [sys.executable, __file__, *passthrough, "--worker", name]
         r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        load = round(os.getloadavg()[0], 2)
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
         try:
@@ -647,9 +720,11 @@ def main() -> None:
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)  # the worker and its samplers' processes (Stan's chains)
             proc.communicate()
+            chains = args.meads_chains if name.startswith(ENSEMBLE) else args.chains
             rec = {"sampler": name, "error": f"did not finish within {args.timeout_s:.0f} s",
-                   "min_ess_per_s_upper_bound": round(args.chains * args.draws / args.timeout_s, 3)}
+                   "min_ess_per_s_upper_bound": round(chains * args.draws / args.timeout_s, 3)}
         r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        rec.setdefault("load_average_1min_at_start", load)
         rec.update(pairs=args.pairs, process_wall_s=round(time.perf_counter() - t0, 2),
                    process_cpu_s=round((r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime), 2))
         records.append(rec)

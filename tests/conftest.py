@@ -1,4 +1,12 @@
-"""Shared fixtures: small simulated campaigns and one NUTS fit reused by many tests."""
+"""Shared fixtures: small simulated campaigns and one NUTS fit reused by many tests.
+
+The test processes (and the command-line subprocesses they start) compile with LLVM's
+expensive optimisation passes off (``--xla_llvm_disable_expensive_passes``): the suite
+compiles hundreds of programs that each run for a few small draws, and compilation was over
+half of its time.  XLA's CPU backend does not enable fast-math, so the arithmetic is the same
+(a potential and its gradient came out bit-identical with and without the flag); only the
+machine code is less optimised.  Set ``XLA_FLAGS`` yourself to run the suite otherwise.
+"""
 
 import dataclasses
 import os
@@ -6,10 +14,13 @@ import shutil
 import tempfile
 import warnings
 
-import pytest
+if "XLA_FLAGS" not in os.environ:  # before bayes_roadload starts JAX (its device-count flag is added)
+    os.environ["XLA_FLAGS"] = "--xla_llvm_disable_expensive_passes=true"
 
-from bayes_roadload import config
-from bayes_roadload.simulate import get_case, simulate_campaign
+import pytest  # noqa: E402
+
+from bayes_roadload import config  # noqa: E402
+from bayes_roadload.simulate import get_case, simulate_campaign  # noqa: E402
 
 
 

@@ -499,11 +499,12 @@ def fit_shapes(lin: Linearisation, library: Mapping[str, Effect]) -> tuple[Linea
     x = lin.x.copy()
     values = dict(lin.values)
     out: dict[str, dict] = {}
+    moved: list[Linearisation] = []
     for name in families:
         e = library[name]
         params = list(e.shape)
         j = lin.index(params)
-        profile, best = [], (0.0, None)
+        profile, best = [], (0.0, None, None)
         for point in itertools.product(*(e.shape[p] for p in params)):
             xs = lin.x.copy()
             xs[:, j] = point
@@ -515,12 +516,16 @@ def fit_shapes(lin: Linearisation, library: Mapping[str, Effect]) -> tuple[Linea
             gain = 0.0 if e.against_sign(est) else sol.loglik_gain - base_gain
             profile.append({**dict(zip(params, point)), "loglik_gain": float(gain)})
             if gain > best[0]:
-                best = (gain, point)
+                best = (gain, point, ls)
         if best[1] is not None:
             x[:, j] = best[1]
             values.update(zip(params, best[1]))
+            moved.append(best[2])
         out[name] = {"values": {p: float(values[p]) for p in params}, "profile": profile}
-    shaped = relinearise(lin, x)
+    if not moved:
+        return lin, out
+    # one family moved: its best grid point's linearisation is already the one at x
+    shaped = moved[0] if len(moved) == 1 else relinearise(lin, x)
     shaped.values = values
     return shaped, out
 

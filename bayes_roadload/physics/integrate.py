@@ -80,13 +80,15 @@ def _conditions(model: DragModel, p, run: RunBatch, v, s, t, u) -> Conditions:
     )
 
 
+@jax.jit
 def lagged_speed_drop(time_s: Array, speed_mps: Array, time_constant_s: Array) -> Array:
     """The part of the speed drop since the first sample not yet followed by a first-order lag:
     L(0) = 0, dL/dt = -L / tau - dv/dt, on the sample grid ([N] arrays, the speed
     piecewise linear between samples), exact for that speed:
     L_{k+1} = a_k L_k - (v_{k+1} - v_k) tau (1 - a_k) / h_k with a_k = exp(-h_k / tau).
     Zero-length steps (padding) leave L unchanged.  Composed as affine maps by
-    ``jax.lax.associative_scan`` (no sequential loop to differentiate).
+    ``jax.lax.associative_scan`` (no sequential loop to differentiate); jitted, so that a call
+    outside a compiled function is one program, not the scan's levels op by op.
     :class:`~bayes_roadload.physics.terms.TyreThermalLag` reads it."""
     t = jnp.asarray(time_s, float)
     v = jnp.asarray(speed_mps, float)

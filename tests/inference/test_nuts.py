@@ -119,6 +119,8 @@ def test_nuts_and_least_squares_agree(pooled_fit, small_campaign):
         assert abs(g.estimate[k] - x.mean()) < 2.0 * x.std(), (k, g.estimate[k], x.mean(), x.std())
 
 
+@pytest.mark.slow  # ~20 s (numpyro initialises the unwhitened model op by op); the gates' failure
+# path and the failure printed first are checked fast by test_gates_fail_loudly_on_too_few_draws
 def test_gates_fail_on_a_deliberately_bad_configuration(small_campaign):
     """10 warm-up draws without the Laplace preconditioning (and trees capped at depth 6 to
     bound the test's cost): the sampler cannot adapt to the AD-BD-CD0 correlation, and the
