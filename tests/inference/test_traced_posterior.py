@@ -26,8 +26,9 @@ def test_traced_posterior_equals_numpyro_initialisation(small_campaign, pooling)
     assert sorted(z0) == sorted(info.z)
     a, b = ravel_pytree(z0)[0], ravel_pytree(info.z)[0]
     np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-12)
-    value, grad = jax.value_and_grad(potential)(z0)
-    ref_value, ref_grad = jax.value_and_grad(ref_potential)(info.z)
+    # compiled, as the sampler runs them (op by op, each took several seconds)
+    value, grad = jax.jit(jax.value_and_grad(potential))(z0)
+    ref_value, ref_grad = jax.jit(jax.value_and_grad(ref_potential))(info.z)
     assert float(value) == pytest.approx(float(ref_value), rel=1e-12)
     np.testing.assert_allclose(np.asarray(ravel_pytree(grad)[0]), np.asarray(ravel_pytree(ref_grad)[0]),
                                rtol=1e-9, atol=1e-9)
