@@ -35,7 +35,8 @@ leapfrog steps per draw and min ESS per wall second.  Records go to
 ``benchmarks/records/peers/``; ``docs/performance.md``'s peers section is regenerated between
 marker comments.  Run (peers venv, ``pip install -e ".[peers]"``)::
 
-    nice python benchmarks/peers.py --pairs 3 --warmup 200 --draws 200
+    python benchmarks/peers.py --timeout-s 420      # the reference: 18 pairs, default draws
+    python benchmarks/peers.py --timeout-s 420 --only stan_whitened   # rerun one sampler
 """
 
 from __future__ import annotations
