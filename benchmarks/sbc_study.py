@@ -12,6 +12,10 @@ time per fit.
 Run::
 
     python benchmarks/sbc_study.py --campaigns 100 --control 40 --workers 2
+
+An arm may be run in parts (``--seed0`` 0, 100, ... with their own ``--records``); ``--docs
+CSV [CSV ...]`` then reads the parts' records together (no fitting) and writes the tables into
+the ``sbc`` section of ``docs/calibration.md``.
 """
 
 from __future__ import annotations
@@ -28,7 +32,8 @@ import pandas as pd
 from bayes_roadload.analysis.batch import batch_client, run_batch
 from bayes_roadload.analysis.sbc import SBC_SAMPLER, sbc_jobs, sbc_markdown, sbc_tests
 
-RECORDS = Path(__file__).resolve().parents[1] / "docs" / "validation" / "sbc_records.csv"
+ROOT = Path(__file__).resolve().parents[1]
+RECORDS = ROOT / "docs" / "validation" / "sbc_records.csv"
 
 
 def main(argv=None) -> int:
@@ -46,7 +51,12 @@ def main(argv=None) -> int:
     ap.add_argument("--exact", action="store_true",
                     help="exact SBC: speed traces drawn from the model's own likelihood (ModelDrawnCampaign)")
     ap.add_argument("--records", type=Path, default=RECORDS)
+    ap.add_argument("--docs", type=Path, nargs="+", metavar="CSV",
+                    help="no fitting: read these record files together and write the tables into docs/calibration.md")
     args = ap.parse_args(argv)
+    if args.docs:
+        write_docs(args.docs)
+        return 0
 
     sampler = dataclasses.replace(SBC_SAMPLER, num_warmup=args.warmup, num_samples=args.draws)
     jobs = (sbc_jobs(args.campaigns, seed0=args.seed0, pairs=args.pairs, sampler=sampler, exact=args.exact)
@@ -83,6 +93,22 @@ def main(argv=None) -> int:
            "tests": json.loads(tests.to_json(orient="records"))}
     print(json.dumps(out, indent=2))
     return 0
+
+
+def write_docs(paths: list[Path]) -> str:
+    """The ``sbc`` section of ``docs/calibration.md`` from the record files ``paths`` (read
+    together): the command lines, then :func:`~bayes_roadload.analysis.sbc.sbc_markdown`."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from doc_sections import replace_section
+
+    records = pd.concat([pd.read_csv(p) for p in paths], ignore_index=True)
+    ok = records[records["error"].isna()] if "error" in records else records
+    names = ", ".join(f"`{p.resolve().relative_to(ROOT)}`" for p in paths)
+    head = (f"Records {names}: {len(records)} fits, {int(ok['pairs'].iloc[0]) if 'pairs' in ok and len(ok) else '?'} "
+            f"pairs each, mean {ok['time_total_s'].mean():.0f} s per fit.\n\n") if len(ok) else ""
+    text = head + sbc_markdown(records)
+    replace_section(ROOT / "docs" / "calibration.md", "<!-- sbc:begin -->", "<!-- sbc:end -->", text)
+    return text
 
 
 if __name__ == "__main__":

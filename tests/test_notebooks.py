@@ -1,6 +1,6 @@
-"""Every notebook in notebooks/ runs top to bottom with small draw counts, on its own example
-and on a user's fit directory (``BR_FIT_DIR``), and converts to a valid .ipynb with a
-``parameters`` cell."""
+"""Every notebook in notebooks/ runs top to bottom with small draw counts on its own example,
+and on a user's fit directory (``BR_FIT_DIR``; the two that refit are ``slow``), and converts
+to a valid .ipynb with a ``parameters`` cell."""
 
 import os
 import runpy
@@ -48,7 +48,13 @@ def user_fit(tmp_path_factory):
     return root / "f"
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+# on a user's fit, 03 refits simulated campaigns (as `plan` does: tests/test_cli.py) and 04
+# diagnoses the campaign (as `diagnose` does: tests/analysis/test_diagnose.py); both run with -m slow
+USER_FIT_SLOW = ("03_test_planning", "04_sim_to_real")
+
+
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in USER_FIT_SLOW else p
+                                  for p in NOTEBOOKS], ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_runs_on_a_user_fit(path, user_fit, tmp_path, monkeypatch):
     ns = run_notebook(path, tmp_path, monkeypatch, fit_dir=user_fit)
     summary = pd.read_csv(user_fit / "summary.csv").set_index("parameter")
