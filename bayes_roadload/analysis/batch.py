@@ -297,6 +297,9 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
         "map_converged": bool(fit.map.success) if fit.map is not None else None,
         "retries": len(fit.retries),
         "retry_failed": ",".join(fit.retries[0]["failed"]) if fit.retries else "",
+        # what the first attempt's R-hat gate read (nuts.fit_nuts: `first_attempt` of the retry)
+        **{f"first_{k}": (fit.retries[0].get("first_attempt") or {}).get(k) if fit.retries else None
+           for k in ("max_r_hat", "max_r_hat_quantity", "its_ess_bulk", "min_ess_bulk")},
         # the acceptance of the reported run: the job's, or the small-campaign / quiet-trace
         # value (nuts.campaign_sampler, nuts.quiet_trace_sampler), or the retry's
         "target_accept_sampled": float(fit.sampler.target_accept),

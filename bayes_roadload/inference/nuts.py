@@ -791,18 +791,21 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
     fit = run_nuts(problem, sampler=sampler, map_result=map_result, posterior=post)
     if sampler.retry and sampler.num_warmup >= config.DEFAULT_SAMPLER.num_warmup \
             and sampler.num_samples >= config.DEFAULT_SAMPLER.num_samples:
-        from .results import gate_failures  # results imports this module
+        from .results import gate_check  # results imports this module
 
-        failed = gate_failures(fit)
+        failed, extremes = gate_check(fit)
         second = remedy(sampler, failed)
         if second is not None:
             log.warning("gates failed (%s): retrying once with %d + %d draws per chain, target acceptance %.2f",
                         ", ".join(failed), second.num_warmup, second.num_samples, second.target_accept)
             first_s = fit.timings["warmup_s"] + fit.timings["sampling_s"]
             fit = run_nuts(problem, sampler=second, map_result=map_result, posterior=post)
+            first = {k: (v if not isinstance(v, float) else round(v, 5) if math.isfinite(v) else None)
+                     for k, v in extremes.items()}  # JSON has no NaN
             fit.retries = [{"failed": failed, "first_attempt_s": round(first_s, 3),
                             "num_warmup": second.num_warmup, "num_samples": second.num_samples,
-                            "target_accept": second.target_accept, "seed": second.seed}]
+                            "target_accept": second.target_accept, "seed": second.seed,
+                            "first_attempt": first}]
             fit.timings["first_attempt_s"] = first_s
     if map_result is not None:
         fit.timings["map_s"] = map_result.time_s

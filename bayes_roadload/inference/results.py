@@ -217,19 +217,42 @@ def gate_failures(fit: NutsFit, gates: config.Gates = config.DEFAULT_GATES) -> l
     """The gates a fit fails, from its draws alone (for any kind of problem): the checks of
     :func:`diagnostics` over every posterior variable and the problem's derived quantities
     (:func:`inference_data`), without building the kind's full InferenceData."""
+    return gate_check(fit, gates)[0]
+
+
+def _extreme(ds, pick) -> tuple[float, str]:
+    """The extreme value over every element of every variable of ``ds`` (``pick``: np.argmax or
+    np.argmin over the finite ones) and its name (``name[i]`` for element i of a vector)."""
+    values, names = [], []
+    for v in ds.data_vars:
+        a = np.ravel(ds[v].values)
+        values.append(a)
+        names += [str(v)] if a.size == 1 else [f"{v}[{i}]" for i in range(a.size)]
+    if not values:
+        return math.nan, ""
+    x = np.concatenate(values)
+    ok = np.flatnonzero(np.isfinite(x))
+    if not ok.size:
+        return math.nan, ""
+    i = ok[pick(x[ok])]
+    return float(x[i]), names[i]
+
+
+def gate_check(fit: NutsFit, gates: config.Gates = config.DEFAULT_GATES) -> tuple[list[str], dict[str, Any]]:
+    """:func:`gate_failures` and the extremes they were read from: the largest R-hat and its
+    quantity (with that quantity's bulk ESS), the smallest bulk and tail ESS and their
+    quantities (recorded with a retry: an R-hat just over the gate on a quantity of low ESS is
+    what converged chains show, docs/calibration.md)."""
     idata = inference_data(fit)
     post = idata.posterior
     chains = int(post.sizes["chain"])
-
-    def extreme(ds, fn):
-        values = np.concatenate([np.ravel(ds[v].values) for v in ds.data_vars]) if ds.data_vars else np.array([])
-        values = values[np.isfinite(values)]
-        return float(fn(values)) if values.size else math.nan
-
     with np.errstate(invalid="ignore", divide="ignore"):
-        max_rhat = extreme(az.rhat(post), np.max) if chains > 1 else math.nan
-        min_bulk = extreme(az.ess(post, method="bulk"), np.min)
-        min_tail = extreme(az.ess(post, method="tail"), np.min)
+        rhat = az.rhat(post) if chains > 1 else None
+        bulk = az.ess(post, method="bulk")
+        tail = az.ess(post, method="tail")
+    max_rhat, rhat_name = _extreme(rhat, np.argmax) if rhat is not None else (math.nan, "")
+    min_bulk, bulk_name = _extreme(bulk, np.argmin)
+    min_tail, tail_name = _extreme(tail, np.argmin)
     bfmi = np.atleast_1d(az.bfmi(idata))
     hits = float(np.mean(fit.stats["tree_depth"] >= fit.sampler.max_tree_depth))
     checks = {
@@ -240,7 +263,14 @@ def gate_failures(fit: NutsFit, gates: config.Gates = config.DEFAULT_GATES) -> l
         "bfmi": float(np.min(bfmi)) >= gates.min_bfmi,
         "tree_depth": hits <= gates.max_tree_depth_hits_fraction,
     }
-    return [k for k, ok in checks.items() if not ok]
+    rhat_ess = math.nan
+    if rhat_name:
+        var, _, idx = rhat_name.partition("[")
+        rhat_ess = float(np.ravel(bulk[var].values)[int(idx[:-1]) if idx else 0])
+    extremes = {"max_r_hat": max_rhat, "max_r_hat_quantity": rhat_name, "its_ess_bulk": rhat_ess,
+                "min_ess_bulk": min_bulk, "min_ess_bulk_quantity": bulk_name,
+                "min_ess_tail": min_tail, "min_ess_tail_quantity": tail_name}
+    return [k for k, ok in checks.items() if not ok], extremes
 
 
 def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,

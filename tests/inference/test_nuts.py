@@ -344,6 +344,14 @@ def test_a_failed_gate_is_retried_once_and_recorded(small_campaign, monkeypatch)
     retry = fit.retries[0]
     assert "ess_bulk" in retry["failed"] and (retry["num_warmup"], retry["num_samples"]) == (40, 40)
     assert fit.samples["CD0"].shape == (2, 40) and fit.timings["first_attempt_s"] > 0
+    # what the first attempt's gates read: the failing ESS is below 100 per chain, and it names
+    # a sampled quantity; the largest R-hat comes with its quantity's own ESS
+    first = retry["first_attempt"]
+    assert first["min_ess_bulk"] < 2 * config.DEFAULT_GATES.min_ess_bulk_per_chain
+    from bayes_roadload.inference.results import inference_data
+
+    assert first["min_ess_bulk_quantity"].split("[")[0] in inference_data(fit).posterior
+    assert first["max_r_hat"] > 1.0 and first["its_ess_bulk"] >= first["min_ess_bulk"]
     idata = to_inference_data(fit, predictive=False)
     diag = diagnostics(fit, idata, summary_table(fit, idata))
     assert diag["retries"] == fit.retries
