@@ -97,15 +97,18 @@ def main(argv=None) -> int:
 
 def write_docs(paths: list[Path]) -> str:
     """The ``sbc`` section of ``docs/calibration.md`` from the record files ``paths`` (read
-    together): the command lines, then :func:`~bayes_roadload.analysis.sbc.sbc_markdown`."""
+    together): the files, the fit count, pairs and mean time, then
+    :func:`~bayes_roadload.analysis.sbc.sbc_markdown`."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from doc_sections import replace_section
 
     records = pd.concat([pd.read_csv(p) for p in paths], ignore_index=True)
     ok = records[records["error"].isna()] if "error" in records else records
     names = ", ".join(f"`{p.resolve().relative_to(ROOT)}`" for p in paths)
-    head = (f"Records {names}: {len(records)} fits, {int(ok['pairs'].iloc[0]) if 'pairs' in ok and len(ok) else '?'} "
-            f"pairs each, mean {ok['time_total_s'].mean():.0f} s per fit.\n\n") if len(ok) else ""
+    head = ""
+    if len(ok):
+        pairs = int(ok["pairs"].iloc[0]) if "pairs" in ok else "?"
+        head = f"Records {names}: {len(records)} fits, {pairs} pairs each, mean {ok['time_total_s'].mean():.0f} s per fit.\n\n"
     text = head + sbc_markdown(records)
     replace_section(ROOT / "docs" / "calibration.md", "<!-- sbc:begin -->", "<!-- sbc:end -->", text)
     return text

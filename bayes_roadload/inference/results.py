@@ -220,22 +220,22 @@ def gate_failures(fit: NutsFit, gates: config.Gates = config.DEFAULT_GATES) -> l
     return gate_check(fit, gates)[0]
 
 
-def _extreme(ds, pick) -> tuple[float, str]:
+def _extreme(ds, pick) -> tuple[float, str, int]:
     """The extreme value over every element of every variable of ``ds`` (``pick``: np.argmax or
-    np.argmin over the finite ones) and its name (``name[i]`` for element i of a vector)."""
-    values, names = [], []
-    for v in ds.data_vars:
-        a = np.ravel(ds[v].values)
-        values.append(a)
-        names += [str(v)] if a.size == 1 else [f"{v}[{i}]" for i in range(a.size)]
-    if not values:
-        return math.nan, ""
-    x = np.concatenate(values)
+    np.argmin over the finite ones), its variable and its flat index in that variable
+    (nan, "", 0 when there is none)."""
+    where = [(str(v), i) for v in ds.data_vars for i in range(ds[v].size)]
+    x = np.concatenate([np.ravel(ds[v].values) for v in ds.data_vars]) if where else np.array([])
     ok = np.flatnonzero(np.isfinite(x))
     if not ok.size:
-        return math.nan, ""
-    i = ok[pick(x[ok])]
-    return float(x[i]), names[i]
+        return math.nan, "", 0
+    k = ok[pick(x[ok])]
+    return float(x[k]), *where[k]
+
+
+def _element(ds, var: str, index: int) -> str:
+    """``var`` for a scalar variable of ``ds``, ``var[index]`` for an element of a vector."""
+    return var if ds[var].size == 1 else f"{var}[{index}]"
 
 
 def gate_check(fit: NutsFit, gates: config.Gates = config.DEFAULT_GATES) -> tuple[list[str], dict[str, Any]]:
@@ -250,9 +250,9 @@ def gate_check(fit: NutsFit, gates: config.Gates = config.DEFAULT_GATES) -> tupl
         rhat = az.rhat(post) if chains > 1 else None
         bulk = az.ess(post, method="bulk")
         tail = az.ess(post, method="tail")
-    max_rhat, rhat_name = _extreme(rhat, np.argmax) if rhat is not None else (math.nan, "")
-    min_bulk, bulk_name = _extreme(bulk, np.argmin)
-    min_tail, tail_name = _extreme(tail, np.argmin)
+    max_rhat, rhat_var, rhat_i = _extreme(rhat, np.argmax) if rhat is not None else (math.nan, "", 0)
+    min_bulk, bulk_var, bulk_i = _extreme(bulk, np.argmin)
+    min_tail, tail_var, tail_i = _extreme(tail, np.argmin)
     bfmi = np.atleast_1d(az.bfmi(idata))
     hits = float(np.mean(fit.stats["tree_depth"] >= fit.sampler.max_tree_depth))
     checks = {
@@ -263,13 +263,11 @@ def gate_check(fit: NutsFit, gates: config.Gates = config.DEFAULT_GATES) -> tupl
         "bfmi": float(np.min(bfmi)) >= gates.min_bfmi,
         "tree_depth": hits <= gates.max_tree_depth_hits_fraction,
     }
-    rhat_ess = math.nan
-    if rhat_name:
-        var, _, idx = rhat_name.partition("[")
-        rhat_ess = float(np.ravel(bulk[var].values)[int(idx[:-1]) if idx else 0])
-    extremes = {"max_r_hat": max_rhat, "max_r_hat_quantity": rhat_name, "its_ess_bulk": rhat_ess,
-                "min_ess_bulk": min_bulk, "min_ess_bulk_quantity": bulk_name,
-                "min_ess_tail": min_tail, "min_ess_tail_quantity": tail_name}
+    extremes = {
+        "max_r_hat": max_rhat, "max_r_hat_quantity": _element(rhat, rhat_var, rhat_i) if rhat_var else "",
+        "its_ess_bulk": float(np.ravel(bulk[rhat_var].values)[rhat_i]) if rhat_var else math.nan,
+        "min_ess_bulk": min_bulk, "min_ess_bulk_quantity": _element(bulk, bulk_var, bulk_i) if bulk_var else "",
+        "min_ess_tail": min_tail, "min_ess_tail_quantity": _element(tail, tail_var, tail_i) if tail_var else ""}
     return [k for k, ok in checks.items() if not ok], extremes
 
 
