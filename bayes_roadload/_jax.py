@@ -15,6 +15,18 @@
   with two arenas (docs/performance.md, section *Memory*).  Linux with glibc only;
   ``MALLOC_ARENA_MAX`` in the environment, or ``BAYES_ROADLOAD_MALLOC_ARENAS`` (0: glibc's
   default), wins.
+* **Arrays as arguments of compiled programs, not constants in them**
+  (``jax_use_simplified_jaxpr_constants``, ``jax_embedded_constants_max_bytes`` = 0,
+  :data:`SHARED_PROGRAM_FLAGS`): by default JAX embeds the arrays a jitted function closes over
+  (a campaign's speed traces, its MAP and Laplace factor) in the compiled program, so every
+  campaign compiled its own sampler and MAP objective even when its shapes were those of the
+  last one.  With every non-scalar constant hoisted into an argument, campaigns of the same
+  shapes (runs padded to a common length, :func:`bayes_roadload.physics.integrate.bucket_length`)
+  lower to the same program, and JAX's persistent compilation cache
+  (:func:`enable_compilation_cache`) loads it instead of compiling it.  Scalars stay embedded.
+  JAX reads the options when it is imported, so they are set as environment variables before
+  the package imports JAX; a value already in the environment wins, and a process that imported
+  JAX before this package keeps JAX's defaults (correct, but no sharing).
 
 To override: set ``XLA_FLAGS`` with your own ``--xla_force_host_platform_device_count=N``
 before importing the package (it is then left as it is), or call
@@ -26,6 +38,7 @@ keeps its device count.
 from __future__ import annotations
 
 import os
+import sys
 
 DEVICE_COUNT_FLAG = "--xla_force_host_platform_device_count"
 MALLOC_ARENAS = 2
@@ -64,13 +77,21 @@ def limit_malloc_arenas(n: int | None = None) -> int | None:
     return int(n) if ok == 1 else None
 
 
+SHARED_PROGRAM_FLAGS = {"jax_use_simplified_jaxpr_constants": True, "jax_embedded_constants_max_bytes": 0}
+"""JAX options that make compiled programs take closed-over arrays as arguments (module docstring)."""
+
+
 def configure_jax() -> None:
     """Set the device-count XLA flag (unless ``XLA_FLAGS`` already names one), cap glibc's
-    malloc arenas (:func:`limit_malloc_arenas`) and enable x64."""
+    malloc arenas (:func:`limit_malloc_arenas`), enable x64 and hoist closed-over arrays into
+    program arguments (:data:`SHARED_PROGRAM_FLAGS`)."""
     limit_malloc_arenas()
     flags = os.environ.get("XLA_FLAGS", "")
     if DEVICE_COUNT_FLAG.lstrip("-") not in flags:
         os.environ["XLA_FLAGS"] = f"{flags} {DEVICE_COUNT_FLAG}={max(os.cpu_count() or 1, 1)}".strip()
+    if "jax" not in sys.modules:  # JAX reads these when it is imported (its lowering defaults)
+        for name, value in SHARED_PROGRAM_FLAGS.items():
+            os.environ.setdefault(name.upper(), str(value))
     import jax  # after XLA_FLAGS: the backend reads it when it starts
 
     jax.config.update("jax_enable_x64", True)

@@ -19,7 +19,7 @@ import pandas as pd
 
 from .. import config
 from ..physics.atmosphere import air_density_kgpm3
-from ..physics.integrate import make_run, stack_runs
+from ..physics.integrate import bucket_length, make_run, stack_runs
 from .checks import (
     read_csv_table,
     CHANNEL_LIMITS,
@@ -135,7 +135,10 @@ class Campaign:
         """The runs as a padded :class:`~bayes_roadload.physics.RunBatch` (time from each
         run's first sample) and the list of run ids in batch order.  ``meta["pad_to_samples"]``
         pads every run to at least that many samples (studies of many same-sized campaigns then
-        share one compiled fit)."""
+        share one compiled fit); the length is then rounded up to the next of
+        :data:`~bayes_roadload.config.PAD_SIZES_PER_OCTAVE` sizes per doubling
+        (:func:`~bayes_roadload.physics.integrate.bucket_length`), so that campaigns of nearly the
+        same length share their compiled programs too."""
         runs = []
         v = self.vehicle
         for rid, g in self.runs.groupby("run", sort=False):
@@ -161,7 +164,8 @@ class Campaign:
                 effective_mass_kg=v.effective_mass_kg + (mass - v.mass_kg),
                 frontal_area_m2=v.frontal_area_m2,
             ))
-        return stack_runs(runs, self.meta.get("pad_to_samples")), self.run_ids
+        longest = max([int(r.time_s.shape[0]) for r in runs] + [int(self.meta.get("pad_to_samples") or 0)])
+        return stack_runs(runs, bucket_length(longest, config.PAD_SIZES_PER_OCTAVE)), self.run_ids
 
 
 def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:

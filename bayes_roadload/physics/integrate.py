@@ -426,6 +426,17 @@ def make_run(
     return RunBatch(*(jnp.asarray(x) for x in host))
 
 
+def bucket_length(n: int, sizes_per_octave: int) -> int:
+    """The smallest length >= ``n`` of the form ``m * 2**k`` with ``sizes_per_octave`` <= m <
+    2 ``sizes_per_octave`` (``sizes_per_octave`` a power of two; 0 or ``n`` below it: ``n``
+    itself): lengths padded to it exceed ``n`` by less than 1/``sizes_per_octave``."""
+    n = int(n)
+    if sizes_per_octave <= 0 or n <= sizes_per_octave:
+        return n
+    step = 2 ** max(n.bit_length() - 1 - (int(sizes_per_octave).bit_length() - 1), 0)
+    return -(-n // step) * step
+
+
 def stack_runs(runs: list[RunBatch], length: int | None = None) -> RunBatch:
     """Pad single runs to a common length (repeating the last sample; ``mask`` False there)
     and stack them.  ``length``: pad to at least this many samples (campaigns of one padded
