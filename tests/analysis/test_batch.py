@@ -134,7 +134,7 @@ def test_record_keys_and_values(batch):
     # the draws are not in the record, only scalars
     assert all(np.ndim(v) == 0 for v in good.to_dict().values())
     for key in ("gate_pass", "gates_failed", "divergences", "max_r_hat", "min_ess_bulk", "time_map_s",
-                "time_warmup_s", "time_sampling_s", "time_fit_s", "time_total_s", "time_compile_s", "rss_mb",
+                "time_warmup_s", "time_sampling_s", "time_fit_s", "time_total_s", "time_compile_s", "rss_mb", "memory_maps",
                 "jax_caches_cleared", "sigma_mps_mean", "target_accept_sampled"):
         assert key in df.columns, key
     # the job asked for 0.8; two runs are sampled at the small-campaign acceptance
@@ -223,3 +223,21 @@ def test_the_time_left_weighs_each_item_by_its_work(monkeypatch):
     assert "about " + batch._format_seconds(90.0) + " left" in out.getvalue()
     bar.update("large", index=1)
     assert out.getvalue().splitlines()[-1].endswith("about " + batch._format_seconds(0.0) + " left]")
+
+
+@pytest.mark.parametrize("maps, cleared", [((1000, 65530), False), ((40000, 65530), True)])
+def test_caches_are_cleared_when_the_process_nears_its_mapping_limit(monkeypatch, maps, cleared):
+    """JAX's caches are cleared after a job once the process holds more memory mappings than
+    the share of the kernel's limit (compiled code lives in mappings of its own)."""
+    import jax
+
+    from bayes_roadload.analysis import batch
+
+    calls = []
+    monkeypatch.setattr(batch, "_map_count", lambda: maps)
+    monkeypatch.setattr(batch, "_rss_mb", lambda: 100.0)  # memory far below its own threshold
+    monkeypatch.setattr(jax, "clear_caches", lambda: calls.append(1))
+    rec = run_fit_job(FitJob("broken", _broken_campaign, model="three_term", sampler=TINY_SAMPLER))
+    assert rec["memory_maps"] == maps[0]
+    assert rec["jax_caches_cleared"] is cleared and len(calls) == int(cleared)
+    assert (maps[0] > batch.CLEAR_JAX_CACHES_ABOVE_MAP_SHARE * maps[1]) is cleared
