@@ -15,18 +15,18 @@
   with two arenas (docs/performance.md, section *Memory*).  Linux with glibc only;
   ``MALLOC_ARENA_MAX`` in the environment, or ``BAYES_ROADLOAD_MALLOC_ARENAS`` (0: glibc's
   default), wins.
-* **Arrays as arguments of compiled programs, not constants in them**
-  (``jax_use_simplified_jaxpr_constants``, ``jax_embedded_constants_max_bytes`` = 0,
-  :data:`SHARED_PROGRAM_FLAGS`): by default JAX embeds the arrays a jitted function closes over
-  (a campaign's speed traces, its MAP and Laplace factor) in the compiled program, so every
-  campaign compiled its own sampler and MAP objective even when its shapes were those of the
-  last one.  With every non-scalar constant hoisted into an argument, campaigns of the same
-  shapes (runs padded to a common length, :func:`bayes_roadload.physics.integrate.bucket_length`)
-  lower to the same program, and JAX's persistent compilation cache
-  (:func:`enable_compilation_cache`) loads it instead of compiling it.  Scalars stay embedded.
-  JAX reads the options when it is imported, so they are set as environment variables before
-  the package imports JAX; a value already in the environment wins, and a process that imported
-  JAX before this package keeps JAX's defaults (correct, but no sharing).
+* **Programs shared across same-shaped campaigns, on request** (``BAYES_ROADLOAD_SHARE_PROGRAMS=1``,
+  :func:`share_programs`): JAX then hoists every non-scalar array a jitted function closes over
+  into an argument (``jax_use_simplified_jaxpr_constants``, ``jax_embedded_constants_max_bytes``
+  = 0: :data:`SHARED_PROGRAM_FLAGS`) and runs are padded to a few lengths
+  (:data:`~bayes_roadload.config.PAD_SIZES_PER_OCTAVE`), so campaigns of the same number of runs
+  and nearly the same length lower to the same programs and the persistent compilation cache
+  (:func:`enable_compilation_cache`) serves them: a second 2-pair fit took 7.9 s instead of
+  22.2 s.  Off by default: with the data as arguments XLA no longer folds the data-only
+  arithmetic into constants, and the warm-up and sampling of a 36-run fit ran 29 % longer (63.0 s
+  against 48.8 s, same draws and steps; ``benchmarks/shared_programs.py``).  JAX reads the options when it
+  is imported, so they are set as environment variables before the package imports JAX; a value
+  already in the environment wins, and a process that imported JAX first keeps JAX's defaults.
 
 To override: set ``XLA_FLAGS`` with your own ``--xla_force_host_platform_device_count=N``
 before importing the package (it is then left as it is), or call
@@ -79,17 +79,25 @@ def limit_malloc_arenas(n: int | None = None) -> int | None:
 
 SHARED_PROGRAM_FLAGS = {"jax_use_simplified_jaxpr_constants": True, "jax_embedded_constants_max_bytes": 0}
 """JAX options that make compiled programs take closed-over arrays as arguments (module docstring)."""
+SHARE_ENV = "BAYES_ROADLOAD_SHARE_PROGRAMS"
+"""Environment variable: "1" shares compiled programs across same-shaped campaigns (module docstring)."""
+
+
+def share_programs() -> bool:
+    """Whether compiled programs are shared across same-shaped campaigns (``$BAYES_ROADLOAD_SHARE_PROGRAMS``
+    is "1"; module docstring)."""
+    return os.environ.get(SHARE_ENV, "") == "1"
 
 
 def configure_jax() -> None:
     """Set the device-count XLA flag (unless ``XLA_FLAGS`` already names one), cap glibc's
-    malloc arenas (:func:`limit_malloc_arenas`), enable x64 and hoist closed-over arrays into
-    program arguments (:data:`SHARED_PROGRAM_FLAGS`)."""
+    malloc arenas (:func:`limit_malloc_arenas`), enable x64 and, when :func:`share_programs`,
+    hoist closed-over arrays into program arguments (:data:`SHARED_PROGRAM_FLAGS`)."""
     limit_malloc_arenas()
     flags = os.environ.get("XLA_FLAGS", "")
     if DEVICE_COUNT_FLAG.lstrip("-") not in flags:
         os.environ["XLA_FLAGS"] = f"{flags} {DEVICE_COUNT_FLAG}={max(os.cpu_count() or 1, 1)}".strip()
-    if "jax" not in sys.modules:  # JAX reads these when it is imported (its lowering defaults)
+    if share_programs() and "jax" not in sys.modules:  # JAX reads these when it is imported
         for name, value in SHARED_PROGRAM_FLAGS.items():
             os.environ.setdefault(name.upper(), str(value))
     import jax  # after XLA_FLAGS: the backend reads it when it starts

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ._jax import share_programs
+
 # --- physical constants -------------------------------------------------------------------
 GRAVITY_MPS2 = 9.81
 """Acceleration due to gravity used by the thesis (m/s^2)."""
@@ -302,13 +304,13 @@ AUTO_HIERARCHICAL_MAX_RUNS = 24
 range) and pooled above: the hierarchical fit of 36 runs ran for more than 8 minutes on a
 2-core machine against 95 s pooled (docs/calibration.md, benchmarks/cold_start.py)."""
 
-PAD_SIZES_PER_OCTAVE = 8
-"""A campaign's runs are padded (masked samples) to the next of this many lengths per doubling
+PAD_SIZES_PER_OCTAVE = 8 if share_programs() else 0
+"""With ``BAYES_ROADLOAD_SHARE_PROGRAMS=1`` (:mod:`bayes_roadload._jax`) a campaign's runs are
+padded (masked samples) to the next of 8 lengths per doubling
 (:func:`~bayes_roadload.physics.integrate.bucket_length`: 493 and 498 samples both to 512), so
-that campaigns of the same number of runs and nearly the same length lower to the same compiled
-programs and share them through the persistent compilation cache
-(:mod:`bayes_roadload._jax`).  The padding costs less than 1/8 (about 6 % on average) more
-likelihood work; 0 pads only to the longest run."""
+that campaigns of the same number of runs and nearly the same length share compiled programs,
+at less than 1/8 (about 6 % on average) more likelihood work.  0 (the default): runs are padded
+to the longest run only."""
 
 PARALLEL_CHAIN_GROWTH_BYTES = 27.0
 """Resident memory that numpyro's parallel chains (one XLA device per chain) gain per

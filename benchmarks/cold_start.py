@@ -98,9 +98,11 @@ def markdown(rec: dict) -> str:
              "independent simulator, `fit --model four_term --no-progress --no-report` in a new process, timed "
              f"from the shell prompt to exit on this {rec['cpu_count']}-core machine (1-minute load "
              f"{rec['load_1min']:.1f} when the run ended). Cold: an empty compilation cache; warm: the cache the "
-             "cold run filled (`BAYES_ROADLOAD_CACHE_DIR`, default `~/.cache/bayes-roadload/jax`); warm, other "
-             "campaign: another seed of the simulator, same runs and padded run length, with that cache "
-             "(compiled programs take the data as arguments: `bayes_roadload/_jax.py`). Stages from "
+             "cold run filled (`BAYES_ROADLOAD_CACHE_DIR`, default `~/.cache/bayes-roadload/jax`)"
+             + ("; warm, other campaign: another seed of the simulator, same runs and padded run length, with "
+                "that cache (its programs are shared only with `BAYES_ROADLOAD_SHARE_PROGRAMS=1`, "
+                "`bayes_roadload/_jax.py`)" if any("seed" in r for r in rec["rows"]) else "")
+             + ". Stages from "
              "`diagnostics.json` `stages_s` (compilation is inside the stage that first runs a program: "
              "`fit_setup` holds the least-squares start, `warmup` the sampler's; after a failed gate, warm-up "
              "and sampling are the retry's and the first attempt's time is its own column).", "",

@@ -311,7 +311,8 @@ def calibration_study(case: int = 15, pairs: int = 3, seeds: Iterable[int] = ran
 # --------------------------------------------------------------------------- the report
 
 def _fmt(x: float, digits: int = 2) -> str:
-    return "-" if x is None or not math.isfinite(x) else f"{x:+.{digits}f}"
+    """``x`` with its sign at ``digits`` decimals; a value that rounds to zero is "+0.00", never "-0.00"."""
+    return "-" if x is None or not math.isfinite(x) else f"{round(x, digits) + 0.0:+.{digits}f}"
 
 
 def _estimated(g: pd.DataFrame, name: str) -> bool:

@@ -162,3 +162,9 @@ def test_full_study_on_case_15():
         assert cal["CD0_in_interval"].astype(bool).sum() >= 2
     text = markdown(df)
     assert "per +1 % reading error" in text
+
+
+def test_a_value_that_rounds_to_zero_has_no_minus_sign():
+    from studies.calibration import _fmt
+
+    assert [_fmt(-1e-10), _fmt(-0.004), _fmt(-0.006), _fmt(float("nan"))] == ["+0.00", "+0.00", "-0.01", "-"]
