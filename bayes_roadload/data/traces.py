@@ -135,10 +135,10 @@ class Campaign:
         """The runs as a padded :class:`~bayes_roadload.physics.RunBatch` (time from each
         run's first sample) and the list of run ids in batch order.  ``meta["pad_to_samples"]``
         pads every run to at least that many samples (studies of many same-sized campaigns then
-        share one compiled fit); the length is then rounded up to the next of
-        :data:`~bayes_roadload.config.PAD_SIZES_PER_OCTAVE` sizes per doubling
-        (:func:`~bayes_roadload.physics.integrate.bucket_length`), so that campaigns of nearly the
-        same length share their compiled programs too."""
+        share one compiled fit); with ``BAYES_ROADLOAD_SHARE_PROGRAMS=1`` the length is then
+        rounded up to the next of :data:`~bayes_roadload.config.PAD_SIZES_PER_OCTAVE` sizes per
+        doubling (:func:`~bayes_roadload.physics.integrate.bucket_length`), so that campaigns of
+        nearly the same length share their compiled programs too."""
         runs = []
         v = self.vehicle
         for rid, g in self.runs.groupby("run", sort=False):
