@@ -22,9 +22,9 @@
   (:data:`~bayes_roadload.config.PAD_SIZES_PER_OCTAVE`), so campaigns of the same number of runs
   and nearly the same length lower to the same programs and the persistent compilation cache
   (:func:`enable_compilation_cache`) serves them: a second 2-pair fit took 7.9 s instead of
-  22.2 s.  Off by default: with the data as arguments XLA no longer folds the data-only
-  arithmetic into constants, and the warm-up and sampling of a 36-run fit ran 29 % longer (63.0 s
-  against 48.8 s, same draws and steps; ``benchmarks/shared_programs.py``).  JAX reads the options when it
+  22.2 s.  Off by default: with the data as arguments the warm-up and sampling of a 36-run fit
+  ran 29 % longer (63.0 s against 48.8 s, same draws and steps; ``benchmarks/shared_programs.py``;
+  likely XLA no longer folding data-only arithmetic into constants).  JAX reads the options when it
   is imported, so they are set as environment variables before the package imports JAX; a value
   already in the environment wins, and a process that imported JAX first keeps JAX's defaults.
 
