@@ -19,7 +19,7 @@ import pandas as pd
 
 from .. import config
 from ..physics.atmosphere import air_density_kgpm3
-from ..physics.integrate import bucket_length, make_run, stack_runs
+from ..physics.integrate import make_run, stack_runs
 from .checks import (
     read_csv_table,
     CHANNEL_LIMITS,
@@ -164,8 +164,7 @@ class Campaign:
                 effective_mass_kg=v.effective_mass_kg + (mass - v.mass_kg),
                 frontal_area_m2=v.frontal_area_m2,
             ))
-        longest = max([int(r.time_s.shape[0]) for r in runs] + [int(self.meta.get("pad_to_samples") or 0)])
-        return stack_runs(runs, bucket_length(longest, config.PAD_SIZES_PER_OCTAVE)), self.run_ids
+        return stack_runs(runs, self.meta.get("pad_to_samples"), config.PAD_SIZES_PER_OCTAVE), self.run_ids
 
 
 def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:

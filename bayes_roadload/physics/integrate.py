@@ -437,11 +437,12 @@ def bucket_length(n: int, sizes_per_octave: int) -> int:
     return -(-n // step) * step
 
 
-def stack_runs(runs: list[RunBatch], length: int | None = None) -> RunBatch:
+def stack_runs(runs: list[RunBatch], length: int | None = None, sizes_per_octave: int = 0) -> RunBatch:
     """Pad single runs to a common length (repeating the last sample; ``mask`` False there)
     and stack them.  ``length``: pad to at least this many samples (campaigns of one padded
-    shape share their compiled fits, :mod:`bayes_roadload.inference.laplace`)."""
-    n = max([int(r.time_s.shape[0]) for r in runs] + [int(length or 0)])
+    shape share their compiled fits, :mod:`bayes_roadload.inference.laplace`); that length is
+    then rounded up by :func:`bucket_length` with ``sizes_per_octave`` (0: not rounded)."""
+    n = bucket_length(max([int(r.time_s.shape[0]) for r in runs] + [int(length or 0)]), sizes_per_octave)
 
     def pad(x, length):
         x = np.asarray(x)  # padded on the host: one device transfer per field, no per-shape programs
