@@ -29,6 +29,9 @@ ROOT = Path(__file__).resolve().parents[1]
 RECORDS = ROOT / "benchmarks" / "records" / "performance" / "cold_start.json"
 DOC = ROOT / "docs" / "performance.md"
 BEGIN, END = "<!-- cold_start: begin -->", "<!-- cold_start: end -->"
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from doc_sections import replace_section  # noqa: E402
 TARGETS_S = {"cold": 15.0, "warm": 8.0, "warm, other campaign": 8.0}
 
 
@@ -93,7 +96,7 @@ def measure(pairs: int, poolings: list[str], rate_hz: float) -> dict:
 
 
 def markdown(rec: dict) -> str:
-    lines = [BEGIN, "", f"Reference: {rec['pairs']} pairs ({rec['runs']} runs, {rec['samples']} samples"
+    lines = ["", f"Reference: {rec['pairs']} pairs ({rec['runs']} runs, {rec['samples']} samples"
              f"{', logged at %g Hz' % rec['rate_hz'] if 'rate_hz' in rec else ''}) from the "
              "independent simulator, `fit --model four_term --no-progress --no-report` in a new process, timed "
              f"from the shell prompt to exit on this {rec['cpu_count']}-core machine (1-minute load "
@@ -121,17 +124,11 @@ def markdown(rec: dict) -> str:
                      f"{t.get('warmup_s', 0):.1f} | {t.get('sampling_s', 0):.1f} | "
                      f"{s.get('summaries_and_predictive', 0):.1f} | {s.get('type_b', 0):.1f} | "
                      f"{s.get('writing', 0):.1f} | {gates} |")
-    return "\n".join(lines + ["", END])
+    return "\n".join(lines + ["", ""])
 
 
 def write_doc(rec: dict) -> None:
-    text = DOC.read_text()
-    block = markdown(rec)
-    if BEGIN in text:
-        text = text[:text.index(BEGIN)] + block + text[text.index(END) + len(END):]
-    else:
-        text = text.rstrip("\n") + "\n\n## Cold and warm start\n\n" + block + "\n"
-    DOC.write_text(text)
+    replace_section(DOC, BEGIN, END, markdown(rec), heading="## Cold and warm start")
 
 
 def main() -> None:
