@@ -2,7 +2,6 @@
 numbers equal to summary.csv, images that decode, and the page in a headless browser."""
 
 import base64
-import dataclasses
 import io
 import json
 import math
@@ -22,7 +21,7 @@ from bayes_roadload.cli import main as cli
 from bayes_roadload.data import save_campaign
 from bayes_roadload.inference.results import REMEDIES
 from bayes_roadload.output.report import FILES_DIR, fmt, render_report
-from bayes_roadload.simulate import get_case, simulate_campaign
+from bayes_roadload.simulate import simulate_campaign
 from bayes_roadload.simulate.intervals import interval_campaign_from_traces
 from bayes_roadload.simulate.spindown import simulate_spindown
 
@@ -101,12 +100,9 @@ def fits(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("report")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        # the campaign, model and draws of `demo --pairs 1 --pooling pooled` in tests/test_cli.py: the
-        # two share their compiled programs through the run's compilation cache (tests/conftest.py)
-        traces = simulate_campaign(dataclasses.replace(get_case(14), model="basic"), pairs=1, seed=1)
+        traces = simulate_campaign(clean_case(), pairs=1, seed=21)
         intervals = interval_campaign_from_traces(simulate_campaign(clean_case(), pairs=2, seed=22))
-        demo_draws = ["--warmup", "150", "--draws", "150", "--seed", "1", "--no-progress"]
-        dirs = {"nuts": _fit(tmp, traces, "nuts", "--model", "four_term", "--pooling", "pooled", *demo_draws),
+        dirs = {"nuts": _fit(tmp, traces, "nuts", "--model", "four_term", "--pooling", "pooled", *SMALL),
                 "lsq": _fit(tmp, traces, "lsq", "--method", "lsq"),
                 "intervals": _fit(tmp, intervals, "intervals", "--no-type-b", *SMALL)}   # budget: the "nuts" fit
     return dirs  # `fit` renders each report
