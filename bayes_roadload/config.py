@@ -304,9 +304,12 @@ AUTO_HIERARCHICAL_MAX_RUNS = 24
 range) and pooled above: the hierarchical fit of 36 runs ran for more than 8 minutes on a
 2-core machine against 95 s pooled (docs/calibration.md, benchmarks/cold_start.py)."""
 
-PAD_SIZES_PER_OCTAVE = 8 if share_programs() else 0
+SHARED_PAD_SIZES_PER_OCTAVE = 8
+"""Run lengths per doubling that campaigns are padded to when programs are shared (below)."""
+
+PAD_SIZES_PER_OCTAVE = SHARED_PAD_SIZES_PER_OCTAVE if share_programs() else 0
 """With ``BAYES_ROADLOAD_SHARE_PROGRAMS=1`` (:mod:`bayes_roadload._jax`) a campaign's runs are
-padded (masked samples) to the next of 8 lengths per doubling
+padded (masked samples) to the next of :data:`SHARED_PAD_SIZES_PER_OCTAVE` lengths per doubling
 (:func:`~bayes_roadload.physics.integrate.bucket_length`: 493 and 498 samples both to 512), so
 that campaigns of the same number of runs and nearly the same length share compiled programs,
 at less than 1/8 (about 6 % on average) more likelihood work.  0 (the default): runs are padded

@@ -8,6 +8,7 @@ import jax
 import numpy as np
 import pytest
 
+from bayes_roadload import config
 from bayes_roadload.inference.bayes import build_problem
 from bayes_roadload.inference.nuts import initial_values, unconstrained_posterior
 from bayes_roadload.physics.integrate import bucket_length
@@ -77,7 +78,7 @@ def test_two_campaigns_of_one_bucket_lower_to_one_program_when_sharing(share):
     assert out.returncode == 0, out.stderr[-2000:]
     pad, same, different_data = out.stdout.split()
     assert different_data == "True"
-    assert (pad, same) == (("8", "True") if share else ("0", "False"))
+    assert (pad, same) == ((str(config.SHARED_PAD_SIZES_PER_OCTAVE), "True") if share else ("0", "False"))
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +91,7 @@ def campaigns():
 def test_the_two_seeds_fall_in_one_bucket(campaigns):
     lengths = {s: c.runs.groupby("run").size().max() for s, c in campaigns.items()}
     assert lengths[1] != lengths[2]
-    assert len({bucket_length(n, 8) for n in lengths.values()}) == 1
+    assert len({bucket_length(n, config.SHARED_PAD_SIZES_PER_OCTAVE) for n in lengths.values()}) == 1
 
 
 def test_padding_to_a_longer_length_leaves_the_density_unchanged(campaigns):
