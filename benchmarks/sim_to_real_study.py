@@ -46,6 +46,8 @@ from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
 from bayes_roadload.analysis.effects import EFFECT_NAMES  # noqa: E402
 from studies.proof_suite import (INDEPENDENT_BASE_EFFECTS, INDEPENDENT_INJECTIONS,  # noqa: E402
                                  INDEPENDENT_MEAN_WIND_MPS, PROOF_DESIGNS, proof_design, withheld_effect_jobs)
+from studies.proof_scoring import (confusion, outcome, rank_one, read_records, summarise,  # noqa: E402
+                                   true_rank, true_visible)
 from studies.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
 
 OUT = ROOT / "docs" / "sim_to_real"
@@ -112,100 +114,6 @@ def check_confirmatory(seeds, null_seeds) -> dict:
     if used:
         raise SystemExit(f"seeds {sorted(used)} designed the rules: a confirmatory run needs fresh seeds")
     return frozen
-
-
-def outcome(row) -> str:
-    """``correct`` (the true effect ranked first and supported), ``flagged`` (nothing claimed and
-    the true effect reported not identifiable here), ``indistinct`` (nothing claimed and the
-    true effect among the candidates reported not distinguishable here), ``none`` (nothing
-    claimed), ``wrong`` (another effect claimed)."""
-    truth, top = row["true_effect"], row["top"]
-    if truth == "null":
-        return "correct" if top == "none" else "wrong"
-    if top == truth:
-        return "correct"
-    flagged = str(row.get("not_identifiable") or "").split(",")
-    if top == "none":
-        if truth in str(row.get("not_distinguishable") or "").split(","):
-            return "indistinct"
-        return "flagged" if truth in flagged else "none"
-    return "wrong"
-
-
-def true_rank(row) -> float:
-    """Rank of the true effect among every candidate by delta_elpd alone (1 = best), claimed
-    or not; NaN for nulls."""
-    truth = row["true_effect"]
-    if truth == "null" or f"delta_elpd_{truth}" not in row:
-        return float("nan")
-    scores = {e: float(row.get(f"delta_elpd_{e}", float("nan"))) for e in EFFECT_NAMES}
-    mine = scores[truth]
-    if not np.isfinite(mine):
-        return float("nan")
-    return 1.0 + sum(1 for e, v in scores.items() if e != truth and np.isfinite(v) and v > mine)
-
-
-def rank_one(row) -> str:
-    """The candidate at rank 1 of ``diagnosis.json``: the supported top, else the best by
-    delta_elpd (supported or not); "none" when no candidate was scored."""
-    if row["top"] != "none":
-        return str(row["top"])
-    scores = {e: float(row.get(f"delta_elpd_{e}", float("nan"))) for e in EFFECT_NAMES}
-    scores = {e: v for e, v in scores.items() if np.isfinite(v)}
-    return max(scores, key=scores.get) if scores else "none"
-
-
-def median_of(rows: pd.DataFrame, column: str) -> float | None:
-    """Median of a column over rows that have it (records written before it existed lack it)."""
-    if column not in rows:
-        return None
-    vals = pd.to_numeric(rows[column], errors="coerce").dropna()
-    return float(vals.median()) if len(vals) else None
-
-
-def summarise(records: pd.DataFrame) -> dict:
-    ok = records[records["error"].isna()].copy()
-    ok["outcome"] = ok.apply(outcome, axis=1)
-    ok["true_rank"] = ok.apply(true_rank, axis=1)
-    effects = ok[ok["true_effect"] != "null"]
-    nulls = ok[ok["true_effect"] == "null"]
-    shrink = effects.loc[effects["outcome"] == "correct", "shrink_trend_rms_mps"].astype(float)
-    return {
-        "campaigns": int(len(ok)), "failed": int(len(records) - len(ok)),
-        "effect_campaigns": int(len(effects)),
-        "true_ranked_first": int((effects.apply(rank_one, axis=1) == effects["true_effect"]).sum()),
-        "true_ranked_first_pct": 100.0 * float((effects.apply(rank_one, axis=1) == effects["true_effect"]).mean())
-        if len(effects) else None,
-        "true_first": int((effects["outcome"] == "correct").sum()),
-        "true_first_pct": 100.0 * float((effects["outcome"] == "correct").mean()) if len(effects) else None,
-        "true_top_by_delta_elpd": int((effects["true_rank"] == 1).sum()),
-        "flagged_not_identifiable": int((effects["outcome"] == "flagged").sum()),
-        "not_distinguishable": int((effects["outcome"] == "indistinct").sum()),
-        "nothing_claimed": int((effects["outcome"] == "none").sum()),
-        "wrong_claim": int((effects["outcome"] == "wrong").sum()),
-        "extra_claims": int(sum(1 for _, r in effects.iterrows()
-                                if set(filter(None, str(r["supported"]).split(","))) - {r["true_effect"]})),
-        "null_campaigns": int(len(nulls)), "null_false_claims": int((nulls["top"] != "none").sum()),
-        "median_trend_shrink_pct_when_correct": float(shrink.median()) if len(shrink) else None,
-        **{f"median_spread_excess_{arm}": median_of(arm_rows, "before_spread_excess")
-           for arm, arm_rows in (("nulls", nulls), ("run_to_run", effects[effects["true_effect"] == "run_to_run_variation"]),
-                                 ("other_effects", effects[effects["true_effect"] != "run_to_run_variation"]))},
-        "median_spread_excess_after_refit_when_correct": median_of(effects[effects["outcome"] == "correct"],
-                                                                   "after_spread_excess"),
-        "median_time_per_campaign_s": float(ok["time_total_s"].median()) if len(ok) else None,
-    }
-
-
-def confusion(records: pd.DataFrame, by: str = "top") -> pd.DataFrame:
-    """True effect (rows) against the top-ranked supported effect (``by="top"``, "none" when
-    nothing is claimed) or against the rank-1 candidate of diagnosis.json (``by="rank_one"``)."""
-    ok = records[records["error"].isna()].copy()
-    if by == "rank_one":
-        ok["rank_one"] = ok.apply(rank_one, axis=1) if len(ok) else []
-    cols = list(EFFECT_NAMES) + ["none"]
-    table = pd.crosstab(ok["true_effect"], ok[by]).reindex(columns=cols, fill_value=0)
-    order = [e for e in list(EFFECT_NAMES) + ["null"] if e in table.index]
-    return table.reindex(order)
 
 
 DESIGN_TEXT = {
@@ -395,7 +303,11 @@ def independent_section(label: str, records: pd.DataFrame, earlier: str | None =
                           (("flagged", "not identifiable here"), ("indistinct", "not distinguishable here"),
                            ("none", "identifiable but below support")))
         checks = [
-            ("true effect claimed", f">= {tgt['claimed']:g} %", f"{_fmt(c['true_first_pct'])} %",
+            ("true effect claimed", f">= {tgt['claimed']:g} %",
+             f"{_fmt(c['true_first_pct'])} %; the true candidate gains >= "
+             f"{config.DEFAULT_DIAGNOSIS.support_delta_elpd:g} at all in {_fmt(c['true_visible_pct'])} % "
+             f"({c['true_visible']} campaigns: the most any rule on this library could claim), "
+             f"{_fmt(c['true_first_pct_of_visible'])} % of those claimed",
              (c["true_first_pct"] or 0) >= tgt["claimed"]),
             ("true effect ranked first", f">= {tgt['ranked_first']:g} %", f"{_fmt(c['true_ranked_first_pct'])} %",
              (c["true_ranked_first_pct"] or 0) >= tgt["ranked_first"]),
@@ -450,6 +362,17 @@ def reading_lines(records: pd.DataFrame) -> list[str]:
              f"- Never claimed: {', '.join(f'`{e}`' for e in never) or 'none'} (each flagged 'not identifiable "
              "here', 'not distinguishable here', or identifiable but below support at its plausible size; "
              "the per-campaign table says which)."]
+    visible = eff.apply(true_visible, axis=1)
+    gains = eff.apply(lambda r: pd.to_numeric(pd.Series([r.get(f"delta_elpd_{r['true_effect']}")]),
+                                              errors="coerce").iloc[0], axis=1)
+    unseen = sorted(e for e, v in visible.groupby(eff["true_effect"]) if not v.any())
+    lines.append(f"- Visible at all (the true candidate's own delta_elpd >= "
+                 f"{config.DEFAULT_DIAGNOSIS.support_delta_elpd:g}): {int(visible.sum())} of {len(eff)} campaigns; "
+                 f"claimed in {int((eff.loc[visible, 'outcome'] == 'correct').sum())} of those.  Never visible: "
+                 + (", ".join(f"`{e}` (median delta_elpd {gains[eff['true_effect'] == e].median():.1f})" for e in unseen)
+                    or "none")
+                 + ": at its plausible size such an effect leaves no trace a candidate can fit on this campaign, "
+                 "whatever the ranking rules; its `needs` name the test that would show it.")
     wrong = eff[eff["outcome"] == "wrong"]
     for (t, top), n in wrong.groupby(["true_effect", "top"]).size().items():
         why = WHY.get((t, top))
@@ -488,7 +411,7 @@ def side_by_side(by_design: dict[str, pd.DataFrame]) -> list[str]:
         sub = rec[phase_of(rec) == "confirmatory"]
         if len(sub):
             cols[f"{label} (confirmatory)"] = summarise(sub)
-    keys = ("effect_campaigns", "true_ranked_first_pct", "true_first_pct", "wrong_claim", "null_campaigns",
+    keys = ("effect_campaigns", "true_visible_pct", "true_ranked_first_pct", "true_first_pct", "wrong_claim", "null_campaigns",
             "null_false_claims", "median_trend_shrink_pct_when_correct")
     lines = ["## The designs side by side", "",
              "`standard` and `identifying` inject each effect with the candidates' own terms (the same formulas "
@@ -563,15 +486,6 @@ def markdown(by_design: dict[str, pd.DataFrame], args_text: str) -> str:
                          f"{r['spread_pct_CD0']:.2f} |")
         lines.append("| track (thesis table 8.3) | | 4.3 | 23.1 | 4.3 |")
     return "\n".join(lines) + "\n"
-
-
-def read_records(path: Path) -> pd.DataFrame:
-    records = pd.read_csv(path, keep_default_na=False, na_values=[""])  # "null" is an arm, not NaN
-    for col in ("supported", "not_identifiable", "not_distinguishable", "refit_effects"):
-        if col not in records:
-            records[col] = ""
-        records[col] = records[col].fillna("")
-    return records
 
 
 def all_records() -> dict[str, pd.DataFrame]:

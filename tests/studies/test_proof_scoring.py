@@ -1,0 +1,59 @@
+"""Scoring of the proof suite's records (``studies.proof_scoring``): the outcome of a campaign,
+the visibility of its true effect, and the summary's invariants on every committed record."""
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from bayes_roadload import config
+from studies.proof_scoring import outcome, read_records, summarise, true_visible
+
+RECORDS = Path(__file__).resolve().parents[2] / "docs" / "sim_to_real"
+THRESHOLD = config.DEFAULT_DIAGNOSIS.support_delta_elpd
+
+
+def _row(**kw) -> pd.Series:
+    base = {"true_effect": "track_gradient", "top": "none", "supported": "", "not_identifiable": "",
+            "not_distinguishable": "", "error": None}
+    return pd.Series({**base, **kw})
+
+
+@pytest.mark.parametrize("gain, visible", [(THRESHOLD, True), (THRESHOLD - 1e-9, False), (float("nan"), False),
+                                           (10 * THRESHOLD, True)])
+def test_an_effect_is_visible_when_its_own_candidate_reaches_the_support_threshold(gain, visible):
+    assert true_visible(_row(delta_elpd_track_gradient=gain)) is visible
+
+
+def test_a_missing_score_is_not_visible():
+    assert true_visible(_row()) is False
+
+
+@pytest.mark.parametrize("kw, expected", [
+    (dict(top="track_gradient"), "correct"),
+    (dict(top="spatial_wind"), "wrong"),
+    (dict(not_identifiable="track_gradient"), "flagged"),
+    (dict(not_distinguishable="spatial_wind,track_gradient"), "indistinct"),
+    (dict(), "none"),
+    (dict(true_effect="null"), "correct"),
+    (dict(true_effect="null", top="yaw_calibration"), "wrong"),
+])
+def test_outcomes(kw, expected):
+    assert outcome(_row(**kw)) == expected
+
+
+def _committed() -> list[Path]:
+    return sorted(RECORDS.glob("records_*.csv")) + sorted((RECORDS / "earlier_rules").glob("records_*.csv"))
+
+
+@pytest.mark.parametrize("path", _committed(), ids=lambda p: p.name)
+def test_a_claim_needs_a_visible_effect_in_every_committed_record(path):
+    """Claimed (ranked first and supported) implies the true candidate's own delta_elpd reached
+    the support threshold: the share of visible campaigns bounds the share claimed."""
+    rec = read_records(path)
+    ok = rec[rec["error"].isna() & (rec["true_effect"] != "null")]
+    claimed = ok[ok.apply(outcome, axis=1) == "correct"]
+    assert claimed.apply(true_visible, axis=1).all()
+    s = summarise(rec)
+    assert s["true_first"] <= s["true_visible"] <= s["effect_campaigns"]
+    assert s["true_first"] <= s["true_ranked_first"]
