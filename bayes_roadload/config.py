@@ -529,6 +529,16 @@ class DiagnosisConfig:
         the best's per-run gains must beat the rival's by this many standard errors over the
         runs (Vuong's test for non-nested models): a lead that one run makes is not a claim.
         Not asked of a run-level best (``kind = "run"``), whose gain lies in the runs that differ.
+    min_input_lag1 : a candidate whose signature reads a logged channel's fluctuations
+        (``resolved_inputs`` in the library: the yaw term's scale) is identifiable here only when
+        that reading resolves them: the lag-1 autocorrelation of its deviation from a 20 s
+        moving average (:func:`bayes_roadload.analysis.gap.input_resolution`) reaches this
+        value.  Below it most of the fluctuation changes from one sample to the next (a low
+        logging rate in gusty air): each sample then stands for a step's yaw drag it does not
+        measure, and the yaw term misfits as if the vane's factor were off.  Set at one half on
+        the independent design's seen seeds (docs/sim_to_real.md): the three null campaigns
+        that claimed a vane factor read 0.20-0.36 (1-2 Hz), the 42 other nulls and yaw-term
+        arms inspected 0.49-0.98, the vane-calibration arm itself 0.59-0.96.
     max_refit_effects : leading supported candidates refitted together (forward selection).
     gauss_newton_steps : re-linearisations of the combined refit (nonlinear check).
     """
@@ -538,6 +548,7 @@ class DiagnosisConfig:
     ambiguity_margin: float = 2.0
     min_distinct_share: float = 0.1
     min_vuong_z: float = 2.0
+    min_input_lag1: float = 0.5
     max_refit_effects: int = 3
     gauss_newton_steps: int = 2
 

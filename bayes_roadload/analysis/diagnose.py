@@ -38,7 +38,7 @@ import numpy as np
 from .. import config
 from ..data.campaign import Campaign
 from . import effects as fx
-from .gap import localise, plot_localisation, plot_residuals, residual_structure
+from .gap import input_resolution, localise, plot_localisation, plot_residuals, residual_structure
 
 SHRINK_FLOORS = {"trend_rms_mps": "trend_floor_mps", "lag1_autocorr": 0.0, "spread_excess": 1.0,
                  "spread_excess_AD": 1.0, "spread_excess_BD": 1.0, "spread_excess_CD0": 1.0}
@@ -254,6 +254,11 @@ def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> s
         given = entry.get("delta_elpd_given_supported")
         return (f"not supported: explained by the effects ranked above it" +
                 (f" (delta_elpd {given:.1f} given them)" if given is not None else ""))
+    if entry.get("unresolved"):
+        what = "; ".join(f"{ch} lag-1 autocorrelation {ac:.2f} < {cfg.min_input_lag1:g}" for ch, ac in entry["unresolved"].items())
+        return (f"not identifiable here (the reading does not resolve the fluctuations this effect's signature reads: "
+                f"{what}; each sample stands for a stretch of the run it does not measure), needs the anemometer "
+                f"logged fast enough to follow the gusts, or {effect.needs}")
     if not entry["identifiable"]:
         what = ", ".join(effect.confounded_with) or "the model's coefficients"
         worst = min(entry["identification"].items(), key=lambda kv: kv[1]["contraction"])
@@ -310,15 +315,16 @@ class Diagnosis:
         return c["effect"] if c is not None and c["supported"] else None
 
 
-DIAGNOSIS_CONTRACT = 4
-"""Version of ``diagnosis.json``'s contract: the keys ``gap``, ``localisation``,
+DIAGNOSIS_CONTRACT = 5
+"""Version of ``diagnosis.json``'s contract: the keys ``gap``, ``localisation``, ``inputs`` (each
+logged anemometer channel's :func:`.gap.input_resolution`, null when not logged),
 ``candidates`` (each candidate with :data:`CANDIDATE_KEYS`), ``contract`` (this number) and
 ``rules`` (:func:`rules_fingerprint`).  Raised whenever a key is added or its meaning changes,
 so a committed diagnosis older than the code is detected."""
 
 CANDIDATE_KEYS = ("effect", "rank", "supported", "qualifies", "delta_elpd", "gap_before", "gap_after", "shrink_pct",
                   "identifiable", "identification", "estimates", "against_sign", "unavailable", "needs", "statement",
-                  "shape")
+                  "shape", "unresolved")
 """The keys every candidate entry of ``diagnosis.json`` carries (``against_sign``: the
 estimates whose sign no physical value of the effect has, :meth:`.effects.Effect.against_sign`;
 empty when none; ``shape``: for a family, its profiled shape and the gain at every grid point,
@@ -336,9 +342,10 @@ def rules_fingerprint(library: Mapping[str, fx.Effect],
     thresholds (:class:`~bayes_roadload.config.DiagnosisConfig`), both as sorted JSON, with
     the thresholds themselves.  A study records it before its confirmatory seeds run; a
     committed report whose fingerprint differs from the code's was made under other rules."""
-    # options an effect leaves unused (no shape grid, not each-run) are not hashed: declaring them
-    # changes the fingerprint, their existence does not
-    lib = {name: {k: v for k, v in dataclasses.asdict(e).items() if not (k in ("shape", "each_run") and not v)}
+    # options an effect leaves unused (no shape grid, not each-run, no resolved inputs) are not
+    # hashed: declaring them changes the fingerprint, their existence does not
+    lib = {name: {k: v for k, v in dataclasses.asdict(e).items()
+                  if not (k in ("shape", "each_run", "resolved_inputs") and not v)}
            for name, e in sorted(library.items())}
     thresholds = dataclasses.asdict(settings)
     return {"library_sha256": _sha256_json(lib), "thresholds_sha256": _sha256_json(thresholds),
@@ -371,6 +378,8 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
     base_sol = fx.fit_effects(lin, (), library)
     before = gap_metrics(lin, lin.residual, None, (), library, groups)
     loc = localise(lin.residual, np.asarray(lin.batch.mask), _variables(lin))
+    readings = {"yaw_rad": lin.batch.yaw_rad, "airspeed_mps": lin.batch.airspeed_mps}
+    resolution = {ch: input_resolution(lin.batch.time_s, readings[ch], lin.batch.mask) for ch in fx.RESOLVABLE_INPUTS}
 
     entries = []
     for name in fx.EFFECT_NAMES:
@@ -381,7 +390,10 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
                                  "delta_elpd": math.nan,
                                  "gap_before": before, "gap_after": {}, "shrink_pct": {},
                                  "identifiable": False, "identification": {}, "estimates": {}, "against_sign": {},
-                                 "unavailable": lin.available.get(name), "shape": shapes.get(name, {})}
+                                 "unavailable": lin.available.get(name), "shape": shapes.get(name, {}),
+                                 "unresolved": {ch: resolution[ch]["lag1_autocorr"] for ch in e.resolved_inputs
+                                                if resolution.get(ch) is not None
+                                                and resolution[ch]["lag1_autocorr"] < settings.min_input_lag1}}
         if entry["unavailable"] is None and name in lin.effects:
             sol = fx.fit_effects(lin, (name,), library)
             k = fx.n_added_parameters(lin, (name,), library)
@@ -414,6 +426,10 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
                 entry["against_sign"] = against
                 sol = base_sol
             entry["delta_elpd"] = float(delta)
+            # a reading that does not resolve the fluctuations the signature reads cannot tell
+            # the effect from what its sampling does to the fit (DiagnosisConfig.min_input_lag1)
+            identifiable = identifiable and not entry["unresolved"]
+            entry["identifiable"] = identifiable
             entry["qualifies"] = bool(identifiable and delta >= settings.support_delta_elpd)
             after = gap_metrics(lin, fx.refit_residual(lin, sol), sol, () if against else (name,), library, groups)
             entry["gap_after"] = after
@@ -443,7 +459,7 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
     refit, after_resid = combined_refit(lin, [c for c in chosen if c not in kinematic], library, settings, groups,
                                         before)
     timings["refit_s"] = time.perf_counter() - t0
-    result = {"gap": before, "localisation": loc, "candidates": entries, "contract": DIAGNOSIS_CONTRACT,
+    result = {"gap": before, "localisation": loc, "inputs": resolution, "candidates": entries, "contract": DIAGNOSIS_CONTRACT,
               "rules": rules_fingerprint(library, settings)}
     spec_name = getattr(model, "name", model)
     return Diagnosis(result=_json_safe(result), refit=_json_safe(refit), model=str(spec_name),

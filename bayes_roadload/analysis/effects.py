@@ -73,6 +73,10 @@ SIGNS = {"positive": 1, "negative": -1}
 
 KINDS = ("term", "air", "run")
 
+RESOLVABLE_INPUTS = ("yaw_rad", "airspeed_mps")
+"""The logged anemometer channels whose resolution of their own fluctuations the diagnosis
+measures (``resolved_inputs`` in the library)."""
+
 
 @dataclass(frozen=True)
 class Effect:
@@ -96,6 +100,10 @@ class Effect:
         (:func:`fit_shapes`); the ``fixed`` value is the shape before profiling.
     each_run : a term effect whose parameters take one value per run (the shape stays shared):
         e.g. each run's tyres starting at their own temperature.
+    resolved_inputs : logged channels (of :data:`RESOLVABLE_INPUTS`) whose fluctuations the
+        effect's signature reads: on a campaign whose reading does not resolve them
+        (:func:`bayes_roadload.analysis.gap.input_resolution` below
+        ``DiagnosisConfig.min_input_lag1``) the effect is not identifiable here.
     """
 
     name: str
@@ -110,6 +118,7 @@ class Effect:
     sign: dict[str, int] = field(default_factory=dict)
     shape: dict[str, tuple[float, ...]] = field(default_factory=dict)
     each_run: bool = False
+    resolved_inputs: tuple[str, ...] = ()
 
     def against_sign(self, estimates: Mapping[str, float]) -> dict[str, float]:
         """The estimates (offsets from the null) whose sign no physical value of the effect has."""
@@ -193,6 +202,10 @@ def load_library(path: str | Path = LIBRARY_PATH) -> dict[str, Effect]:
         each_run = bool(e.get("each_run", False))
         if each_run and kind != "term":
             raise ValueError(f"{where}: each_run is for a term effect (kind \"run\" is per run already)")
+        resolved = tuple(e.get("resolved_inputs", ()))
+        for ch in resolved:
+            if ch not in RESOLVABLE_INPUTS:
+                raise ValueError(f"{where}: resolved_inputs: {ch!r} not one of {RESOLVABLE_INPUTS}")
         shape = {}
         for p, spec in e.get("shape", {}).items():
             if p not in e.get("fixed", {}) or kind != "term":
@@ -203,7 +216,7 @@ def load_library(path: str | Path = LIBRARY_PATH) -> dict[str, Effect]:
                            null={p: v.get("null", 0.0) for p, v in params.items()},
                            fixed={k: float(v) for k, v in e.get("fixed", {}).items()},
                            needs=e.get("needs", ""), confounded_with=tuple(e.get("confounded_with", [])),
-                           sign=sign, shape=shape, each_run=each_run)
+                           sign=sign, shape=shape, each_run=each_run, resolved_inputs=resolved)
     return out
 
 

@@ -66,6 +66,35 @@ def residual_structure(residual: np.ndarray, mask: np.ndarray, time_s: np.ndarra
             "lag1_autocorr": float(np.mean(ac)) if ac else math.nan}
 
 
+def input_resolution(time_s: np.ndarray, values: np.ndarray, mask: np.ndarray,
+                     window_s: float = TREND_WINDOW_S) -> dict[str, float] | None:
+    """How well a logged input channel ([R, N] readings) resolves its own fluctuations.
+
+    Per run, the reading's deviation from its centred moving average over ``window_s`` (the
+    gusts, not the run's slow course) and that deviation's lag-1 autocorrelation: near 1 when
+    consecutive samples follow one gust, near 0 when each sample catches a different one (the
+    logging rate is too low for the turbulence, or noise dominates).  Returns the median over
+    runs, ``lag1_autocorr``, and the median ``sample_rate_hz``; None when no run has four
+    samples of a varying reading."""
+    time_s, values, mask = np.asarray(time_s, float), np.asarray(values, float), np.asarray(mask, bool)
+    ac, rate = [], []
+    for r in range(values.shape[0]):
+        x, t = values[r][mask[r]], time_s[r][mask[r]]
+        if x.size < 4:
+            continue
+        dt = float(np.median(np.diff(t)))
+        d = x - _moving_average(x, int(round(window_s / dt)) if dt > 0 else 1)
+        d = d - d.mean()
+        denom = float(np.sum(d**2))
+        if denom <= 0.0:
+            continue
+        ac.append(float(np.sum(d[1:] * d[:-1]) / denom))
+        rate.append(1.0 / dt if dt > 0 else math.nan)
+    if not ac:
+        return None
+    return {"lag1_autocorr": float(np.median(ac)), "sample_rate_hz": float(np.median(rate))}
+
+
 def localise(residual: np.ndarray, mask: np.ndarray, variables: Mapping[str, np.ndarray],
              bins: int = LOCALISATION_BINS) -> dict[str, dict]:
     """Residuals binned by each variable ([R, N] arrays, like ``residual``).

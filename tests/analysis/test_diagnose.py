@@ -2,11 +2,13 @@
 gradient (built by the proof suite, ``studies/proof_suite.py``), a null control, and the claim
 rules."""
 
+import dataclasses
 import json
 import math
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bayes_roadload import config
@@ -36,7 +38,7 @@ def gradient_diagnosis(tmp_path_factory):
 
 def check_contract(d: dict) -> None:
     """``diagnosis.json`` of the current contract (diagnose.DIAGNOSIS_CONTRACT)."""
-    assert set(d) == {"gap", "localisation", "candidates", "contract", "rules"}
+    assert set(d) == {"gap", "localisation", "inputs", "candidates", "contract", "rules"}
     assert d["contract"] == diagnose_module.DIAGNOSIS_CONTRACT
     for c in d["candidates"]:
         assert set(diagnose_module.CANDIDATE_KEYS) <= set(c), set(diagnose_module.CANDIDATE_KEYS) - set(c)
@@ -96,13 +98,36 @@ def test_a_null_control_claims_nothing():
     sd, 1 / sqrt(2 dof) with dof = 3 x 3, of 1 (case 9 nulls of 3 pairs: median 1.27 in the
     proof suite)."""
     factory, model = withheld_campaign(None, seed=1001, pairs=2)
+    campaign = factory()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        d = diagnose(factory(), model)
+        d = diagnose(campaign, model)
     assert d.top is None and not any(c["supported"] for c in d.candidates)
     assert all(c["delta_elpd"] < config.DEFAULT_DIAGNOSIS.support_delta_elpd
                for c in d.candidates if math.isfinite(c["delta_elpd"]))
     assert d.result["gap"]["spread_excess"] < 1.0 + 3.0 / math.sqrt(2 * 9)
+    # the anemometer's readings and how well they resolve their gusts, at the logging rate
+    rate = 1.0 / float(np.median(np.diff(campaign.runs["time_s"].to_numpy()[:50])))
+    for ch in ("yaw_rad", "airspeed_mps"):
+        assert d.result["inputs"][ch]["sample_rate_hz"] == pytest.approx(rate)
+        assert -1.0 <= d.result["inputs"][ch]["lag1_autocorr"] <= 1.0
+    # readings declared unresolved (a threshold no autocorrelation reaches): the effects whose
+    # signature reads the yaw's fluctuations are not identifiable here, and say why; the others
+    # are scored as before
+    strict = dataclasses.replace(config.DEFAULT_DIAGNOSIS, min_input_lag1=1.01)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        d2 = diagnose(campaign, model, settings=strict)
+    lib = diagnose_module.fx.load_library()
+    before = {c["effect"]: c for c in d.candidates}
+    for c in d2.candidates:
+        if lib[c["effect"]].resolved_inputs:
+            assert set(c["unresolved"]) == set(lib[c["effect"]].resolved_inputs)
+            assert not c["identifiable"] and not c["qualifies"] and "does not resolve" in c["statement"]
+        else:
+            assert c["unresolved"] == {} and c["identifiable"] == before[c["effect"]]["identifiable"]
+        assert c["delta_elpd"] == pytest.approx(before[c["effect"]]["delta_elpd"], nan_ok=True)
+    assert {"yaw_calibration", "side_force_slip"} <= {e for e, x in lib.items() if x.resolved_inputs}
 
 
 def test_a_claim_needs_a_margin_over_every_other_candidate():

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from bayes_roadload.analysis.gap import (TREND_WINDOW_S, localise, plot_localisation, plot_residuals,
-                                         residual_structure)
+from bayes_roadload.analysis.gap import (TREND_WINDOW_S, input_resolution, localise, plot_localisation,
+                                         plot_residuals, residual_structure)
 
 
 def grid(runs=4, n=400, dt=0.25):
@@ -63,3 +63,25 @@ def test_localise_finds_the_variable_that_carries_the_misfit(tmp_path):
     assert sum(loc["speed_mps"]["n"]) == m.sum()
     assert plot_localisation(loc, tmp_path / "loc.png").stat().st_size > 1000
     assert plot_residuals(t, resid, m, tmp_path / "res.png", after=0 * resid).stat().st_size > 1000
+
+
+def test_input_resolution_of_a_gust_that_the_samples_follow_and_of_one_they_do_not():
+    """A 5 s gust on a steady reading: over the 20 s moving average (four whole periods) the
+    deviation is the gust itself, whose lag-1 autocorrelation is cos(2 pi dt / 5 s) --
+    0.998 at 20 Hz, cos(0.4 pi) = 0.31 at 1 Hz less the end effects of a finite run; white
+    noise reads 0 within 4 / sqrt(samples).  A constant reading has no fluctuation: None."""
+    for rate, expect, tol in ((20.0, math.cos(2 * math.pi / 100), 0.01), (1.0, math.cos(0.4 * math.pi), 0.1)):
+        t = np.tile(np.arange(0.0, 200.0, 1.0 / rate), (3, 1))
+        yaw = 0.1 + 0.03 * np.sin(2 * np.pi * t / 5.0)
+        r = input_resolution(t, yaw, np.ones_like(t, bool))
+        assert r["sample_rate_hz"] == pytest.approx(rate)
+        assert r["lag1_autocorr"] == pytest.approx(expect, abs=tol)
+    t, m = grid(runs=3, n=2000)
+    white = np.random.default_rng(1).standard_normal(t.shape)
+    assert abs(input_resolution(t, white, m)["lag1_autocorr"]) < 4.0 / math.sqrt(2000)
+    assert input_resolution(t, np.full(t.shape, 0.2), m) is None
+    # padded samples are not read: a run padded with garbage keeps its value
+    pad = np.concatenate([m, np.zeros((3, 500), bool)], axis=1)
+    tt = np.concatenate([t, t[:, -1:] + 0.25 * np.arange(1, 501)], axis=1)
+    wp = np.concatenate([white, np.full((3, 500), 1e6)], axis=1)
+    assert input_resolution(tt, wp, pad) == input_resolution(t, white, m)
