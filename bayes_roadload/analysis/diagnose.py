@@ -524,8 +524,8 @@ def plot_candidates(entries: list[dict], path: Path, threshold: float) -> Path:
 
 def write_diagnosis(diag: Diagnosis, out_dir: str | Path,
                     settings: config.DiagnosisConfig = config.DEFAULT_DIAGNOSIS) -> Path:
-    """Write ``diagnosis.json`` (keys ``gap``, ``localisation``, ``candidates``, ``contract``,
-    ``rules``: :data:`DIAGNOSIS_CONTRACT`),
+    """Write ``diagnosis.json`` (keys ``gap``, ``localisation``, ``inputs``, ``candidates``,
+    ``contract``, ``rules``: :data:`DIAGNOSIS_CONTRACT`),
     ``refit.json`` (the combined refit), ``report.md`` and its plots into ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -551,6 +551,13 @@ def write_diagnosis(diag: Diagnosis, out_dir: str | Path,
               f"of {_fmt(gap['trend_floor_mps'])} m/s.", ""]
     lines += ["## 1. The gap", "", "| metric | value |", "| --- | --- |"]
     lines += [f"| {k} | {_fmt(v)} |" for k, v in gap.items()]
+    inputs = {ch: v for ch, v in (diag.result.get("inputs") or {}).items() if v}
+    if inputs:
+        lines += ["", "Anemometer readings (how well the samples follow the gusts: lag-1 autocorrelation of the "
+                  "deviation from a 20 s moving average; below "
+                  f"{settings.min_input_lag1:g} the yaw-term candidates are not identifiable here):", "",
+                  "| reading | sample rate (Hz) | lag-1 autocorrelation |", "| --- | --- | --- |"]
+        lines += [f"| {ch} | {_fmt(v['sample_rate_hz'], 3)} | {_fmt(v['lag1_autocorr'], 3)} |" for ch, v in inputs.items()]
     lines += ["", "![residuals](residuals.png)", "", "## 2. Where", ""]
     loc = diag.result["localisation"]
     lines += ["| variable | eta2 (share of residual variance between bins) |", "| --- | --- |"]

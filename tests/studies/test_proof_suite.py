@@ -146,3 +146,23 @@ def test_a_lead_of_the_reading_is_the_admittance_not_a_cup_lag():
     assert cup["against_sign"] == {"cup_lag_m": adm["estimates"]["cup_lag_m"]}
     assert cup["delta_elpd"] == -1.0 and not cup["supported"] and "sign" in cup["statement"]
     assert adm["delta_elpd"] >= config.DEFAULT_DIAGNOSIS.support_delta_elpd
+
+
+@pytest.mark.slow
+def test_a_yaw_reading_that_misses_the_gusts_claims_no_vane_factor():
+    """Null 2001 of the independent design: a heavy truck logged at 1 Hz in gusty 2 m/s wind,
+    no injected effect.  Under the rules before ``min_input_lag1`` it claimed a vane factor
+    (delta_elpd 25.3; docs/sim_to_real/earlier_rules).  Its yaw reading's gusts change from one
+    sample to the next (lag-1 autocorrelation under the threshold), so the yaw-term candidates
+    are not identifiable here and nothing is claimed."""
+    from studies.proof_suite import IndependentWithheld
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        d = diagnose(IndependentWithheld(None, 2001, 6)(), "three_term")
+    yaw_in = d.result["inputs"]["yaw_rad"]
+    assert yaw_in["sample_rate_hz"] == pytest.approx(1.0)
+    assert yaw_in["lag1_autocorr"] < config.DEFAULT_DIAGNOSIS.min_input_lag1
+    vane = next(c for c in d.candidates if c["effect"] == "yaw_calibration")
+    assert not vane["identifiable"] and "does not resolve" in vane["statement"]
+    assert d.top is None
