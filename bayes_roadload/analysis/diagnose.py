@@ -328,7 +328,8 @@ CANDIDATE_KEYS = ("effect", "rank", "supported", "qualifies", "delta_elpd", "gap
 """The keys every candidate entry of ``diagnosis.json`` carries (``against_sign``: the
 estimates whose sign no physical value of the effect has, :meth:`.effects.Effect.against_sign`;
 empty when none; ``shape``: for a family, its profiled shape and the gain at every grid point,
-:func:`.effects.fit_shapes`, else empty)."""
+:func:`.effects.fit_shapes`, else empty; ``unresolved``: the channels of its ``resolved_inputs``
+whose reading does not follow the gusts, with their lag-1 autocorrelation, empty when none)."""
 
 
 def _sha256_json(obj: Any) -> str:
@@ -378,8 +379,8 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
     base_sol = fx.fit_effects(lin, (), library)
     before = gap_metrics(lin, lin.residual, None, (), library, groups)
     loc = localise(lin.residual, np.asarray(lin.batch.mask), _variables(lin))
-    readings = {"yaw_rad": lin.batch.yaw_rad, "airspeed_mps": lin.batch.airspeed_mps}
-    resolution = {ch: input_resolution(lin.batch.time_s, readings[ch], lin.batch.mask) for ch in fx.RESOLVABLE_INPUTS}
+    channels = lin.batch._asdict()
+    resolution = {ch: input_resolution(lin.batch.time_s, channels[ch], lin.batch.mask) for ch in fx.RESOLVABLE_INPUTS}
 
     entries = []
     for name in fx.EFFECT_NAMES:
