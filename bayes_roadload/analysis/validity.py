@@ -16,6 +16,11 @@ it (``partner of ...`` in the reason).
   each run's speed flags spikes, and a run with more than ``config.HAMPEL_MAX_SPIKE_FRACTION`` of
   its samples flagged is rejected.
 - The operator's own flag (``valid = 0``, VBOX ``Run-Use = Off``) rejects a run as well.
+- **How well the yaw reading follows the gusts** (reported, never a rejection): each run's yaw
+  sample rate and the lag-1 autocorrelation of its gusts
+  (:func:`bayes_roadload.analysis.gap.input_resolution`); below
+  ``DiagnosisConfig.min_input_lag1`` the summary line says so (the diagnosis then reports the
+  yaw-term candidates not identifiable, docs/method.md section 7).
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import pandas as pd
 
 from .. import config
 from ..data import IntervalCampaign
+from .gap import input_resolution
 
 MAD_TO_SD = 1.4826
 """Scale of the median absolute deviation to a normal standard deviation."""
@@ -129,6 +135,10 @@ def trace_validity(campaign, limits: str = config.DEFAULT_WIND_LIMITS, k: float 
             speed = np.hypot(head, cross)
             row.update(mean_wind_mps=float(np.hypot(head.mean(), cross.mean())), peak_wind_mps=float(speed.max()),
                        mean_cross_wind_mps=float(abs(cross.mean())))
+            res = input_resolution(g["time_s"].to_numpy(float)[None], g["yaw_rad"].to_numpy(float)[None],
+                                   np.ones((1, len(g)), bool))
+            row.update(yaw_sample_rate_hz=res["sample_rate_hz"] if res else np.nan,
+                       yaw_lag1_autocorr=res["lag1_autocorr"] if res else np.nan)
             for key, name in (("mean_wind_mps", "mean wind"), ("peak_wind_mps", "peak wind"),
                               ("mean_cross_wind_mps", "mean cross wind")):
                 if row[key] > lim[key]:
@@ -155,4 +165,11 @@ def format_validity(table: pd.DataFrame) -> str:
     lines = [f"validity: {len(table) - len(bad)} of {len(table)} runs accepted"
              + (f", {len(bad)} rejected:" if len(bad) else "")]
     lines += [f"  rejected run {r}: {why}" for r, why in zip(bad["run"], bad["reason"])]
+    if "yaw_lag1_autocorr" in table and table["yaw_lag1_autocorr"].notna().any():
+        ac, rate = float(table["yaw_lag1_autocorr"].median()), float(table["yaw_sample_rate_hz"].median())
+        floor = config.DEFAULT_DIAGNOSIS.min_input_lag1
+        if ac < floor:
+            lines.append(f"  note: the yaw reading does not follow its gusts (lag-1 autocorrelation {ac:.2f} < {floor:g} "
+                         f"at {rate:.3g} Hz, median of the runs): what scales the yaw term (K_D, a vane factor) may be "
+                         "off; log the anemometer faster")
     return "\n".join(lines)

@@ -54,3 +54,26 @@ def test_wind_limits_on_a_windy_campaign(small_campaign):
     assert eec["rejected"].all() and "(eec)" in eec["reason"].iloc[0]
     assert not gtr["rejected"].any()
     np.testing.assert_allclose(gtr["mean_wind_mps"], 2 * np.sqrt(2), atol=0.5)
+
+
+def test_the_yaw_readings_resolution_is_reported_and_a_reading_that_misses_the_gusts_is_noted(small_campaign):
+    """Each run's yaw sample rate and the lag-1 autocorrelation of its gusts; the summary line
+    notes a reading whose gusts change from one sample to the next (white noise in place of the
+    yaw's fluctuations: autocorrelation ~0), never a rejection."""
+    import dataclasses
+
+    from bayes_roadload import config
+
+    table = trace_validity(small_campaign, "gtr_onboard")
+    t = small_campaign.runs.groupby("run", sort=False)["time_s"].apply(lambda s: 1.0 / np.median(np.diff(s)))
+    np.testing.assert_allclose(table["yaw_sample_rate_hz"], t.to_numpy())
+    assert table["yaw_lag1_autocorr"].between(-1.0, 1.0).all()
+    noted = table["yaw_lag1_autocorr"].median() < config.DEFAULT_DIAGNOSIS.min_input_lag1
+    assert ("does not follow its gusts" in format_validity(table)) == noted
+    runs = small_campaign.runs.copy()
+    rng = np.random.default_rng(0)
+    runs["yaw_rad"] = runs.groupby("run")["yaw_rad"].transform("mean") + 0.05 * rng.standard_normal(len(runs))
+    white = trace_validity(dataclasses.replace(small_campaign, runs=runs), "gtr_onboard")
+    assert (white["yaw_lag1_autocorr"].abs() < 4.0 / np.sqrt(white["samples"])).all()
+    assert "does not follow its gusts" in format_validity(white)
+    assert not white["reason"].str.contains("gust").any()   # its noise may raise the peak wind; not itself a reason
