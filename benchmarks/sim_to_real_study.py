@@ -43,11 +43,10 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_roadload import config  # noqa: E402
 from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
-from bayes_roadload.analysis.effects import EFFECT_NAMES  # noqa: E402
 from studies.proof_suite import (INDEPENDENT_BASE_EFFECTS, INDEPENDENT_INJECTIONS,  # noqa: E402
                                  INDEPENDENT_MEAN_WIND_MPS, PROOF_DESIGNS, proof_design, withheld_effect_jobs)
-from studies.proof_scoring import (confusion, outcome, rank_one, read_records, summarise,  # noqa: E402
-                                   true_rank, true_visible)
+from studies.proof_scoring import (confusion, outcome, read_records, summarise, true_rank,  # noqa: E402
+                                   true_visible)
 from studies.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
 
 OUT = ROOT / "docs" / "sim_to_real"
