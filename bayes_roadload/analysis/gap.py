@@ -40,6 +40,25 @@ def _moving_average(x: np.ndarray, width: int) -> np.ndarray:
     return uniform_filter1d(x, size=max(int(width), 1), mode="nearest")
 
 
+def _runs(values: np.ndarray, mask: np.ndarray, time_s: np.ndarray):
+    """Per run of [R, N] arrays with at least four real samples: the run index, its samples,
+    its median sample interval and the width in samples of the :data:`TREND_WINDOW_S` moving
+    average."""
+    for r in range(values.shape[0]):
+        x, t = values[r][mask[r]], time_s[r][mask[r]]
+        if x.size < 4:
+            continue
+        dt = float(np.median(np.diff(t)))
+        yield r, x, dt, int(round(TREND_WINDOW_S / dt)) if dt > 0 else 1
+
+
+def _lag1(x: np.ndarray) -> float | None:
+    """Lag-1 autocorrelation of ``x`` about its mean (None for a constant)."""
+    xc = x - x.mean()
+    denom = float(np.sum(xc**2))
+    return float(np.sum(xc[1:] * xc[:-1]) / denom) if denom > 0 else None
+
+
 def residual_structure(residual: np.ndarray, mask: np.ndarray, time_s: np.ndarray,
                        sigma_mps: np.ndarray | float) -> dict[str, float]:
     """``trend_rms_mps``, ``trend_floor_mps`` and ``lag1_autocorr`` of [R, N] residuals
@@ -47,30 +66,22 @@ def residual_structure(residual: np.ndarray, mask: np.ndarray, time_s: np.ndarra
     residual, mask, time_s = np.asarray(residual, float), np.asarray(mask, bool), np.asarray(time_s, float)
     sigma = np.broadcast_to(np.asarray(sigma_mps, float), (residual.shape[0],))
     trend_sq, floor_sq, n_total, ac = 0.0, 0.0, 0, []
-    for r in range(residual.shape[0]):
-        x = residual[r][mask[r]]
-        t = time_s[r][mask[r]]
-        if x.size < 4:
-            continue
-        dt = float(np.median(np.diff(t)))
-        width = int(round(TREND_WINDOW_S / dt)) if dt > 0 else 1
+    for r, x, _, width in _runs(residual, mask, time_s):
         trend = _moving_average(x, width)
         trend_sq += float(np.sum(trend**2))
         floor_sq += x.size * float(sigma[r]) ** 2 / max(min(width, x.size), 1)
         n_total += x.size
-        xc = x - x.mean()
-        denom = float(np.sum(xc**2))
-        ac.append(float(np.sum(xc[1:] * xc[:-1]) / denom) if denom > 0 else 0.0)
+        lag1 = _lag1(x)
+        ac.append(0.0 if lag1 is None else lag1)
     return {"trend_rms_mps": math.sqrt(trend_sq / max(n_total, 1)),
             "trend_floor_mps": math.sqrt(floor_sq / max(n_total, 1)),
             "lag1_autocorr": float(np.mean(ac)) if ac else math.nan}
 
 
-def input_resolution(time_s: np.ndarray, values: np.ndarray, mask: np.ndarray,
-                     window_s: float = TREND_WINDOW_S) -> dict[str, float] | None:
+def input_resolution(time_s: np.ndarray, values: np.ndarray, mask: np.ndarray) -> dict[str, float] | None:
     """How well a logged input channel ([R, N] readings) resolves its own fluctuations.
 
-    Per run, the reading's deviation from its centred moving average over ``window_s`` (the
+    Per run, the reading's deviation from its centred moving average over :data:`TREND_WINDOW_S` (the
     gusts, not the run's slow course) and that deviation's lag-1 autocorrelation: near 1 when
     consecutive samples follow one gust, near 0 when each sample catches a different one (the
     logging rate is too low for the turbulence, or noise dominates).  Returns the median over
@@ -78,17 +89,11 @@ def input_resolution(time_s: np.ndarray, values: np.ndarray, mask: np.ndarray,
     samples of a varying reading."""
     time_s, values, mask = np.asarray(time_s, float), np.asarray(values, float), np.asarray(mask, bool)
     ac, rate = [], []
-    for r in range(values.shape[0]):
-        x, t = values[r][mask[r]], time_s[r][mask[r]]
-        if x.size < 4:
+    for _, x, dt, width in _runs(values, mask, time_s):
+        lag1 = _lag1(x - _moving_average(x, width))
+        if lag1 is None:
             continue
-        dt = float(np.median(np.diff(t)))
-        d = x - _moving_average(x, int(round(window_s / dt)) if dt > 0 else 1)
-        d = d - d.mean()
-        denom = float(np.sum(d**2))
-        if denom <= 0.0:
-            continue
-        ac.append(float(np.sum(d[1:] * d[:-1]) / denom))
+        ac.append(lag1)
         rate.append(1.0 / dt if dt > 0 else math.nan)
     if not ac:
         return None
