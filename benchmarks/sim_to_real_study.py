@@ -45,8 +45,8 @@ from bayes_roadload import config  # noqa: E402
 from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
 from studies.proof_suite import (INDEPENDENT_BASE_EFFECTS, INDEPENDENT_INJECTIONS,  # noqa: E402
                                  INDEPENDENT_MEAN_WIND_MPS, PROOF_DESIGNS, proof_design, withheld_effect_jobs)
-from studies.proof_scoring import (confusion, outcome, read_records, summarise, true_rank,  # noqa: E402
-                                   true_visible)
+from studies.proof_scoring import (confusion, outcome, read_records, summarise, true_gain,  # noqa: E402
+                                   true_rank, true_visible)
 from studies.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
 
 OUT = ROOT / "docs" / "sim_to_real"
@@ -372,8 +372,7 @@ def reading_lines(records: pd.DataFrame) -> list[str]:
              "here', 'not distinguishable here', or identifiable but below support at its plausible size; "
              "the per-campaign table says which)."]
     visible = eff.apply(true_visible, axis=1)
-    gains = eff.apply(lambda r: pd.to_numeric(pd.Series([r.get(f"delta_elpd_{r['true_effect']}")]),
-                                              errors="coerce").iloc[0], axis=1)
+    gains = eff.apply(true_gain, axis=1)
     unseen = sorted(e for e, v in visible.groupby(eff["true_effect"]) if not v.any())
     lines.append(f"- Visible at all (the true candidate's own delta_elpd >= "
                  f"{config.DEFAULT_DIAGNOSIS.support_delta_elpd:g}): {int(visible.sum())} of {len(eff)} campaigns; "

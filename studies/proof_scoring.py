@@ -55,11 +55,17 @@ def true_rank(row) -> float:
     return 1.0 + sum(1 for e, v in scores.items() if e != truth and np.isfinite(v) and v > mine)
 
 
+def true_gain(row) -> float:
+    """The true effect's own delta_elpd (NaN for nulls and when it was not scored)."""
+    value = row.get(f"delta_elpd_{row['true_effect']}")
+    return float("nan") if value is None else float(value)
+
+
 def true_visible(row) -> bool:
     """Whether the true effect's own candidate gains the support threshold
     (``delta_elpd >= DiagnosisConfig.support_delta_elpd``): without it no rule on this library
     could claim the effect, so the share of visible campaigns bounds the share claimed."""
-    value = pd.to_numeric(pd.Series([row.get(f"delta_elpd_{row['true_effect']}")]), errors="coerce").iloc[0]
+    value = true_gain(row)
     return bool(np.isfinite(value) and value >= config.DEFAULT_DIAGNOSIS.support_delta_elpd)
 
 
