@@ -54,6 +54,7 @@ def test_designed_campaign_keeps_the_runs_as_tested_and_adds_the_design(one_pair
     np.testing.assert_allclose(obs["mass_kg"], c.vehicle.mass_kg)
 
 
+@pytest.mark.slow  # the outcome of a planning study (refits of designed campaigns), ~30 s
 def test_plan_identify_finds_that_a_ballast_identifies_a_mass_error(one_pair, tmp_path):
     """With A_D, B_D, C_D0 free, an effective-mass error dM dv/dt rescales every force alike
     (library `needs`): one test mass leaves it almost all in the coefficients.  Runs at a

@@ -52,6 +52,7 @@ def test_same_map_and_covariance_as_find_map(two_campaigns):
         assert corrected.samples[k].std() > lf.samples[k].std(), k
 
 
+@pytest.mark.slow  # a compile-time ratio (speed), ~18 s
 def test_same_shaped_campaigns_share_one_compilation(two_campaigns):
     """The second campaign of the same shape compiles (almost) nothing: < 10 % of the first's
     compile time."""

@@ -21,6 +21,9 @@ def test_fit_passes_its_gates(pooled_fit):
     # (benchmarks/bench_fit.py); here the mean depth is ~3.
     assert diag["mean_tree_depth"] <= 5.0
     assert pooled_fit.map.success
+    # a well-posed campaign needs none of the MAP's guards, and says so
+    assert pooled_fit.map.diagnostics() == {"map_method": "trust-exact", "map_fallback": "", "hessian_regularised": False,
+                                            "n_eigenvalues_clipped": 0, "hessian_step": 1e-4}
 
 
 def test_truth_within_the_posterior(pooled_fit, small_campaign):
@@ -71,6 +74,7 @@ def test_sampler_config_is_validated():
         config.SamplerConfig(num_samples=0)
 
 
+@pytest.mark.slow  # a second numerical check: the exact Hessian by reverse mode through the ODE, ~25 s
 def test_fd_hessian_matches_the_exact_hessian(small_campaign):
     """The run-structured finite-difference Hessian (2 x (shared + per-run-of-one-run)
     gradients) equals JAX's exact Hessian (reverse mode through the ODE) at the MAP."""

@@ -59,7 +59,7 @@ print(config.PAD_SIZES_PER_OCTAVE, texts[0] == texts[1], values[0] != values[1])
 """
 
 
-@pytest.mark.parametrize("share", ["1", ""])
+@pytest.mark.parametrize("share", ["1", pytest.param("", marks=pytest.mark.slow)])  # "": the default's own program texts, ~12 s
 def test_two_campaigns_of_one_bucket_lower_to_one_program_when_sharing(share):
     """Seeds 1 and 2 (longest runs 493 and 498 samples): with BAYES_ROADLOAD_SHARE_PROGRAMS=1
     their potentials lower to the same program text (data as arguments, both padded to 512);

@@ -327,6 +327,7 @@ SPLIT = (Path(__file__).resolve().parents[3] / "shared" / "data" / "external" / 
          / "sample_data" / "Split" / "coastdown")
 
 
+@pytest.mark.slow  # the browser check of test_page_in_a_headless_browser on a real campaign, ~30 s
 @pytest.mark.external
 @pytest.mark.skipif(not SPLIT.is_dir(), reason=f"{SPLIT} not present (real data are read in place)")
 def test_report_of_a_real_interval_campaign_in_a_headless_browser(tmp_path):

@@ -104,8 +104,9 @@ def _truth_params(campaign, model):
 
 @pytest.mark.parametrize("case, model", [
     (6, simplified_model(lift=True)),                      # eq. 6.1, spatially varying wind
-    (12, full_model()),                                    # eq. 6.2 (slip and pitch)
-    (13, simplified_model(lift=True, tunnel_table=thesis.THESIS_TUNNEL_TABLE)),  # tunnel C_D(psi)
+    pytest.param(12, full_model(), marks=pytest.mark.slow),  # eq. 6.2 (slip and pitch)
+    pytest.param(13, simplified_model(lift=True, tunnel_table=thesis.THESIS_TUNNEL_TABLE),  # tunnel C_D(psi)
+                 marks=pytest.mark.slow),
 ])
 def test_fitter_physics_reproduces_steady_wind_runs(case, model):
     # Noise-free, no dynamics, mean wind only: integrating the logged 4 Hz channels with the

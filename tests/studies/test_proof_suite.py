@@ -128,6 +128,7 @@ def test_the_independent_design_injects_one_effect_at_its_stated_size():
     assert all(j.tags["phase"] == "design" and j.tags["pairs"] == 2 for j in jobs)
 
 
+@pytest.mark.slow  # one seed's diagnosis outcome: a study result, ~30 s
 def test_a_lead_of_the_reading_is_the_admittance_not_a_cup_lag():
     """The independent simulator's body feels the wind through its admittance and the
     anemometer samples the air ahead of the nose: the reading leads the force.  The rate term
