@@ -210,6 +210,7 @@ def test_a_source_whose_refit_fails_is_left_out_not_fatal(interval_campaign, mon
     assert set(typeb.sensitivity["F50_N"]) == {"speed_scale_rel"}
 
 
+@pytest.mark.slow  # a second numerical check: shared against separate compilations, ~14 s
 def test_shared_compilation_gives_the_same_sensitivities(interval_campaign):
     """The shifted campaigns' MAPs with one shared compilation (the fit's problem and MAP as
     ``base``, a start of its own) equal those each compiled on its own, to the optimiser's

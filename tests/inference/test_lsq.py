@@ -286,7 +286,7 @@ def _simulate_campaign():
     return simulate_campaign
 
 
-@pytest.mark.parametrize("case", [1, *(pytest.param(c, marks=pytest.mark.slow) for c in (2, 3, 4)), 5])
+@pytest.mark.parametrize("case", [1, *(pytest.param(c, marks=pytest.mark.slow) for c in (2, 3, 4, 5))])
 def test_table_6_8_recovery_cases_1_to_5(case):
     # Thesis table 6.8, 4-term per-pair fits of the noise-free validation cases: A_D
     # 0.00999-0.01000, B_D 1.985-2.000e-4, C_D0 0.4000-0.4005, K_D 0.613-0.678.  The

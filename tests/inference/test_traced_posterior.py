@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 
-@pytest.mark.parametrize("pooling", ["pooled", pytest.param("hierarchical", marks=pytest.mark.slow)])
+@pytest.mark.slow  # a second numerical check of the potential every fit samples, ~15 s
+@pytest.mark.parametrize("pooling", ["pooled", "hierarchical"])
 def test_traced_posterior_equals_numpyro_initialisation(small_campaign, pooling):
     """unconstrained_posterior's abstract trace gives numpyro's own starting point, potential
     and gradient there (initialize_model), and the same constrained values back."""

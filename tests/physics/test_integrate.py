@@ -54,7 +54,7 @@ def test_closed_form_appendix_d():
     np.testing.assert_allclose(s, trap, rtol=1e-4)
 
 
-@pytest.mark.parametrize("stride", [1, 2])
+@pytest.mark.parametrize("stride", [pytest.param(1, marks=pytest.mark.slow), 2])  # 2: the default integrator
 def test_fourth_order_convergence(stride):
     """Max error over the run falls as h^4 with the RK4 step h (full nonlinear model, steady
     wind, pitch), whether a step spans one sample interval or two."""

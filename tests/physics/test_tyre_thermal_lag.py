@@ -51,6 +51,7 @@ def _reference(t_eval, v0):
     return sol.y[0], sol.y[1] / r
 
 
+@pytest.mark.slow  # the optional term against the simulator's tyre state, ~14 s
 def test_the_term_reproduces_the_tyre_temperature_state():
     """The model integrated with the lagged speed drop of its own speed trace (the measured
     speed, here noise-free) matches the two-state reference; without the term the speeds
