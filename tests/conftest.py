@@ -39,23 +39,6 @@ def pytest_configure(config):
     config._bayes_roadload_cache = path
 
 
-LONG_MODULES = ("test_cli.py", "output/test_report.py", "inference/test_nuts.py", "analysis/test_budget.py",
-                "analysis/test_diagnose.py", "test_notebooks.py")
-"""The modules with the longest total time (pytest --durations=0 on the default suite, 2026-11-27):
-the two worker processes take whole modules in collection order (``--dist loadfile``), so these
-go first and the short ones fill in at the end; collected last, one of them kept a worker busy
-alone at the end of the run."""
-
-
-def pytest_collection_modifyitems(session, config, items):
-    """Collect :data:`LONG_MODULES` first, each module's tests in their own order (a stable sort)."""
-    def rank(item):
-        path = item.nodeid.split("::")[0].removeprefix("tests/")
-        return LONG_MODULES.index(path) if path in LONG_MODULES else len(LONG_MODULES)
-
-    items.sort(key=rank)
-
-
 def pytest_unconfigure(config):
     path = getattr(config, "_bayes_roadload_cache", None)
     if path:
