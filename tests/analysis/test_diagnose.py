@@ -113,12 +113,15 @@ def test_a_null_control_claims_nothing():
         assert -1.0 <= d.result["inputs"][ch]["lag1_autocorr"] <= 1.0
     # readings declared unresolved (a threshold no autocorrelation reaches): the effects whose
     # signature reads the yaw's fluctuations are not identifiable here, and say why; the others
-    # are scored as before
+    # are scored as before (each candidate is scored against the base fit alone, so the two
+    # yaw-reading effects and one other stand for the library)
     strict = dataclasses.replace(config.DEFAULT_DIAGNOSIS, min_input_lag1=1.01)
+    lib = diagnose_module.fx.load_library()
+    three = {k: lib[k] for k in ("yaw_calibration", "side_force_slip", "track_gradient")}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        d2 = diagnose(campaign, model, settings=strict)
-    lib = diagnose_module.fx.load_library()
+        d2 = diagnose(campaign, model, settings=strict, library=three)
+    assert {c["effect"] for c in d2.candidates} == set(three)
     before = {c["effect"]: c for c in d.candidates}
     for c in d2.candidates:
         if lib[c["effect"]].resolved_inputs:
