@@ -90,8 +90,37 @@ def small_campaign():
         return simulate_campaign(clean_case(), pairs=2, seed=11)
 
 
+def computed_once(request, tmp_path_factory, name: str, compute):
+    """``compute()``, shared by the run's worker processes: the first worker to need it computes
+    it and leaves it pickled in the run's base directory, where a later worker reads it.  A
+    worker that needs it while another is computing it computes its own (it does not wait)."""
+    worker_id = getattr(request.config, "workerinput", {}).get("workerid")
+    if worker_id is None:  # one process: the session fixture alone shares it
+        return compute()
+    import fcntl
+    import pickle
+
+    root = tmp_path_factory.getbasetemp().parent  # one per run, shared by its workers
+    data = root / f"{name}.pickle"
+    if data.is_file():
+        return pickle.loads(data.read_bytes())
+    with open(root / f"{name}.lock", "w") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return compute()
+        value = compute()
+        tmp = data.with_suffix(f".{worker_id}")
+        tmp.write_bytes(pickle.dumps(value))
+        tmp.replace(data)  # a reader sees the whole file or none
+        return value
+
+
 @pytest.fixture(scope="session")
-def pooled_fit(small_campaign):
+def pooled_fit(small_campaign, request, tmp_path_factory):
+    """The NUTS fit of ``small_campaign`` (four-term, pooled, :data:`SMALL_SAMPLER`), computed
+    once per run (:func:`computed_once`)."""
     from bayes_roadload.inference.nuts import fit_nuts
 
-    return fit_nuts(small_campaign, "four_term", sampler=SMALL_SAMPLER)
+    return computed_once(request, tmp_path_factory, "pooled_fit",
+                         lambda: fit_nuts(small_campaign, "four_term", sampler=SMALL_SAMPLER))
