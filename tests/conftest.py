@@ -116,6 +116,43 @@ def computed_once(request, tmp_path_factory, name: str, compute):
         return value
 
 
+CLI_NUTS_FIT = ["--model", "four_term", "--pooling", "pooled", "--warmup", "100", "--draws", "100"]
+"""The options of the run's shared command-line NUTS fit (:func:`cli_nuts_fit`)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class CliFit:
+    """A ``bayes-roadload fit`` run: its exit code, what it printed and its fit directory."""
+
+    code: int
+    out: str
+    err: str
+    fit_dir: "os.PathLike"
+    campaign_dir: "os.PathLike"
+
+
+@pytest.fixture(scope="session")
+def cli_nuts_fit(request, tmp_path_factory) -> CliFit:
+    """``simulate --case 14 --pairs 2 --seed 1`` then ``fit`` with :data:`CLI_NUTS_FIT` (the
+    default report and Type B budget), through the command line, computed once per run
+    (:func:`computed_once`) and read by the tests of the command line, the report and the
+    notebooks on a user's fit.  Tests copy the directory before changing anything in it."""
+    import contextlib
+    import io
+
+    from bayes_roadload.cli import main
+
+    def compute() -> CliFit:
+        root = tmp_path_factory.mktemp("cli_nuts_fit")
+        assert main(["simulate", "--case", "14", "--pairs", "2", "--seed", "1", "--out", str(root / "c"), "-q"]) == 0
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = main(["fit", str(root / "c"), *CLI_NUTS_FIT, "--out", str(root / "f")])
+        return CliFit(code, out.getvalue(), err.getvalue(), root / "f", root / "c")
+
+    return computed_once(request, tmp_path_factory, "cli_nuts_fit", compute)
+
+
 @pytest.fixture(scope="session")
 def pooled_fit(small_campaign, request, tmp_path_factory):
     """The NUTS fit of ``small_campaign`` (four-term, pooled, :data:`SMALL_SAMPLER`), computed

@@ -70,16 +70,14 @@ def test_sensitivity_cases_models(tmp_path, capsys):
     assert "combined" in out and "three_term" in out and "four_term_driveline" in out
 
 
-def test_fit_nuts_writes_outputs_and_flags_gates(campaign_dir, tmp_path, capsys):
-    out = tmp_path / "nuts"
-    code = main(["fit", str(campaign_dir), "--model", "three_term", "--warmup", "100", "--draws", "100",
-                 "--pooling", "pooled", "--out", str(out)])
-    captured = capsys.readouterr()
-    printed = captured.out
+def test_fit_nuts_writes_outputs_and_flags_gates(cli_nuts_fit):
+    """``simulate`` then ``fit`` (four-term, pooled, few draws) through the command line: the
+    run's shared fit (``tests/conftest.py``)."""
+    out, code, printed, err = cli_nuts_fit.fit_dir, cli_nuts_fit.code, cli_nuts_fit.out, cli_nuts_fit.err
     # off a terminal: no progress bars, one plain line per chain and the MAP's result
-    chain_lines = [x for x in captured.err.splitlines() if x.startswith("chain ")]
-    assert len(chain_lines) == config.DEFAULT_SAMPLER.num_chains and "\r" not in captured.err
-    assert any(x.startswith("MAP: trust-exact") or x.startswith("MAP: L-BFGS-B") for x in captured.err.splitlines())
+    chain_lines = [x for x in err.splitlines() if x.startswith("chain ")]
+    assert len(chain_lines) == config.DEFAULT_SAMPLER.num_chains and "\r" not in err
+    assert any(x.startswith("MAP: trust-exact") or x.startswith("MAP: L-BFGS-B") for x in err.splitlines())
     # posterior.nc: units per variable, the provenance of the fit
     import arviz as az
 

@@ -37,17 +37,10 @@ def test_notebook_runs(path, tmp_path, monkeypatch):
 
 
 @pytest.fixture(scope="module")
-def user_fit(tmp_path_factory):
-    """A user's fit directory: `simulate` then `fit` through the command line (two pairs, pooled).
-    The campaign, model and draws are those of tests/test_cli.py's NUTS fit, so the two share
-    their compiled programs through the run's compilation cache (tests/conftest.py)."""
-    from bayes_roadload.cli import main
-
-    root = tmp_path_factory.mktemp("user")
-    assert main(["simulate", "--case", "14", "--pairs", "2", "--seed", "1", "--out", str(root / "c"), "-q"]) == 0
-    assert main(["fit", str(root / "c"), "--model", "three_term", "--pooling", "pooled", "--warmup", "100", "--draws",
-                 "100", "--no-report", "--no-type-b", "--out", str(root / "f"), "-q"]) in (0, 3)
-    return root / "f"
+def user_fit(cli_nuts_fit):
+    """A user's fit directory: `simulate` then `fit` through the command line (two pairs, pooled;
+    the run's shared fit, ``tests/conftest.py``)."""
+    return cli_nuts_fit.fit_dir
 
 
 # on a user's fit, 03 refits simulated campaigns (as `plan` does: tests/test_cli.py) and 04

@@ -16,7 +16,7 @@ from bayes_roadload.analysis import diagnose as diagnose_module
 from bayes_roadload.analysis.diagnose import diagnose
 from bayes_roadload.analysis.effects import EFFECT_NAMES
 from bayes_roadload.cli import main
-from bayes_roadload.data import save_campaign
+from bayes_roadload.data import load_campaign, save_campaign
 from studies.proof_suite import withheld_campaign
 
 CANDIDATE_KEYS = {"effect", "rank", "supported", "delta_elpd", "gap_before", "gap_after", "shrink_pct"}
@@ -59,6 +59,12 @@ def test_cli_writes_the_contract(gradient_diagnosis):
     assert d["gap"]["spread_excess"] > 0 and 0.0 <= d["gap"]["spread_p_value"] <= 1.0
     for v in ("time_s", "speed_mps", "distance_m", "yaw_rad", "airspeed_mps", "direction", "run"):
         assert 0.0 <= d["localisation"][v]["eta2"] <= 1.0
+    # the anemometer's readings and how well they resolve their gusts, at the logging rate
+    runs = load_campaign(out.parent / "campaign").runs
+    rate = 1.0 / float(np.median(np.diff(runs["time_s"].to_numpy()[:50])))
+    for ch in ("yaw_rad", "airspeed_mps"):
+        assert d["inputs"][ch]["sample_rate_hz"] == pytest.approx(rate)
+        assert -1.0 <= d["inputs"][ch]["lag1_autocorr"] <= 1.0
     names = [c["effect"] for c in d["candidates"]]
     assert sorted(names) == sorted(EFFECT_NAMES)
     assert [c["rank"] for c in d["candidates"]] == list(range(1, len(EFFECT_NAMES) + 1))
@@ -91,6 +97,7 @@ def test_withheld_gradient_is_ranked_first_estimated_and_shrinks_the_trend(gradi
     assert not mass["supported"]
 
 
+@pytest.mark.slow  # a single-seed outcome of the proof suite (>= 20 nulls in benchmarks/), ~25 s
 def test_a_null_control_claims_nothing():
     """No added effect (case 9, 2 pairs; seed 1001 is the null whose best candidate came
     closest to the threshold, yaw_calibration at 3.5 nats): nothing may be claimed, and the
@@ -111,10 +118,18 @@ def test_a_null_control_claims_nothing():
     for ch in ("yaw_rad", "airspeed_mps"):
         assert d.result["inputs"][ch]["sample_rate_hz"] == pytest.approx(rate)
         assert -1.0 <= d.result["inputs"][ch]["lag1_autocorr"] <= 1.0
-    # readings declared unresolved (a threshold no autocorrelation reaches): the effects whose
-    # signature reads the yaw's fluctuations are not identifiable here, and say why; the others
-    # are scored as before (each candidate is scored against the base fit alone, so the two
-    # yaw-reading effects and one other stand for the library)
+
+
+def test_unresolved_readings_leave_the_yaw_effects_unidentified(gradient_diagnosis):
+    """Readings declared unresolved (a threshold no autocorrelation reaches): the effects whose
+    signature reads the yaw's fluctuations are not identifiable here, and say why; the others
+    are scored as before.  Each candidate is scored against the base fit alone, so the two
+    yaw-reading effects and one other stand for the library; the campaign is the one the
+    command line diagnosed, read back from its directory."""
+    _, out = gradient_diagnosis
+    before = {c["effect"]: c for c in json.loads((out / "diagnosis.json").read_text())["candidates"]}
+    campaign = load_campaign(out.parent / "campaign")
+    _, model = withheld_campaign("track_gradient", seed=1, pairs=2)
     strict = dataclasses.replace(config.DEFAULT_DIAGNOSIS, min_input_lag1=1.01)
     lib = diagnose_module.fx.load_library()
     three = {k: lib[k] for k in ("yaw_calibration", "side_force_slip", "track_gradient")}
@@ -122,14 +137,13 @@ def test_a_null_control_claims_nothing():
         warnings.simplefilter("ignore")
         d2 = diagnose(campaign, model, settings=strict, library=three)
     assert {c["effect"] for c in d2.candidates} == set(three)
-    before = {c["effect"]: c for c in d.candidates}
     for c in d2.candidates:
         if lib[c["effect"]].resolved_inputs:
             assert set(c["unresolved"]) == set(lib[c["effect"]].resolved_inputs)
             assert not c["identifiable"] and not c["qualifies"] and "does not resolve" in c["statement"]
         else:
             assert c["unresolved"] == {} and c["identifiable"] == before[c["effect"]]["identifiable"]
-        assert c["delta_elpd"] == pytest.approx(before[c["effect"]]["delta_elpd"], nan_ok=True)
+        assert c["delta_elpd"] == pytest.approx(before[c["effect"]]["delta_elpd"], rel=1e-9, nan_ok=True)
     assert {"yaw_calibration", "side_force_slip"} <= {e for e, x in lib.items() if x.resolved_inputs}
 
 

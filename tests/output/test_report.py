@@ -95,14 +95,15 @@ def _fit(tmp: Path, campaign, name: str, *extra: str) -> Path:
 
 
 @pytest.fixture(scope="module")
-def fits(tmp_path_factory):
-    """Fit directories of three kinds: speed traces by NUTS and by least squares, interval times."""
+def fits(tmp_path_factory, cli_nuts_fit):
+    """Fit directories of three kinds: speed traces by NUTS (the run's shared command-line fit,
+    ``tests/conftest.py``) and by least squares, interval times."""
     tmp = tmp_path_factory.mktemp("report")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         traces = simulate_campaign(clean_case(), pairs=1, seed=21)
         intervals = interval_campaign_from_traces(simulate_campaign(clean_case(), pairs=2, seed=22))
-        dirs = {"nuts": _fit(tmp, traces, "nuts", "--model", "four_term", "--pooling", "pooled", *SMALL),
+        dirs = {"nuts": cli_nuts_fit.fit_dir,
                 "lsq": _fit(tmp, traces, "lsq", "--method", "lsq"),
                 "intervals": _fit(tmp, intervals, "intervals", "--no-type-b", *SMALL)}   # budget: the "nuts" fit
     return dirs  # `fit` renders each report
