@@ -13,6 +13,7 @@ import os
 import shutil
 import tempfile
 import warnings
+from pathlib import Path
 
 if "XLA_FLAGS" not in os.environ:  # before bayes_roadload starts JAX (its device-count flag is added)
     os.environ["XLA_FLAGS"] = "--xla_llvm_disable_expensive_passes=true"
@@ -127,8 +128,7 @@ class CliFit:
     code: int
     out: str
     err: str
-    fit_dir: "os.PathLike"
-    campaign_dir: "os.PathLike"
+    fit_dir: Path
 
 
 @pytest.fixture(scope="session")
@@ -148,7 +148,7 @@ def cli_nuts_fit(request, tmp_path_factory) -> CliFit:
         out, err = io.StringIO(), io.StringIO()
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             code = main(["fit", str(root / "c"), *CLI_NUTS_FIT, "--out", str(root / "f")])
-        return CliFit(code, out.getvalue(), err.getvalue(), root / "f", root / "c")
+        return CliFit(code, out.getvalue(), err.getvalue(), root / "f")
 
     return computed_once(request, tmp_path_factory, "cli_nuts_fit", compute)
 
