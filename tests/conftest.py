@@ -110,6 +110,8 @@ def computed_once(request, tmp_path_factory, name: str, compute):
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             return compute()
+        if data.is_file():  # written by the worker that held the lock before
+            return pickle.loads(data.read_bytes())
         value = compute()
         tmp = data.with_suffix(f".{worker_id}")
         tmp.write_bytes(pickle.dumps(value))
