@@ -2,7 +2,10 @@
 
 ``--campaigns`` campaigns drawn from the priors of ``models/four_term_driveline_informative.toml``
 (:mod:`bayes_roadload.analysis.sbc`), simulated with the table 6.6 measurement noise on speed,
-airspeed, yaw and driveline force, fitted with NUTS through the batch door; ``--control``
+airspeed, yaw and driveline force and a random force whose intensity is drawn from the prior of
+the integrated noise q (arms ``sim_calibrated``, ``sim_wrong_mass``; ``--sensor-noise-only``
+leaves it out: arms ``calibrated``, ``wrong_mass``; ``--exact`` draws the speed traces from the
+model's likelihood: arms ``exact_*``), fitted with NUTS through the batch door; ``--control``
 more campaigns fitted with the effective mass mis-stated by ``--mass-factor`` (the negative
 control).  Writes every record to ``--records`` (CSV, read by
 ``benchmarks/validation_report.py``) and prints one JSON object: the chi-square uniformity
@@ -50,6 +53,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seed0", type=int, default=0)
     ap.add_argument("--exact", action="store_true",
                     help="exact SBC: speed traces drawn from the model's own likelihood (ModelDrawnCampaign)")
+    ap.add_argument("--sensor-noise-only", action="store_true",
+                    help="simulator arm without the random force drawn from the prior of q (arms 'calibrated', "
+                         "'wrong_mass'): the integrated noise is the sensors' alone")
     ap.add_argument("--records", type=Path, default=RECORDS)
     ap.add_argument("--docs", type=Path, nargs="+", metavar="CSV",
                     help="no fitting: read these record files together and write the tables into docs/calibration.md")
@@ -59,9 +65,11 @@ def main(argv=None) -> int:
         return 0
 
     sampler = dataclasses.replace(SBC_SAMPLER, num_warmup=args.warmup, num_samples=args.draws)
-    jobs = (sbc_jobs(args.campaigns, seed0=args.seed0, pairs=args.pairs, sampler=sampler, exact=args.exact)
+    force = not (args.exact or args.sensor_noise_only)
+    jobs = (sbc_jobs(args.campaigns, seed0=args.seed0, pairs=args.pairs, sampler=sampler, exact=args.exact,
+                     random_force=force)
             + sbc_jobs(args.control, seed0=args.seed0 + 10_000, pairs=args.pairs, sampler=sampler,
-                       control_factor=args.mass_factor, exact=args.exact))
+                       control_factor=args.mass_factor, exact=args.exact, random_force=force))
     if args.control:  # interleave the arms, so that a study cut short still has both
         step = max(args.campaigns // args.control, 1)
         cal, ctl = jobs[:args.campaigns], jobs[args.campaigns:]

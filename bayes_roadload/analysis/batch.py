@@ -307,6 +307,8 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
         if name in fit.samples:
             rec[f"{name}_mean"] = float(np.mean(fit.samples[name]))
             rec[f"{name}_q50"] = float(np.median(fit.samples[name]))
+            if isinstance(truth.get(name), (int, float)):
+                rec[f"{name}_truth"] = float(truth[name])
     rec["sigma_mps_mean"] = float(np.mean(fit.samples["sigma_mps"]))
     rec.update({
         "gate_pass": bool(diag["pass"]),
@@ -387,7 +389,8 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
           False / None) and ``P_rank``, the number of posterior draws below the truth (None
           when unknown; out of ``rank_draws``, all chains' draws: the rank statistic of
           simulation-based calibration); ``P_r_hat, P_ess_bulk`` for the free parameters;
-        * noise: ``sigma_mps_mean`` and, when sampled, ``q_mps_per_sqrt_s_mean`` / ``_q50``;
+        * noise: ``sigma_mps_mean`` and, when sampled, ``q_mps_per_sqrt_s_mean`` / ``_q50``
+          (NUTS: and ``q_mps_per_sqrt_s_truth`` when the campaign's truth states it);
         * gates: ``gate_pass, gates_failed, divergences, max_r_hat, min_ess_bulk,
           min_ess_tail, mean_tree_depth, map_converged``; for ``method="laplace"`` only
           ``gate_pass`` (the MAP converged, its Hessian is positive definite and the

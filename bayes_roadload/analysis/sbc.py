@@ -112,6 +112,14 @@ class PriorDrawnCampaign:
     settings : SimulationSettings, optional
         Default: thesis chapter 6 (table 6.6 noise).
     max_draws : int
+    random_force : bool
+        Also draw the intensity q of a random force (the simulator's
+        ``random_force_mps_per_sqrt_s``) from the fitting model's prior of
+        ``q_mps_per_sqrt_s`` (:data:`bayes_roadload.config.NOISE_PRIORS`, Gamma(2)), recorded
+        in ``truth["q_mps_per_sqrt_s"]``: every parameter of the likelihood that the data
+        cannot pin down is then drawn from its prior, as SBC requires.  Without it the only
+        integrated noise is the one the inputs' sensor noise makes (q ~ 5e-4 m/s/sqrt(s), the
+        prior's 2.5 % quantile), a frequentist check at one fixed nuisance value.
     """
 
     seed: int
@@ -120,12 +128,18 @@ class PriorDrawnCampaign:
     case: Any = None
     settings: Any = None
     max_draws: int = 20
+    random_force: bool = False
 
     def __call__(self) -> Campaign:
         from ..simulate import SimulationSettings, simulate_campaign
 
         base = self.settings or SimulationSettings()
         case = self.case or sbc_case()
+        extra: dict[str, float] = {}
+        if self.random_force:
+            q = float(np.random.default_rng([self.seed, 7919]).gamma(2.0, config.NOISE_PRIORS["q_mps_per_sqrt_s"] / 2.0))
+            base = dataclasses.replace(base, random_force_mps_per_sqrt_s=q)
+            extra["q_mps_per_sqrt_s"] = q
         last: Exception | None = None
         for attempt in range(self.max_draws):
             drawn = draw_from_prior(self.model, self.seed * 1000 + attempt)
@@ -142,6 +156,7 @@ class PriorDrawnCampaign:
             except (ValueError, RuntimeWarning) as exc:
                 last = exc
                 continue
+            campaign.truth.update(extra)
             campaign.meta["prior_draws"] = attempt + 1
             campaign.meta["sbc_model"] = self.model
             return campaign
@@ -237,18 +252,24 @@ class WrongEffectiveMass:
 
 def sbc_jobs(n_campaigns: int, *, seed0: int = 0, pairs: int = 1, model: str = SBC_MODEL,
              sampler: config.SamplerConfig = SBC_SAMPLER, control_factor: float | None = None,
-             settings: Any = None, exact: bool = False) -> list[FitJob]:
+             settings: Any = None, exact: bool = False, random_force: bool = False) -> list[FitJob]:
     """The fit jobs of one SBC arm: ``n_campaigns`` prior-drawn campaigns (seeds ``seed0``...),
     fitted with ``model``; with ``control_factor`` the negative control (effective mass
     mis-stated by that factor); ``exact`` draws the speed traces from the model's own
-    likelihood (:class:`ModelDrawnCampaign`) instead of the simulator.  Tags: ``arm``
-    ("calibrated" or "wrong_mass", prefixed ``exact_`` for exact SBC) and ``mass_factor``."""
-    arm = ("exact_" if exact else "") + ("calibrated" if control_factor is None else "wrong_mass")
-    recipe = ModelDrawnCampaign if exact else PriorDrawnCampaign
+    likelihood (:class:`ModelDrawnCampaign`) instead of the simulator; ``random_force`` (simulator
+    only) draws the simulator's random force from the prior of q (:class:`PriorDrawnCampaign`).
+    Tags: ``arm`` ("calibrated" or "wrong_mass", prefixed ``exact_`` for exact SBC and ``sim_``
+    for the simulator with the random force) and ``mass_factor``."""
+    if exact and random_force:
+        raise ValueError("random_force applies to the simulator arm, not to exact SBC")
+    prefix = "exact_" if exact else "sim_" if random_force else ""
+    arm = prefix + ("calibrated" if control_factor is None else "wrong_mass")
     jobs = []
     for i in range(int(n_campaigns)):
         seed = seed0 + i
-        factory: Callable[[], Campaign] = recipe(seed, pairs=pairs, model=model, settings=settings)
+        factory: Callable[[], Campaign] = (
+            ModelDrawnCampaign(seed, pairs=pairs, model=model, settings=settings) if exact
+            else PriorDrawnCampaign(seed, pairs=pairs, model=model, settings=settings, random_force=random_force))
         if control_factor is not None:
             factory = WrongEffectiveMass(factory, float(control_factor))
         # type_b=False: the campaigns' declared values are exact, and SBC checks the posterior of the

@@ -113,6 +113,13 @@ class SimulationSettings:
         (run-to-run variation, as a hierarchical model assumes).
     system_noise_bandwidth_hz : float
         Band limit of the "band_limited" system noise.
+    random_force_mps_per_sqrt_s : float
+        Intensity q of a white random acceleration (an unmodelled random force per unit
+        effective mass, e.g. road roughness): after every internal step of length dt the speed
+        moves by q sqrt(dt) N(0, 1), so over a time t it wanders by q sqrt(t) -- the
+        integrated (process) noise of the analysis' likelihood
+        (:mod:`bayes_roadload.physics.residuals`).  Applied in every case, also without
+        measurement or system noise; default 0 (none).
     speed_decimals : int
         Decimals the logged speed is rounded to (5, as in the thesis data files).
     max_yaw_rad : float
@@ -158,6 +165,7 @@ class SimulationSettings:
     system_noise_std: Mapping[str, float] = field(default_factory=lambda: dict(thesis.THESIS_SYSTEM_NOISE))
     system_noise_mode: Literal["band_limited", "per_run"] = "band_limited"
     system_noise_bandwidth_hz: float = thesis.THESIS_WIND["bandwidth_hz"]
+    random_force_mps_per_sqrt_s: float = 0.0
     speed_decimals: int = 5
     max_yaw_rad: float = config.MAX_LOGGED_YAW_RAD
     coefficients: Mapping[str, float] = field(default_factory=lambda: dict(thesis.THESIS_COEFFICIENTS))
@@ -179,6 +187,8 @@ class SimulationSettings:
             raise ValueError("max_yaw_rad must be in (0, pi/2]")
         if self.system_noise_mode not in ("band_limited", "per_run"):
             raise ValueError("system_noise_mode must be 'band_limited' or 'per_run'")
+        if not self.random_force_mps_per_sqrt_s >= 0:
+            raise ValueError("random_force_mps_per_sqrt_s must be >= 0")
 
     @property
     def substeps(self) -> int:
@@ -267,13 +277,15 @@ def band_limited_noise(n: int, dt_s: float, bandwidth_hz: float, rng: np.random.
 
 @functools.partial(jax.jit, static_argnames=("model", "n_samples", "substeps", "dynamics", "sensors",
                                              "band_limited", "noise_names"))
-def _integrate_runs(params, fields, direction, start_m, masses, consts, sys_noise, *, model, n_samples, substeps,
-                    dynamics, sensors, band_limited, noise_names):
+def _integrate_runs(params, fields, direction, start_m, masses, consts, sys_noise, kicks, *, model, n_samples,
+                    substeps, dynamics, sensors, band_limited, noise_names):
     """Integrate R runs ([R] params, [R, G, 2] wind fields, [R, 2] test and effective masses)
     and sample every ``substeps``.
 
     ``sys_noise`` ([R, T, k]) is added over time to the parameters ``noise_names`` (a series
-    ``SYSTEM_NOISE_STEP_S`` apart, linearly interpolated).
+    ``SYSTEM_NOISE_STEP_S`` apart, linearly interpolated).  ``kicks`` ([R, n_samples,
+    substeps] m/s, or [R, 1, 1] zeros) are added to the speed after each internal step while
+    the vehicle moves: the random force of ``SimulationSettings.random_force_mps_per_sqrt_s``.
 
     State: [v, s, t, band-limited w_a, its rate, band-limited w_c, its rate, 5 sensor states].
     Returns a dict of [R, n_samples] arrays.
@@ -281,7 +293,7 @@ def _integrate_runs(params, fields, direction, start_m, masses, consts, sys_nois
     (grid_start, grid_dx, dt, v0, v_floor, rho, temp, area, length, band_omega) = consts
     n_grid = fields.shape[1]
 
-    def one_run(p, field_, d, x0, mass_pair, noise_):
+    def one_run(p, field_, d, x0, mass_pair, noise_, kick):
         mass, eff_mass = mass_pair[0], mass_pair[1]
         n_noise = noise_.shape[0]
 
@@ -343,22 +355,32 @@ def _integrate_runs(params, fields, direction, start_m, masses, consts, sys_nois
         y0 = jnp.concatenate([jnp.stack([v0, zero, zero, wa0, zero, wc0, zero]),
                               sensor_initial_state(wa0, wc0, vr0, psi0)])
 
-        def sample(y, _):
+        random = kick.shape[1] > 1
+
+        def substep(j, yy, kick_k):
+            yy = rk4_step(rate, yy, dt)
+            if random:
+                yy = yy.at[0].add(jnp.where(yy[0] > v_floor, kick_k[j], 0.0))
+            return yy
+
+        def sample(y, k):
             out = observe(y)
-            y = jax.lax.fori_loop(0, substeps, lambda j, yy: rk4_step(rate, yy, dt), y)
+            kick_k = kick[jnp.minimum(k, kick.shape[0] - 1)]
+            y = jax.lax.fori_loop(0, substeps, lambda j, yy: substep(j, yy, kick_k), y)
             return y, out
 
-        _, outs = jax.lax.scan(sample, y0, None, length=n_samples)
+        _, outs = jax.lax.scan(sample, y0, jnp.arange(n_samples))
         return outs
 
-    return jax.vmap(one_run)(params, fields, direction, start_m, masses, sys_noise)
+    return jax.vmap(one_run)(params, fields, direction, start_m, masses, sys_noise, kicks)
 
 
 def simulate_true_runs(model: DragModel, params: Sequence[Mapping[str, float]],
                        winds: Sequence[wind_mod.WindField], directions: Sequence[int], *,
                        dynamics: bool, settings: SimulationSettings = DEFAULT_SETTINGS,
                        system_noise: Mapping[str, np.ndarray] | None = None,
-                       masses_kg: Sequence[float] | None = None
+                       masses_kg: Sequence[float] | None = None,
+                       random_force: np.ndarray | None = None
                        ) -> list[dict[str, np.ndarray]]:
     """Noise-free channels of coastdown runs through given wind fields, at the logging rate.
 
@@ -375,6 +397,9 @@ def simulate_true_runs(model: DragModel, params: Sequence[Mapping[str, float]],
     masses_kg : optional, per run, the test mass M (kg); default ``settings.vehicle.mass_kg``.
         The effective mass moves by the same amount, M_e = vehicle M_e + (M - vehicle M): the
         rotating inertia does not change with the load (:func:`run_effective_mass_kg`).
+    random_force : optional [R, n_samples, substeps] standard normal draws, scaled by
+        ``settings.random_force_mps_per_sqrt_s * sqrt(settings.dt_s)`` into the speed's
+        increments after each internal step (n_samples = max_run_duration_s x sample rate + 1).
 
     Returns
     -------
@@ -413,7 +438,16 @@ def simulate_true_runs(model: DragModel, params: Sequence[Mapping[str, float]],
         sys_noise = jnp.asarray(np.stack([np.asarray(system_noise[k], float) for k in names], axis=-1))
     else:
         sys_noise = jnp.zeros((r, 2, 0))
-    outs = _integrate_runs(stacked, fields, direction, start_m, masses, consts, sys_noise, model=model, noise_names=names,
+    q = settings.random_force_mps_per_sqrt_s
+    if q > 0:
+        if random_force is None or np.shape(random_force) != (r, n_samples, settings.substeps):
+            raise ValueError(f"random_force_mps_per_sqrt_s = {q:g} needs random_force draws of shape "
+                             f"{(r, n_samples, settings.substeps)}")
+        kicks = jnp.asarray(q * math.sqrt(settings.dt_s) * np.asarray(random_force, float))
+    else:
+        kicks = jnp.zeros((r, 1, 1))
+    outs = _integrate_runs(stacked, fields, direction, start_m, masses, consts, sys_noise, kicks, model=model,
+                           noise_names=names,
                            n_samples=n_samples, substeps=settings.substeps, dynamics=bool(dynamics),
                            sensors=settings.sensors,
                            band_limited=settings.wind_bandwidth_hz is not None)
@@ -521,8 +555,12 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
                     n_noise, SYSTEM_NOISE_STEP_S, settings.system_noise_bandwidth_hz, rng_sys)
         params.append(p)
 
+    random_force = None
+    if settings.random_force_mps_per_sqrt_s > 0:
+        shape = (int(math.floor(settings.max_run_duration_s * settings.sample_rate_hz)) + 1, settings.substeps)
+        random_force = np.stack([_rng(seed, rid, 3).standard_normal(shape) for rid in run_ids])
     runs = simulate_true_runs(model, params, winds, directions, dynamics=sc.dynamics, settings=settings,
-                              system_noise=series, masses_kg=run_mass)
+                              system_noise=series, masses_kg=run_mass, random_force=random_force)
     for i, (rid, p, run) in enumerate(zip(run_ids, params, runs)):
         # per run: the coefficients (band-limited noise: their mean over the run's duration)
         k = max(int(run["time_s"][-1] / SYSTEM_NOISE_STEP_S), 1)
@@ -575,6 +613,7 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
             "spatial_beta": sc.spatial_beta, "dynamics": sc.dynamics,
             "measurement_noise": sc.measurement_noise, "system_noise": sc.system_noise,
             "system_noise_mode": settings.system_noise_mode,
+            "random_force_mps_per_sqrt_s": float(settings.random_force_mps_per_sqrt_s),
             "driveline": bool(driveline), "generator": "bayes_roadload.simulate"}
     if masses_kg is not None:
         meta["masses_kg"] = list(dict.fromkeys(pair_mass))
