@@ -11,10 +11,15 @@ the central intervals cover at their level (:func:`bayes_roadload.analysis.batch
 
 The simulation is not the fitted likelihood: it integrates the truth at 100 Hz through frozen
 turbulence and logs noisy channels at 4 Hz, while the model integrates the noisy logged inputs
-and approximates what that does to the speed by the integrated-noise residual; the noise
-levels (speed noise, random-walk intensity) are fixed by the simulator, not drawn from their
-priors.  So this checks the calibration of the analysis of realistic data, which is the claim
-that matters, and it can fail for reasons exact SBC could not (see the negative control).
+and approximates what that does to the speed by the integrated-noise residual.  So this checks
+the calibration of the analysis of realistic data, which is the claim that matters, and it can
+fail for reasons exact SBC could not (see the negative control).  The integrated noise's
+intensity q is a parameter of the likelihood that two pairs hardly identify, so SBC needs it
+drawn from its prior too: ``random_force=True`` adds a random force of intensity q ~ the prior
+of ``q_mps_per_sqrt_s`` to the simulation (:class:`PriorDrawnCampaign`).  Without it the only
+integrated noise is the sensors' (q ~ 5e-4 m/s/sqrt(s), low in that prior), and the study is a
+frequentist check at one fixed nuisance value, where the averaging over q's wide posterior
+makes the intervals conservative (``docs/calibration.md``).
 
 Ranks use every post-warm-up draw of both chains (``rank_draws`` of them).  Correlated draws
 make the rank a Monte-Carlo estimate of the posterior CDF at the truth with standard error

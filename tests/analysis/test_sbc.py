@@ -51,6 +51,23 @@ def test_prior_drawn_campaign_carries_its_draw_as_truth():
     pd.testing.assert_frame_equal(wrong.runs, campaign.runs)
 
 
+def test_prior_drawn_campaign_draws_its_random_force_from_the_prior_of_q():
+    """With ``random_force`` the simulator's random-force intensity is a draw of the fitted
+    model's Gamma(2) prior of q, recorded as truth; the coefficients' draw is unchanged."""
+    plain = PriorDrawnCampaign(5, pairs=1)()
+    forced = PriorDrawnCampaign(5, pairs=1, random_force=True)()
+    q = forced.truth["q_mps_per_sqrt_s"]
+    assert forced.meta["random_force_mps_per_sqrt_s"] == q > 0
+    assert "q_mps_per_sqrt_s" not in plain.truth and plain.meta["random_force_mps_per_sqrt_s"] == 0.0
+    for k in ("AD", "BD", "CD0", "KD", "At", "Bt", "Ct"):
+        assert forced.truth[k] == plain.truth[k], k
+    assert not np.allclose(forced.runs["speed_mps"], plain.runs["speed_mps"][:len(forced.runs)])
+    arms = {j.tags["arm"] for j in sbc_jobs(1, random_force=True) + sbc_jobs(1, random_force=True, control_factor=1.05)}
+    assert arms == {"sim_calibrated", "sim_wrong_mass"}
+    with pytest.raises(ValueError, match="exact"):
+        sbc_jobs(1, exact=True, random_force=True)
+
+
 def test_model_drawn_campaign_follows_the_model_likelihood():
     """Exact SBC data: at the true coefficients the residual of each run is a random walk of
     intensity q plus white noise sigma_r, so its first differences have variance

@@ -273,6 +273,34 @@ def test_system_noise_modes():
         SimulationSettings(system_noise_mode="hourly")
 
 
+def test_random_force_makes_a_random_walk_of_its_intensity():
+    """The random force moves the speed by q sqrt(dt) per internal step: at the logging rate
+    the increments of the speed difference from the same campaign without it have variance
+    q^2 / 4 Hz (the drag's feedback, ~0.03 /s, changes that by < 1 % over 0.25 s).  Its draws
+    are a stream of their own: the wind is the same with and without it."""
+    import dataclasses
+
+    case = dataclasses.replace(get_case(2), measurement_noise=False, system_noise=False)
+    q = 0.01
+    base = simulate_campaign(case, pairs=2, seed=3)
+    forced = simulate_campaign(case, pairs=2, seed=3, settings=SimulationSettings(random_force_mps_per_sqrt_s=q))
+    assert forced.meta["random_force_mps_per_sqrt_s"] == q and base.meta["random_force_mps_per_sqrt_s"] == 0.0
+    steps = []
+    for rid in base.run_ids:
+        a = base.runs.loc[base.runs["run"] == rid, "speed_mps"].to_numpy()
+        b = forced.runs.loc[forced.runs["run"] == rid, "speed_mps"].to_numpy()
+        n = min(a.size, b.size)
+        steps.append(np.diff(b[:n] - a[:n]))
+    steps = np.concatenate(steps)
+    # ~1700 increments: the variance ratio has sd sqrt(2 / n) ~ 3.4 %; 4 sd
+    ratio = np.var(steps) / (q**2 * 0.25)
+    assert abs(ratio - 1.0) < 4 * np.sqrt(2.0 / steps.size), ratio
+    # 5 decimals of rounding are the only difference at the first sample
+    assert abs(forced.runs["speed_mps"].iloc[0] - base.runs["speed_mps"].iloc[0]) < 1e-5
+    with pytest.raises(ValueError, match="random_force"):
+        SimulationSettings(random_force_mps_per_sqrt_s=-1.0)
+
+
 def test_several_test_masses_assigned_to_pairs_in_turn(tmp_path):
     """``masses_kg``: pairs at the masses in turn, a ``mass_kg`` column, M_e shifted by the same
     amount; a run's draws do not depend on its mass (the 1100 kg pairs are the single-mass
