@@ -118,8 +118,9 @@ class SimulationSettings:
         effective mass, e.g. road roughness): after every internal step of length dt the speed
         moves by q sqrt(dt) N(0, 1), so over a time t it wanders by q sqrt(t) -- the
         integrated (process) noise of the analysis' likelihood
-        (:mod:`bayes_roadload.physics.residuals`).  Applied in every case, also without
-        measurement or system noise; default 0 (none).
+        (:mod:`bayes_roadload.physics.residuals`).  :func:`simulate_campaign` applies it in
+        every case, also without measurement or system noise, from a random stream of its own
+        (the wind and the other noise do not change with it); default 0 (none).
     speed_decimals : int
         Decimals the logged speed is rounded to (5, as in the thesis data files).
     max_yaw_rad : float
