@@ -356,6 +356,29 @@ def sbc_tests(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS,
     return out
 
 
+def z_sd_by_truth_q(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS,
+                    groups: int = 3) -> pd.DataFrame:
+    """sd(z) of every parameter in ``groups`` equal-count groups of the true integrated-noise
+    intensity (``q_mps_per_sqrt_s_truth``, recorded by the simulator arm with its random force),
+    per arm: does the calibration depend on how well q is identified?  One row per arm and
+    group: ``q_low``, ``q_high`` (the group's range of true q), ``n`` and one column per
+    parameter.  Empty when no record states the truth of q."""
+    ok = _ok(records)
+    if "q_mps_per_sqrt_s_truth" not in ok:
+        return pd.DataFrame()
+    ok = ok[ok["q_mps_per_sqrt_s_truth"].notna()]
+    rows = []
+    for arm, g in ok.groupby("arm", sort=False):
+        g = g.copy()  # defragmented: the records are wide
+        g["q_group"] = pd.qcut(g["q_mps_per_sqrt_s_truth"], min(groups, len(g)), labels=False)
+        cov = coverage_summary(g, by=("q_group",), quantities=list(parameters), levels=(0.95,))
+        for k, c in cov.groupby("q_group"):
+            q = g.loc[g["q_group"] == k, "q_mps_per_sqrt_s_truth"]
+            rows.append({"arm": arm, "q_low": float(q.min()), "q_high": float(q.max()), "n": int(q.size),
+                         **{r["quantity"]: float(r["z_sd"]) for _, r in c.iterrows()}})
+    return pd.DataFrame(rows)
+
+
 def sbc_markdown(records: pd.DataFrame, tests: pd.DataFrame | None = None,
                  parameters: Sequence[str] = SBC_PARAMETERS, bins: int = SBC_BINS) -> str:
     """Markdown tables of an SBC study: per arm and parameter the rank histogram, the
@@ -384,4 +407,12 @@ def sbc_markdown(records: pd.DataFrame, tests: pd.DataFrame | None = None,
     n_err = int(records["error"].notna().sum()) if "error" in records else 0
     if n_err:
         lines.append(f"- {n_err} jobs ended in an error and are not counted.")
+    by_q = z_sd_by_truth_q(records, parameters)
+    if not by_q.empty:
+        lines += ["", "sd(z) by the true intensity q of the random force (m/s/sqrt(s)), in thirds of the arm's fits:", "",
+                  "| arm | true q | n | " + " | ".join(parameters) + " |",
+                  "|---|---|---|" + "---|" * len(parameters)]
+        for _, r in by_q.iterrows():
+            lines.append(f"| {r['arm']} | {r['q_low']:.4f}-{r['q_high']:.4f} | {r['n']} | "
+                         + " | ".join(f"{r[p]:.2f}" for p in parameters) + " |")
     return "\n".join(lines) + "\n"

@@ -20,7 +20,7 @@ from bayes_roadload import config
 from bayes_roadload.analysis.batch import run_batch
 from bayes_roadload.analysis.sbc import (SBC_MODEL, SBC_PARAMETERS, SBC_SAMPLER, ModelDrawnCampaign, PriorDrawnCampaign,
                                          WrongEffectiveMass, draw_from_prior, rank_fractions, rank_histograms,
-                                         sbc_jobs, sbc_markdown, sbc_tests)
+                                         sbc_jobs, sbc_markdown, sbc_tests, z_sd_by_truth_q)
 from bayes_roadload.inference.spec import load_model_spec
 
 
@@ -143,6 +143,27 @@ def test_uniform_ranks_pass_and_shifted_ranks_fail():
     assert u["u"].between(0, 1).all()
     md = sbc_markdown(records, tests)
     assert "| calibrated | AD | 200 |" in md and "**no**" in md
+
+
+def test_z_sd_by_the_true_q_splits_the_arm_in_thirds():
+    """Fits whose true q is in the top third have errors twice their sd: the table shows it
+    there and not in the lower thirds (each third's sd(z) within 4 of its standard errors,
+    1 / sqrt(2 n), of the truth)."""
+    rng = np.random.default_rng(1)
+    records = _synthetic_records({"sim_calibrated": rng.uniform(size=300)})
+    q = rng.uniform(0.001, 0.01, size=300)
+    records["q_mps_per_sqrt_s_truth"] = q
+    top = q > np.quantile(q, 2 / 3)
+    for p in SBC_PARAMETERS:
+        records.loc[top, f"{p}_truth"] *= 2.0
+    table = z_sd_by_truth_q(records)
+    assert list(table["n"]) == [100, 100, 100]
+    assert (table["q_low"].diff().dropna() > 0).all()
+    tol = 4 / np.sqrt(2 * 100)
+    for p in SBC_PARAMETERS:
+        assert np.allclose(table[p], [1.0, 1.0, 2.0], atol=2 * tol), (p, table[p].tolist())
+    assert "sd(z) by the true intensity q" in sbc_markdown(records)
+    assert z_sd_by_truth_q(records.drop(columns="q_mps_per_sqrt_s_truth")).empty
 
 
 @pytest.fixture(scope="module")
