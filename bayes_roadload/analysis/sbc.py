@@ -356,21 +356,29 @@ def sbc_tests(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS,
     return out
 
 
+MIN_GROUP = 5
+"""Fewest fits in a group of :func:`z_sd_by_truth_q` (sd(z) of fewer is mostly noise)."""
+
+
 def z_sd_by_truth_q(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS,
                     groups: int = 3) -> pd.DataFrame:
     """sd(z) of every parameter in ``groups`` equal-count groups of the true integrated-noise
     intensity (``q_mps_per_sqrt_s_truth``, recorded by the simulator arm with its random force),
     per arm: does the calibration depend on how well q is identified?  One row per arm and
     group: ``q_low``, ``q_high`` (the group's range of true q), ``n`` and one column per
-    parameter.  Empty when no record states the truth of q."""
+    parameter.  Groups hold at least ``MIN_GROUP`` fits (an arm with fewer has no row);
+    empty when no record states the truth of q."""
     ok = _ok(records)
     if "q_mps_per_sqrt_s_truth" not in ok:
         return pd.DataFrame()
     ok = ok[ok["q_mps_per_sqrt_s_truth"].notna()]
     rows = []
     for arm, g in ok.groupby("arm", sort=False):
+        n_groups = min(groups, len(g) // MIN_GROUP)
+        if n_groups < 1:
+            continue
         g = g.copy()  # defragmented: the records are wide
-        g["q_group"] = pd.qcut(g["q_mps_per_sqrt_s_truth"], min(groups, len(g)), labels=False)
+        g["q_group"] = pd.qcut(g["q_mps_per_sqrt_s_truth"], n_groups, labels=False)
         cov = coverage_summary(g, by=("q_group",), quantities=list(parameters), levels=(0.95,))
         for k, c in cov.groupby("q_group"):
             q = g.loc[g["q_group"] == k, "q_mps_per_sqrt_s_truth"]

@@ -164,6 +164,7 @@ def test_z_sd_by_the_true_q_splits_the_arm_in_thirds():
         assert np.allclose(table[p], [1.0, 1.0, 2.0], atol=2 * tol), (p, table[p].tolist())
     assert "sd(z) by the true intensity q" in sbc_markdown(records)
     assert z_sd_by_truth_q(records.drop(columns="q_mps_per_sqrt_s_truth")).empty
+    assert z_sd_by_truth_q(records.iloc[:4]).empty          # too few fits for one group
 
 
 @pytest.fixture(scope="module")
