@@ -944,8 +944,9 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--pooling", choices=("auto", "pooled", "hierarchical"), default="auto",
                    help="nuts: one set of coefficients, or run-level AD, BD, CD0 around population means; auto: "
                         "hierarchical for speed traces of 2 to 12 pairs (docs/calibration.md), else pooled")
-    f.add_argument("--noise", choices=("integrated", "white"), default="integrated",
-                   help="nuts: residual model ('integrated': white noise plus integrated input noise)")
+    f.add_argument("--noise", choices=("integrated", "reverting", "white"), default="integrated",
+                   help="nuts: residual model ('integrated': white noise plus integrated input noise, a random walk; "
+                        "'reverting': that error reverting through the model's speed-dependent forces; 'white')")
     f.add_argument("--robust", action="store_true", help="nuts: Student-t innovations (outlier-robust)")
     f.add_argument("--grouping", choices=("pair", "run", "all"), default="pair",
                    help="lsq: fit each pair, each run, or all runs jointly")

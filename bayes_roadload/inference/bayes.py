@@ -32,7 +32,10 @@ between measured and integrated speed is white measurement noise plus an integra
 (random-walk) error ``q_mps_per_sqrt_s`` shared by the runs: the sensor noise on the measured
 inputs (airspeed, yaw, driveline force) and unmodelled forces are integrated by the equation of
 motion, so a likelihood with independent residuals gives intervals that are too narrow
-(:mod:`bayes_roadload.physics.residuals`).  ``noise="white"`` drops the integrated part;
+(:mod:`bayes_roadload.physics.residuals`).  ``noise="reverting"`` lets that error revert
+through the model's own speed-dependent forces (:func:`_residuals_and_reversion`: the
+linearised equation of motion, since the truth's rolling and driveline losses follow the true
+speed and the model's its own); ``noise="white"`` drops the integrated part;
 ``robust=True`` scores the innovations with a Student-t (``student_df``).
 
 Priors of the coefficients are those of the model file (physical units); a free parameter
@@ -106,19 +109,24 @@ import numpyro.distributions as dist
 from .. import config
 from .. import thesis
 from ..data.campaign import Campaign
-from ..physics.integrate import RunBatch, integrate_batch, integrate_batch_forward_sensitivity
+from ..physics.integrate import RunBatch, integrate_batch, integrate_batch_forward_sensitivity, reversion_rate
 from ..physics.model import DragModel
 from ..physics.residuals import (
     local_level_effects_posterior,
     local_level_loglik,
     local_level_loglik_batch,
     local_level_loglik_effects,
+    reversion_factors,
+    reverting_loglik_batch,
 )
 from .problem import road_load_draws, road_load_truth
 from .spec import ModelSpec, Prior, load_model_spec
 
 POOLINGS = ("pooled", "hierarchical")
-NOISE_MODELS = ("integrated", "white")
+NOISE_MODELS = ("integrated", "white", "reverting")
+"""Speed-residual likelihoods: white noise plus an integrated error that is a random walk
+(``integrated``, the default), that reverts to zero through the model's speed-dependent forces
+(``reverting``), or white noise alone."""
 HIERARCHICAL_PARAMETERS = ("AD", "BD", "CD0")
 """Coefficients that vary from run to run in the hierarchical model (when free)."""
 
@@ -190,6 +198,11 @@ class FitProblem:
     @property
     def n_runs(self) -> int:
         return len(self.run_ids)
+
+    @property
+    def integrated_noise(self) -> bool:
+        """The residual has an integrated error of intensity ``q_mps_per_sqrt_s``."""
+        return self.noise in ("integrated", "reverting")
 
     kind = "traces"
 
@@ -352,6 +365,9 @@ def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, po
     if pooling == "hierarchical" and robust:
         raise ValueError("the hierarchical model integrates the run effects out with a Gaussian likelihood: "
                          "it cannot be combined with robust (Student-t) noise; use --pooling pooled --robust")
+    if noise == "reverting" and robust:
+        raise ValueError("the reverting residual has a Gaussian likelihood: it cannot be combined with robust "
+                         "(Student-t) noise")
     spec = load_model_spec(spec) if isinstance(spec, str) else spec
     if "airspeed_factor" in spec.free and spec.resolve_air(campaign) != "measured":
         raise ValueError(f"model {spec.name!r} frees airspeed_factor (true airspeed = factor x reading), but "
@@ -428,16 +444,41 @@ def speed_noise(sample: dict[str, jnp.ndarray]) -> jnp.ndarray:
 def run_log_likelihood(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp.ndarray:
     """[R] log-likelihood of each run's speed trace for one draw (hierarchical: with the run
     effects integrated out, at the population values)."""
-    resid = effect_residuals(problem, sample) if problem.varying else speed_residuals(problem, sample)
+    resid, phi = _residuals_and_reversion(problem, sample)
     q = sample.get("q_mps_per_sqrt_s", jnp.zeros(()))
     sigma = speed_noise(sample)
     b = problem.batch
+    if phi is not None and not problem.varying:
+        return reverting_loglik_batch(resid, b.time_s, b.mask, sigma, q, phi)
     if problem.robust:
         df = sample["student_df"]
         return jax.vmap(lambda r, t, m, s: local_level_loglik(r, t, m, s, q, df))(resid, b.time_s, b.mask, sigma)
     if problem.varying:
-        return local_level_loglik_effects(resid, b.time_s, b.mask, sigma, q, _design(problem), _effect_var(problem, sample))
+        return local_level_loglik_effects(resid, b.time_s, b.mask, sigma, q, _design(problem),
+                                          _effect_var(problem, sample), phi)
     return local_level_loglik_batch(resid, b.time_s, b.mask, sigma, q)
+
+
+def _residuals_and_reversion(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> tuple[jnp.ndarray, Any]:
+    """The residuals the likelihood scores ([R, N]; hierarchical: :func:`effect_residuals`)
+    and, for ``noise="reverting"``, the factors phi ([R, N],
+    :func:`~bayes_roadload.physics.residuals.reversion_factors`) of the integrated error's
+    reversion at the rate :func:`~bayes_roadload.physics.integrate.reversion_rate` along the
+    model's trajectory (hierarchical: each run's at its reference coefficients); else None."""
+    if problem.noise != "reverting":
+        return (effect_residuals(problem, sample) if problem.varying else speed_residuals(problem, sample)), None
+    b = problem.batch
+    if problem.varying:
+        shifted = _shifted(problem, sample)
+        speed = integrated_speed(problem, shifted)
+        resid = b.speed_mps - speed + jnp.einsum("rnk,rk->rn", _design(problem), jnp.asarray(problem.run_offsets))
+        params = run_parameters(problem, shifted)
+    else:
+        speed = integrated_speed(problem, sample)
+        resid = b.speed_mps - speed
+        params = run_parameters(problem, sample)
+    kappa = reversion_rate(problem.model, params, b, speed)
+    return resid, reversion_factors(b.time_s, b.mask, kappa)
 
 
 def _design(problem: FitProblem) -> jnp.ndarray:
@@ -463,12 +504,18 @@ def effect_residuals(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp
     the first-order expansion is taken at each run's own coefficients, and its error is
     second order in the run's posterior uncertainty, not in its offset from the mean."""
     design = _design(problem)
+    return speed_residuals(problem, _shifted(problem, sample)) + jnp.einsum("rnk,rk->rn", design,
+                                                                            jnp.asarray(problem.run_offsets))
+
+
+def _shifted(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:
+    """``sample`` (population values) with each run's coefficients at its reference offset."""
     sample = population_sample(problem, sample)
     offsets = jnp.asarray(problem.run_offsets)
     shifted = dict(sample)
     for i, name in enumerate(problem.varying):
         shifted[f"{name}_run"] = sample[name] + offsets[:, i]
-    return speed_residuals(problem, shifted) + jnp.einsum("rnk,rk->rn", design, offsets)
+    return shifted
 
 
 def run_sensitivities(problem: FitProblem, base: dict[str, Any], v0_mps: Any, batch: RunBatch) -> jnp.ndarray:
@@ -512,9 +559,10 @@ def linearise_run_effects(problem: FitProblem, reference: dict[str, Any], offset
 def _effects_posterior(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Conditional posterior mean [R, k] and covariance [R, k, k] of the run effects at one draw."""
     b = problem.batch
-    return local_level_effects_posterior(effect_residuals(problem, sample), b.time_s, b.mask, speed_noise(sample),
+    resid, phi = _residuals_and_reversion(problem, sample)
+    return local_level_effects_posterior(resid, b.time_s, b.mask, speed_noise(sample),
                                          sample.get("q_mps_per_sqrt_s", jnp.zeros(())), _design(problem),
-                                         _effect_var(problem, sample))
+                                         _effect_var(problem, sample), phi)
 
 
 def run_effect_means(problem: FitProblem, sample: dict[str, Any]) -> np.ndarray:
@@ -584,7 +632,7 @@ def coastdown_model(problem: FitProblem) -> None:
         # log sigma, where the integrated noise q takes over the residual
         sample["sigma_mps"] = numpyro.sample(
             "sigma_mps", dist.Gamma(2.0, 2.0 / config.NOISE_PRIORS["sigma_speed_mean_mps"]))
-    if problem.noise == "integrated":
+    if problem.integrated_noise:
         # Gamma(2) vanishes at 0: measured inputs are never noise-free, and the boundary-avoiding
         # prior removes the funnel at q -> 0 where the coefficients' posterior narrows
         sample["q_mps_per_sqrt_s"] = numpyro.sample(

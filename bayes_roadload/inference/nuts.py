@@ -188,7 +188,7 @@ def _latent_wind_start(problem: FitProblem, campaign: Campaign, init: dict, firs
             init[k] = max(float(init[k]), prior.low + 1e-6 * config.PARAMETER_SCALES.get(k, 1.0))
     init["v0_mps"] = jnp.asarray(v0)
     init["sigma_mps"] = jnp.asarray(sigma)
-    if problem.noise == "integrated":
+    if problem.integrated_noise:
         init["q_mps_per_sqrt_s"] = 0.002
     if problem.robust:
         init["student_df"] = 10.0
@@ -230,7 +230,7 @@ def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, flo
             init[k] = max(init[k], prior.low + 1e-6 * config.PARAMETER_SCALES.get(k, 1.0))
     init["v0_mps"] = jnp.asarray(v0)
     init["sigma_mps"] = jnp.asarray(sigma)
-    if problem.noise == "integrated":
+    if problem.integrated_noise:
         init["q_mps_per_sqrt_s"] = 0.002
     if problem.robust:
         init["student_df"] = 10.0

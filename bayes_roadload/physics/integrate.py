@@ -361,6 +361,37 @@ def integrate_batch(
     return jax.vmap(one, in_axes=(axes, 0, 0, 0))(p, batch, v0, schedule)
 
 
+def reversion_rate(
+    model: DragModel,
+    params: Mapping[str, Array],
+    batch: RunBatch,
+    speed_mps: Array,
+) -> Array:
+    """[R, N] kappa = -d(dv/dt)/dv of eq. 5.4 at each sample, along the speed trace
+    ``speed_mps`` (the model's own, [R, N]) with the logged inputs held: the rate at which a
+    speed error decays through the model's speed-dependent forces (the tyres' B_D, the
+    driveline, and the aerodynamic force when the relative air is computed from the speed;
+    with a measured airspeed the aerodynamic force follows the reading instead).  The distance
+    is the trapezoid of the speed.  Zero on padding.  Parameters with an [R] value are per run,
+    as in :func:`integrate_batch`."""
+    r = batch.n_runs
+    p = model.complete(params)
+    axes = {k: (0 if jnp.ndim(v) == 1 and jnp.shape(v)[0] == r else None) for k, v in p.items()}
+
+    def one(pp, run, v):
+        u, _ = _with_model_channel(model, pp, run, jnp.asarray(_inputs(run)), None)
+        s = jnp.concatenate([jnp.zeros_like(v[:1]), jnp.cumsum(0.5 * (v[1:] + v[:-1]) * jnp.diff(run.time_s))])
+
+        def accel(vk, sk, tk, uk):
+            c = _conditions(model, pp, run, jnp.maximum(vk, 0.0), sk, tk, uk)
+            return model.acceleration_mps2(pp, c, run.effective_mass_kg)
+
+        slope = jax.vmap(jax.grad(accel))(v, s, run.time_s, u)
+        return jnp.where(run.mask & (v > 0.0), -slope, 0.0)
+
+    return jax.vmap(one, in_axes=(axes, 0, 0))(p, batch, jnp.asarray(speed_mps))
+
+
 def quadratic_coastdown_time(v_mps, v0_mps, a_n, b_n_per_mps, c_n_per_mps2, effective_mass_kg):
     """Time to coast from v0 to v with F = a + b v + c v^2 and no wind (appendix D).
 

@@ -211,23 +211,82 @@ def tridiagonal_solve(lower: Array, diag: Array, upper: Array, rhs: Array) -> Ar
     return jnp.swapaxes(x, 0, 1)
 
 
-def _difference(x: Array, mask: Array) -> Array:
-    """D x along the samples (axis 1: x_0, x_1 - x_0, ...), zero on padding."""
+def _difference(x: Array, mask: Array, phi: Array | None = None) -> Array:
+    """D x along the samples (axis 1: x_0, x_1 - x_0, ...), zero on padding; with ``phi``
+    ([R, N]) the quasi-difference x_0, x_1 - phi_1 x_0, ... of a mean-reverting residual."""
     prev = jnp.concatenate([jnp.zeros_like(x[:, :1]), x[:, :-1]], axis=1)
+    if phi is not None:
+        prev = prev * phi.reshape(phi.shape + (1,) * (x.ndim - 2))
     return jnp.where(mask.reshape(mask.shape + (1,) * (x.ndim - 2)), x - prev, 0.0)
 
 
-def _tridiagonal(time_s, mask, var_e, q2):
+def _tridiagonal(time_s, mask, var_e, q2, phi=None):
     """Covariance of the differenced residuals (r_0, r_1 - r_0, ...): tridiagonal, with
-    identity rows on padded samples."""
+    identity rows on padded samples.  With ``phi`` ([R, N], :func:`reversion_factors`) that of
+    the quasi-differenced residuals r_k - phi_k r_{k-1} = w_k + e_k - phi_k e_{k-1}: diagonal
+    Var(w_k) + var_e (1 + phi_k^2), Var(w_k) = q2 dt_k (1 + phi_k^2) / 2 (the trapezoid of
+    q2 int exp(2 int_s^t -kappa) ds over the step), below it -phi_k var_e."""
     dt = jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
     ve = var_e[:, None]
     first = jnp.arange(time_s.shape[-1]) == 0
-    diag = jnp.where(mask, jnp.where(first, ve, q2 * dt + 2.0 * ve), 1.0)
+    if phi is None:
+        step_var, lag = q2 * dt + 2.0 * ve, -ve
+    else:
+        both = 1.0 + phi**2
+        step_var, lag = 0.5 * q2 * dt * both + ve * both, -phi * ve
+    diag = jnp.where(mask, jnp.where(first, ve, step_var), 1.0)
     prev_ok = jnp.concatenate([jnp.zeros_like(mask[:, :1]), mask[:, :-1]], axis=1)
-    lower = jnp.where(mask & prev_ok, -ve, 0.0)   # T[k, k-1]; T[0, -1] is not used
+    lower = jnp.where(mask & prev_ok, jnp.broadcast_to(lag, mask.shape), 0.0)   # T[k, k-1]; T[0, -1] is not used
     upper = jnp.concatenate([lower[:, 1:], jnp.zeros_like(lower[:, :1])], axis=1)
     return lower, diag, upper
+
+
+def tridiagonal_logdet(lower: Array, diag: Array, upper: Array) -> Array:
+    """[R] log det of symmetric positive-definite tridiagonal matrices (the Thomas pivots
+    d_i = diag_i - lower_i upper_{i-1} / d_{i-1}, one ``lax.scan`` over N)."""
+    lo, dg, up = (jnp.swapaxes(x, 0, 1) for x in (lower, diag, upper))     # [N, R]
+    up_prev = jnp.concatenate([jnp.zeros_like(up[:1]), up[:-1]], axis=0)
+
+    def step(d_prev, xs):
+        l_i, m_i, u_prev = xs
+        d = m_i - l_i * u_prev / d_prev
+        return d, jnp.log(d)
+
+    lo = lo.at[0].set(0.0)
+    _, logs = jax.lax.scan(step, jnp.ones_like(dg[0]), (lo, dg, up_prev))
+    return jnp.sum(logs, axis=0)
+
+
+def reversion_factors(time_s: Array, mask: Array, kappa: Array) -> Array:
+    """[R, N] phi_k = exp(-(kappa_{k-1} + kappa_k) dt_k / 2): how much of the residual's
+    integrated error survives the step to sample k when the error reverts at the rate
+    ``kappa`` ([R, N], 1/s; :func:`bayes_roadload.physics.integrate.reversion_rate`); 1 at the
+    first sample and on padding."""
+    dt = jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
+    k_prev = jnp.concatenate([kappa[:, :1], kappa[:, :-1]], axis=1)
+    return jnp.where(mask, jnp.exp(-0.5 * (k_prev + kappa) * dt), 1.0)
+
+
+def reverting_loglik_batch(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array,
+                           phi: Array) -> Array:
+    """[R] log-likelihoods of R runs' residuals when the integrated error reverts to zero:
+
+        delta_k = phi_k delta_{k-1} + w_k,   r_k = delta_k + e_k,   delta_0 = 0,
+
+    the linearisation of the equation of motion about the model's trajectory (a force error
+    that moves the true speed also moves the truth's speed-dependent losses, which the model
+    evaluates at its own speed).  ``phi`` from :func:`reversion_factors`; phi = 1 is
+    :func:`local_level_loglik_batch`.  The quasi-differenced residuals have a tridiagonal
+    covariance (:func:`_tridiagonal`): one banded solve and its pivots' log determinant,
+    differentiated by JAX through the scans (phi depends on the coefficients)."""
+    sigma = jnp.broadcast_to(jnp.asarray(sigma, residual.dtype), residual.shape[:1])
+    time_s, mask = jnp.asarray(time_s, residual.dtype), jnp.asarray(mask, bool)
+    q = jnp.asarray(q, residual.dtype)
+    lower, diag, upper = _tridiagonal(time_s, mask, sigma**2, q**2, phi)
+    y = _difference(residual, mask, phi)
+    w = tridiagonal_solve(lower, diag, upper, y[..., None])[..., 0]
+    n = mask.sum(axis=1)
+    return -0.5 * (n * _LOG_2PI + tridiagonal_logdet(lower, diag, upper) + jnp.sum(y * w, axis=1))
 
 
 def _batch_loglik(residual, time_s, mask, var_e, q2, grid):
@@ -284,17 +343,18 @@ def local_level_loglik_batch(residual: Array, time_s: Array, mask: Array, sigma:
     return _batch_loglik(residual, jnp.asarray(time_s, residual.dtype), jnp.asarray(mask, bool), sigma**2, q**2, grid)
 
 
-def _effect_terms(residual, time_s, mask, sigma, q, design):
+def _effect_terms(residual, time_s, mask, sigma, q, design, phi=None):
     """G = J^T Sigma^-1 J ([R, k, k]) and b = J^T Sigma^-1 r ([R, k]) for the residual
-    covariance Sigma of each run, through the same banded form (differentiable)."""
+    covariance Sigma of each run, through the same banded form (differentiable); ``phi`` as
+    in :func:`reverting_loglik_batch`."""
     sigma = jnp.broadcast_to(jnp.asarray(sigma, residual.dtype), residual.shape[:1])
     time_s, mask = jnp.asarray(time_s, residual.dtype), jnp.asarray(mask, bool)
-    lower, diag, upper = _tridiagonal(time_s, mask, sigma**2, jnp.asarray(q, residual.dtype) ** 2)
+    lower, diag, upper = _tridiagonal(time_s, mask, sigma**2, jnp.asarray(q, residual.dtype) ** 2, phi)
 
-    dj = _difference(jnp.asarray(design, residual.dtype), mask)            # [R, N, k]
+    dj = _difference(jnp.asarray(design, residual.dtype), mask, phi)       # [R, N, k]
     w = tridiagonal_solve(lower, diag, upper, dj)                          # T^-1 D J
     g = jnp.einsum("rnk,rnl->rkl", dj, w)
-    b = jnp.einsum("rnk,rn->rk", w, _difference(residual, mask))
+    b = jnp.einsum("rnk,rn->rk", w, _difference(residual, mask, phi))
     return g, b
 
 
@@ -313,7 +373,7 @@ def _effect_posterior(g, b, effect_var):
 
 
 def local_level_loglik_effects(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array,
-                               design: Array, effect_var: Array) -> Array:
+                               design: Array, effect_var: Array, phi: Array | None = None) -> Array:
     """[R] log-likelihoods of R runs' residuals when each run also carries its own effect
     ``J_r delta_r`` with ``delta_r ~ N(0, diag(effect_var))`` integrated out:
     ``r_r ~ N(0, Sigma_r + J_r diag(effect_var) J_r^T)``.
@@ -321,17 +381,20 @@ def local_level_loglik_effects(residual: Array, time_s: Array, mask: Array, sigm
     ``design`` [R, N, k] is J_r (how the run's speed trace responds to the k effects); by
     Woodbury the likelihood is :func:`local_level_loglik_batch` plus
     ``b^T (T^-1 + G)^-1 b / 2 - log det(I + T^1/2 G T^1/2) / 2`` with ``G = J^T Sigma^-1 J``,
-    ``b = J^T Sigma^-1 r``, ``T = diag(effect_var)``: k extra banded solves per run.
+    ``b = J^T Sigma^-1 r``, ``T = diag(effect_var)``: k extra banded solves per run.  With
+    ``phi`` the residual's error reverts (:func:`reverting_loglik_batch`).
     """
-    g, b = _effect_terms(residual, time_s, mask, sigma, q, design)
+    g, b = _effect_terms(residual, time_s, mask, sigma, q, design, phi)
     _, _, correction = _effect_posterior(g, b, effect_var)
+    if phi is not None:
+        return reverting_loglik_batch(residual, time_s, mask, sigma, q, phi) + correction
     return local_level_loglik_batch(residual, time_s, mask, sigma, q) + correction
 
 
 def local_level_effects_posterior(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array,
-                                  design: Array, effect_var: Array) -> tuple[Array, Array]:
+                                  design: Array, effect_var: Array, phi: Array | None = None) -> tuple[Array, Array]:
     """Conditional posterior mean [R, k] and covariance [R, k, k] of the run effects of
     :func:`local_level_loglik_effects` given the residuals."""
-    g, b = _effect_terms(residual, time_s, mask, sigma, q, design)
+    g, b = _effect_terms(residual, time_s, mask, sigma, q, design, phi)
     mean, cov, _ = _effect_posterior(g, b, effect_var)
     return mean, cov

@@ -142,3 +142,61 @@ def test_tridiagonal_solver_equals_lapack():
     rhs = rng.normal(size=(r, n, k))
     args = tuple(jnp.asarray(a) for a in (lower, diag, upper, rhs))
     np.testing.assert_allclose(tridiagonal_solve(*args), jax.lax.linalg.tridiagonal_solve(*args), rtol=1e-12, atol=1e-14)
+
+
+def _reverting_dense_covariance(t, phi, sigma, q):
+    """Cov(r) of delta_k = phi_k delta_{k-1} + w_k, Var(w_k) = q^2 dt_k (1 + phi_k^2) / 2,
+    delta_0 = 0, r = delta + e: delta = L w with L[k, j] = prod_{i=j+1..k} phi_i."""
+    n = t.size
+    dt = np.diff(t, prepend=t[0])
+    var_w = q**2 * dt * (1.0 + phi**2) / 2.0
+    var_w[0] = 0.0
+    lower = np.zeros((n, n))
+    for k in range(n):
+        for j in range(1, k + 1):
+            lower[k, j] = np.prod(phi[j + 1:k + 1])
+    return lower @ np.diag(var_w) @ lower.T + sigma**2 * np.eye(n)
+
+
+def test_reverting_loglik_equals_dense_gaussian_and_the_walk_at_phi_one():
+    """The quasi-differenced banded likelihood of a reverting error equals the dense normal of
+    its covariance (padded samples add nothing), reduces to the random walk's at phi = 1, and
+    its run effects' posterior equals the dense Gaussian conditional."""
+    from bayes_roadload.physics.residuals import (local_level_effects_posterior, local_level_loglik_effects,
+                                                  reversion_factors, reverting_loglik_batch)
+
+    rng = np.random.default_rng(11)
+    r_runs, n = 2, 40
+    t = np.tile(np.arange(n) * 0.25, (r_runs, 1))
+    mask = np.ones((r_runs, n), bool)
+    mask[1, 31:] = False
+    t[1, 31:] = t[1, 30]
+    kappa = rng.uniform(0.05, 0.6, (r_runs, n))
+    sigma, q = np.array([0.05, 0.02]), 0.3
+    resid = rng.normal(0, 0.1, (r_runs, n))
+    phi = np.asarray(reversion_factors(jnp.asarray(t), jnp.asarray(mask), jnp.asarray(kappa)))
+    assert np.all(phi[mask] <= 1.0) and np.all(phi[:, 0] == 1.0)
+    ll = reverting_loglik_batch(jnp.asarray(resid), jnp.asarray(t), jnp.asarray(mask), jnp.asarray(sigma), q,
+                                jnp.asarray(phi))
+    design = rng.normal(size=(r_runs, n, 2))
+    design[~mask] = 0.0
+    tau2 = np.array([0.04, 0.09])
+    ll_eff = local_level_loglik_effects(jnp.asarray(resid), jnp.asarray(t), jnp.asarray(mask), jnp.asarray(sigma), q,
+                                        jnp.asarray(design), jnp.asarray(tau2), jnp.asarray(phi))
+    mean, _ = local_level_effects_posterior(jnp.asarray(resid), jnp.asarray(t), jnp.asarray(mask), jnp.asarray(sigma),
+                                            q, jnp.asarray(design), jnp.asarray(tau2), jnp.asarray(phi))
+    for i in range(r_runs):
+        m = mask[i]
+        cov = _reverting_dense_covariance(t[i, m], phi[i, m], sigma[i], q)
+        assert float(ll[i]) == pytest.approx(stats.multivariate_normal(np.zeros(m.sum()), cov).logpdf(resid[i, m]),
+                                             rel=1e-10)
+        j = design[i, m]
+        marginal = cov + j @ np.diag(tau2) @ j.T
+        assert float(ll_eff[i]) == pytest.approx(
+            stats.multivariate_normal(np.zeros(m.sum()), marginal).logpdf(resid[i, m]), rel=1e-10)
+        dense_mean = np.diag(tau2) @ j.T @ np.linalg.solve(marginal, resid[i, m])
+        np.testing.assert_allclose(np.asarray(mean[i]), dense_mean, rtol=1e-8)
+    walk = reverting_loglik_batch(jnp.asarray(resid), jnp.asarray(t), jnp.asarray(mask), jnp.asarray(sigma), q,
+                                  jnp.ones((r_runs, n)))
+    np.testing.assert_allclose(walk, local_level_loglik_batch(jnp.asarray(resid), jnp.asarray(t), jnp.asarray(mask),
+                                                               jnp.asarray(sigma), q), rtol=1e-12)
