@@ -176,15 +176,18 @@ def test_reverting_loglik_equals_dense_gaussian_and_the_walk_at_phi_one():
     resid = rng.normal(0, 0.1, (r_runs, n))
     phi = np.asarray(reversion_factors(jnp.asarray(t), jnp.asarray(mask), jnp.asarray(kappa)))
     assert np.all(phi[mask] <= 1.0) and np.all(phi[:, 0] == 1.0)
-    ll = reverting_loglik_batch(jnp.asarray(resid), jnp.asarray(t), jnp.asarray(mask), jnp.asarray(sigma), q,
-                                jnp.asarray(phi))
     design = rng.normal(size=(r_runs, n, 2))
     design[~mask] = 0.0
     tau2 = np.array([0.04, 0.09])
-    ll_eff = local_level_loglik_effects(jnp.asarray(resid), jnp.asarray(t), jnp.asarray(mask), jnp.asarray(sigma), q,
-                                        jnp.asarray(design), jnp.asarray(tau2), jnp.asarray(phi))
-    mean, _ = local_level_effects_posterior(jnp.asarray(resid), jnp.asarray(t), jnp.asarray(mask), jnp.asarray(sigma),
-                                            q, jnp.asarray(design), jnp.asarray(tau2), jnp.asarray(phi))
+
+    @jax.jit
+    def all_three(res, ph):
+        args = (res, jnp.asarray(t), jnp.asarray(mask), jnp.asarray(sigma), q)
+        return (reverting_loglik_batch(*args, ph),
+                local_level_loglik_effects(*args, jnp.asarray(design), jnp.asarray(tau2), ph),
+                local_level_effects_posterior(*args, jnp.asarray(design), jnp.asarray(tau2), ph)[0])
+
+    ll, ll_eff, mean = all_three(jnp.asarray(resid), jnp.asarray(phi))
     for i in range(r_runs):
         m = mask[i]
         cov = _reverting_dense_covariance(t[i, m], phi[i, m], sigma[i], q)
@@ -196,7 +199,6 @@ def test_reverting_loglik_equals_dense_gaussian_and_the_walk_at_phi_one():
             stats.multivariate_normal(np.zeros(m.sum()), marginal).logpdf(resid[i, m]), rel=1e-10)
         dense_mean = np.diag(tau2) @ j.T @ np.linalg.solve(marginal, resid[i, m])
         np.testing.assert_allclose(np.asarray(mean[i]), dense_mean, rtol=1e-8)
-    walk = reverting_loglik_batch(jnp.asarray(resid), jnp.asarray(t), jnp.asarray(mask), jnp.asarray(sigma), q,
-                                  jnp.ones((r_runs, n)))
+    walk = all_three(jnp.asarray(resid), jnp.ones((r_runs, n)))[0]
     np.testing.assert_allclose(walk, local_level_loglik_batch(jnp.asarray(resid), jnp.asarray(t), jnp.asarray(mask),
                                                                jnp.asarray(sigma), q), rtol=1e-12)
