@@ -267,6 +267,26 @@ def reversion_factors(time_s: Array, mask: Array, kappa: Array) -> Array:
     return jnp.where(mask, jnp.exp(-0.5 * (k_prev + kappa) * dt), 1.0)
 
 
+def integrated_error_draws(time_s: Array, q: Array, normals: Array, phi: Array | None = None) -> Array:
+    """[R, N] draws of the residual's integrated error delta from standard normals [R, N]:
+    the random walk delta_k = delta_{k-1} + q sqrt(dt_k) z_k, or with ``phi``
+    (:func:`reversion_factors`) the reverting delta_k = phi_k delta_{k-1} + w_k,
+    Var(w_k) = q^2 dt_k (1 + phi_k^2) / 2 -- the processes the two likelihoods score
+    (delta_0 = 0: dt_0 = 0)."""
+    dt = jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
+    if phi is None:
+        return jnp.cumsum(q * jnp.sqrt(dt) * normals, axis=-1)
+    w = q * jnp.sqrt(0.5 * dt * (1.0 + phi**2)) * normals
+
+    def step(prev, xs):
+        ph, wk = xs
+        cur = ph * prev + wk
+        return cur, cur
+
+    _, out = jax.lax.scan(step, jnp.zeros_like(w[..., 0]), (jnp.moveaxis(phi, -1, 0), jnp.moveaxis(w, -1, 0)))
+    return jnp.moveaxis(out, 0, -1)
+
+
 def reverting_loglik_batch(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array,
                            phi: Array) -> Array:
     """[R] log-likelihoods of R runs' residuals when the integrated error reverts to zero:

@@ -202,3 +202,22 @@ def test_reverting_loglik_equals_dense_gaussian_and_the_walk_at_phi_one():
     walk = all_three(jnp.asarray(resid), jnp.ones((r_runs, n)))[0]
     np.testing.assert_allclose(walk, local_level_loglik_batch(jnp.asarray(resid), jnp.asarray(t), jnp.asarray(mask),
                                                                jnp.asarray(sigma), q), rtol=1e-12)
+
+
+def test_error_draws_have_the_covariance_the_likelihoods_score():
+    """The posterior predictive's draws of the integrated error are a linear map of standard
+    normals; with the unit vectors as normals its columns give the covariance exactly: the
+    random walk's q^2 min(t_i, t_j) and the reverting error's covariance of
+    :func:`_reverting_dense_covariance` (without the white noise)."""
+    from bayes_roadload.physics.residuals import integrated_error_draws, reversion_factors
+
+    n, q = 25, 0.3
+    t = np.cumsum(np.r_[0.0, np.full(n - 1, 0.25)])
+    kappa = np.random.default_rng(3).uniform(0.05, 0.6, n)
+    phi = np.asarray(reversion_factors(jnp.asarray(t[None]), jnp.ones((1, n), bool), jnp.asarray(kappa[None])))[0]
+    eye = jnp.eye(n)                                   # row k: the unit normal vector e_k
+    tt = jnp.broadcast_to(jnp.asarray(t), (n, n))
+    walk = np.asarray(integrated_error_draws(tt, q, eye)).T          # [sample, normal]
+    np.testing.assert_allclose(walk @ walk.T, dense_covariance(t, 0.0, q), atol=1e-12)
+    rev = np.asarray(integrated_error_draws(tt, q, eye, jnp.broadcast_to(jnp.asarray(phi), (n, n)))).T
+    np.testing.assert_allclose(rev @ rev.T, _reverting_dense_covariance(t, phi, 0.0, q), atol=1e-12)
