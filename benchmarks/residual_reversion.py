@@ -19,11 +19,10 @@ Run::
 
     python benchmarks/residual_reversion.py > benchmarks/records/sbc/residual_reversion.log
 """
-import dataclasses
 
 import numpy as np
 
-from bayes_roadload.analysis.sbc import COEFFICIENTS, DRIVELINE, SBC_MODEL, draw_from_prior, sbc_case
+from bayes_roadload.analysis.sbc import SBC_MODEL, draw_from_prior, sbc_case, with_drawn_truth
 from bayes_roadload.inference.bayes import build_problem, integrated_speed
 from bayes_roadload.simulate import SimulationSettings, simulate_campaign
 
@@ -42,11 +41,8 @@ def ou_ratio(t: np.ndarray, kappa: np.ndarray, k: int) -> float:
 def main() -> None:
     base = SimulationSettings()
     drawn = draw_from_prior(SBC_MODEL, 2000)
-    settings = dataclasses.replace(
-        base, speed_noise_mps=0.0, airspeed_noise_mps=0.0, yaw_noise_rad=0.0, driveline_noise_n=0.0,
-        random_force_mps_per_sqrt_s=Q,
-        coefficients={**base.coefficients, **{k: v for k, v in drawn.items() if k in COEFFICIENTS}},
-        driveline_params={**base.driveline_params, **{k: v for k, v in drawn.items() if k in DRIVELINE}})
+    settings = with_drawn_truth(base, drawn, speed_noise_mps=0.0, airspeed_noise_mps=0.0, yaw_noise_rad=0.0,
+                                driveline_noise_n=0.0, random_force_mps_per_sqrt_s=Q)
     measured = {T: [] for T in TIMES_S}
     predicted = {T: [] for T in TIMES_S}
     for s in range(CAMPAIGNS):

@@ -16,13 +16,12 @@ Run::
     python benchmarks/sbc_replicates.py default 40 0 > benchmarks/records/sbc/replicates_default.log
     python benchmarks/sbc_replicates.py no_input_noise 40 0 > benchmarks/records/sbc/replicates_no_input_noise.log
 """
-import dataclasses
 import json
 import sys
 
 import numpy as np
 
-from bayes_roadload.analysis.sbc import COEFFICIENTS, DRIVELINE, SBC_MODEL, draw_from_prior, sbc_case
+from bayes_roadload.analysis.sbc import SBC_MODEL, draw_from_prior, sbc_case, with_drawn_truth
 from bayes_roadload.inference.laplace import fit_laplace
 from bayes_roadload.simulate import SimulationSettings, simulate_campaign
 
@@ -34,10 +33,7 @@ def main(variant: str, n: int, truth_seed: int = 0) -> None:
     kw = {"default": {}, "no_input_noise": dict(airspeed_noise_mps=0.0, yaw_noise_rad=0.0),
           "no_airspeed_noise": dict(airspeed_noise_mps=0.0), "no_yaw_noise": dict(yaw_noise_rad=0.0)}[variant]
     drawn = draw_from_prior(SBC_MODEL, truth_seed * 1000)
-    settings = dataclasses.replace(
-        base, **kw,
-        coefficients={**base.coefficients, **{k: v for k, v in drawn.items() if k in COEFFICIENTS}},
-        driveline_params={**base.driveline_params, **{k: v for k, v in drawn.items() if k in DRIVELINE}})
+    settings = with_drawn_truth(base, drawn, **kw)
     rows = []
     for s in range(n):
         c = simulate_campaign(sbc_case(), 2, 100 + s, driveline=True, settings=settings)

@@ -24,7 +24,7 @@ Records (2026-11-27, Q = 0.006, truth seed 2): ``benchmarks/records/sbc/walk_arm
 import sys, dataclasses, json
 import numpy as np
 from bayes_roadload import config
-from bayes_roadload.analysis.sbc import sbc_case, draw_from_prior, SBC_MODEL, COEFFICIENTS, DRIVELINE
+from bayes_roadload.analysis.sbc import SBC_MODEL, draw_from_prior, sbc_case, with_drawn_truth
 from bayes_roadload.simulate import SimulationSettings, simulate_campaign
 from bayes_roadload.inference.laplace import fit_laplace
 from bayes_roadload.inference.bayes import build_problem, integrated_speed
@@ -33,9 +33,7 @@ from bayes_roadload.data.campaign import Campaign
 arm = sys.argv[1]; n = int(sys.argv[2]); q = float(sys.argv[3]); tseed = int(sys.argv[4]); off = int(sys.argv[5]) if len(sys.argv) > 5 else 0
 base = SimulationSettings()
 drawn = draw_from_prior(SBC_MODEL, tseed * 1000)
-settings = dataclasses.replace(base,
-    coefficients={**base.coefficients, **{k: v for k, v in drawn.items() if k in COEFFICIENTS}},
-    driveline_params={**base.driveline_params, **{k: v for k, v in drawn.items() if k in DRIVELINE}})
+settings = with_drawn_truth(base, drawn)
 P = ["AD", "BD", "CD0", "KD", "At", "Bt"]
 rows = []
 for s in range(off, off + n):

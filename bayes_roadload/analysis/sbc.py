@@ -94,6 +94,16 @@ def draw_from_prior(model: str, seed: int) -> dict[str, float]:
     return {p: float(spec.priors[p].to_numpyro().sample(k)) for p, k in zip(spec.free, keys)}
 
 
+def with_drawn_truth(settings: Any, drawn: dict[str, float], **changes: Any) -> Any:
+    """Simulation ``settings`` whose true coefficients (A_D, B_D, C_D0, K_D) and driveline
+    (A_t, B_t, C_t) are those of ``drawn`` (:func:`draw_from_prior`), other values kept;
+    ``changes`` replace further settings."""
+    return dataclasses.replace(
+        settings, **changes,
+        coefficients={**settings.coefficients, **{k: v for k, v in drawn.items() if k in COEFFICIENTS}},
+        driveline_params={**settings.driveline_params, **{k: v for k, v in drawn.items() if k in DRIVELINE}})
+
+
 @dataclass(frozen=True)
 class PriorDrawnCampaign:
     """A picklable recipe: true coefficients drawn from ``model``'s priors, then a simulated
@@ -151,9 +161,7 @@ class PriorDrawnCampaign:
             unknown = set(drawn) - set(COEFFICIENTS) - set(DRIVELINE)
             if unknown:
                 raise ValueError(f"cannot simulate drawn {', '.join(sorted(unknown))}")
-            settings = dataclasses.replace(
-                base, coefficients={**base.coefficients, **{k: v for k, v in drawn.items() if k in COEFFICIENTS}},
-                driveline_params={**base.driveline_params, **{k: v for k, v in drawn.items() if k in DRIVELINE}})
+            settings = with_drawn_truth(base, drawn)
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("error", RuntimeWarning)
