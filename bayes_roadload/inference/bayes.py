@@ -467,18 +467,19 @@ def _residuals_and_reversion(problem: FitProblem, sample: dict[str, jnp.ndarray]
     model's trajectory (hierarchical: each run's at its reference coefficients); else None."""
     if problem.noise != "reverting":
         return (effect_residuals(problem, sample) if problem.varying else speed_residuals(problem, sample)), None
+    response = _offset_response(problem) if problem.varying else 0.0  # first: it names a missing linearisation
+    at = _shifted(problem, sample) if problem.varying else sample
+    speed = integrated_speed(problem, at)
+    return problem.batch.speed_mps - speed + response, reversion_along(problem, at, speed)
+
+
+def reversion_along(problem: FitProblem, sample: dict[str, jnp.ndarray], speed: jnp.ndarray) -> jnp.ndarray:
+    """[R, N] factors phi (:func:`~bayes_roadload.physics.residuals.reversion_factors`) of the
+    integrated error's reversion at the rate
+    :func:`~bayes_roadload.physics.integrate.reversion_rate` along ``speed``, the trajectory
+    of ``sample``'s coefficients."""
     b = problem.batch
-    if problem.varying:
-        shifted = _shifted(problem, sample)
-        speed = integrated_speed(problem, shifted)
-        resid = b.speed_mps - speed + jnp.einsum("rnk,rk->rn", _design(problem), jnp.asarray(problem.run_offsets))
-        params = run_parameters(problem, shifted)
-    else:
-        speed = integrated_speed(problem, sample)
-        resid = b.speed_mps - speed
-        params = run_parameters(problem, sample)
-    kappa = reversion_rate(problem.model, params, b, speed)
-    return resid, reversion_factors(b.time_s, b.mask, kappa)
+    return reversion_factors(b.time_s, b.mask, reversion_rate(problem.model, run_parameters(problem, sample), b, speed))
 
 
 def _design(problem: FitProblem) -> jnp.ndarray:
@@ -503,9 +504,13 @@ def effect_residuals(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> jnp
     (:func:`linearise_run_effects`), so that ``y_r ~ v_r(theta + d_r) + J_r (delta_r - d_r)``:
     the first-order expansion is taken at each run's own coefficients, and its error is
     second order in the run's posterior uncertainty, not in its offset from the mean."""
-    design = _design(problem)
-    return speed_residuals(problem, _shifted(problem, sample)) + jnp.einsum("rnk,rk->rn", design,
-                                                                            jnp.asarray(problem.run_offsets))
+    response = _offset_response(problem)  # first: it names the missing linearisation
+    return speed_residuals(problem, _shifted(problem, sample)) + response
+
+
+def _offset_response(problem: FitProblem) -> jnp.ndarray:
+    """[R, N] J_r d_r: each run's first-order response to its reference offset."""
+    return jnp.einsum("rnk,rk->rn", _design(problem), jnp.asarray(problem.run_offsets))
 
 
 def _shifted(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:

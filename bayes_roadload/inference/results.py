@@ -31,9 +31,8 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from ..physics.integrate import reversion_rate
-from ..physics.residuals import integrated_error_draws, reversion_factors
-from .bayes import FitProblem, integrated_speed, run_log_likelihood, run_parameters
+from ..physics.residuals import integrated_error_draws
+from .bayes import FitProblem, integrated_speed, reversion_along, run_log_likelihood
 from .nuts import NutsFit
 from .problem import ROAD_LOAD_DERIVED, road_load_truth
 
@@ -97,9 +96,8 @@ def posterior_predictive(fit: NutsFit, n_draws: int | None = None, seed: int = 1
         v = integrated_speed(p, sample)
         k1, k2 = jax.random.split(k)
         q = sample.get("q_mps_per_sqrt_s", jnp.zeros(()))
-        phi = None
-        if p.noise == "reverting":  # the error reverts along this draw's trajectory, as the likelihood scores it
-            phi = reversion_factors(batch.time_s, batch.mask, reversion_rate(p.model, run_parameters(p, sample), batch, v))
+        # a reverting error reverts along this draw's trajectory, as the likelihood scores it
+        phi = reversion_along(p, sample, v) if p.noise == "reverting" else None
         walk = integrated_error_draws(batch.time_s, q, jax.random.normal(k1, v.shape), phi)
         sigma = jnp.sqrt(sample["sigma_mps"] ** 2 + config.SPEED_NOISE_FLOOR_MPS**2)  # the likelihood's noise
         noise = sigma[:, None] * jax.random.normal(k2, v.shape)
