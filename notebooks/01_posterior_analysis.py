@@ -36,6 +36,7 @@ import matplotlib
 
 matplotlib.use(os.environ.get("MPLBACKEND", "Agg"))
 import arviz as az
+import jax
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
@@ -127,12 +128,21 @@ print("fraction of measured speeds inside the 95 % predictive band:", np.round(i
 
 # %%
 speeds = np.linspace(5.0, 31.3, 60)
-draws = {k: v.reshape(-1) for k, v in samples.items()}
-n_draws = next(iter(draws.values())).size
-curves = np.stack([
-    sum(road_load_parts_n(problem.model, dict(problem.fixed, **{k: v[i] for k, v in draws.items()}),
-                          speeds, problem.mass_kg, problem.frontal_area_m2).values())
-    for i in range(0, n_draws, max(1, n_draws // 200))])
+n_draws = samples["CD0"].size
+every = max(1, n_draws // 200)  # about 200 draws
+draws = {k: v.reshape(-1)[::every] for k, v in samples.items() if v.size == n_draws}
+
+
+@jax.jit
+@jax.vmap
+def road_load_n(p):
+    """Total road load at ``speeds`` for one draw ``p`` (vectorised over the draws)."""
+    parts = road_load_parts_n(problem.model, dict(problem.fixed, **p), speeds, problem.mass_kg,
+                              problem.frontal_area_m2)
+    return sum(parts.values())
+
+
+curves = np.asarray(road_load_n(draws))
 lo, mid, hi = np.percentile(curves, [2.5, 50, 97.5], axis=0)
 plt.figure(figsize=(6, 4))
 plt.fill_between(speeds * 3.6, lo, hi, alpha=0.4, label="95 % band")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import io
 import time
 import traceback
@@ -74,6 +75,14 @@ def draw(seed: int, invalid: bool = False) -> dict:
 
 
 def _trace_campaign(d: dict):
+    """The simulated speed-trace campaign of draw ``d`` (its ``invalid`` entry aside), simulated
+    once per process: the invalid draws break copies of one campaign's files."""
+    return _simulated(tuple(sorted((k, v) for k, v in d.items() if k != "invalid")))
+
+
+@functools.lru_cache(maxsize=4)
+def _simulated(items: tuple):
+    d = dict(items)
     mass, area, length, ad, bd, cd0 = VEHICLES[d["vehicle"]]
     veh = Vehicle(mass_kg=mass, effective_mass_kg=1.03 * mass, frontal_area_m2=area, length_m=length)
     case = SimulationCase(number=900, description="robustness draw", head_wind_mps=d["head_wind_mps"],
