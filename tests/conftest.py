@@ -40,6 +40,34 @@ def pytest_configure(config):
     config._bayes_roadload_cache = path
 
 
+LONGEST_FIRST = (
+    "tests/output/test_report.py",  # computes the shared command-line fit (cli_nuts_fit) ...
+    "tests/inference/test_nuts.py",  # ... and the shared NUTS fit (pooled_fit)
+    "tests/analysis/test_budget.py",
+    "tests/physics/test_integrate.py",
+    "tests/inference/test_calibration_model.py",
+    "tests/inference/test_lsq.py",
+    "tests/analysis/test_calibration.py",
+    "tests/simulate/test_campaign.py",
+    "tests/inference/test_bayes.py",
+    "tests/test_cli_demo_and_plan.py",
+    "tests/analysis/test_diagnose.py",
+    "tests/test_cli.py",  # reads cli_nuts_fit: after test_report has started it
+    "tests/test_notebooks.py",  # likewise
+)
+"""Test modules that took 40-100 s each in the default run (``--durations``, 2 workers), in
+the order the two workers are handed them: longest first, so that the run does not end with one
+worker on a long module while the other waits (--no-loadscope-reorder in pyproject.toml keeps
+this order; xdist's own reorder is by number of tests).  The other modules follow in their
+collection order."""
+
+
+def pytest_collection_modifyitems(config, items):
+    """Modules in :data:`LONGEST_FIRST` order, then the rest as collected (stable)."""
+    rank = {path: i for i, path in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.nodeid.split("::", 1)[0], len(rank)))
+
+
 def pytest_unconfigure(config):
     path = getattr(config, "_bayes_roadload_cache", None)
     if path:
@@ -94,7 +122,11 @@ def small_campaign():
 def computed_once(request, tmp_path_factory, name: str, compute):
     """``compute()``, shared by the run's worker processes: the first worker to need it computes
     it and leaves it pickled in the run's base directory, where a later worker reads it.  A
-    worker that needs it while another is computing it computes its own (it does not wait)."""
+    worker that needs it while another is computing it waits for it (computing its own copy
+    alongside took the other worker's core: the suite's CPU is saturated); it computes its own
+    only when the first left no file (its computation raised).  ``compute`` must not call
+    :func:`computed_once` itself: two workers each holding one lock and waiting for the other's
+    would wait for ever."""
     worker_id = getattr(request.config, "workerinput", {}).get("workerid")
     if worker_id is None:  # one process: the session fixture alone shares it
         return compute()
@@ -106,10 +138,7 @@ def computed_once(request, tmp_path_factory, name: str, compute):
     if data.is_file():
         return pickle.loads(data.read_bytes())
     with open(root / f"{name}.lock", "w") as lock:
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            return compute()
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the holder finishes, or its process ends
         if data.is_file():  # written by the worker that held the lock before
             return pickle.loads(data.read_bytes())
         value = compute()
