@@ -42,12 +42,13 @@ def pairs_of(seed: int, lo: int, hi: int) -> int:
 
 def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
                      options: FitOptions | None = None, model: str = "four_term") -> list[FitJob]:
-    """One fit job per seed, with the default fit options (or ``options``) and ``model``
-    (``fit``'s default for speed traces unless given)."""
+    """One fit job per seed, with the default fit options (or ``options``: method, pooling,
+    noise, robust, sampler and Type B budget pass through) and ``model`` (``fit``'s default for
+    speed traces unless given)."""
     o = options or FitOptions()
     return [FitJob(f"ind-{s}", functools.partial(simulate_independent, s, pairs=pairs_of(s, lo, hi)), model=model,
-                   pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler,
-                   derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi)})
+                   method=o.method, pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler,
+                   type_b=o.type_b, derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi)})
             for s in seeds]
 
 

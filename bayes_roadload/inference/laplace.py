@@ -141,7 +141,7 @@ class CompiledProblem:
             return jax.lax.map(lambda y: objective(y, data), ys, batch_size=batch)
 
         self._fns = {
-            "f": jax.jit(objective), "g": jax.jit(jax.grad(objective)), "to_scaled": jax.jit(to_scaled),
+            "fg": jax.jit(jax.value_and_grad(objective)), "to_scaled": jax.jit(to_scaled),
             "f_many": jax.jit(objective_many),
             "constrain": jax.jit(constrain), "constrain_many": jax.jit(jax.vmap(constrain, in_axes=(0, None))),
             "linearise": jax.jit(linearise), "effect_means": jax.jit(effect_means),
@@ -162,10 +162,9 @@ class CompiledProblem:
         constrained starting values ``init``."""
         t0 = time.perf_counter()
         data = _data(problem)
-        f, g = self._fns["f"], self._fns["g"]
+        fg = self._fns["fg"]
         y0 = np.asarray(self._fns["to_scaled"]({k: jnp.asarray(v) for k, v in init.items()}, data))
-        res = newton_map(lambda y: f(y, data), lambda y: g(y, data), y0, self.run_index, self.scale,
-                         max_iter=max_iter)
+        res = newton_map(lambda y: fg(y, data), y0, self.run_index, self.scale, max_iter=max_iter)
         z = self.unravel(jnp.asarray(res["y"] * self.scale))
         constrained = self._fns["constrain"](jnp.asarray(res["y"]), data)
         return MapResult(z=z, constrained=constrained, cov=res["cov"], success=res["success"],

@@ -414,10 +414,10 @@ def _name_of(names: list[str] | None, j: int) -> str:
     return names[j] if names is not None and j < len(names) else f"coordinate {j}"
 
 
-def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *,
+def newton_map(fg, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *,
                max_iter: int = 200, names: list[str] | None = None, progress: bool = False) -> dict[str, Any]:
     """Trust-region Newton (``scipy.optimize.minimize``, ``trust-exact``) on O(1)-scaled
-    coordinates ``y`` with the exact gradient ``g`` and the Hessian by :func:`fd_hessian`,
+    coordinates ``y`` with the exact gradient and the Hessian by :func:`fd_hessian` of it,
     guarded against non-finite values.
 
     * The objective is +inf wherever it, or its gradient, is not finite, so the optimisers
@@ -432,7 +432,9 @@ def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *
 
     Parameters
     ----------
-    f, g : objective and its gradient on the scaled vector.
+    fg : the objective and its gradient on the scaled vector, ``fg(y) -> (value, gradient)``
+        (one compiled program: ``jax.jit(jax.value_and_grad(objective))``; compiling the
+        value on its own as well took a third of the gradient's compilation).
     y0 : scaled start.
     run_index : run of each coordinate (-1 shared), for :func:`fd_hessian`.
     scale : the coordinates' scale (``x = y * scale``).
@@ -469,7 +471,8 @@ def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *
         key = y.tobytes()
         if key not in last:
             with np.errstate(all="ignore"):
-                v, d = float(f(y)), np.asarray(g(y), float)
+                v, d = fg(y)
+                v, d = float(v), np.asarray(d, float)
             ok = math.isfinite(v) and bool(np.all(np.isfinite(d)))
             last.clear()
             last[key] = (v, d) if ok else (math.inf, np.zeros_like(y))
@@ -485,8 +488,11 @@ def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *
     def jac(y):
         return evaluate(y)[1]
 
-    f0 = float(f(y0))
-    g0 = np.asarray(g(y0), float)
+    def g(y):
+        return fg(y)[1]
+
+    f0, g0 = fg(y0)
+    f0, g0 = float(f0), np.asarray(g0, float)
     if not math.isfinite(f0):
         raise FitStageError("map", f"the log posterior is not finite at the least-squares start ({f0})",
                             remedy="check the campaign for runs whose speed does not decrease; "
@@ -537,8 +543,8 @@ def newton_map(f, g, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *
             raise FitStageError("map", "no finite optimum of the log posterior was found (trust-region Newton "
                                 "and L-BFGS-B both failed)")
     bar.close()
-    fval = float(f(y))
-    grad = np.asarray(g(y), float)
+    fval, grad = fg(y)
+    fval, grad = float(fval), np.asarray(grad, float)
     grad_max = float(np.max(np.abs(grad))) if np.all(np.isfinite(grad)) else math.inf
     try:
         hmat, step = finite_hessian(g, y, run_index, steps=(1e-4, 1e-6, 1e-3))
@@ -581,7 +587,7 @@ def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200,
             return post.potential_fn(post.unravel(y * scale))
 
         log.info("MAP: %d unknowns, trust-region Newton from the least-squares start ...", post.flat0.size)
-        res = newton_map(jax.jit(objective), jax.jit(jax.grad(objective)), post.flat0 / scale, post.run_index,
+        res = newton_map(jax.jit(jax.value_and_grad(objective)), post.flat0 / scale, post.run_index,
                          scale, max_iter=max_iter, names=_coordinate_names(post.z0), progress=progress)
         z_map = post.unravel(jnp.asarray(res["y"] * scale))
         constrained = post.postprocess_fn(z_map)

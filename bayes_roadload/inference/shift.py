@@ -136,8 +136,7 @@ class SharedPotential:
             problem = _with_leaves(self.template, self.structure, list(leaves))
             return potential_energy(model, (problem,), {}, self.unravel(y * self.scale))
 
-        self._f = jax.jit(objective)
-        self._g = jax.jit(jax.grad(objective, argnums=1))
+        self._fg = jax.jit(jax.value_and_grad(objective, argnums=1))
 
     def data_of(self, problem: Problem) -> list | None:
         leaves: list = []
@@ -152,7 +151,7 @@ class SharedPotential:
         data = self.data_of(problem)
         if data is None:
             return None
-        res = newton_map(lambda y: self._f(data, y), lambda y: self._g(data, y), self.y0, self.run_index, self.scale)
+        res = newton_map(lambda y: self._fg(data, y), self.y0, self.run_index, self.scale)
         if not res["success"]:
             return None
         z = self.unravel(jnp.asarray(res["y"] * self.scale))

@@ -179,7 +179,7 @@ def test_newton_map_survives_a_non_finite_hessian_next_to_the_optimum():
     from bayes_roadload.inference.nuts import newton_map
 
     f, g, c, a = _wall_quadratic(5e-5)
-    res = newton_map(f, g, np.zeros(3), np.full(3, -1), np.ones(3))
+    res = newton_map(lambda y: (f(y), g(y)), np.zeros(3), np.full(3, -1), np.ones(3))
     assert res["success"] and res["map_method"] == "trust-exact"
     assert res["hessian_step"] < 5e-5  # the step had to be smaller than the distance to the wall
     np.testing.assert_allclose(res["y"], c, atol=1e-8)
@@ -194,7 +194,7 @@ def test_newton_map_falls_back_to_lbfgs_and_records_it():
     from bayes_roadload.inference.nuts import newton_map
 
     f, g, c, a = _wall_quadratic(5e-7)
-    res = newton_map(f, g, np.zeros(3), np.full(3, -1), np.ones(3))
+    res = newton_map(lambda y: (f(y), g(y)), np.zeros(3), np.full(3, -1), np.ones(3))
     assert res["map_method"] == "L-BFGS-B" and "trust-exact failed" in res["map_fallback"]
     assert res["hessian_regularised"] and res["hessian_step"] == 0.0
     np.testing.assert_allclose(res["y"], c, atol=1e-6)
@@ -217,7 +217,8 @@ def test_newton_map_names_the_coordinate_with_a_non_finite_gradient_at_the_start
         return d
 
     with pytest.raises(FitStageError) as err:
-        newton_map(f, g, np.ones(4), np.array([-1, -1, 0, 1]), np.ones(4), names=["AD", "BD", "v0_mps[0]", "v0_mps[1]"])
+        newton_map(lambda y: (f(y), g(y)), np.ones(4), np.array([-1, -1, 0, 1]), np.ones(4),
+                   names=["AD", "BD", "v0_mps[0]", "v0_mps[1]"])
     assert err.value.stage == "map" and err.value.parameter == "v0_mps[1]" and err.value.run == 1
     assert "remedy" in str(err.value)
 
