@@ -10,6 +10,14 @@ the mean Laplace sd.  Arms, all with a random-walk intensity Q:
 
 * ``sim``: the simulator's random force (``random_force_mps_per_sqrt_s = Q``), acting inside the
   dynamics (it moves the true speed, the airspeed the vehicle meets, its losses);
+* ``sim_fixed_end``: as ``sim``, but each run ends at the time the run without the force ends
+  (simulated to 4 m/s, cut there), not where its own speed, moved by the walk, falls to the stop
+  speed: the sim arm's one data-selection rule that depends on the walk;
+* ``posthoc_same``: the logged speed of ``sim_fixed_end`` with the other channels (airspeed,
+  yaw, driveline) of the same seed's campaign without the force: the speed's noise is drawn
+  alike with and without the force, so this is the campaign without the force plus the
+  deviation the force made in the true speed (the walk, reverting through every loss,
+  aerodynamic included), which the other channels do not carry;
 * ``posthoc``: the simulator without it, the walk added to the logged speed afterwards;
 * ``exact``: as the exact SBC arm draws: the model's own integration of the noisy logged inputs,
   plus the walk and white noise 0.05 m/s, the driveline channel from the new speeds;
@@ -17,7 +25,9 @@ the mean Laplace sd.  Arms, all with a random-walk intensity Q:
   airspeed and yaw channels afterwards.
 
 Records (2026-11-27, Q = 0.006, truth seed 2): ``benchmarks/records/sbc/walk_arms/*.log``
-(``_b`` files continue an arm at OFFSET 30).
+(``_b`` files continue an arm at OFFSET 30, ``_c`` at OFFSET 43 with N 60; ``sim_fixed_end``
+stopped after 19 replicates and ``posthoc_same`` after 42, both from OFFSET 0, so that they pair
+with ``sim``'s replicates of the same seeds).
 
     python benchmarks/sbc_walk_arms.py sim 30 0.006 2 > benchmarks/records/sbc/walk_arms/arms_sim.log
 """
@@ -48,6 +58,19 @@ for s in range(off, off + n):
     elif arm == "sim":
         c = simulate_campaign(sbc_case(), 2, 100 + s, driveline=True,
                               settings=dataclasses.replace(settings, random_force_mps_per_sqrt_s=q))
+    elif arm in ("sim_fixed_end", "posthoc_same"):
+        ref = simulate_campaign(sbc_case(), 2, 100 + s, driveline=True, settings=settings)
+        c = simulate_campaign(sbc_case(), 2, 100 + s, driveline=True,
+                              settings=dataclasses.replace(settings, random_force_mps_per_sqrt_s=q, stop_speed_mps=4.0))
+        end = ref.runs.groupby("run")["time_s"].max()
+        runs = c.runs[c.runs["time_s"].to_numpy() <= c.runs["run"].map(end).to_numpy()].reset_index(drop=True)
+        assert (runs.groupby("run")["time_s"].max() == end).all(), "a run with the force stopped before the run without it"
+        if arm == "posthoc_same":  # the speed's noise is drawn alike with and without the force (same seed)
+            free = ref.runs.copy()
+            assert np.array_equal(free["time_s"].to_numpy(), runs["time_s"].to_numpy())
+            free["speed_mps"] = runs["speed_mps"].to_numpy()
+            runs = free
+        c = Campaign(runs, c.vehicle, c.anemometer, c.tunnel, c.truth, c.meta)
     else:
         clean = arm == "exact_clean"
         t = simulate_campaign(sbc_case(), 2, 100 + s, driveline=True,
