@@ -22,7 +22,10 @@ the mean Laplace sd.  Arms, all with a random-walk intensity Q:
 * ``exact``: as the exact SBC arm draws: the model's own integration of the noisy logged inputs,
   plus the walk and white noise 0.05 m/s, the driveline channel from the new speeds;
 * ``exact_clean``: as ``exact`` but integrated from noise-free inputs, the noise added to the
-  airspeed and yaw channels afterwards.
+  airspeed and yaw channels afterwards;
+* ``exact_reverting``: as ``exact``, the walk replaced by a deviation that reverts at
+  :data:`KAPPA_PER_S` (an Ornstein-Uhlenbeck process of the same increments over short times),
+  the rate the force's own deviation shows (``benchmarks/force_deviation.py``).
 
 Records (2026-11-27, Q = 0.006, truth seed 2): ``benchmarks/records/sbc/walk_arms/*.log``
 (``_b`` files continue an arm at OFFSET 30, ``_c`` at OFFSET 43 with N 60; ``sim_fixed_end``
@@ -39,6 +42,9 @@ from bayes_roadload.simulate import SimulationSettings, simulate_campaign
 from bayes_roadload.inference.laplace import fit_laplace
 from bayes_roadload.inference.bayes import build_problem, integrated_speed
 from bayes_roadload.data.campaign import Campaign
+
+KAPPA_PER_S = 0.016
+"""Reversion rate of ``exact_reverting`` (1/s)."""
 
 arm = sys.argv[1]; n = int(sys.argv[2]); q = float(sys.argv[3]); tseed = int(sys.argv[4]); off = int(sys.argv[5]) if len(sys.argv) > 5 else 0
 base = SimulationSettings()
@@ -86,7 +92,14 @@ for s in range(off, off + n):
         for r, rid in enumerate(problem.run_ids):
             rows_r = np.flatnonzero((runs["run"] == rid).to_numpy()); m = int(mask[r].sum())
             dt = np.diff(tt[r, :m], prepend=tt[r, 0])
-            walk = np.cumsum(rng.normal(0, 1, m) * q * np.sqrt(dt))
+            if arm == "exact_reverting":  # delta_k = phi_k delta_{k-1} + w_k, Var(w_k) = q^2 (1 - phi_k^2) / (2 kappa)
+                phi = np.exp(-KAPPA_PER_S * dt)
+                w = rng.normal(0, 1, m) * q * np.sqrt((1.0 - phi**2) / (2.0 * KAPPA_PER_S))
+                walk = np.zeros(m)
+                for k in range(1, m):
+                    walk[k] = phi[k] * walk[k - 1] + w[k]
+            else:
+                walk = np.cumsum(rng.normal(0, 1, m) * q * np.sqrt(dt))
             speed[rows_r] = v_model[r, :m] + walk + rng.normal(0, 0.05, m)
         runs["speed_mps"] = speed
         pp = {**problem.fixed, **truth}
