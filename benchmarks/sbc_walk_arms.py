@@ -30,7 +30,8 @@ the mean Laplace sd.  Arms, all with a random-walk intensity Q:
 Records (2026-11-27, Q = 0.006, truth seed 2): ``benchmarks/records/sbc/walk_arms/*.log``
 (``_b`` files continue an arm at OFFSET 30, ``_c`` at OFFSET 43 with N 60; ``sim_fixed_end``
 stopped after 19 replicates and ``posthoc_same`` after 42, both from OFFSET 0, so that they pair
-with ``sim``'s replicates of the same seeds).
+with ``sim``'s replicates of the same seeds; ``exact_reverting`` 0-24 and, ``_b``, 25-49, which
+pair with ``exact``'s: the same normal draws make the walk and the reverting deviation).
 
     python benchmarks/sbc_walk_arms.py sim 30 0.006 2 > benchmarks/records/sbc/walk_arms/arms_sim.log
 """
