@@ -247,12 +247,9 @@ class LsqResult:
 # ----------------------------------------------------------------------------- the fit
 
 @functools.lru_cache(maxsize=32)
-@functools.lru_cache(maxsize=32)
 def _compiled(model: DragModel, free: tuple[str, ...], integrator: config.IntegratorConfig,
               fit_v0: bool):
-    """Jitted residual and Jacobian in scaled parameters for one (model, free) pair, built once
-    per process (the data are arguments: every campaign and group of the same batch shape
-    reuses the compilation).
+    """Jitted residual and Jacobian in scaled parameters for one (model, free) pair.
 
     ``residual(theta, fixed, batch)`` returns the masked residuals v_meas - v_calc of a
     [R, N] batch flattened to [R N]; jit retraces only when the batch shape changes.  With
