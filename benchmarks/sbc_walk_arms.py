@@ -47,7 +47,11 @@ from bayes_roadload.data.campaign import Campaign
 KAPPA_PER_S = 0.016
 """Reversion rate of ``exact_reverting`` (1/s)."""
 
+ARMS = ("sim", "sim_fixed_end", "posthoc_same", "posthoc", "exact", "exact_clean", "exact_reverting")
+
 arm = sys.argv[1]; n = int(sys.argv[2]); q = float(sys.argv[3]); tseed = int(sys.argv[4]); off = int(sys.argv[5]) if len(sys.argv) > 5 else 0
+if arm not in ARMS:  # the last branch below draws every exact-style arm: a misspelt arm would run as "exact"
+    sys.exit(f"unknown arm {arm!r}: one of {', '.join(ARMS)}")
 base = SimulationSettings()
 drawn = draw_from_prior(SBC_MODEL, tseed * 1000)
 settings = with_drawn_truth(base, drawn)
