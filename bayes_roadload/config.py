@@ -262,10 +262,13 @@ class SamplerConfig:
         77 dimensions).
     seed : PRNG seed.
     progress_bar : show numpyro's progress bar.
-    retry : when the first run fails a gate, run the sampler once more with the remedy for
-        that gate (:func:`bayes_roadload.inference.nuts.remedy`): twice the warm-up and the
-        draws, and after divergences target acceptance 0.99.  The retry, why, and the first run's time are recorded in
-        ``diagnostics.json`` (``retries``); the gates are then those of the second run.  Only
+    retry : when the first run fails a gate, remedy it once: when only R-hat or ESS failed,
+        the same chains continue for as many draws again (the first draws kept, warm-up not
+        repeated: :data:`bayes_roadload.inference.nuts.CONTINUED_GATES`); otherwise the sampler
+        runs anew with the remedy for that gate (:func:`bayes_roadload.inference.nuts.remedy`):
+        twice the warm-up and the draws, and after divergences target acceptance 0.99.  The
+        retry, why, whether it ``continued`` and the first attempt's time are recorded in
+        ``diagnostics.json`` (``retries``); the gates are then those of all the draws kept.  Only
         fits with at least the default warm-up and draws retry: fewer is a quick look whose
         ESS gates are expected to fail, and a retry would spend the time it was meant to save.
     """

@@ -337,32 +337,89 @@ def test_gate_failures_agree_with_the_diagnostics(pooled_fit):
     assert {"ess_bulk", "ess_tail"} <= set(gate_failures(short))
 
 
-def test_a_failed_gate_is_retried_once_and_recorded(monkeypatch):
-    """20 draws per chain fail the ESS gates (>= 100 per chain); with the default sampler set to
-    those counts the fit retries once with twice the warm-up and draws, and says so.  The retry
-    is :func:`~bayes_roadload.inference.nuts.sample_problem`'s, the same for every kind of
-    campaign: checked on a short steady-state campaign, whose potential (no ODE) compiles in a
-    fraction of a speed trace's."""
-    from bayes_roadload.inference.steady import fit_steady_nuts, steady_report
+def _steady_campaign():
+    """A short steady-state campaign: the retry is
+    :func:`~bayes_roadload.inference.nuts.sample_problem`'s, the same for every kind of campaign,
+    and this potential (no ODE) compiles in a fraction of a speed trace's."""
     from bayes_roadload.simulate.steady import SteadySettings, simulate_steady
 
-    campaign = simulate_steady(9, pairs=1, seed=3, settings=SteadySettings(duration_s=8.0))
-    tiny = config.SamplerConfig(num_warmup=20, num_samples=20, num_chains=2, seed=3)
-    monkeypatch.setattr(config, "DEFAULT_SAMPLER", tiny)
-    fit = fit_steady_nuts(campaign, "four_term", sampler=tiny)
-    assert len(fit.retries) == 1
-    retry = fit.retries[0]
-    assert "ess_bulk" in retry["failed"] and (retry["num_warmup"], retry["num_samples"]) == (40, 40)
-    assert fit.samples["CD0"].shape == (2, 40) and fit.timings["first_attempt_s"] > 0
-    # what the first attempt's gates read: the failing ESS is below 100 per chain, and it names
-    # a reported quantity; the largest R-hat comes with its quantity's own ESS
+    return simulate_steady(9, pairs=1, seed=3, settings=SteadySettings(duration_s=8.0))
+
+
+TINY = config.SamplerConfig(num_warmup=20, num_samples=20, num_chains=2, seed=3)
+"""Made the default in these tests (a fit retries only at the default draws or more)."""
+
+
+def _first_gates_read_as(monkeypatch, failed):
+    """The first gate check of a fit reports ``failed`` (with the extremes it really read); later
+    checks are the real ones.  Returns the list of (fit checked, what the check really found)."""
+    from bayes_roadload.inference import results
+
+    real, found = results.gate_check, []
+
+    def gate_check(fit, *args, **kwargs):
+        got, extremes = real(fit, *args, **kwargs)
+        found.append((fit, got))
+        return (failed if len(found) == 1 else got), extremes
+
+    monkeypatch.setattr(results, "gate_check", gate_check)
+    return found
+
+
+def test_a_failed_r_hat_or_ess_continues_the_same_chains(monkeypatch):
+    """When only R-hat or ESS failed, the chains go on for as many draws again: the fit holds the
+    first attempt's draws unchanged followed by the new ones, warm-up is not repeated, and
+    ``retries`` says so with what the first attempt's gates read."""
+    from bayes_roadload.inference.nuts import CONTINUED_GATES
+    from bayes_roadload.inference.steady import fit_steady_nuts, steady_report
+
+    campaign = _steady_campaign()
+    monkeypatch.setattr(config, "DEFAULT_SAMPLER", TINY)
+    found = _first_gates_read_as(monkeypatch, ["r_hat", "ess_bulk"])
+    fit = fit_steady_nuts(campaign, "four_term", sampler=TINY)
+    assert {"r_hat", "ess_bulk"} <= CONTINUED_GATES and len(found) == 1  # no second check
+    alone = found[0][0]  # the first attempt, as its gates were read
+    assert alone.samples["CD0"].shape == (2, 20)
+    (retry,) = fit.retries
+    assert retry["continued"] and retry["failed"] == ["r_hat", "ess_bulk"]
+    assert (retry["num_warmup"], retry["num_samples"], retry["seed"]) == (20, 40, TINY.seed)
+    assert fit.sampler.num_samples == 40
+    for name in ("CD0", "AD"):
+        assert fit.samples[name].shape == (2, 40)
+        np.testing.assert_array_equal(fit.samples[name][:, :20], alone.samples[name])
+        assert not np.array_equal(fit.samples[name][:, 20:], fit.samples[name][:, :20])
+    for k, v in fit.stats.items():
+        assert v.shape == (2, 40), k
+    np.testing.assert_array_equal(fit.stats["num_steps"][:, :20], alone.stats["num_steps"])
+    assert 0 < fit.timings["extension_s"] <= fit.timings["sampling_s"] and "first_attempt_s" not in fit.timings
+    # what the first attempt's gates read: the smallest ESS names a reported quantity; the
+    # largest R-hat comes with its quantity's own ESS
     first = retry["first_attempt"]
-    assert first["min_ess_bulk"] < 2 * config.DEFAULT_GATES.min_ess_bulk_per_chain
     report = steady_report(fit, campaign)
     assert first["min_ess_bulk_quantity"].split("[")[0] in report.idata.posterior
     assert first["max_r_hat"] > 1.0 and first["its_ess_bulk"] >= first["min_ess_bulk"]
     diag = report.diagnostics
-    assert diag["retries"] == fit.retries
+    assert diag["retries"] == fit.retries and diag["draws_per_chain"] == 40
     # the chain method of the run that produced the draws, with its reason
     assert diag["chain_method"]["method"] in ("parallel", "sequential") and diag["chain_method"]["reason"]
+
+
+def test_another_failed_gate_samples_anew_with_the_remedy(monkeypatch):
+    """Divergences (also beside an R-hat miss), E-BFMI or tree depth need another adaptation: a
+    new run with twice the warm-up and draws (0.99 after divergences) and a new seed, once,
+    recorded."""
+    from bayes_roadload.inference.steady import fit_steady_nuts
+
+    campaign = _steady_campaign()
+    monkeypatch.setattr(config, "DEFAULT_SAMPLER", TINY)
+    failed = ["r_hat", "divergences"]
+    _first_gates_read_as(monkeypatch, failed)
+    fit = fit_steady_nuts(campaign, "four_term", sampler=TINY)
+    (retry,) = fit.retries
+    assert not retry["continued"] and retry["failed"] == failed
+    assert (retry["num_warmup"], retry["num_samples"], retry["seed"]) == (40, 40, TINY.seed + 1)
+    assert (fit.sampler.num_warmup, fit.sampler.num_samples, fit.sampler.seed) == (40, 40, TINY.seed + 1)
+    assert retry["target_accept"] == fit.sampler.target_accept == 0.99
+    assert fit.samples["CD0"].shape == (2, 40) and fit.timings["first_attempt_s"] > 0
+    assert "extension_s" not in fit.timings
 
