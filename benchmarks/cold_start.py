@@ -112,8 +112,10 @@ def markdown(rec: dict) -> str:
                 "`bayes_roadload/_jax.py`)" if any(r["start"] == "warm, other campaign" for r in rec["rows"]) else "")
              + ". Stages from "
              "`diagnostics.json` `stages_s` (compilation is inside the stage that first runs a program: "
-             "`fit_setup` holds the least-squares start, `warmup` the sampler's; after a failed gate, warm-up "
-             "and sampling are the retry's and the first attempt's time is its own column).", "",
+             "`fit_setup` holds the least-squares start, `warmup` the sampler's; after an R-hat or ESS miss "
+             "the chains continue, and sampling includes the further draws (`extension_s`); after another "
+             "failed gate, warm-up and sampling are the new run's and the first attempt's time is its own "
+             "column).", "",
              "| pooling | start | seed (padded samples per run) | wall (s) | target | imports | load | fit setup | MAP | first NUTS attempt "
              "| warm-up | sampling | summaries + predictive | Type B | writing | gates |", "|" + "---|" * 16]
     for r in rec["rows"]:
@@ -121,6 +123,8 @@ def markdown(rec: dict) -> str:
         gates = "pass" if r["pass"] else f"FAIL ({', '.join(r['failed'] or [])})"
         if r["retries"]:
             gates += f", {len(r['retries'])} retry"
+            if r["retries"][0].get("continued"):
+                gates += f" (chains continued, {t['extension_s']:.1f} s)"
         seed = f"{r['seed']} ({r['padded_samples']})" if "seed" in r else "-"
         lines.append(f"| {r['pooling']} | {r['start']} | {seed} | {r['wall_s']:.1f} | <= {TARGETS_S[r['start']]:.0f} | "
                      f"{s.get('imports', 0):.1f} | {s.get('load', 0):.1f} | {s.get('fit_setup', 0):.1f} | "
