@@ -318,6 +318,13 @@ that campaigns of the same number of runs and nearly the same length share compi
 at less than 1/8 (about 6 % on average) more likelihood work.  0 (the default): runs are padded
 to the longest run only."""
 
+LSQ_PAD_SIZES_PER_OCTAVE = 8
+"""The least-squares fit pads its runs to the next of this many lengths per doubling (less than
+1/8 more samples; :func:`~bayes_roadload.inference.lsq._lsq_batch`) whatever
+``BAYES_ROADLOAD_SHARE_PROGRAMS`` says: its residual and Jacobian take the data as arguments,
+so same-shaped campaigns then share their compilation (padded samples are masked: the
+estimates of a one-pair campaign padded from 493 to 512 samples agreed to 1e-13)."""
+
 PARALLEL_CHAIN_GROWTH_BYTES = 27.0
 """Resident memory that numpyro's parallel chains (one XLA device per chain) gain per
 observation (:attr:`~bayes_roadload.inference.problem.Problem.n_observations`) per iteration of

@@ -488,6 +488,29 @@ def stack_runs(runs: list[RunBatch], length: int | None = None, sizes_per_octave
     return RunBatch(*(jnp.asarray(np.stack(fields)) for fields in zip(*padded)))
 
 
+def pad_batch(batch: RunBatch, length: int) -> RunBatch:
+    """``batch`` ([R, N] or one run's [N]) padded along its samples to ``length`` as
+    :func:`stack_runs` pads (the last sample repeated, ``mask`` False there): padded samples
+    add nothing to a residual or a likelihood.  Per-run constants are kept; a batch at least
+    ``length`` long is returned as it is."""
+    n = int(batch.time_s.shape[-1])
+    if length <= n:
+        return batch
+    per_sample = np.ndim(batch.time_s)
+
+    def pad(x):
+        x = np.asarray(x)
+        if x.ndim < per_sample:  # per-run constants
+            return x
+        if x.dtype == bool:
+            fill = np.zeros(x.shape[:-1] + (length - n,), bool)
+        else:
+            fill = np.repeat(x[..., -1:], length - n, axis=-1)
+        return np.concatenate([x, fill], axis=-1)
+
+    return RunBatch(*(jnp.asarray(pad(x)) for x in batch))
+
+
 def integrate_batch_forward_sensitivity(
     model: DragModel,
     fixed: Mapping[str, Array],

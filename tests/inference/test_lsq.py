@@ -302,3 +302,57 @@ def test_table_6_8_recovery_cases_1_to_5(case):
     assert abs(g.estimate["BD"] / 2.0e-4 - 1.0) < 0.0075
     assert abs(g.estimate["CD0"] - 0.4) < 5e-4
     assert abs(g.estimate["KD"] - 0.614) < 0.07
+
+
+def test_campaigns_padded_alike_share_the_compiled_residual(monkeypatch):
+    """Two one-pair campaigns of 493 and 498 samples per run pad to one length (512,
+    config.LSQ_PAD_SIZES_PER_OCTAVE), so the second fit traces no new residual or Jacobian; the
+    padded fit equals the unpadded one (padded samples are masked) to the optimiser's
+    reproducibility, far inside a standard error."""
+    import warnings
+
+    from bayes_roadload.inference import lsq
+    from bayes_roadload.physics.integrate import bucket_length
+    from bayes_roadload.simulate import simulate_campaign
+
+    from ..conftest import clean_case
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        one, two = (simulate_campaign(clean_case(), pairs=1, seed=s) for s in (1, 2))
+    lengths = [c.to_batch()[0].time_s.shape[-1] for c in (one, two)]
+    assert lengths[0] != lengths[1]
+    assert bucket_length(lengths[0], config.LSQ_PAD_SIZES_PER_OCTAVE) == bucket_length(lengths[1], config.LSQ_PAD_SIZES_PER_OCTAVE)
+    spec = load_model_spec("four_term")
+    model, _, free = spec.build(one)
+    fun, jac = lsq._compiled(model, free, LsqSettings().integrator, True)
+    padded = fit_lsq(one, spec, "all")
+    traced = (fun._cache_size(), jac._cache_size())
+    assert min(traced) >= 1  # the programs the fit used
+    fit_lsq(two, spec, "all")
+    assert (fun._cache_size(), jac._cache_size()) == traced
+    monkeypatch.setattr(config, "LSQ_PAD_SIZES_PER_OCTAVE", 0)
+    assert lsq._lsq_batch(one)[0].time_s.shape[-1] == lengths[0]
+    plain = fit_lsq(one, spec, "all")
+    g, h = padded.groups[0], plain.groups[0]
+    assert g.n_samples == h.n_samples
+    for q in ("AD", "BD", "CD0", "KD", "F50_N"):
+        assert g.estimate[q] == pytest.approx(h.estimate[q], rel=1e-9, abs=1e-6 * h.se[q])
+        assert g.se[q] == pytest.approx(h.se[q], rel=1e-6)
+
+
+def test_pad_batch_repeats_the_last_sample_and_masks_it():
+    from bayes_roadload.physics.integrate import pad_batch
+
+    runs = [make_run(np.arange(n) * 0.5, 30.0 - 0.1 * np.arange(n), airspeed_mps=np.full(n, 31.0),
+                     yaw_rad=np.zeros(n), direction=1.0, mass_kg=1500.0, effective_mass_kg=1540.0,
+                     frontal_area_m2=2.0) for n in (5, 7)]
+    batch = stack_runs(runs)
+    out = pad_batch(batch, 10)
+    assert out.time_s.shape == (2, 10) and out.mass_kg.shape == (2,)
+    np.testing.assert_array_equal(out.mask, np.concatenate([np.asarray(batch.mask), np.zeros((2, 3), bool)], axis=1))
+    np.testing.assert_array_equal(np.asarray(out.speed_mps)[:, 7:], np.repeat(np.asarray(batch.speed_mps)[:, -1:], 3, axis=1))
+    np.testing.assert_array_equal(np.asarray(out.time_s)[:, :7], np.asarray(batch.time_s))
+    one = pad_batch(batch.run(1), 9)  # one run's [N] arrays, its constants scalars
+    assert one.time_s.shape == (9,) and np.ndim(one.mass_kg) == 0 and not np.asarray(one.mask)[7:].any()
+    assert pad_batch(batch, 7) is batch
