@@ -83,6 +83,7 @@ def timed_fit(camp: Path, out: Path, cache: Path) -> dict:
             "stages_s": diag.get("stages_s", {}),
             "timings_s": diag.get("timings_s", {}), "pass": diag.get("pass"), "failed": diag.get("failed"),
             "retries": len(diag.get("retries", [])), "stderr_tail": tail,
+            "retries_continued": sum(bool(r.get("continued")) for r in diag.get("retries", [])),
             "first_attempts": [r.get("first_attempt") for r in diag.get("retries", [])]}
 
 
@@ -136,9 +137,10 @@ def markdown(rec: dict) -> str:
              "row in its last column): "
              "thesis case 9 campaigns from the project's simulator at 4 Hz, `fit --model four_term --pooling pooled "
              "--no-progress --no-report` in a new process with an empty compilation cache, wall time from the "
-             "process start to its exit, peak resident memory of the process.  After a failed gate, warm-up and "
-             "sampling are the logged retry's (twice the draws) and the first attempt's NUTS time is its own "
-             "column.", "",
+             "process start to its exit, peak resident memory of the process.  After an R-hat or ESS miss the "
+             "chains continue (rows from 2026-11-28 on) and sampling includes the further draws; after another "
+             "failed gate, or before 2026-11-28, warm-up and sampling are the logged retry's (twice the draws) "
+             "and the first attempt's NUTS time is its own column.", "",
              "![scaling](performance_scaling.png)", "",
              "| pairs | runs | samples | wall (s) | peak memory (MB) | MAP | first NUTS attempt | warm-up | sampling | "
              "Type B | gates | load after | date |", "|" + "---|" * 13]
@@ -147,7 +149,7 @@ def markdown(rec: dict) -> str:
         gates = "pass" if r["pass"] else f"FAIL ({', '.join(r['failed'] or [])})" if r["rc"] in (0, 3) else \
             f"exit {r['rc']}: {' '.join(r['stderr_tail'])[:120]}"
         if r.get("retries"):
-            gates += f", {r['retries']} retry"
+            gates += f", {r['retries']} retry" + (" (chains continued)" if r.get("retries_continued") else "")
         lines.append(f"| {r['pairs']} | {r['runs']} | {r['samples']} | {r['wall_s']:.0f} | {r['peak_rss_mb']:.0f} | "
                      f"{t.get('map_s', 0):.1f} | {'%.1f' % t['first_attempt_s'] if 'first_attempt_s' in t else '-'} | "
                      f"{t.get('warmup_s', 0):.1f} | {t.get('sampling_s', 0):.1f} | "
