@@ -275,6 +275,19 @@ def _interval_fields(name: str, draws: np.ndarray, truth: float | None,
     return out
 
 
+def retry_fields(retries: list[dict[str, Any]]) -> dict[str, Any]:
+    """A batch record's account of a fit's retry (``NutsFit.retries``,
+    :func:`~bayes_roadload.inference.nuts.sample_problem`): how many, which gates failed, whether
+    the chains were continued (not sampled anew), and what the first attempt's R-hat and ESS
+    gates read."""
+    first = retries[0] if retries else {}
+    return {"retries": len(retries),
+            "retry_failed": ",".join(first.get("failed", [])),
+            "retry_continued": bool(first.get("continued")) if retries else None,
+            **{f"first_{k}": (first.get("first_attempt") or {}).get(k) if retries else None
+               for k in ("max_r_hat", "max_r_hat_quantity", "its_ess_bulk", "min_ess_bulk")}}
+
+
 def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
     from ..inference.results import diagnostics, summary_table, to_inference_data, truth_derived
 
@@ -319,11 +332,7 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
         "min_ess_tail": float(diag["min_ess_tail"]),
         "mean_tree_depth": float(diag["mean_tree_depth"]),
         "map_converged": bool(fit.map.success) if fit.map is not None else None,
-        "retries": len(fit.retries),
-        "retry_failed": ",".join(fit.retries[0]["failed"]) if fit.retries else "",
-        # what the first attempt's R-hat gate read (nuts.fit_nuts: `first_attempt` of the retry)
-        **{f"first_{k}": (fit.retries[0].get("first_attempt") or {}).get(k) if fit.retries else None
-           for k in ("max_r_hat", "max_r_hat_quantity", "its_ess_bulk", "min_ess_bulk")},
+        **retry_fields(fit.retries),
         # the acceptance of the reported run: the job's, or the small-campaign / quiet-trace
         # value (nuts.campaign_sampler, nuts.quiet_trace_sampler), or the retry's
         "target_accept_sampled": float(fit.sampler.target_accept),

@@ -400,6 +400,12 @@ def test_a_failed_r_hat_or_ess_continues_the_same_chains(monkeypatch):
     assert first["max_r_hat"] > 1.0 and first["its_ess_bulk"] >= first["min_ess_bulk"]
     diag = report.diagnostics
     assert diag["retries"] == fit.retries and diag["draws_per_chain"] == 40
+    # a batch record (the studies' tables) says the retry continued the chains
+    from bayes_roadload.analysis.batch import retry_fields
+
+    record = retry_fields(fit.retries)
+    assert (record["retries"], record["retry_failed"], record["retry_continued"]) == (1, "r_hat,ess_bulk", True)
+    assert record["first_max_r_hat"] == first["max_r_hat"] and retry_fields([])["retry_continued"] is None
     # the chain method of the run that produced the draws, with its reason
     assert diag["chain_method"]["method"] in ("parallel", "sequential") and diag["chain_method"]["reason"]
 
@@ -422,4 +428,7 @@ def test_another_failed_gate_samples_anew_with_the_remedy(monkeypatch):
     assert retry["target_accept"] == fit.sampler.target_accept == 0.99
     assert fit.samples["CD0"].shape == (2, 40) and fit.timings["first_attempt_s"] > 0
     assert "extension_s" not in fit.timings
+    from bayes_roadload.analysis.batch import retry_fields
+
+    assert retry_fields(fit.retries)["retry_continued"] is False
 
