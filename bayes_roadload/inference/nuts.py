@@ -756,8 +756,8 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
         timings["sampling_s"] += timings["extension_s"]
         log.info("NUTS: %.1f s for the further draws", timings["extension_s"])
         raw = jax.tree_util.tree_map(lambda a, b: np.concatenate([a, np.asarray(b)], axis=1), raw, raw_more)
-        extra = {k: np.concatenate([v, np.asarray(mcmc.get_extra_fields(group_by_chain=True)[k])], axis=1)
-                 for k, v in extra.items()}
+        extra_more = mcmc.get_extra_fields(group_by_chain=True)
+        extra = {k: np.concatenate([v, np.asarray(extra_more[k])], axis=1) for k, v in extra.items()}
         fit = finished(raw, extra, dataclasses.replace(sampler, num_samples=sampler.num_samples + more))
     return fit
 
@@ -845,20 +845,17 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
     if failed:
         first = {k: (v if not isinstance(v, float) else round(v, 5) if math.isfinite(v) else None)
                  for k, v in checked["extremes"].items()}  # JSON has no NaN
-        record = {"failed": failed, "first_attempt_s": round(checked["first_s"], 3), "first_attempt": first}
-        if "extension_s" in fit.timings:
-            fit.retries = [{**record, "continued": True, "num_warmup": sampler.num_warmup,
-                            "num_samples": fit.sampler.num_samples, "target_accept": sampler.target_accept,
-                            "seed": sampler.seed}]
-        else:
+        continued = "extension_s" in fit.timings
+        if not continued:
             second = remedy(sampler, failed)
             log.warning("gates failed (%s): retrying once with %d + %d draws per chain, target acceptance %.2f",
                         ", ".join(failed), second.num_warmup, second.num_samples, second.target_accept)
             fit = run_nuts(problem, sampler=second, map_result=map_result, posterior=post)
-            fit.retries = [{**record, "continued": False, "num_warmup": second.num_warmup,
-                            "num_samples": second.num_samples, "target_accept": second.target_accept,
-                            "seed": second.seed}]
             fit.timings["first_attempt_s"] = checked["first_s"]
+        kept = fit.sampler  # the settings of the draws kept
+        fit.retries = [{"failed": failed, "first_attempt_s": round(checked["first_s"], 3), "first_attempt": first,
+                        "continued": continued, "num_warmup": kept.num_warmup, "num_samples": kept.num_samples,
+                        "target_accept": kept.target_accept, "seed": kept.seed}]
     if map_result is not None:
         fit.timings["map_s"] = map_result.time_s
     fit.truth = truth

@@ -474,18 +474,22 @@ def stack_runs(runs: list[RunBatch], length: int | None = None, sizes_per_octave
     shape share their compiled fits, :mod:`bayes_roadload.inference.laplace`); that length is
     then rounded up by :func:`bucket_length` with ``sizes_per_octave`` (0: not rounded)."""
     n = bucket_length(max([int(r.time_s.shape[0]) for r in runs] + [int(length or 0)]), sizes_per_octave)
-
-    def pad(x, length):
-        x = np.asarray(x)  # padded on the host: one device transfer per field, no per-shape programs
-        if x.ndim == 0:
-            return x
-        extra = n - length
-        if x.dtype == bool:
-            return np.concatenate([x, np.zeros(extra, bool)])
-        return np.concatenate([x, np.repeat(x[-1:], extra)])
-
-    padded = [RunBatch(*(pad(f, int(r.time_s.shape[0])) for f in r)) for r in runs]
+    # padded on the host: one device transfer per field, no per-shape programs
+    padded = [RunBatch(*(_pad_samples(f, n, 1) for f in r)) for r in runs]
     return RunBatch(*(jnp.asarray(np.stack(fields)) for fields in zip(*padded)))
+
+
+def _pad_samples(x, length: int, per_sample_ndim: int) -> np.ndarray:
+    """One field of a run or batch padded on the host along its last (sample) axis to
+    ``length``: the last sample repeated, False for a mask; a per-run constant (fewer than
+    ``per_sample_ndim`` dimensions) is returned as it is."""
+    x = np.asarray(x)
+    if x.ndim < per_sample_ndim or x.shape[-1] >= length:
+        return x
+    extra = length - x.shape[-1]
+    if x.dtype == bool:
+        return np.concatenate([x, np.zeros(x.shape[:-1] + (extra,), bool)], axis=-1)
+    return np.concatenate([x, np.repeat(x[..., -1:], extra, axis=-1)], axis=-1)
 
 
 def pad_batch(batch: RunBatch, length: int) -> RunBatch:
@@ -493,22 +497,9 @@ def pad_batch(batch: RunBatch, length: int) -> RunBatch:
     :func:`stack_runs` pads (the last sample repeated, ``mask`` False there): padded samples
     add nothing to a residual or a likelihood.  Per-run constants are kept; a batch at least
     ``length`` long is returned as it is."""
-    n = int(batch.time_s.shape[-1])
-    if length <= n:
+    if length <= int(batch.time_s.shape[-1]):
         return batch
-    per_sample = np.ndim(batch.time_s)
-
-    def pad(x):
-        x = np.asarray(x)
-        if x.ndim < per_sample:  # per-run constants
-            return x
-        if x.dtype == bool:
-            fill = np.zeros(x.shape[:-1] + (length - n,), bool)
-        else:
-            fill = np.repeat(x[..., -1:], length - n, axis=-1)
-        return np.concatenate([x, fill], axis=-1)
-
-    return RunBatch(*(jnp.asarray(pad(x)) for x in batch))
+    return RunBatch(*(jnp.asarray(_pad_samples(x, length, np.ndim(batch.time_s))) for x in batch))
 
 
 def integrate_batch_forward_sensitivity(
