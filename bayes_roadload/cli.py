@@ -698,7 +698,7 @@ def _cmd_plan(args) -> int:
     from . import config
     from .analysis.batch import batch_client, run_batch
     from .analysis.planning import (Target, plan_jobs, plan_table, plot_plan, recommend, refit_work, sizes_to_fit,
-                                    undecided_sizes)
+                                    type_b_floors, undecided_sizes)
     from .analysis.regulation import regulation_checks
 
     if args.identify:
@@ -719,6 +719,25 @@ def _cmd_plan(args) -> int:
     pairs = sorted(set(args.pairs))
     if args.simulations < 1:
         raise ValueError("--simulations must be at least 1")
+    quantities = [t.quantity for t in targets]
+    floors = None
+    if not args.no_type_b:
+        # the Type B uncertainty does not shrink with pairs: a target below its floor is not
+        # reachable at any size, and is not located by simulation (planning.type_b_floors)
+        floors = type_b_floors(population, targets, args.confidence, model=fit_model)
+        floors.to_csv(out / "type_b_floors.csv", index=False)
+        echo("Type B floor (the declared values' and instruments' uncertainty, [uncertainty]; it does not shrink "
+             "with more pairs; type_b_floors.csv):")
+        for _, r in floors.iterrows():
+            verdict = "" if r["reachable"] else "  NOT REACHABLE at any number of pairs"
+            main = f" ({r['main_source']} {100 * r['main_source_share']:.0f} %)" if r["main_source"] else ""
+            echo(f"  {r['quantity']:<15}target {r['target']:g} {r['unit']:<6} floor {r['type_b_half_width']:.3g} "
+                 f"{r['unit']}{main}{verdict}")
+        unreachable = set(floors.loc[~floors["reachable"], "quantity"])
+        if unreachable:
+            echo("  a smaller standard uncertainty of the main source (vehicle.toml [uncertainty], e.g. a fresh "
+                 "calibration) lowers the floor; `plan --no-type-b` plans the data's share alone")
+        quantities = [q for q in quantities if q not in unreachable]
     # adaptive in two ways: the sizes by bisection on each target's smallest size meeting it
     # (planning.sizes_to_fit; --all-sizes: every size), and half the simulations at a size, the
     # other half only where a target's assurance is still undecided (planning.undecided_sizes;
@@ -730,7 +749,6 @@ def _cmd_plan(args) -> int:
           + f" with {fit_model} ({population.pooling}, MAP + Laplace)"
           + (f", {args.simulations} where a target stays undecided" if first < args.simulations else "") + " ...")
     progress = not args.no_progress and _output.isEnabledFor(logging.INFO)
-    quantities = [t.quantity for t in targets]
     records = pd.DataFrame()
     simulated: list[int] = []
     rounds = math.ceil(math.log2(len(pairs) + 1))  # bisection over len + 1 outcomes (the last: not reached)
@@ -745,8 +763,8 @@ def _cmd_plan(args) -> int:
                 echo(f"round {round_} (at most {rounds}): {todo} pairs")
             # the batch door draws a bar on a terminal and plain lines elsewhere; --quiet: neither
             new = run_batch(plan_jobs(population, todo, simulations=first, model=fit_model,
-                                      confidence=args.confidence, seed=args.seed), client, progress=progress,
-                            weight=refit_work)
+                                      confidence=args.confidence, seed=args.seed, type_b=not args.no_type_b),
+                            client, progress=progress, weight=refit_work)
             simulated += todo
             if first < args.simulations:
                 new_table = plan_table(new, targets, args.confidence)
@@ -755,20 +773,28 @@ def _cmd_plan(args) -> int:
                     echo(f"undecided after {first} simulations at {undecided} pairs (a target's assurance within the "
                           f"Wilson 95 % interval of {args.assurance:g}): {args.simulations - first} more at each ...")
                     more = run_batch(plan_jobs(population, undecided, simulations=args.simulations, model=fit_model,
-                                               confidence=args.confidence, seed=args.seed, first=first),
+                                               confidence=args.confidence, seed=args.seed, first=first,
+                                               type_b=not args.no_type_b),
                                      client, progress=progress, weight=refit_work)
                     new = pd.concat([new, more], ignore_index=True)
             records = pd.concat([records, new], ignore_index=True)
     skipped = [n for n in pairs if n not in simulated]
-    if skipped:
+    if skipped and quantities:
         echo(f"not simulated: {skipped} pairs (no target's smallest size can lie there, the assurance taken as "
               "increasing with pairs; --all-sizes simulates them)")
     records.to_csv(out / "plan_records.csv", index=False)
+    if records.empty:  # every target below its Type B floor: nothing to locate
+        pd.DataFrame(columns=["quantity", "n_pairs", "median_half_width", "assurance"]).to_csv(out / "plan.csv",
+                                                                                             index=False)
+        recommend(pd.DataFrame(), args.assurance, floors=floors).to_csv(out / "recommendation.csv", index=False)
+        echo(f"\nno target is reachable at any number of pairs: nothing simulated; wrote {out / 'plan.csv'} (empty), "
+             "recommendation.csv, type_b_floors.csv")
+        return 0
     failed = int(records["error"].notna().sum()) if "error" in records else 0
     not_converged = int((~records["gate_pass"].fillna(False).astype(bool)).sum()) if "gate_pass" in records else 0
     table = plan_table(records, targets, args.confidence)
     table.to_csv(out / "plan.csv", index=False)
-    rec = recommend(table, args.assurance)
+    rec = recommend(table, args.assurance, floors=floors)
     rec.to_csv(out / "recommendation.csv", index=False)
     plot_plan(table, targets, out / "plan.png", assurance=args.assurance)
     echo(f"\n{'quantity':<15}{'target':>10}  " + "".join(f"{n:>8}" for n in pairs) + "   pairs needed")
@@ -779,7 +805,9 @@ def _cmd_plan(args) -> int:
             continue
         cells = "".join(f"{rows.loc[n, 'median_half_width']:>8.3g}" if n in rows.index else f"{'-':>8}" for n in pairs)
         r = rec[rec["quantity"] == t.quantity].iloc[0]
-        need = f"{int(r['n_pairs'])}" if r["reached"] else f"> {int(r['max_pairs_simulated'])}"
+        below_floor = not bool(r.get("reachable", True))
+        need = f"{int(r['n_pairs'])}" if r["reached"] else \
+            ("none (Type B floor)" if below_floor else f"> {int(r['max_pairs_simulated'])}")
         echo(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  {cells}   {need}")
     echo(f"(median {100 * args.confidence:g} % half-width against pairs, in the target's units; pairs needed: "
           f"smallest simulated n with P(half-width <= target) >= {args.assurance:g})")
@@ -1061,6 +1089,10 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--all-sizes", action="store_true",
                     help="simulate every size of --pairs (default: only the sizes that locate each target's "
                          "smallest size by bisection, the assurance taken as increasing with pairs)")
+    pl.add_argument("--no-type-b", action="store_true",
+                    help="plan the data's share of the intervals alone: without the Type B uncertainty of the "
+                         "declared values and instruments that `fit` adds (which does not shrink with pairs; "
+                         "type_b_floors.csv)")
     pl.add_argument("--model", default="three_term", help="model of the source fit when given a campaign")
     pl.add_argument("--pooling", choices=("pooled", "hierarchical"), default="hierarchical",
                     help="source fit: hierarchical gives the run-to-run spreads the future runs vary by")

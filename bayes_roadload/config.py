@@ -474,6 +474,10 @@ LAPLACE_PROPOSAL_DF = 5
 """Degrees of freedom of the multivariate-t proposal around the MAP (heavier tails than the
 Gaussian, so that the importance weights of a right-skewed posterior stay bounded)."""
 
+LAPLACE_PROPOSAL_FAMILY = "t"
+"""Family of the importance-sampling proposal: "t" (multivariate t, ``LAPLACE_PROPOSAL_DF``) or
+"normal" (``benchmarks/laplace_proposals.py`` compares them against NUTS)."""
+
 LAPLACE_PROPOSAL_INFLATION = (1.0, 1.5, 2.0)
 """Scale factors of the proposal's covariance tried in turn while the Pareto k is above
 ``LAPLACE_GOOD_PARETO_K`` (the best proposal is kept).  Measured on one pair, pooled: k 0.81 at

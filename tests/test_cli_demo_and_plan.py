@@ -33,7 +33,10 @@ def test_demo_runs_and_prints_truth_beside_estimates(tmp_path, capsys):
 def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys):
     """``plan FIT_DIR --target ... --confidence 0.95 --out DIR`` writes plan.csv with the contract
     columns (quantity, n_pairs, median_half_width, assurance), recommendation.csv,
-    regulation.csv and the plot; a fit directory without fit.json is refused."""
+    regulation.csv, type_b_floors.csv and the plot; a fit directory without fit.json is refused.
+    A target below its Type B floor (CD0 to 1 % with the default anemometer uncertainty) is
+    reported not reachable, and the refits' intervals are at least that floor; with
+    ``--no-type-b`` they are narrower and no floor applies."""
     import warnings
 
     import arviz as az
@@ -61,16 +64,34 @@ def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys):
                                                   "free": ["AD", "BD", "CD0"], "pooling": "pooled",
                                                   "campaign": str(tmp_path / "campaign")}))
     out = tmp_path / "plan"
-    code = main(["plan", str(fit_dir), "--target", "CD0=1%", "--target", "F50_N=0.5%", "--confidence", "0.95",
-                 "--pairs", "2", "--simulations", "2", "--workers", "1", "--out", str(out)])
+    args = ["plan", str(fit_dir), "--target", "CD0=1%", "--target", "F50_N=3%", "--confidence", "0.95",
+            "--pairs", "2", "--simulations", "2", "--workers", "1"]
+    code = main(args + ["--out", str(out)])
     assert code == 0
     plan = pd.read_csv(out / "plan.csv")
     assert list(plan.columns[:4]) == ["quantity", "n_pairs", "median_half_width", "assurance"]
     assert set(plan["quantity"]) == {"CD0", "F50_N"} and set(plan["n_pairs"]) == {2}
     assert plan["assurance"].between(0, 1).all()
     assert (out / "plan.png").stat().st_size > 0
-    assert {"quantity", "n_pairs", "reached"} <= set(pd.read_csv(out / "recommendation.csv").columns)
+    rec = pd.read_csv(out / "recommendation.csv").set_index("quantity")
+    assert {"n_pairs", "reached", "type_b_half_width", "reachable"} <= set(rec.columns)
+    floors = pd.read_csv(out / "type_b_floors.csv").set_index("quantity")
+    assert not floors.loc["CD0", "reachable"] and floors.loc["CD0", "main_source"] == "airspeed_factor_rel"
+    assert not rec.loc["CD0", "reached"] and pd.isna(rec.loc["CD0", "n_pairs"])
+    # every refit's interval carries the floor: 0.9 allows the Monte Carlo error of a 95 %
+    # half-width read from 2000 draws (~3 %) three times over
+    records = pd.read_csv(out / "plan_records.csv")
+    assert records["type_b"].all()
+    cd0 = plan.set_index("quantity").loc["CD0"]
+    assert cd0["q10_half_width"] >= 0.9 * floors.loc["CD0", "type_b_half_width"]
     reg = pd.read_csv(out / "regulation.csv")
     assert {"EEC", "GTR15"} <= set(reg["criterion"])
     printed = capsys.readouterr().out
     assert "pairs needed" in printed and "Regulation precision" in printed
+    assert "NOT REACHABLE" in printed and "none (Type B floor)" in printed
+
+    code = main(args + ["--no-type-b", "--out", str(tmp_path / "data_only")])
+    assert code == 0 and not (tmp_path / "data_only" / "type_b_floors.csv").exists()
+    data_only = pd.read_csv(tmp_path / "data_only" / "plan.csv").set_index("quantity")
+    assert data_only.loc["CD0", "median_half_width"] < cd0["median_half_width"]
+    assert "reachable" not in pd.read_csv(tmp_path / "data_only" / "recommendation.csv").columns

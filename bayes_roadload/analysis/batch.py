@@ -213,8 +213,8 @@ class FitJob:
         Road-load quantities recorded besides the free parameters
         (:data:`~bayes_roadload.inference.results.DERIVED` names).
     type_b : bool
-        NUTS only: add the Type B uncertainty of the declared values and instruments to the
-        draws before the intervals are read, as ``fit`` does (:mod:`.budget`).
+        Add the Type B uncertainty of the declared values and instruments to the draws before
+        the intervals are read, as ``fit`` does (:mod:`.budget`), for NUTS and Laplace fits.
     start : mapping, optional
         Laplace only: starting values of the free parameters instead of the least-squares
         start.
@@ -347,13 +347,20 @@ def _laplace_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
     problem = fit.problem
     truth = campaign.truth or {}
     rec: dict[str, Any] = {"parameters": ",".join(problem.free),
-                           "rank_draws": int(np.asarray(fit.samples[problem.free[0]]).size)}
+                           "rank_draws": int(np.asarray(fit.samples[problem.free[0]]).size), "type_b": job.type_b}
+    draws = fit.samples
+    if job.type_b:  # as the NUTS record (_fit_record) and `fit`: the intervals carry the Type B uncertainty
+        from .budget import BUDGET_QUANTITIES, add_type_b, type_b_sensitivities
+
+        typeb = type_b_sensitivities(campaign, problem.spec, [q for q in BUDGET_QUANTITIES if q in draws])
+        draws = {**draws, **add_type_b({q: draws[q] for q in typeb.sensitivity}, typeb, seed=job.sampler.seed)}
+        rec["time_type_b_s"] = typeb.time_s
     for name in problem.free:
         t = truth.get(name)
-        rec.update(_interval_fields(name, fit.samples[name], t if isinstance(t, (int, float)) else None, job.levels))
+        rec.update(_interval_fields(name, draws[name], t if isinstance(t, (int, float)) else None, job.levels))
     derived_truth = truth_derived(problem, truth)
     for name in job.derived:
-        rec.update(_interval_fields(name, fit.samples[name], derived_truth.get(name), job.levels))
+        rec.update(_interval_fields(name, draws[name], derived_truth.get(name), job.levels))
     for name in ("q_mps_per_sqrt_s",) + tuple(f"tau_{n}" for n in problem.varying):
         if name in fit.samples:
             rec[f"{name}_mean"] = float(np.mean(fit.samples[name]))
@@ -366,7 +373,8 @@ def _laplace_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
                 "map_converged": bool(fit.map.success), "map_min_eigenvalue": float(fit.map.min_eigenvalue),
                 "map_iterations": int(fit.map.n_iter), "pareto_k": k,
                 "is_ess": float(fit.diagnostics.get("is_ess", math.nan)),
-                "proposal_inflation": float(fit.diagnostics.get("proposal_inflation", math.nan))})
+                "proposal_inflation": float(fit.diagnostics.get("proposal_inflation", math.nan)),
+                "is_evaluations": int(fit.diagnostics.get("is_evaluations", 0))})
     rec.update({f"time_{k}": float(v) for k, v in fit.timings.items()})
     return rec
 
@@ -405,9 +413,11 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
           ``gate_pass`` (the MAP converged, its Hessian is positive definite and the
           importance weights' Pareto k is at most ``config.LAPLACE_MAX_PARETO_K``),
           ``gates_failed`` ("map", "pareto_k"), ``map_converged, map_min_eigenvalue,
-          map_iterations, pareto_k, is_ess, proposal_inflation``, and no ``P_r_hat, P_ess_bulk``; ``tau_P_mean / _q50`` of the
-          hierarchical spreads;
-        * timings (s): ``time_simulate_s``, ``time_map_s``, ``time_warmup_s``,
+          map_iterations, pareto_k, is_ess, proposal_inflation, is_evaluations`` (posterior
+          evaluations of the importance correction), and no ``P_r_hat, P_ess_bulk``;
+          ``tau_P_mean / _q50`` of the hierarchical spreads;
+        * timings (s): ``time_simulate_s``, ``time_map_s``, ``time_importance_s`` (Laplace),
+          ``time_warmup_s``,
           ``time_sampling_s`` (from the fit, compilation included), ``time_fit_s`` (the whole
           ``fit_nuts`` call), ``time_summary_s``, ``time_total_s`` and ``time_compile_s`` (JAX
           tracing, lowering and compilation during the job);
@@ -542,8 +552,13 @@ def batch_client(workers: int | None = None, scheduler: str | None = None, *,
     ``fork``) started with the environment of :func:`worker_environment` (set in this
     process while they start: a spawned process imports this program's main module, and
     with it JAX, before Dask applies a worker's own environment); they import
-    ``bayes_roadload`` to unpickle their first job, which enables 64-bit floats in JAX.  The
-    dashboard is off and the cluster logs only errors.
+    ``bayes_roadload`` to unpickle their first job, which enables 64-bit floats in JAX.  When
+    this process has JAX's persistent compilation cache on (the command line turns it on,
+    :func:`~bayes_roadload._jax.enable_compilation_cache`), every local worker uses the same
+    directory (:class:`~bayes_roadload.analysis._worker_plugins.CompilationCachePlugin`), so
+    a program one worker compiled is loaded by the others and by later batches of the same
+    shapes.  The dashboard is off and the cluster
+    logs only errors.
     """
     from distributed import Client, LocalCluster  # deferred: the command line starts without Dask
 
@@ -560,7 +575,19 @@ def batch_client(workers: int | None = None, scheduler: str | None = None, *,
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                                memory_limit=memory_limit, silence_logs=logging.ERROR, env=env)
     with cluster, Client(cluster) as client:
+        cache = compilation_cache_dir()
+        if cache:
+            from ._worker_plugins import CompilationCachePlugin
+
+            client.register_plugin(CompilationCachePlugin(cache))
         yield client
+
+
+def compilation_cache_dir() -> str | None:
+    """The directory of this process's persistent compilation cache, or None when it is off
+    (or JAX was not imported, so nothing turned it on)."""
+    jax = sys.modules.get("jax")
+    return (jax.config.jax_compilation_cache_dir or None) if jax is not None else None
 
 
 @contextlib.contextmanager

@@ -325,13 +325,15 @@ class FutureCampaign:
 def plan_jobs(population: Population, pairs: Sequence[int] = config.PLAN_PAIRS, *,
               simulations: int = config.PLAN_SIMULATIONS,
               model: str | None = None, confidence: float = config.PLAN_CONFIDENCE, seed: int = 0,
-              method: str = "laplace",
+              method: str = "laplace", type_b: bool = True,
               tags: Mapping[str, Any] | None = None, first: int = 0) -> list[FitJob]:
     """One fit job per future campaign: simulations ``first`` .. ``simulations - 1`` of each size
     in ``pairs``, refitted with ``model`` (default: the population's) by ``method`` ("laplace",
     or "nuts" to confirm the Laplace intervals).  Campaign seeds depend on the size and the
     simulation's index only, so arms (methods, models) compare the same campaigns and a top-up
-    (``first`` > 0, :func:`undecided_sizes`) adds new ones."""
+    (``first`` > 0, :func:`undecided_sizes`) adds new ones.  With ``type_b`` (default, as
+    ``fit``) the refits' intervals carry the Type B uncertainty of the declared values and
+    instruments (:mod:`.budget`): the intervals the engineer's own fit will report."""
     model = model or population.model
     label = PurePath(str(model)).stem  # a model file's path labels the jobs by the file's name
     start = population.mean_values()
@@ -341,7 +343,7 @@ def plan_jobs(population: Population, pairs: Sequence[int] = config.PLAN_PAIRS, 
             cseed = seed * 1_000_003 + 1009 * int(n) + k
             jobs.append(FitJob(f"plan-{label}-{method}-n{n}-{k}", FutureCampaign(population, int(n), cseed),
                                model=model, pooling=population.pooling, method=method,
-                               levels=(confidence,), derived=PLAN_DERIVED, start=start,
+                               levels=(confidence,), derived=PLAN_DERIVED, start=start, type_b=type_b,
                                tags={"n_pairs": int(n), "simulation": k, "fit_model": model, **(tags or {})}))
     return jobs
 
@@ -394,6 +396,49 @@ def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: flo
     if out.empty:
         return out
     return out[cols + [c for c in out.columns if c not in cols]]
+
+
+def type_b_floors(population: Population, targets: Sequence[Target], confidence: float = config.PLAN_CONFIDENCE,
+                  model: str | None = None) -> pd.DataFrame:
+    """The half-width that the Type B uncertainty alone gives each target's quantity, whatever
+    the number of pairs: the declared values' and instruments' standard uncertainties u_s
+    (``[uncertainty]``; SAE J1263 / J2263 defaults) do not shrink with more runs, so the
+    ``confidence`` interval of a fit carrying them (:mod:`.budget`: ``sum_s c_s delta_s``
+    added to every draw, delta_s ~ N(0, u_s^2)) is never narrower than
+    z sqrt(sum_s (c_s u_s)^2), z the normal quantile of (1 + confidence) / 2.  The
+    sensitivities c_s are those of the conditions campaign fitted with ``model`` (default: the
+    population's; the refits' model), first order
+    (:func:`~bayes_roadload.analysis.budget.type_b_sensitivities`); a relative target divides
+    by the quantity at the population's mean coefficients.
+
+    Returns one row per target: ``quantity, target, unit, type_b_half_width`` (the target's
+    unit), ``reachable`` (the floor is below the target), ``main_source`` and
+    ``main_source_share`` (of the Type B variance)."""
+    from statistics import NormalDist
+
+    from ..inference.bayes import build_problem
+    from ..inference.results import truth_derived
+    from .budget import BUDGET_QUANTITIES, type_b_sensitivities
+
+    model = model or population.model
+    quantities = [t.quantity for t in targets if t.quantity in BUDGET_QUANTITIES]
+    typeb = type_b_sensitivities(population.conditions, model, quantities)
+    values = population.mean_values()
+    values.update(truth_derived(build_problem(population.conditions, population.model, pooling="pooled"), values))
+    z = NormalDist().inv_cdf((1.0 + confidence) / 2.0)
+    rows = []
+    for t in targets:
+        parts = {s: (c * typeb.u[s]) ** 2 for s, c in typeb.sensitivity.get(t.quantity, {}).items()
+                 if s in typeb.sources}
+        var = float(sum(parts.values()))
+        half = z * math.sqrt(var)
+        value = values.get(t.quantity, math.nan)
+        floor = 100.0 * half / abs(value) if t.relative else half
+        main = max(parts, key=parts.get) if var > 0 else ""
+        rows.append({"quantity": t.quantity, "target": t.value, "unit": t.unit, "type_b_half_width": floor,
+                     "reachable": not floor >= t.value, "main_source": main,
+                     "main_source_share": parts[main] / var if var > 0 else math.nan})
+    return pd.DataFrame(rows)
 
 
 def refit_work(job: FitJob) -> float:
@@ -451,12 +496,16 @@ def sizes_to_fit(table: pd.DataFrame, pairs: Sequence[int], quantities: Sequence
     return sorted(out - {int(n) for n in simulated})
 
 
-def recommend(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE, by: Sequence[str] = ()) -> pd.DataFrame:
+def recommend(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE, by: Sequence[str] = (),
+              floors: pd.DataFrame | None = None) -> pd.DataFrame:
     """The smallest ``n_pairs`` whose assurance reaches ``assurance``, per (group and) quantity;
-    ``n_pairs`` is None (and ``reached`` False) when no simulated size reaches it."""
+    ``n_pairs`` is None (and ``reached`` False) when no simulated size reaches it.  With
+    ``floors`` (:func:`type_b_floors`): the columns ``type_b_half_width`` and ``reachable``,
+    and a target whose floor is not below it is not reached at any size (also when it was not
+    simulated: ``max_pairs_simulated`` 0)."""
     rows = []
     keys = list(by) + ["quantity"]
-    for key, g in table.groupby(keys, sort=False):
+    for key, g in (table.groupby(keys, sort=False) if not table.empty else []):
         key = key if isinstance(key, tuple) else (key,)
         g = g.sort_values("n_pairs")
         hit = g[g["assurance"] >= assurance]
@@ -464,7 +513,20 @@ def recommend(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE, by:
         rows.append({**dict(zip(keys, key)), "target": float(g["target"].iloc[0]), "unit": g["unit"].iloc[0],
                      "n_pairs": n, "reached": n is not None, "assurance_required": assurance,
                      "max_pairs_simulated": int(g["n_pairs"].max())})
-    return pd.DataFrame(rows)
+    out = pd.DataFrame(rows, columns=keys + ["target", "unit", "n_pairs", "reached", "assurance_required",
+                                             "max_pairs_simulated"])
+    if floors is None or by:
+        return out
+    missing = floors[~floors["quantity"].isin(out["quantity"])]
+    out = pd.concat([out, pd.DataFrame({"quantity": missing["quantity"], "target": missing["target"],
+                                        "unit": missing["unit"], "n_pairs": None, "reached": False,
+                                        "assurance_required": assurance, "max_pairs_simulated": 0})],
+                    ignore_index=True) if len(missing) else out
+    out = out.merge(floors[["quantity", "type_b_half_width", "reachable"]], on="quantity", how="left")
+    blocked = out["reachable"].eq(False)
+    out.loc[blocked, "n_pairs"] = None
+    out.loc[blocked, "reached"] = False
+    return out
 
 
 def plot_plan(table: pd.DataFrame, targets: Sequence[Target], path, *, assurance: float = config.PLAN_ASSURANCE):

@@ -55,6 +55,7 @@ from .spec import ModelSpec
 
 DEFAULT_LAPLACE_DRAWS = config.LAPLACE_DRAWS
 PROPOSAL_DF = config.LAPLACE_PROPOSAL_DF
+PROPOSAL_FAMILIES = ("t", "normal")
 
 _CACHE: dict[Any, "CompiledProblem"] = {}
 _CACHE_MAX = 16
@@ -200,26 +201,45 @@ class LaplaceFit:
     diagnostics: dict[str, float] = field(default_factory=dict)
 
 
-def _importance_draws(comp: CompiledProblem, problem: FitProblem, y_map: np.ndarray, chol: np.ndarray, draws: int,
-                      rng: np.random.Generator) -> tuple[np.ndarray, float, float, float]:
-    """``draws`` draws of the posterior by PSIS from a multivariate-t proposal around the MAP
-    (module docstring): the Laplace covariance first, inflated by the next factor of
-    :data:`~bayes_roadload.config.LAPLACE_PROPOSAL_INFLATION` while the Pareto k exceeds
-    :data:`~bayes_roadload.config.LAPLACE_GOOD_PARETO_K` (small campaigns: the posterior's
-    coefficients widen with the noise scales and the Gaussian at the mode is too narrow); the
-    proposal with the smallest k is kept.  Returns resampled draws, Pareto k, effective sample
-    size and the inflation used."""
-    import arviz as az
+def _proposal_draws(y_map: np.ndarray, chol: np.ndarray, n: int, family: str, inflation: float,
+                    rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` draws of a proposal centred on the MAP with the Laplace covariance times
+    ``inflation**2`` -- ``family`` "t": multivariate t with ``PROPOSAL_DF`` degrees of freedom;
+    "normal": Gaussian -- and the log proposal density of each (up to a constant shared by the
+    draws)."""
     from scipy import stats
 
     d = y_map.size
-    nu = PROPOSAL_DF
-    best = None
-    for inflation in config.LAPLACE_PROPOSAL_INFLATION:
-        e = inflation * rng.standard_normal((draws, d)) / np.sqrt(rng.chisquare(nu, draws) / nu)[:, None]
-        ys = y_map + e @ chol.T
+    if family == "t":
+        nu = PROPOSAL_DF
+        e = inflation * rng.standard_normal((n, d)) / np.sqrt(rng.chisquare(nu, n) / nu)[:, None]
         log_q = stats.multivariate_t(loc=np.zeros(d), shape=inflation**2 * np.eye(d), df=nu).logpdf(e)
+    elif family == "normal":
+        e = inflation * rng.standard_normal((n, d))
+        log_q = stats.norm(scale=inflation).logpdf(e).sum(axis=1)
+    else:
+        raise ValueError(f"proposal family must be one of {PROPOSAL_FAMILIES}, got {family!r}")
+    return y_map + e @ chol.T, log_q
+
+
+def _importance_draws(comp: CompiledProblem, problem: FitProblem, y_map: np.ndarray, chol: np.ndarray, draws: int,
+                      rng: np.random.Generator, family: str = config.LAPLACE_PROPOSAL_FAMILY,
+                      inflations: tuple[float, ...] = config.LAPLACE_PROPOSAL_INFLATION
+                      ) -> tuple[np.ndarray, float, float, float, int]:
+    """``draws`` draws of the posterior by PSIS from a proposal of ``family`` around the MAP
+    (module docstring; :func:`_proposal_draws`): the Laplace covariance scaled by the first
+    factor of ``inflations``, the next while the Pareto k exceeds
+    :data:`~bayes_roadload.config.LAPLACE_GOOD_PARETO_K` (small campaigns: the posterior's
+    coefficients widen with the noise scales and the Gaussian at the mode is too narrow); the
+    proposal with the smallest k is kept.  Returns resampled draws, Pareto k, effective sample
+    size, the inflation used and the number of posterior evaluations."""
+    import arviz as az
+
+    best, evaluations = None, 0
+    for inflation in inflations:
+        ys, log_q = _proposal_draws(y_map, chol, draws, family, inflation, rng)
         log_p = -np.asarray(comp._fns["f_many"](jnp.asarray(ys), _data(problem)))
+        evaluations += draws
         log_w = np.where(np.isfinite(log_p), log_p - log_q, -np.inf)
         lw, k = az.psislw(log_w - np.max(log_w[np.isfinite(log_w)]))
         k = float(np.asarray(k))
@@ -231,19 +251,22 @@ def _importance_draws(comp: CompiledProblem, problem: FitProblem, y_map: np.ndar
     w = np.exp(lw - lw.max())
     w = w / w.sum()
     idx = rng.choice(draws, size=draws, p=w)
-    return ys[idx], k, float(1.0 / np.sum(w**2)), inflation
+    return ys[idx], k, float(1.0 / np.sum(w**2)), inflation, evaluations
 
 
 def fit_laplace(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling: str = "pooled",
                 noise: str = "integrated", robust: bool = False, draws: int = DEFAULT_LAPLACE_DRAWS,
-                seed: int = 0, start: dict[str, float] | None = None, importance: bool = True) -> LaplaceFit:
+                seed: int = 0, start: dict[str, float] | None = None, importance: bool = True,
+                proposal: str = config.LAPLACE_PROPOSAL_FAMILY,
+                inflations: tuple[float, ...] = config.LAPLACE_PROPOSAL_INFLATION) -> LaplaceFit:
     """MAP + Laplace fit of a campaign, compiled once per kind of campaign.
 
     The same starting values (:func:`~bayes_roadload.inference.nuts.initial_values`) and, for
     the hierarchical model, the same re-linearisation at the first MAP's run effects as
     :func:`~bayes_roadload.inference.nuts.fit_nuts`; then ``draws`` independent draws of the
     Gaussian approximation at the MAP -- with ``importance`` (default) corrected by
-    Pareto-smoothed importance sampling (module docstring).  ``start`` (free parameter ->
+    Pareto-smoothed importance sampling (module docstring) from ``proposal`` ("t" or "normal")
+    proposals scaled by ``inflations`` in turn (:func:`_importance_draws`).  ``start`` (free parameter ->
     value) replaces the least-squares start
     (:func:`~bayes_roadload.inference.nuts.initial_values`).
 
@@ -267,10 +290,14 @@ def fit_laplace(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pool
     y_map = np.asarray(ravel_pytree(result.z)[0]) / comp.scale
     cov_y = result.cov / np.outer(comp.scale, comp.scale)
     chol = np.linalg.cholesky(cov_y + 1e-12 * np.eye(y_map.size))
-    diagnostics = {"pareto_k": float("nan"), "is_ess": float("nan"), "proposal_inflation": float("nan")}
+    diagnostics = {"pareto_k": float("nan"), "is_ess": float("nan"), "proposal_inflation": float("nan"),
+                   "is_evaluations": 0}
+    t_is = time.perf_counter()
     if importance:
-        ys, k, ess, inflation = _importance_draws(comp, problem, y_map, chol, draws, rng)
-        diagnostics = {"pareto_k": k, "is_ess": ess, "proposal_inflation": inflation}
+        ys, k, ess, inflation, evaluations = _importance_draws(comp, problem, y_map, chol, draws, rng, proposal,
+                                                               tuple(inflations))
+        diagnostics = {"pareto_k": k, "is_ess": ess, "proposal_inflation": inflation,
+                       "is_evaluations": evaluations}
     else:
         ys = y_map + rng.standard_normal((draws, y_map.size)) @ chol.T
     constrained = comp._fns["constrain_many"](jnp.asarray(ys), _data(problem))
@@ -278,5 +305,6 @@ def fit_laplace(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pool
     derived = comp._fns["derived"]({k: jnp.asarray(samples[k][0]) for k in problem.free})
     samples.update({k: np.asarray(v)[None] for k, v in derived.items()})
     fit = LaplaceFit(problem=problem, map=result, samples=samples, truth=campaign.truth, diagnostics=diagnostics)
-    fit.timings = {"map_s": result.time_s, "fit_s": time.perf_counter() - t0}
+    fit.timings = {"map_s": result.time_s, "importance_s": time.perf_counter() - t_is if importance else 0.0,
+                   "fit_s": time.perf_counter() - t0}
     return fit

@@ -124,6 +124,22 @@ def test_resume_through_the_command_and_a_scheduler_address(first, fleet_root, c
     assert marker["fit_args"] == list(LSQ) and marker["rc"] == 0
 
 
+def _cache_dir_of_worker():
+    import jax
+
+    return jax.config.jax_compilation_cache_dir
+
+
+def test_local_workers_share_this_process_s_compilation_cache(client):
+    """The suite turns the persistent cache on in this process (conftest); every local worker
+    uses the same directory, so what one compiles the others load."""
+    from bayes_roadload.analysis.batch import compilation_cache_dir
+
+    assert compilation_cache_dir()
+    per_worker = client.run(_cache_dir_of_worker)
+    assert len(per_worker) == 2 and set(per_worker.values()) == {compilation_cache_dir()}
+
+
 def test_options_are_checked_and_passed_through():
     parser = batch_parser()
     args = parser.parse_args(["batch", "d", "--out", "o", "--workers", "2", "--chains", "2", "--robust",
