@@ -8,7 +8,8 @@ planning jobs of ``plan_jobs`` from a source fit, by default the issue's 12-pair
 
 * each importance-sampling scheme of ``SCHEMES`` (a proposal family and its inflations, tried in
   turn as ``laplace._importance_draws`` does), the same MAP for all, and
-* NUTS with the fit's defaults (``method="nuts"`` through the batch door: the reference),
+* NUTS with the fit's defaults (``method="nuts"`` through the batch door, without the Type B
+  draws: the posterior itself, the reference),
 
 and records, per campaign and scheme, the 95 % half-widths of AD, BD, CD0 and F50_N (percent of
 the posterior mean, as ``planning.half_widths``), the Pareto k, the effective sample size, the
@@ -83,7 +84,8 @@ def run(fit_dir: Path, pairs: list[int], campaigns: int, note: str) -> None:
                          "pareto_k": d["pareto_k"], "is_ess": d["is_ess"], "inflation": d["proposal_inflation"],
                          "evaluations": d["is_evaluations"], "importance_s": fit.timings["importance_s"],
                          "map_s": fit.timings["map_s"]})
-        rec = run_job(dataclasses.replace(job, method="nuts", name=job.name.replace("laplace", "nuts")))
+        # the posterior itself on both sides: no Type B draws added (the Laplace fits above have none)
+        rec = run_job(dataclasses.replace(job, method="nuts", type_b=False, name=job.name.replace("laplace", "nuts")))
         frame = pd.DataFrame([rec])
         rows.append({**base, "method": "nuts", "half_width_pct": {q: float(half_widths(frame, q).iloc[0])
                                                                   for q in QUANTITIES},
@@ -132,7 +134,7 @@ def docs() -> None:
             f"(same MAP) and by NUTS with the fit's defaults ({int(nuts['gate_pass'].sum())} of {len(nuts)} "
             "NUTS fits passed their gates).  Ratio: Laplace / NUTS 95 % half-width of AD, BD, CD0 and "
             "F50_N, over campaigns and quantities.\n\n" + _markdown(table))
-    replace_section(DOC, BEGIN, END, text, heading="## 8. The importance correction's proposal against NUTS")
+    replace_section(DOC, BEGIN, END, text, heading="## 9. The importance correction's proposal against NUTS")
 
 
 def main() -> None:

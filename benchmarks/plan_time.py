@@ -84,9 +84,20 @@ def summarise(plan_dir: Path, wall_s: float, args: str, note: str = "") -> dict:
         "jax_caches_cleared": int(rec["jax_caches_cleared"].sum()),
         "sizes_simulated": sorted(int(n) for n in rec["n_pairs"].unique()),
         "per_size": {int(n): {k: round(float(v), 2) for k, v in r.items()} for n, r in per_size.iterrows()},
-        "recommendation": {r["quantity"]: (int(r["n_pairs"]) if r["reached"] else f"> {int(r['max_pairs_simulated'])}")
-                           for _, r in recommendation.iterrows()},
+        "recommendation": {r["quantity"]: _answer(r) for _, r in recommendation.iterrows()},
+        **({"type_b_floors": {r["quantity"]: round(float(r["type_b_half_width"]), 3)
+                              for _, r in recommendation.iterrows()}} if "type_b_half_width" in recommendation else {}),
         "note": note}
+
+
+def _answer(row) -> int | str:
+    """A recommendation row as the plan prints it: the pairs, "> N" (not reached by the largest
+    size simulated) or "none (Type B floor)" (not reachable at any size)."""
+    if row["reached"]:
+        return int(row["n_pairs"])
+    if "reachable" in row and not bool(row["reachable"]):
+        return "none (Type B floor)"
+    return f"> {int(row['max_pairs_simulated'])}"
 
 
 def main() -> None:

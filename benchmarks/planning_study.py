@@ -92,6 +92,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     timings = {}
     frames = {}
+    # every study here plans the data's share of the intervals (type_b=False): the thesis'
+    # planning tables and these records have no Type B uncertainty (docs/planning.md section 8)
     with batch_client(args.workers, args.scheduler) as pool:
         if "thesis" in args.only:
             t0 = time.perf_counter()
@@ -103,7 +105,7 @@ def main(argv=None) -> int:
         if "simulated" in args.only:
             t0 = time.perf_counter()
             frames["simulated"] = _cached("simulated_records", "simulated" in args.rerun, lambda: run_batch(
-                pl.plan_jobs(pilot, (2, 6, 24), simulations=args.simulations, seed=1,
+                pl.plan_jobs(pilot, (2, 6, 24), simulations=args.simulations, seed=1, type_b=False,
                              tags={"study": "simulated"}), pool))
             timings["simulated_s"] = time.perf_counter() - t0
         if "nuts" in args.only:
@@ -114,13 +116,13 @@ def main(argv=None) -> int:
                 sampler = dataclasses.replace(config.DEFAULT_SAMPLER, num_samples=500)
                 for method in ("laplace", "nuts"):
                     for job in pl.plan_jobs(pilot, (2, 6), simulations=args.nuts_simulations, seed=2, method=method,
-                                            tags={"study": "nuts"}):
+                                            type_b=False, tags={"study": "nuts"}):
                         jobs.append(dataclasses.replace(job, sampler=sampler))
                 return run_batch(jobs, pool)
             if "nuts_laplace" in args.rerun and (DATA / "nuts_check_records.csv").exists():
                 # keep the (slow) NUTS arm, refit the same campaigns by Laplace
                 old = pd.read_csv(DATA / "nuts_check_records.csv")
-                lap = run_batch(pl.plan_jobs(pilot, (2, 6), simulations=args.nuts_simulations, seed=2,
+                lap = run_batch(pl.plan_jobs(pilot, (2, 6), simulations=args.nuts_simulations, seed=2, type_b=False,
                                              tags={"study": "nuts"}), pool)
                 pd.concat([lap, old[old["method"] == "nuts"]], ignore_index=True).to_csv(
                     DATA / "nuts_check_records.csv", index=False)
@@ -134,7 +136,7 @@ def main(argv=None) -> int:
                 for w in (0.0, 1.0, 2.0, 4.0):
                     pop = pl.population_from_pilot(WINDY_4TERM, {}, 18, _conditions(18, 4, 3, cross_wind=w),
                                                    "four_term", seed=3)
-                    jobs += pl.plan_jobs(pop, (1, 4, 16), simulations=args.simulations, seed=3,
+                    jobs += pl.plan_jobs(pop, (1, 4, 16), simulations=args.simulations, seed=3, type_b=False,
                                          tags={"study": "yaw", "cross_wind_mps": w})
                 return run_batch(jobs, pool)
             frames["yaw"] = _cached("yaw_records", "yaw" in args.rerun, yaw_compute)
@@ -146,7 +148,7 @@ def main(argv=None) -> int:
                 pop = pl.population_from_pilot(WINDY_4TERM, SPREADS_4TERM, 9, _conditions(16, 4, 4), "four_term", seed=4)
                 jobs = []
                 for model in ("four_term", "three_term", "two_term_tyres"):
-                    jobs += pl.plan_jobs(pop, (2, 6, 24), simulations=args.simulations, seed=4, model=model,
+                    jobs += pl.plan_jobs(pop, (2, 6, 24), simulations=args.simulations, seed=4, model=model, type_b=False,
                                          tags={"study": "constrained"})
                 return run_batch(jobs, pool)
             frames["constrained"] = _cached("constrained_records", "constrained" in args.rerun, constrained_compute)

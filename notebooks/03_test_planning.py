@@ -188,4 +188,9 @@ if FIT_DIR:
     plan_records = run_batch(jobs, None, progress=False)
     mine = pl.plan_table(plan_records, targets, 0.95)
     print(mine[["quantity", "n_pairs", "median_half_width", "assurance"]].to_string(index=False))
+    # the Type B uncertainty (vehicle.toml [uncertainty]) does not shrink with pairs: a target
+    # below its floor is not reachable at any size (`plan` reports it and does not simulate it)
+    floors = pl.type_b_floors(pilot, targets, 0.95)
+    print(floors[["quantity", "target", "type_b_half_width", "reachable", "main_source"]].to_string(index=False))
+    print(pl.recommend(mine, floors=floors)[["quantity", "n_pairs", "reached", "reachable"]].to_string(index=False))
     pl.plot_plan(mine, targets, OUT / "planning_your_fit.png")

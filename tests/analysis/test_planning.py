@@ -105,6 +105,24 @@ def test_plan_table_and_recommendation():
     assert tight["n_pairs"] is None and not tight["reached"]
 
 
+def test_a_target_below_its_type_b_floor_is_never_reached():
+    """With floors (planning.type_b_floors): a target at or below its floor is not reached even
+    where the simulated assurance says so (the refits' Monte Carlo noise), one never simulated is
+    listed with max_pairs_simulated 0, and a reachable one keeps its answer."""
+    rec = _records({1: [3.0, 2.5, 2.0, 1.5], 2: [1.2, 0.9, 0.8, 0.7], 4: [0.6, 0.5, 0.5, 0.4]})
+    table = plan_table(rec, [Target.parse("CD0=1%")])
+    floors = pd.DataFrame([
+        {"quantity": "CD0", "target": 1.0, "unit": "%", "type_b_half_width": 1.2, "reachable": False},
+        {"quantity": "F50_N", "target": 0.5, "unit": "%", "type_b_half_width": 1.5, "reachable": False}])
+    out = recommend(table, 0.8, floors=floors).set_index("quantity")
+    assert not out.loc["CD0", "reached"] and pd.isna(out.loc["CD0", "n_pairs"])
+    assert out.loc["CD0", "max_pairs_simulated"] == 4 and out.loc["F50_N", "max_pairs_simulated"] == 0
+    assert not out.loc["F50_N", "reached"] and out.loc["F50_N", "type_b_half_width"] == 1.5
+    ok = recommend(table, 0.8, floors=floors.assign(reachable=True, type_b_half_width=0.3)).set_index("quantity")
+    assert ok.loc["CD0", "n_pairs"] == 4 and ok.loc["CD0", "reached"]
+    assert recommend(pd.DataFrame(), 0.8, floors=floors)["reached"].eq(False).all()
+
+
 def test_predictive_half_widths_against_the_thesis_formula():
     """A pilot so large that its spread is known: the median half-width is t(n-1) sigma /
     sqrt(n) times the median of s_n / sigma; the thesis' z s / sqrt(n) is met only about half
@@ -125,7 +143,7 @@ def test_plan_through_the_batch_door(conditions):
     spreads is refitted hierarchically.)"""
     pop = _population(conditions, sigma=0.05, q=0.002)
     assert _population(conditions, tau={"AD": np.ones(50)}).pooling == "hierarchical"
-    jobs = plan_jobs(pop, pairs=(1, 4), simulations=2, seed=4)
+    jobs = plan_jobs(pop, pairs=(1, 4), simulations=2, seed=4, type_b=False)  # the data's share shrinks
     assert {j.pooling for j in jobs} == {"pooled"} and {j.method for j in jobs} == {"laplace"}
     records = run_batch(jobs)
     assert records["error"].isna().all(), records["error"].dropna().tolist()
