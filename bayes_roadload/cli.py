@@ -698,7 +698,7 @@ def _cmd_plan(args) -> int:
     from . import config
     from .analysis.batch import batch_client, run_batch
     from .analysis.planning import (Target, plan_jobs, plan_table, plot_plan, recommend, refit_work, sizes_to_fit,
-                                    type_b_floors, undecided_sizes)
+                                    small_size_caveat, type_b_floors, undecided_sizes)
     from .analysis.regulation import regulation_checks
 
     if args.identify:
@@ -811,6 +811,9 @@ def _cmd_plan(args) -> int:
         echo(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  {cells}   {need}")
     echo(f"(median {100 * args.confidence:g} % half-width against pairs, in the target's units; pairs needed: "
           f"smallest simulated n with P(half-width <= target) >= {args.assurance:g})")
+    caveat = small_size_caveat(rec, population.pooling)
+    if caveat:
+        echo(caveat)
     if failed or not_converged:
         echo(f"!! {failed} refits raised (left out of the table), {not_converged} failed their gate (MAP not "
               "converged, or importance weights with Pareto k > 0.7: the Laplace approximation is poor there; kept, "

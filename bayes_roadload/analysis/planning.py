@@ -529,6 +529,27 @@ def recommend(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE, by:
     return out
 
 
+SMALL_SIZE_CAVEAT_PAIRS = 3
+"""`plan` warns when a hierarchical plan recommends this many pairs or fewer: there the Laplace
+refits' intervals are narrower than NUTS' (median 0.75 of NUTS' half-width at 2 pairs,
+docs/planning.md sections 3 and 9), so the answer is optimistic."""
+
+
+def small_size_caveat(recommendation: pd.DataFrame, pooling: str) -> str:
+    """The warning `plan` prints when a hierarchical population's recommendation has answers of
+    at most :data:`SMALL_SIZE_CAVEAT_PAIRS` pairs ("" otherwise)."""
+    if pooling != "hierarchical" or recommendation.empty:
+        return ""
+    small = recommendation[recommendation["reached"].astype(bool)
+                           & (recommendation["n_pairs"].astype(float) <= SMALL_SIZE_CAVEAT_PAIRS)]
+    if small.empty:
+        return ""
+    names = ", ".join(f"{r['quantity']} {int(r['n_pairs'])}" for _, r in small.iterrows())
+    return (f"!! optimistic at small sizes ({names} pairs): with run-to-run spreads the MAP + Laplace refits' "
+            f"intervals at {SMALL_SIZE_CAVEAT_PAIRS} pairs or fewer are narrower than NUTS' (median 0.75 of its "
+            "half-width at 2 pairs, docs/planning.md section 9); confirm with NUTS refits or plan one pair more")
+
+
 def plot_plan(table: pd.DataFrame, targets: Sequence[Target], path, *, assurance: float = config.PLAN_ASSURANCE):
     """Two panels against the number of pairs: the median half-width with its 10-90 % band over
     the simulated campaigns (one line per target, each divided by its target so that 1 is the

@@ -123,6 +123,21 @@ def test_a_target_below_its_type_b_floor_is_never_reached():
     assert recommend(pd.DataFrame(), 0.8, floors=floors)["reached"].eq(False).all()
 
 
+def test_small_hierarchical_answers_carry_the_caveat():
+    """An answer of at most SMALL_SIZE_CAVEAT_PAIRS pairs from a hierarchical population is
+    flagged optimistic, naming it; larger answers, unreached targets and pooled plans are not."""
+    from bayes_roadload.analysis.planning import SMALL_SIZE_CAVEAT_PAIRS, small_size_caveat
+
+    rec = pd.DataFrame([{"quantity": "AD", "n_pairs": 2, "reached": True},
+                        {"quantity": "BD", "n_pairs": 8, "reached": True},
+                        {"quantity": "CD0", "n_pairs": None, "reached": False}])
+    text = small_size_caveat(rec, "hierarchical")
+    assert "AD 2" in text and "BD" not in text and "CD0" not in text
+    assert small_size_caveat(rec, "pooled") == ""
+    later = rec.assign(n_pairs=[SMALL_SIZE_CAVEAT_PAIRS + 1, 8, None])
+    assert small_size_caveat(later, "hierarchical") == ""
+
+
 def test_predictive_half_widths_against_the_thesis_formula():
     """A pilot so large that its spread is known: the median half-width is t(n-1) sigma /
     sqrt(n) times the median of s_n / sigma; the thesis' z s / sqrt(n) is met only about half
