@@ -513,6 +513,11 @@ PLAN_PAIRS = (1, 2, 3, 4, 6, 8, 12, 16, 24)
 PLAN_SIMULATIONS = 40
 """Future campaigns simulated per number of pairs (the assurance's binomial sd is <= 0.08)."""
 
+PLAN_SMALL_SIZE_CAVEAT_PAIRS = 3
+"""`plan` warns when a hierarchical plan recommends this many pairs or fewer: there the Laplace
+refits' intervals are narrower than NUTS' (median 0.75 of NUTS' half-width at 2 pairs,
+docs/planning.md sections 3 and 9), so the answer is optimistic."""
+
 
 # Sim-to-real diagnosis (bayes_roadload.analysis.diagnose, diagnose_intervals)
 @dataclass(frozen=True)

@@ -557,8 +557,7 @@ def batch_client(workers: int | None = None, scheduler: str | None = None, *,
     :func:`~bayes_roadload._jax.enable_compilation_cache`), every local worker uses the same
     directory (:class:`~bayes_roadload.analysis._worker_plugins.CompilationCachePlugin`), so
     a program one worker compiled is loaded by the others and by later batches of the same
-    shapes.  The dashboard is off and the cluster
-    logs only errors.
+    shapes.  The dashboard is off and the cluster logs only errors.
     """
     from distributed import Client, LocalCluster  # deferred: the command line starts without Dask
 

@@ -529,10 +529,7 @@ def recommend(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE, by:
     return out
 
 
-SMALL_SIZE_CAVEAT_PAIRS = 3
-"""`plan` warns when a hierarchical plan recommends this many pairs or fewer: there the Laplace
-refits' intervals are narrower than NUTS' (median 0.75 of NUTS' half-width at 2 pairs,
-docs/planning.md sections 3 and 9), so the answer is optimistic."""
+SMALL_SIZE_CAVEAT_PAIRS = config.PLAN_SMALL_SIZE_CAVEAT_PAIRS
 
 
 def small_size_caveat(recommendation: pd.DataFrame, pooling: str) -> str:
