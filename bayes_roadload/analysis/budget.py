@@ -84,6 +84,10 @@ class TypeB:
     def sources(self) -> list[str]:
         return [s for s in self.u if s not in self.notes]
 
+    def variances(self, quantity: str) -> dict[str, float]:
+        """Source -> the variance (c_s u_s)^2 it gives ``quantity`` (empty: no sensitivity)."""
+        return {s: (c * self.u[s]) ** 2 for s, c in self.sensitivity.get(quantity, {}).items()}
+
 
 def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[str] = BUDGET_QUANTITIES,
                          method: str = "linear", options: FitOptions = FitOptions(), fit=None) -> TypeB:
@@ -171,7 +175,7 @@ def budget_table(typeb: TypeB, data_sd: dict[str, float]) -> pd.DataFrame:
     rows = []
     for q, sd in data_sd.items():
         row = typeb.sensitivity.get(q, {})
-        var = {s: (c * typeb.u[s]) ** 2 for s, c in row.items()}
+        var = typeb.variances(q)
         total = sd**2 + sum(var.values())
         if not total > CONSTANT_SD**2:
             continue

@@ -428,8 +428,7 @@ def type_b_floors(population: Population, targets: Sequence[Target], confidence:
     z = NormalDist().inv_cdf((1.0 + confidence) / 2.0)
     rows = []
     for t in targets:
-        parts = {s: (c * typeb.u[s]) ** 2 for s, c in typeb.sensitivity.get(t.quantity, {}).items()
-                 if s in typeb.sources}
+        parts = typeb.variances(t.quantity)
         var = float(sum(parts.values()))
         half = z * math.sqrt(var)
         value = values.get(t.quantity, math.nan)
