@@ -574,10 +574,14 @@ def _cmd_demo(args) -> int:
           f"system noise {on(case.system_noise)}, {case.model} drag model; seed {args.seed}.")
     campaign = simulate_campaign(case, pairs=args.pairs, seed=args.seed)
     save_campaign(campaign, out / "campaign")
-    echo(f"Fitting model {args.model}: classical per-pair least squares, then NUTS over all runs jointly ...")
-    lsq = fit_lsq(campaign, args.model, grouping="pair")
+    traces = KINDS["traces"]
+    lsq_model = args.model or traces.default_model(campaign, FitOptions(method="lsq"))
+    nuts_model = args.model or traces.default_model(campaign, FitOptions())
+    echo(f"Fitting classical per-pair least squares (model {lsq_model}), then NUTS over all runs jointly "
+         f"(model {nuts_model}) ...")
+    lsq = fit_lsq(campaign, lsq_model, grouping="pair")
     write_lsq_fit_dir(lsq, out / "fit_lsq", provenance=_provenance(args, campaign, out / "campaign"))
-    spec = load_model_spec(args.model)
+    spec = load_model_spec(nuts_model)
     options = resolve_pooling(KINDS["traces"], campaign, spec, FitOptions(
         pooling=args.pooling, noise=args.noise, robust=bool(args.robust), sampler=_sampler(args)))
     _, report, _, _, truth, table = _fit_and_write(KINDS["traces"], campaign, spec, options, out / "fit_nuts",
@@ -931,7 +935,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "by least squares and NUTS, printing truth, estimates and posterior")
     d.add_argument("--case", type=int, default=14)
     d.add_argument("--pairs", type=int, default=6)
-    d.add_argument("--model", default="four_term", help="model variant (see `models`)")
+    d.add_argument("--model", default=None,
+                   help="model variant of both fits (see `models`; default: fit's for speed traces)")
     d.add_argument("--truth-model", choices=("basic", "case"), default="basic",
                    help="simulate with the basic drag model (eq. 6.1, the physics of the analysis "
                         "model) or with the case's own (case 14: the full model, eq. 6.2)")

@@ -16,7 +16,8 @@ The rules are frozen before the confirmatory seeds run (``docs/calibration.md``)
 * design seeds (used while choosing the default analysis): 100-199; confirmatory seeds: from
   1000 on (``--seed0 1000``).
 
-Writes every record to ``--records`` (CSV; a ``.partial.csv`` while running), prints the
+Writes every record to ``--records`` (CSV; a ``.partial.csv`` while running, from which an
+interrupted run resumes: its campaigns are not fitted again), prints the
 summary as JSON and, with ``--docs``, regenerates the section of ``docs/calibration.md`` between
 its markers.
 
@@ -85,7 +86,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scheduler", default=None, metavar="ADDR", help="a running Dask scheduler")
     ap.add_argument("--records", type=Path, default=RECORDS)
     ap.add_argument("--docs", action="store_true", help="regenerate the section of docs/calibration.md")
-    ap.add_argument("--model", default="four_term", help="model variant (default four_term, fit's default)")
+    ap.add_argument("--model", default=None, help="model variant (default: fit's for speed traces)")
     ap.add_argument("--compare", type=Path, default=None, metavar="RECORDS",
                     help="with --from-records: a table of --records beside these records on the seeds both hold")
     ap.add_argument("--from-records", action="store_true", help="summarise --records without fitting")
@@ -98,15 +99,22 @@ def main(argv=None) -> int:
         jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs, model=args.model)
         args.records.parent.mkdir(parents=True, exist_ok=True)
         partial = args.records.with_suffix(".partial.csv")
-        done: list[dict] = []
+        # resumable: the campaigns of an interrupted run's partial records are not fitted again
+        before = pd.read_csv(partial) if partial.exists() else pd.DataFrame({"name": []})
+        done: list[dict] = before.to_dict("records")
+        finished = set(before["name"])
+        jobs = [j for j in jobs if j.name not in finished]
+        if finished:
+            print(f"resuming: {len(finished)} campaigns from {partial}, {len(jobs)} to fit", file=sys.stderr)
 
         def progress(rec):
             done.append(rec)
             pd.DataFrame.from_records(done).to_csv(partial, index=False)
 
         with batch_client(args.workers, args.scheduler) as client:
-            records = run_batch(jobs, client, on_record=progress)
+            new = run_batch(jobs, client, on_record=progress)
         wall = time.perf_counter() - t0
+        records = pd.concat([before, new], ignore_index=True) if finished else new
         records.to_csv(args.records, index=False)
         partial.unlink(missing_ok=True)
     if args.compare is not None:

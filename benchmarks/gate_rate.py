@@ -3,8 +3,9 @@
 Campaigns: the thesis' simulation cases 1-19 (``--cases``) at ``--pairs`` pairs (seeded), and
 ``--independent`` campaigns of the independent simulator (``bayes_roadload.simulate.independent``,
 1-``--max-pairs`` pairs).  Each is fitted with the default options of ``bayes-roadload fit``
-(:class:`bayes_roadload.inference.kinds.FitOptions`: model ``four_term``, default sampler with its
-retry, :data:`bayes_roadload.config.DEFAULT_SAMPLER`) through the batch door.  A fit passes
+(:class:`bayes_roadload.inference.kinds.FitOptions`: the registry's default model for speed
+traces unless ``--model`` names another, default sampler with its retry,
+:data:`bayes_roadload.config.DEFAULT_SAMPLER`) through the batch door.  A fit passes
 *first time* when it needed no retry; the records say which gate failed first
 (``retry_failed``) and the time of the first attempt (``time_first_attempt_s``).
 
@@ -27,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bayes_roadload.analysis.batch import FitJob, SimulatedCampaign, batch_client, run_batch  # noqa: E402
-from bayes_roadload.inference.kinds import FitOptions  # noqa: E402
+from bayes_roadload.inference.kinds import KINDS, FitOptions  # noqa: E402
 from bayes_roadload.simulate.independent import simulate_independent  # noqa: E402
 
 RECORDS = ROOT / "benchmarks" / "records" / "gates" / "gate_rate.csv"
@@ -52,9 +53,11 @@ def main(argv=None) -> int:
     ap.add_argument("--records", type=Path, default=RECORDS)
     ap.add_argument("--pooling", choices=("auto", "pooled", "hierarchical"), default="auto",
                     help="pooling of every fit (default: the default of `fit`)")
+    ap.add_argument("--model", default=None, help="model variant of every fit (default: fit's for speed traces)")
     args = ap.parse_args(argv)
     o = FitOptions(pooling=args.pooling)
-    common = dict(pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler)
+    common = dict(model=args.model or KINDS["traces"].default_model(None, o), pooling=o.pooling, noise=o.noise,
+                  robust=o.robust, sampler=o.sampler)
     jobs = [FitJob(f"case{c}-p{args.pairs}-s{args.seed}", SimulatedCampaign(c, args.pairs, args.seed),
                    tags={"source": "thesis case", "case": c, "pairs": args.pairs}, **common)
             for c in parse_cases(args.cases)]

@@ -19,6 +19,12 @@ def test_demo_runs_and_prints_truth_beside_estimates(tmp_path, capsys):
     assert (tmp_path / "campaign" / "runs.csv").exists()
     assert (tmp_path / "fit_lsq" / "summary.csv").exists()
     assert (tmp_path / "fit_nuts" / "posterior.nc").exists()
+    # without --model each fit takes fit's default model for its method
+    from bayes_roadload.inference.kinds import KINDS, FitOptions
+
+    for fit_dir, method in (("fit_lsq", "lsq"), ("fit_nuts", "nuts")):
+        expected = KINDS["traces"].default_model(None, FitOptions(method=method))
+        assert json.loads((tmp_path / fit_dir / "fit.json").read_text())["model"] == expected
     # the statement on the intervals counts what summary.csv and the truth say
     summary = pd.read_csv(tmp_path / "fit_nuts" / "summary.csv").set_index("parameter")
     truth = json.loads((tmp_path / "campaign" / "truth.json").read_text())

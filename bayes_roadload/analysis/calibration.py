@@ -23,7 +23,7 @@ from typing import Iterable
 import numpy as np
 import pandas as pd
 
-from ..inference.kinds import FitOptions
+from ..inference.kinds import KINDS, FitOptions
 from ..simulate.independent import simulate_independent
 from .batch import FitJob, coverage_summary
 
@@ -41,11 +41,12 @@ def pairs_of(seed: int, lo: int, hi: int) -> int:
 
 
 def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
-                     options: FitOptions | None = None, model: str = "four_term") -> list[FitJob]:
+                     options: FitOptions | None = None, model: str | None = None) -> list[FitJob]:
     """One fit job per seed, with the default fit options (or ``options``: method, pooling,
     noise, robust, sampler and Type B budget pass through) and ``model`` (``fit``'s default for
-    speed traces unless given)."""
+    speed traces, the registry's ``KINDS["traces"].default_model``, unless given)."""
     o = options or FitOptions()
+    model = model or KINDS["traces"].default_model(None, o)
     return [FitJob(f"ind-{s}", functools.partial(simulate_independent, s, pairs=pairs_of(s, lo, hi)), model=model,
                    method=o.method, pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler,
                    type_b=o.type_b, derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi)})

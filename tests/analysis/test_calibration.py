@@ -50,8 +50,11 @@ def test_the_rules_pass_calibrated_and_fail_overconfident_posteriors():
 
 def test_jobs_carry_the_model_asked_for():
     """The study fits fit's default model unless told otherwise (``--model``)."""
-    assert {j.model for j in calibration_jobs([1, 2], 1, 3)} == {"four_term"}
-    assert {j.model for j in calibration_jobs([1, 2], 1, 3, model="four_term_tyre_lag")} == {"four_term_tyre_lag"}
+    from bayes_roadload.inference.kinds import KINDS, FitOptions
+
+    fit_default = KINDS["traces"].default_model(None, FitOptions())
+    assert {j.model for j in calibration_jobs([1, 2], 1, 3)} == {fit_default}
+    assert {j.model for j in calibration_jobs([1, 2], 1, 3, model="four_term")} == {"four_term"}
 
 
 def test_campaign_sizes_come_from_the_seed():
