@@ -77,6 +77,14 @@ def comparison_markdown(first: pd.DataFrame, second: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
+def resume_from(partial: Path, jobs: list) -> tuple[pd.DataFrame, list]:
+    """The records of an interrupted run (``partial``, empty when it does not exist) and the
+    jobs whose campaign (``name``) they do not hold yet."""
+    before = pd.read_csv(partial) if partial.exists() else pd.DataFrame({"name": []})
+    finished = set(before["name"])
+    return before, [j for j in jobs if j.name not in finished]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=200, help="campaigns (default 200)")
@@ -99,13 +107,11 @@ def main(argv=None) -> int:
         jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs, model=args.model)
         args.records.parent.mkdir(parents=True, exist_ok=True)
         partial = args.records.with_suffix(".partial.csv")
-        # resumable: the campaigns of an interrupted run's partial records are not fitted again
-        before = pd.read_csv(partial) if partial.exists() else pd.DataFrame({"name": []})
+        before, jobs = resume_from(partial, jobs)
         done: list[dict] = before.to_dict("records")
-        finished = set(before["name"])
-        jobs = [j for j in jobs if j.name not in finished]
+        finished = len(before) > 0
         if finished:
-            print(f"resuming: {len(finished)} campaigns from {partial}, {len(jobs)} to fit", file=sys.stderr)
+            print(f"resuming: {len(before)} campaigns from {partial}, {len(jobs)} to fit", file=sys.stderr)
 
         def progress(rec):
             done.append(rec)
