@@ -582,9 +582,9 @@ def _cmd_demo(args) -> int:
     lsq = fit_lsq(campaign, lsq_model, grouping="pair")
     write_lsq_fit_dir(lsq, out / "fit_lsq", provenance=_provenance(args, campaign, out / "campaign"))
     spec = load_model_spec(nuts_model)
-    options = resolve_pooling(KINDS["traces"], campaign, spec, FitOptions(
+    options = resolve_pooling(traces, campaign, spec, FitOptions(
         pooling=args.pooling, noise=args.noise, robust=bool(args.robust), sampler=_sampler(args)))
-    _, report, _, _, truth, table = _fit_and_write(KINDS["traces"], campaign, spec, options, out / "fit_nuts",
+    _, report, _, _, truth, table = _fit_and_write(traces, campaign, spec, options, out / "fit_nuts",
                                                    out / "campaign", _provenance(args, campaign, out / "campaign"))
     summary, diag = report.summary, report.diagnostics
     post = summary.set_index("parameter")

@@ -528,22 +528,20 @@ def recommend(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE, by:
     return out
 
 
-SMALL_SIZE_CAVEAT_PAIRS = config.PLAN_SMALL_SIZE_CAVEAT_PAIRS
-
-
 def small_size_caveat(recommendation: pd.DataFrame, pooling: str) -> str:
     """The warning `plan` prints when a hierarchical population's recommendation has answers of
-    at most :data:`SMALL_SIZE_CAVEAT_PAIRS` pairs ("" otherwise)."""
+    at most :data:`~bayes_roadload.config.PLAN_SMALL_SIZE_CAVEAT_PAIRS` pairs ("" otherwise)."""
     if pooling != "hierarchical" or recommendation.empty:
         return ""
     small = recommendation[recommendation["reached"].astype(bool)
-                           & (recommendation["n_pairs"].astype(float) <= SMALL_SIZE_CAVEAT_PAIRS)]
+                           & (recommendation["n_pairs"].astype(float) <= config.PLAN_SMALL_SIZE_CAVEAT_PAIRS)]
     if small.empty:
         return ""
     names = ", ".join(f"{r['quantity']} {int(r['n_pairs'])}" for _, r in small.iterrows())
     return (f"!! optimistic at small sizes ({names} pairs): with run-to-run spreads the MAP + Laplace refits' "
-            f"intervals at {SMALL_SIZE_CAVEAT_PAIRS} pairs or fewer are narrower than NUTS' (median 0.75 of its "
-            "half-width at 2 pairs, docs/planning.md section 9); confirm with NUTS refits or plan one pair more")
+            f"intervals at {config.PLAN_SMALL_SIZE_CAVEAT_PAIRS} pairs or fewer are narrower than NUTS' "
+            "(median 0.75 of its half-width at 2 pairs, docs/planning.md section 9); confirm with NUTS refits "
+            "or plan one pair more")
 
 
 def plot_plan(table: pd.DataFrame, targets: Sequence[Target], path, *, assurance: float = config.PLAN_ASSURANCE):

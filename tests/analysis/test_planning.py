@@ -124,9 +124,9 @@ def test_a_target_below_its_type_b_floor_is_never_reached():
 
 
 def test_small_hierarchical_answers_carry_the_caveat():
-    """An answer of at most SMALL_SIZE_CAVEAT_PAIRS pairs from a hierarchical population is
+    """An answer of at most config.PLAN_SMALL_SIZE_CAVEAT_PAIRS pairs from a hierarchical population is
     flagged optimistic, naming it; larger answers, unreached targets and pooled plans are not."""
-    from bayes_roadload.analysis.planning import SMALL_SIZE_CAVEAT_PAIRS, small_size_caveat
+    from bayes_roadload.analysis.planning import small_size_caveat
 
     rec = pd.DataFrame([{"quantity": "AD", "n_pairs": 2, "reached": True},
                         {"quantity": "BD", "n_pairs": 8, "reached": True},
@@ -134,7 +134,7 @@ def test_small_hierarchical_answers_carry_the_caveat():
     text = small_size_caveat(rec, "hierarchical")
     assert "AD 2" in text and "BD" not in text and "CD0" not in text
     assert small_size_caveat(rec, "pooled") == ""
-    later = rec.assign(n_pairs=[SMALL_SIZE_CAVEAT_PAIRS + 1, 8, None])
+    later = rec.assign(n_pairs=[config.PLAN_SMALL_SIZE_CAVEAT_PAIRS + 1, 8, None])
     assert small_size_caveat(later, "hierarchical") == ""
 
 
