@@ -109,13 +109,7 @@ import numpyro.distributions as dist
 from .. import config
 from .. import thesis
 from ..data.campaign import Campaign
-from ..physics.integrate import (
-    RunBatch,
-    integrate_batch,
-    integrate_batch_forward_sensitivity,
-    lagged_speed_drop,
-    reversion_rate,
-)
+from ..physics.integrate import RunBatch, integrate_batch, integrate_batch_forward_sensitivity, reversion_rate
 from ..physics.model import DragModel
 from ..physics.residuals import (
     local_level_effects_posterior,
@@ -169,10 +163,6 @@ class FitProblem:
         [R] index of each run's opposite-direction pair (:func:`latent_wind_pairs`); the
         along-track wind of pair k, ``head_wind_mps[k]``, is a head wind for the pair's run of
         direction +1 and a tail wind for the other.  None otherwise.
-    apparent : (c, b) of the straight line ``L ~ c - b v`` through the campaign's lagged speed
-        drop when the tyre-lag gain, A_D and B_D are all free: NUTS and the MAP then sample the
-        apparent coefficients ``AD_apparent``, ``BD_apparent`` instead of A_D, B_D
-        (:func:`apparent_coefficients`); None otherwise.
     driveline_channel : the driveline loss is the polynomial A_t + B_t v + C_t v^2 and the
         campaign logs ``driveline_force_n``: the logged force is fitted too
         (:func:`driveline_log_likelihood`), with its noise ``sigma_driveline_n``.
@@ -198,7 +188,6 @@ class FitProblem:
     calibration_pairs: tuple[tuple[int, int], ...] = ()
     driveline_channel: bool = False
     wind_pair_index: Any = None
-    apparent: tuple[float, float] | None = None
 
     @property
     def latent_wind(self) -> bool:
@@ -360,60 +349,6 @@ def latent_wind_pairs(campaign: Campaign, run_ids) -> np.ndarray:
     return out
 
 
-LAG_GAIN = "tyre_lag_gain_per_mps"
-LAG_TIME_CONSTANT = "tyre_lag_time_constant_s"
-APPARENT_SITES = {"AD": "AD_apparent", "BD": "BD_apparent"}
-"""Sample sites of the apparent rolling coefficients (:func:`apparent_coefficients`)."""
-
-
-def lag_line(batch: RunBatch, time_constant_s: float) -> tuple[float, float]:
-    """(c, b) of the least-squares line ``L ~ c - b v`` through every real sample of the
-    campaign's lagged speed drop L (:func:`~bayes_roadload.physics.integrate.lagged_speed_drop`
-    of the logged speed, time constant ``time_constant_s``) against the logged speed v."""
-    lag = np.asarray(jax.vmap(lagged_speed_drop, in_axes=(0, 0, None))(
-        jnp.asarray(batch.time_s), jnp.asarray(batch.speed_mps), time_constant_s))
-    mask = np.asarray(batch.mask, bool)
-    v, y = np.asarray(batch.speed_mps)[mask], lag[mask]
-    slope, intercept = np.polyfit(v, y, 1)
-    return float(intercept), float(-slope)
-
-
-def apparent_coefficients(AD, BD, gain, line: tuple[float, float]):
-    """The rolling coefficients a coastdown without the tyre lag would read:
-    ``AD' = AD s``, ``BD' = BD s + AD G_T b`` with ``s = 1 - G_T c``.
-
-    With the lagged speed drop close to the line ``L ~ c - b v`` (:func:`lag_line`) the rolling
-    loss of :class:`~bayes_roadload.physics.terms.TyreThermalLag`,
-    ``(A_D + B_D v)(1 - G_T L)``, is ``AD' + BD' v + B_D G_T b v^2``: the speed traces fix AD'
-    and BD' about as well as they fix A_D and B_D of the model without the lag, and leave G_T to
-    its prior.  In (A_D, B_D, G_T) that weak direction is the curve of constant AD', BD'
-    (A_D = AD' / s bends by ~5 % of A_D over the prior's +-2 sd of G_T, several posterior
-    widths), on which NUTS diverged; in (AD', BD', G_T) it is straight.  The map is exact
-    whatever (c, b): the line only chooses the coordinates."""
-    c, b = line
-    s = 1.0 - gain * c
-    return AD * s, BD * s + AD * gain * b
-
-
-def rolling_from_apparent(AD_apparent, BD_apparent, gain, line: tuple[float, float]):
-    """The inverse of :func:`apparent_coefficients`: (A_D, B_D, log |d(AD', BD') / d(A_D, B_D)|),
-    the Jacobian's determinant being s^2."""
-    c, b = line
-    s = 1.0 - gain * c
-    AD = AD_apparent / s
-    return AD, (BD_apparent - AD * gain * b) / s, 2.0 * jnp.log(s)
-
-
-def with_apparent(problem: FitProblem, values: dict[str, Any]) -> dict[str, Any]:
-    """``values`` (constrained, with A_D, B_D and the lag gain) with the apparent sites added
-    when the problem samples them (:attr:`FitProblem.apparent`)."""
-    if problem.apparent is None:
-        return values
-    ad, bd = apparent_coefficients(float(values["AD"]), float(values["BD"]), float(values[LAG_GAIN]),
-                                   problem.apparent)
-    return dict(values, **{APPARENT_SITES["AD"]: ad, APPARENT_SITES["BD"]: bd})
-
-
 def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling: str = "pooled",
                   noise: str = "integrated", robust: bool = False) -> FitProblem:
     """Resolve a model variant against a campaign.
@@ -461,17 +396,12 @@ def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, po
             raise ValueError("a latent wind per pair is available with --pooling pooled only")
         wind_pairs = latent_wind_pairs(campaign, run_ids)
         initial["head_wind_mps"] = np.zeros(int(wind_pairs.max()) + 1)
-    apparent = None
-    if {"AD", "BD", LAG_GAIN} <= set(free):
-        tau = fixed.get(LAG_TIME_CONSTANT, initial.get(LAG_TIME_CONSTANT))
-        apparent = lag_line(batch, float(tau))
     return FitProblem(spec=spec, model=model, fixed={k: float(v) for k, v in fixed.items()}, free=tuple(free),
                       priors=priors, batch=batch, run_ids=tuple(run_ids), pooling=pooling, noise=noise,
                       robust=robust, mass_kg=campaign.vehicle.mass_kg,
                       frontal_area_m2=campaign.vehicle.frontal_area_m2,
                       driveline_curve=measured_driveline_curve(campaign), initial=initial,
-                      calibration_pairs=pairs, driveline_channel=channel, wind_pair_index=wind_pairs,
-                      apparent=apparent)
+                      calibration_pairs=pairs, driveline_channel=channel, wind_pair_index=wind_pairs)
 
 
 def free_parameters(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:
@@ -683,35 +613,17 @@ def driveline_log_likelihood(problem: FitProblem, sample: dict[str, jnp.ndarray]
     return jnp.sum(jnp.where(b.mask, logp, 0.0))
 
 
-def _sample_apparent(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> None:
-    """A_D and B_D through the apparent coefficients (:func:`apparent_coefficients`): sites
-    ``AD_apparent``, ``BD_apparent`` with the supports of A_D's and B_D's priors, A_D and B_D
-    deterministic, and their priors' density with the Jacobian ``-log s^2`` as a factor, so
-    that the posterior is that of the model file's priors on A_D, B_D."""
-    priors = {n: problem.priors[n].to_numpyro() for n in APPARENT_SITES}
-    raw = {n: numpyro.sample(site, dist.ImproperUniform(priors[n].support, (), ()))
-           for n, site in APPARENT_SITES.items()}
-    AD, BD, log_det = rolling_from_apparent(raw["AD"], raw["BD"], sample[LAG_GAIN], problem.apparent)
-    sample["AD"] = numpyro.deterministic("AD", AD)
-    sample["BD"] = numpyro.deterministic("BD", BD)
-    numpyro.factor("rolling_prior", priors["AD"].log_prob(AD) + priors["BD"].log_prob(BD) - log_det)
-
-
 def coastdown_model(problem: FitProblem) -> None:
     """The numpyro model (see the module docstring).  Sample sites use the contract names."""
     r = problem.n_runs
     sample: dict[str, jnp.ndarray] = {}
     for name in problem.free:
-        if problem.apparent is not None and name in APPARENT_SITES:
-            continue
         if problem.latent_wind and name == "head_wind_mps":
             # one along-track wind per opposite-direction pair (speed only, no anemometer)
             with numpyro.plate("wind_pair", int(np.max(problem.wind_pair_index)) + 1):
                 sample[name] = numpyro.sample(name, problem.priors[name].to_numpyro())
             continue
         sample[name] = numpyro.sample(name, problem.priors[name].to_numpyro())
-    if problem.apparent is not None:
-        _sample_apparent(problem, sample)
     for name in problem.varying:
         # Gamma(2): no mass piling at tau = 0, so the joint mode (the MAP the sampler is
         # whitened at) is not degenerate (Chung et al. 2013).  The run effects themselves

@@ -47,12 +47,10 @@ from .. import config
 from ..data.campaign import Campaign
 from ..errors import FitStageError, stage
 from .bayes import (
-    APPARENT_SITES,
     FitProblem,
     build_problem,
     linearise_run_effects,
     run_effect_means,
-    with_apparent,
 )
 from .problem import Problem
 from .lsq import fit_lsq
@@ -139,16 +137,14 @@ def _site_scales(problem: Problem, z: dict[str, Any]) -> dict[str, Any]:
     truncated from below, about (value - bound) / (0.05 x prior scale):
     :func:`~bayes_roadload.inference.spec.soft_lower_truncated_normal`)."""
     scales = {}
-    apparent = {site: n for n, site in APPARENT_SITES.items()}
-    for site, value in z.items():
+    for name, value in z.items():
         s = 1.0
-        name = apparent.get(site, site)  # an apparent coefficient is scaled as its own
         prior = problem.priors.get(name)  # the coefficients' priors (sites without one are nuisances)
         if name in problem.free and prior is not None and prior.dist == "normal" and prior.low is None and prior.high is None:
             s = config.PARAMETER_SCALES.get(name, 1.0)
         elif name == "v0_mps":
             s = 0.05
-        scales[site] = jnp.full(jnp.shape(value), s, dtype=float)
+        scales[name] = jnp.full(jnp.shape(value), s, dtype=float)
     return scales
 
 
@@ -211,7 +207,7 @@ def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, flo
     if start is not None:
         init.update({k: float(v) for k, v in start.items() if k in problem.free})
     elif problem.latent_wind:
-        return with_apparent(problem, _latent_wind_start(problem, campaign, init, first))
+        return _latent_wind_start(problem, campaign, init, first)
     else:
         try:
             with warnings.catch_warnings():
@@ -240,7 +236,7 @@ def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, flo
         init["student_df"] = 10.0
     for name in problem.varying:
         init[f"tau_{name}"] = 0.5 * config.TAU_PRIOR_SCALES[name]
-    return with_apparent(problem, init)
+    return init
 
 
 @dataclass
