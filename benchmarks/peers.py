@@ -623,7 +623,7 @@ def render(records: list[dict], meta: dict) -> str:
         if "error" in r:
             bound = r.get("min_ess_per_s_upper_bound")
             if bound and r["sampler"].startswith(ENSEMBLE):  # all chains' draws, not --chains'
-                bound = round(meta["meads_chains"] * meta["draws"] / meta["timeout_s"], 3)
+                bound = round(meta["meads_chains"] * meta["draws"] / r.get("timeout_s", meta["timeout_s"]), 3)
             vs = "" if ours is None or not bound else f">= {ours['min_ess_per_s'] / bound:.1f}x"
             ess = "" if not bound else f"<= {bound}"
             lines.append(f"| {r['sampler']} | | not run: {r['error']} | {r.get('process_cpu_s', '')} | | | {ess} | {vs} "
@@ -722,7 +722,7 @@ def main() -> None:
             os.killpg(proc.pid, signal.SIGKILL)  # the worker and its samplers' processes (Stan's chains)
             proc.communicate()
             chains = args.meads_chains if name.startswith(ENSEMBLE) else args.chains
-            rec = {"sampler": name, "error": f"did not finish within {args.timeout_s:.0f} s",
+            rec = {"sampler": name, "error": f"did not finish within {args.timeout_s:.0f} s", "timeout_s": args.timeout_s,
                    "min_ess_per_s_upper_bound": round(chains * args.draws / args.timeout_s, 3)}
         r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         rec.setdefault("load_average_1min_at_start", load)
