@@ -109,7 +109,13 @@ import numpyro.distributions as dist
 from .. import config
 from .. import thesis
 from ..data.campaign import Campaign
-from ..physics.integrate import RunBatch, integrate_batch, integrate_batch_forward_sensitivity, reversion_rate
+from ..physics.integrate import (
+    RunBatch,
+    integrate_batch,
+    integrate_batch_forward_sensitivity,
+    lagged_speed_drop,
+    reversion_rate,
+)
 from ..physics.model import DragModel
 from ..physics.residuals import (
     local_level_effects_posterior,
@@ -163,6 +169,10 @@ class FitProblem:
         [R] index of each run's opposite-direction pair (:func:`latent_wind_pairs`); the
         along-track wind of pair k, ``head_wind_mps[k]``, is a head wind for the pair's run of
         direction +1 and a tail wind for the other.  None otherwise.
+    apparent : (c, b, kappa) of :func:`lag_line` when the tyre-lag gain, A_D, B_D and C_D0 are
+        all free: NUTS and the MAP then sample the apparent coefficients ``AD_apparent``,
+        ``BD_apparent``, ``CD0_apparent`` instead (:func:`apparent_coefficients`); None
+        otherwise.
     driveline_channel : the driveline loss is the polynomial A_t + B_t v + C_t v^2 and the
         campaign logs ``driveline_force_n``: the logged force is fitted too
         (:func:`driveline_log_likelihood`), with its noise ``sigma_driveline_n``.
@@ -188,6 +198,7 @@ class FitProblem:
     calibration_pairs: tuple[tuple[int, int], ...] = ()
     driveline_channel: bool = False
     wind_pair_index: Any = None
+    apparent: tuple[float, float, float] | None = None
 
     @property
     def latent_wind(self) -> bool:
@@ -349,6 +360,67 @@ def latent_wind_pairs(campaign: Campaign, run_ids) -> np.ndarray:
     return out
 
 
+LAG_GAIN = "tyre_lag_gain_per_mps"
+LAG_TIME_CONSTANT = "tyre_lag_time_constant_s"
+APPARENT_SITES = {"AD": "AD_apparent", "BD": "BD_apparent", "CD0": "CD0_apparent"}
+"""Sample sites of the apparent coefficients (:func:`apparent_coefficients`)."""
+
+
+def lag_line(batch: RunBatch, time_constant_s: float) -> tuple[float, float, float]:
+    """(c, b, kappa): the least-squares line ``L ~ c - b v`` through every real sample of the
+    campaign's lagged speed drop L (:func:`~bayes_roadload.physics.integrate.lagged_speed_drop`
+    of the logged speed, time constant ``time_constant_s``) against the logged speed v, and
+    ``kappa = b M g / (rho A / 2)`` (mean test weight and air density of the campaign): the
+    drag coefficient that a rolling term ``B_D G_T b v^2`` per unit weight adds."""
+    lag = np.asarray(jax.vmap(lagged_speed_drop, in_axes=(0, 0, None))(
+        jnp.asarray(batch.time_s), jnp.asarray(batch.speed_mps), time_constant_s))
+    mask = np.asarray(batch.mask, bool)
+    v, y = np.asarray(batch.speed_mps)[mask], lag[mask]
+    slope, intercept = np.polyfit(v, y, 1)
+    weight = float(np.mean(np.asarray(batch.mass_kg, float))) * config.GRAVITY_MPS2
+    rho = float(np.mean(np.asarray(batch.air_density_kgpm3)[mask]))
+    area = float(np.mean(np.asarray(batch.frontal_area_m2, float)))
+    return float(intercept), float(-slope), float(-slope * weight / (0.5 * rho * area))
+
+
+def apparent_coefficients(AD, BD, CD0, gain, line: tuple[float, float, float]):
+    """The coefficients a coastdown without the tyre lag would read:
+    ``AD' = AD s``, ``BD' = BD s + AD G_T b``, ``CD0' = CD0 + kappa BD G_T``, ``s = 1 - G_T c``.
+
+    With the lagged speed drop close to the line ``L ~ c - b v`` (:func:`lag_line`) the rolling
+    loss of :class:`~bayes_roadload.physics.terms.TyreThermalLag` per unit weight,
+    ``(A_D + B_D v)(1 - G_T L)``, is ``AD' + BD' v + B_D G_T b v^2``, and its v^2 part is a drag
+    coefficient ``kappa B_D G_T``: the speed traces fix AD', BD', CD0' about as well as they fix
+    A_D, B_D, C_D0 without the lag and leave G_T to its prior and what the lag's curvature
+    tells.  In (A_D, B_D, C_D0, G_T) that weak direction is curved (products of G_T with the
+    coefficients); in (AD', BD', CD0', G_T) it is nearly straight.  The map is exact whatever
+    the line: it only chooses the coordinates."""
+    c, b, kappa = line
+    s = 1.0 - gain * c
+    return AD * s, BD * s + AD * gain * b, CD0 + kappa * BD * gain
+
+
+def coefficients_from_apparent(AD_apparent, BD_apparent, CD0_apparent, gain, line: tuple[float, float, float]):
+    """The inverse of :func:`apparent_coefficients`: (A_D, B_D, C_D0,
+    log |d(AD', BD', CD0') / d(A_D, B_D, C_D0)|), the Jacobian being triangular with
+    determinant s^2."""
+    c, b, kappa = line
+    s = 1.0 - gain * c
+    AD = AD_apparent / s
+    BD = (BD_apparent - AD * gain * b) / s
+    return AD, BD, CD0_apparent - kappa * BD * gain, 2.0 * jnp.log(s)
+
+
+def with_apparent(problem: FitProblem, values: dict[str, Any]) -> dict[str, Any]:
+    """``values`` (constrained, with A_D, B_D, C_D0 and the lag gain) with the apparent sites
+    added when the problem samples them (:attr:`FitProblem.apparent`)."""
+    if problem.apparent is None:
+        return values
+    apparent = apparent_coefficients(*(float(values[k]) for k in APPARENT_SITES), float(values[LAG_GAIN]),
+                                     problem.apparent)
+    return dict(values, **dict(zip(APPARENT_SITES.values(), apparent)))
+
+
 def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling: str = "pooled",
                   noise: str = "integrated", robust: bool = False) -> FitProblem:
     """Resolve a model variant against a campaign.
@@ -396,12 +468,17 @@ def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, po
             raise ValueError("a latent wind per pair is available with --pooling pooled only")
         wind_pairs = latent_wind_pairs(campaign, run_ids)
         initial["head_wind_mps"] = np.zeros(int(wind_pairs.max()) + 1)
+    apparent = None
+    if {*APPARENT_SITES, LAG_GAIN} <= set(free):
+        tau = fixed.get(LAG_TIME_CONSTANT, initial.get(LAG_TIME_CONSTANT))
+        apparent = lag_line(batch, float(tau))
     return FitProblem(spec=spec, model=model, fixed={k: float(v) for k, v in fixed.items()}, free=tuple(free),
                       priors=priors, batch=batch, run_ids=tuple(run_ids), pooling=pooling, noise=noise,
                       robust=robust, mass_kg=campaign.vehicle.mass_kg,
                       frontal_area_m2=campaign.vehicle.frontal_area_m2,
                       driveline_curve=measured_driveline_curve(campaign), initial=initial,
-                      calibration_pairs=pairs, driveline_channel=channel, wind_pair_index=wind_pairs)
+                      calibration_pairs=pairs, driveline_channel=channel, wind_pair_index=wind_pairs,
+                      apparent=apparent)
 
 
 def free_parameters(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> dict[str, jnp.ndarray]:
@@ -613,17 +690,36 @@ def driveline_log_likelihood(problem: FitProblem, sample: dict[str, jnp.ndarray]
     return jnp.sum(jnp.where(b.mask, logp, 0.0))
 
 
+def _sample_apparent(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> None:
+    """A_D, B_D, C_D0 through the apparent coefficients (:func:`apparent_coefficients`): sites
+    ``AD_apparent``, ``BD_apparent``, ``CD0_apparent`` with the supports of the coefficients'
+    priors, the coefficients deterministic, and their priors' density with the Jacobian
+    ``-log s^2`` as a factor, so that the posterior is that of the model file's priors."""
+    priors = {n: problem.priors[n].to_numpyro() for n in APPARENT_SITES}
+    raw = [numpyro.sample(site, dist.ImproperUniform(priors[n].support, (), ())) for n, site in APPARENT_SITES.items()]
+    *values, log_det = coefficients_from_apparent(*raw, sample[LAG_GAIN], problem.apparent)
+    log_prior = 0.0
+    for name, value in zip(APPARENT_SITES, values):
+        sample[name] = numpyro.deterministic(name, value)
+        log_prior = log_prior + priors[name].log_prob(value)
+    numpyro.factor("coefficient_prior", log_prior - log_det)
+
+
 def coastdown_model(problem: FitProblem) -> None:
     """The numpyro model (see the module docstring).  Sample sites use the contract names."""
     r = problem.n_runs
     sample: dict[str, jnp.ndarray] = {}
     for name in problem.free:
+        if problem.apparent is not None and name in APPARENT_SITES:
+            continue
         if problem.latent_wind and name == "head_wind_mps":
             # one along-track wind per opposite-direction pair (speed only, no anemometer)
             with numpyro.plate("wind_pair", int(np.max(problem.wind_pair_index)) + 1):
                 sample[name] = numpyro.sample(name, problem.priors[name].to_numpyro())
             continue
         sample[name] = numpyro.sample(name, problem.priors[name].to_numpyro())
+    if problem.apparent is not None:
+        _sample_apparent(problem, sample)
     for name in problem.varying:
         # Gamma(2): no mass piling at tau = 0, so the joint mode (the MAP the sampler is
         # whitened at) is not degenerate (Chung et al. 2013).  The run effects themselves

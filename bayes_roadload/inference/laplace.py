@@ -62,13 +62,14 @@ _CACHE_MAX = 16
 
 
 def _data(problem: FitProblem) -> tuple:
-    """The arguments that differ between same-shaped campaigns."""
-    return (problem.batch, problem.run_jacobian, problem.run_offsets)
+    """The arguments that differ between same-shaped campaigns (the apparent coefficients'
+    line too: :attr:`~bayes_roadload.inference.bayes.FitProblem.apparent`)."""
+    return (problem.batch, problem.run_jacobian, problem.run_offsets, problem.apparent)
 
 
 def _with_data(template: FitProblem, data: tuple) -> FitProblem:
-    batch, jac, offsets = data
-    return dataclasses.replace(template, batch=batch, run_jacobian=jac, run_offsets=offsets)
+    batch, jac, offsets, apparent = data
+    return dataclasses.replace(template, batch=batch, run_jacobian=jac, run_offsets=offsets, apparent=apparent)
 
 
 def _key(problem: FitProblem) -> tuple:
@@ -121,7 +122,8 @@ class CompiledProblem:
             return ravel_pytree(z)[0] / scale
 
         def constrain(y, data):
-            return constrain_fn(coastdown_model, (_with_data(tpl, data),), {}, unravel(y * scale))
+            return constrain_fn(coastdown_model, (_with_data(tpl, data),), {}, unravel(y * scale),
+                                return_deterministic=True)
 
         def linearise(base, v0, batch):
             return run_sensitivities(tpl, base, v0, batch)

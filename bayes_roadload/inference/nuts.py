@@ -47,10 +47,12 @@ from .. import config
 from ..data.campaign import Campaign
 from ..errors import FitStageError, stage
 from .bayes import (
+    APPARENT_SITES,
     FitProblem,
     build_problem,
     linearise_run_effects,
     run_effect_means,
+    with_apparent,
 )
 from .problem import Problem
 from .lsq import fit_lsq
@@ -137,14 +139,16 @@ def _site_scales(problem: Problem, z: dict[str, Any]) -> dict[str, Any]:
     truncated from below, about (value - bound) / (0.05 x prior scale):
     :func:`~bayes_roadload.inference.spec.soft_lower_truncated_normal`)."""
     scales = {}
-    for name, value in z.items():
+    apparent = {site: n for n, site in APPARENT_SITES.items()}
+    for site, value in z.items():
         s = 1.0
+        name = apparent.get(site, site)  # an apparent coefficient is scaled as its own
         prior = problem.priors.get(name)  # the coefficients' priors (sites without one are nuisances)
         if name in problem.free and prior is not None and prior.dist == "normal" and prior.low is None and prior.high is None:
             s = config.PARAMETER_SCALES.get(name, 1.0)
         elif name == "v0_mps":
             s = 0.05
-        scales[name] = jnp.full(jnp.shape(value), s, dtype=float)
+        scales[site] = jnp.full(jnp.shape(value), s, dtype=float)
     return scales
 
 
@@ -207,7 +211,7 @@ def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, flo
     if start is not None:
         init.update({k: float(v) for k, v in start.items() if k in problem.free})
     elif problem.latent_wind:
-        return _latent_wind_start(problem, campaign, init, first)
+        return with_apparent(problem, _latent_wind_start(problem, campaign, init, first))
     else:
         try:
             with warnings.catch_warnings():
@@ -236,7 +240,7 @@ def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, flo
         init["student_df"] = 10.0
     for name in problem.varying:
         init[f"tau_{name}"] = 0.5 * config.TAU_PRIOR_SCALES[name]
-    return init
+    return with_apparent(problem, init)
 
 
 @dataclass
