@@ -91,12 +91,15 @@ class CompiledProblem:
     unravel : flat unconstrained vector -> dict of sites.
     scale : O(1) scaling of the flat unconstrained vector.
     run_index : run of each flat coordinate (-1: shared).
+    sites : the sample sites (a start may also hold deterministic ones, e.g. the tyre-lag
+        model's coefficients beside its apparent ones).
     """
 
     template: FitProblem
     unravel: Any
     scale: np.ndarray
     run_index: np.ndarray
+    sites: tuple[str, ...] = ()
     _fns: dict = field(default_factory=dict)
 
     @classmethod
@@ -106,8 +109,9 @@ class CompiledProblem:
             problem = dataclasses.replace(problem, run_jacobian=np.zeros((r, n, k)), run_offsets=np.zeros((r, k)))
         # the sites from an abstract trace (nuts.unconstrained_posterior): running the model
         # op by op took ~3 s per kind of campaign
-        unravel, scale, run_index = site_layout(problem, unconstrained_posterior(problem, init).z0)
-        self = cls(template=problem, unravel=unravel, scale=scale, run_index=run_index)
+        z0 = unconstrained_posterior(problem, init).z0
+        unravel, scale, run_index = site_layout(problem, z0)
+        self = cls(template=problem, unravel=unravel, scale=scale, run_index=run_index, sites=tuple(z0))
         self._compile()
         return self
 
@@ -117,8 +121,10 @@ class CompiledProblem:
         def objective(y, data):
             return potential_energy(coastdown_model, (_with_data(tpl, data),), {}, unravel(y * scale))
 
+        sites = self.sites
+
         def to_scaled(init, data):
-            z = unconstrain_fn(coastdown_model, (_with_data(tpl, data),), {}, init)
+            z = unconstrain_fn(coastdown_model, (_with_data(tpl, data),), {}, {k: init[k] for k in sites})
             return ravel_pytree(z)[0] / scale
 
         def constrain(y, data):
