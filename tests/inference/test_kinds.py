@@ -81,3 +81,16 @@ def test_auto_pooling_is_hierarchical_for_nuts_fits_of_speed_traces(small_campai
     assert resolve_pooling(traces, speed_only, load_model_spec("speed_only_wind"), FitOptions()).pooling == "pooled"
     for name in ("intervals", "distances", "spindown", "steady"):
         assert KINDS[name].default_pooling(small_campaign, spec, FitOptions()) == "pooled"
+
+
+def test_speed_traces_default_to_the_tyre_lag_for_nuts_only():
+    """The Bayesian default carries the tyre lag's gain with its prior; least squares, which
+    has no prior to hold that weakly identified gain, fits a model without it."""
+    from bayes_roadload.inference.spec import load_model_spec
+
+    traces = KINDS["traces"]
+    gain = "tyre_lag_gain_per_mps"
+    nuts = load_model_spec(traces.default_model(None, FitOptions(method="nuts")))
+    lsq = load_model_spec(traces.default_model(None, FitOptions(method="lsq")))
+    assert gain in nuts.free and gain in nuts.priors
+    assert gain not in lsq.free and "tyre_thermal_lag" not in lsq.terms
