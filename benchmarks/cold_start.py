@@ -19,10 +19,8 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,6 +29,7 @@ DOC = ROOT / "docs" / "performance.md"
 BEGIN, END = "<!-- cold_start: begin -->", "<!-- cold_start: end -->"
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cli_process import run_cli  # noqa: E402
 from doc_sections import replace_section  # noqa: E402
 TARGETS_S = {"cold": 15.0, "warm": 8.0, "warm, other campaign": 8.0}
 
@@ -67,11 +66,8 @@ def other_campaign(pairs: int, root: Path, rate_hz: float, padded: int,
 
 def timed_fit(camp: Path, out: Path, cache: Path, pooling: str) -> dict:
     env = dict(os.environ, BAYES_ROADLOAD_CACHE_DIR=str(cache))
-    cmd = [sys.executable, "-m", "bayes_roadload", "fit", str(camp), "--model", "four_term", "--pooling", pooling,
-           "--no-progress", "--no-report", "--force", "--out", str(out)]
-    t0 = time.perf_counter()
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
-    wall = time.perf_counter() - t0
+    wall, proc = run_cli(["fit", camp, "--model", "four_term", "--pooling", pooling, "--no-progress", "--no-report",
+                          "--force", "--out", out], env=env, ok=None)
     diag = json.loads((out / "diagnostics.json").read_text()) if (out / "diagnostics.json").is_file() else {}
     return {"rc": proc.returncode, "wall_s": round(wall, 2), "stages_s": diag.get("stages_s", {}),
             "timings_s": diag.get("timings_s", {}), "pass": diag.get("pass"), "failed": diag.get("failed"),

@@ -15,25 +15,22 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cli_process import run_cli  # noqa: E402
 RECORDS = ROOT / "benchmarks" / "records" / "performance" / "default_model_cost.jsonl"
 MODELS = ("four_term", "four_term_tyre_lag")
 
 
 def run(args: list[str]) -> float:
-    """Wall time of ``bayes-roadload ARGS`` in a new process (raises on a non-zero exit other
+    """Wall time of ``bayes-roadload ARGS`` in a new process (stops on a non-zero exit other
     than 3, a fit that failed a gate, which is recorded)."""
-    t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "bayes_roadload", *args], capture_output=True, text=True)
-    if proc.returncode not in (0, 3):
-        raise SystemExit(f"bayes-roadload {' '.join(args)} exited {proc.returncode}:\n{proc.stderr[-2000:]}")
-    return time.perf_counter() - t0
+    return run_cli(args, ok=(0, 3))[0]
 
 
 def main() -> None:

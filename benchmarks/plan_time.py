@@ -22,7 +22,6 @@ import argparse
 import json
 import os
 import shlex
-import subprocess
 import sys
 import tempfile
 import time
@@ -34,14 +33,14 @@ ROOT = Path(__file__).resolve().parents[1]
 RECORDS = ROOT / "benchmarks" / "records" / "performance" / "plan_time.jsonl"
 REFIT_RECORDS = ROOT / "benchmarks" / "records" / "performance" / "plan_refits.jsonl"
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cli_process import run_cli  # noqa: E402
+
 
 def reference_fit(tmp: Path) -> Path:
     """The issue's source fit: case 14, 12 pairs, seed 1, ``fit`` with its defaults."""
-    cli = [sys.executable, "-m", "bayes_roadload"]
-    subprocess.run(cli + ["simulate", "--case", "14", "--pairs", "12", "--seed", "1", "--out", str(tmp / "camp")],
-                   check=True, capture_output=True)
-    subprocess.run(cli + ["fit", str(tmp / "camp"), "--out", str(tmp / "fit"), "--no-progress", "--no-report"],
-                   check=True, capture_output=True)
+    run_cli(["simulate", "--case", "14", "--pairs", "12", "--seed", "1", "--out", tmp / "camp"])
+    run_cli(["fit", tmp / "camp", "--out", tmp / "fit", "--no-progress", "--no-report"])
     return tmp / "fit"
 
 
@@ -129,10 +128,8 @@ def main() -> None:
         with tempfile.TemporaryDirectory(prefix="plan_time_") as tmp:
             tmp = Path(tmp)
             fit_dir = a.fit_dir or reference_fit(tmp)
-            t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "bayes_roadload", "plan", str(fit_dir), "--out", str(tmp / "plan"),
-                            *shlex.split(a.extra_args)], check=True, capture_output=True)
-            record = summarise(tmp / "plan", time.perf_counter() - t0, a.extra_args, a.note)
+            wall, _ = run_cli(["plan", fit_dir, "--out", tmp / "plan", *shlex.split(a.extra_args)])
+            record = summarise(tmp / "plan", wall, a.extra_args, a.note)
     RECORDS.parent.mkdir(parents=True, exist_ok=True)
     with RECORDS.open("a") as f:
         f.write(json.dumps(record) + "\n")

@@ -361,7 +361,6 @@ def latent_wind_pairs(campaign: Campaign, run_ids) -> np.ndarray:
 
 
 LAG_GAIN = "tyre_lag_gain_per_mps"
-LAG_TIME_CONSTANT = "tyre_lag_time_constant_s"
 APPARENT_SITES = {"AD": "AD_apparent", "BD": "BD_apparent", "CD0": "CD0_apparent"}
 """Sample sites of the apparent coefficients (:func:`apparent_coefficients`)."""
 
@@ -469,8 +468,8 @@ def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, po
         wind_pairs = latent_wind_pairs(campaign, run_ids)
         initial["head_wind_mps"] = np.zeros(int(wind_pairs.max()) + 1)
     apparent = None
-    if {*APPARENT_SITES, LAG_GAIN} <= set(free):
-        tau = fixed.get(LAG_TIME_CONSTANT, initial.get(LAG_TIME_CONSTANT))
+    if model.lag_time_constant and {*APPARENT_SITES, LAG_GAIN} <= set(free):
+        tau = fixed.get(model.lag_time_constant, initial.get(model.lag_time_constant))
         apparent = lag_line(batch, float(tau))
     return FitProblem(spec=spec, model=model, fixed={k: float(v) for k, v in fixed.items()}, free=tuple(free),
                       priors=priors, batch=batch, run_ids=tuple(run_ids), pooling=pooling, noise=noise,
