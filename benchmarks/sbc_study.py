@@ -1,6 +1,7 @@
 """Simulation-based calibration of the NUTS fit, with its negative control.
 
 ``--campaigns`` campaigns drawn from the priors of ``models/four_term_driveline_informative.toml``
+(``--model``: another model's, e.g. the tyre-lag default's ``four_term_tyre_lag_driveline_informative``)
 (:mod:`bayes_roadload.analysis.sbc`), simulated with the table 6.6 measurement noise on speed,
 airspeed, yaw and driveline force and a random force whose intensity is drawn from the prior of
 the integrated noise q (arms ``sim_calibrated``, ``sim_wrong_mass``; ``--sensor-noise-only``
@@ -16,6 +17,7 @@ Run::
 
     python benchmarks/sbc_study.py --campaigns 100 --control 40 --workers 2
 
+An interrupted study resumes from its ``.partial.csv`` (the finished fits are not run again).
 An arm may be run in parts (``--seed0`` 0, 100, ... with their own ``--records``); ``--docs
 CSV [CSV ...]`` then reads the parts' records together (no fitting) and writes the tables into
 the ``sbc`` section of ``docs/calibration.md``.
@@ -33,7 +35,7 @@ from pathlib import Path
 import pandas as pd
 
 from bayes_roadload.analysis.batch import batch_client, run_batch
-from bayes_roadload.analysis.sbc import SBC_SAMPLER, sbc_jobs, sbc_markdown, sbc_tests
+from bayes_roadload.analysis.sbc import SBC_MODEL, SBC_SAMPLER, sbc_jobs, sbc_markdown, sbc_tests
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDS = ROOT / "docs" / "validation" / "sbc_records.csv"
@@ -45,6 +47,9 @@ def main(argv=None) -> int:
     ap.add_argument("--control", type=int, default=40, help="campaigns of the negative control")
     ap.add_argument("--mass-factor", type=float, default=1.05)
     ap.add_argument("--pairs", type=int, default=2)
+    ap.add_argument("--model", default=SBC_MODEL,
+                    help="the model whose priors draw the truths and which fits them (default %(default)s; the "
+                         "tyre-lag default's: four_term_tyre_lag_driveline_informative)")
     ap.add_argument("--warmup", type=int, default=SBC_SAMPLER.num_warmup)
     ap.add_argument("--draws", type=int, default=SBC_SAMPLER.num_samples)
     ap.add_argument("--workers", type=int, default=1)
@@ -66,9 +71,9 @@ def main(argv=None) -> int:
 
     sampler = dataclasses.replace(SBC_SAMPLER, num_warmup=args.warmup, num_samples=args.draws)
     force = not (args.exact or args.sensor_noise_only)
-    jobs = (sbc_jobs(args.campaigns, seed0=args.seed0, pairs=args.pairs, sampler=sampler, exact=args.exact,
-                     random_force=force)
-            + sbc_jobs(args.control, seed0=args.seed0 + 10_000, pairs=args.pairs, sampler=sampler,
+    jobs = (sbc_jobs(args.campaigns, seed0=args.seed0, pairs=args.pairs, model=args.model, sampler=sampler,
+                     exact=args.exact, random_force=force)
+            + sbc_jobs(args.control, seed0=args.seed0 + 10_000, pairs=args.pairs, model=args.model, sampler=sampler,
                        control_factor=args.mass_factor, exact=args.exact, random_force=force))
     if args.control:  # interleave the arms, so that a study cut short still has both
         step = max(args.campaigns // args.control, 1)
@@ -79,14 +84,19 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     args.records.parent.mkdir(parents=True, exist_ok=True)
     partial = args.records.with_suffix(".partial.csv")
-    done: list[dict] = []
+    done: list[dict] = pd.read_csv(partial).to_dict("records") if partial.is_file() else []
+    if done:  # resume an interrupted study: its finished fits are kept, not run again
+        finished = {r["name"] for r in done}
+        jobs = [j for j in jobs if j.name not in finished]
+        print(f"resuming {partial}: {len(done)} fits done, {len(jobs)} to run", file=sys.stderr)
 
     def progress(rec):
         done.append(rec)
         pd.DataFrame.from_records(done).to_csv(partial, index=False)  # survives an interrupted study
 
     with batch_client(args.workers, args.scheduler) as client:
-        records = run_batch(jobs, client, on_record=progress)
+        run_batch(jobs, client, on_record=progress)
+    records = pd.DataFrame.from_records(done)
     wall = time.perf_counter() - t0
     records.to_csv(args.records, index=False)
     partial.unlink(missing_ok=True)

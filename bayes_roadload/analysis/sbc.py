@@ -94,10 +94,40 @@ def draw_from_prior(model: str, seed: int) -> dict[str, float]:
     return {p: float(spec.priors[p].to_numpyro().sample(k)) for p, k in zip(spec.free, keys)}
 
 
-def with_drawn_truth(settings: Any, drawn: dict[str, float], **changes: Any) -> Any:
+def extra_physics(model: str, drawn: dict[str, float]) -> tuple[tuple, dict[str, float]]:
+    """The drag terms of ``model`` whose parameters are drawn but are not the case's own
+    coefficients or driveline (e.g. the tyre thermal lag of ``four_term_tyre_lag``), as the
+    simulator's ``extra_terms``, and their parameters: the drawn values and the model's fixed
+    ones (e.g. the lag's time constant).  Raises when a drawn parameter belongs to no term."""
+    from ..inference.spec import load_model_spec
+    from ..physics.terms import TERMS
+
+    spec = load_model_spec(model)
+    rest = {k: v for k, v in drawn.items() if k not in COEFFICIENTS and k not in DRIVELINE}
+    terms, params = [], {}
+    for name in spec.terms:
+        term = TERMS[name]
+        own = set(term.defaults) & set(rest)
+        if own:
+            terms.append(term())
+            params.update({k: rest[k] for k in own})
+            params.update({k: float(v) for k, v in spec.fixed.items() if k in term.defaults})
+    unknown = set(rest) - set(params)
+    if unknown:
+        raise ValueError(f"cannot simulate drawn {', '.join(sorted(unknown))}: no term of model {spec.name!r} has it")
+    return tuple(terms), params
+
+
+def with_drawn_truth(settings: Any, drawn: dict[str, float], model: str | None = None, **changes: Any) -> Any:
     """Simulation ``settings`` whose true coefficients (A_D, B_D, C_D0, K_D) and driveline
-    (A_t, B_t, C_t) are those of ``drawn`` (:func:`draw_from_prior`), other values kept;
+    (A_t, B_t, C_t) are those of ``drawn`` (:func:`draw_from_prior`), other values kept; with
+    ``model``, the drawn parameters of its further terms as extra physics (:func:`extra_physics`);
     ``changes`` replace further settings."""
+    if model is not None:
+        terms, params = extra_physics(model, drawn)
+        present = {t.name for t in settings.extra_terms}
+        changes = {"extra_terms": tuple(settings.extra_terms) + tuple(t for t in terms if t.name not in present),
+                   "extra_params": {**settings.extra_params, **params}, **changes}
     return dataclasses.replace(
         settings, **changes,
         coefficients={**settings.coefficients, **{k: v for k, v in drawn.items() if k in COEFFICIENTS}},
@@ -158,10 +188,7 @@ class PriorDrawnCampaign:
         last: Exception | None = None
         for attempt in range(self.max_draws):
             drawn = draw_from_prior(self.model, self.seed * 1000 + attempt)
-            unknown = set(drawn) - set(COEFFICIENTS) - set(DRIVELINE)
-            if unknown:
-                raise ValueError(f"cannot simulate drawn {', '.join(sorted(unknown))}")
-            settings = with_drawn_truth(base, drawn)
+            settings = with_drawn_truth(base, drawn, self.model)
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("error", RuntimeWarning)
@@ -294,9 +321,16 @@ def sbc_jobs(n_campaigns: int, *, seed0: int = 0, pairs: int = 1, model: str = S
 
 
 def _ok(records: pd.DataFrame) -> pd.DataFrame:
-    """The records without errors, with an ``arm`` column ("all" when the study has none)."""
+    """The records without errors, with an ``arm`` column ("all" when the study has none); the
+    arms of a model other than :data:`SBC_MODEL` carry its name (``exact_calibrated
+    four_term_tyre_lag_driveline_informative``), so that studies of several models read together
+    stay apart."""
     ok = successful(records)
-    return ok if "arm" in ok else ok.assign(arm="all")
+    ok = ok if "arm" in ok else ok.assign(arm="all")
+    if "model" in ok and len(ok):
+        other = ok["model"].notna() & (ok["model"] != SBC_MODEL)
+        ok = ok.assign(arm=ok["arm"].where(~other, ok["arm"] + " " + ok["model"].astype(str)))
+    return ok
 
 
 def rank_fractions(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS) -> pd.DataFrame:

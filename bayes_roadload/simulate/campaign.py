@@ -288,7 +288,11 @@ def _integrate_runs(params, fields, direction, start_m, masses, consts, sys_nois
     substeps] m/s, or [R, 1, 1] zeros) are added to the speed after each internal step while
     the vehicle moves: the random force of ``SimulationSettings.random_force_mps_per_sqrt_s``.
 
-    State: [v, s, t, band-limited w_a, its rate, band-limited w_c, its rate, 5 sensor states].
+    State: [v, s, t, band-limited w_a, its rate, band-limited w_c, its rate, 5 sensor states,
+    L]: L the speed drop not yet followed by a first-order lag of the model's
+    ``lag_time_constant`` (dL/dt = -L / tau - dv/dt, L(0) = 0, of the true speed; the tyre
+    thermal lag's :attr:`~bayes_roadload.physics.terms.Conditions.speed_drop_lagged_mps`), kept
+    at 0 when the model has no lag.
     Returns a dict of [R, n_samples] arrays.
     """
     (grid_start, grid_dx, dt, v0, v_floor, rho, temp, area, length, band_omega) = consts
@@ -321,7 +325,7 @@ def _integrate_runs(params, fields, direction, start_m, masses, consts, sys_nois
             return (pos, y[3], y[5]) if band_limited else (pos, wa, wc)
 
         def rate(y):
-            v, s, t, lp, sens = y[0], y[1], y[2], y[3:7], y[7:12]
+            v, s, t, lp, sens, lag = y[0], y[1], y[2], y[3:7], y[7:12], y[12]
             pos, wa_field, wc_field = field_at(s)
             if band_limited:
                 d_lp = jnp.stack([
@@ -336,12 +340,15 @@ def _integrate_runs(params, fields, direction, start_m, masses, consts, sys_nois
             c = Conditions(
                 speed_mps=v, airspeed_mps=vr_f, yaw_rad=psi_f, driveline_force_n=jnp.zeros_like(v),
                 position_m=pos, distance_m=s, time_s=t, accel_mps2=jnp.zeros_like(v), direction=d,
-                air_density_kgpm3=rho, temperature_k=temp, mass_kg=mass, frontal_area_m2=area)
+                air_density_kgpm3=rho, temperature_k=temp, mass_kg=mass, frontal_area_m2=area,
+                speed_drop_lagged_mps=lag)
             moving = v > v_floor
-            dv = jnp.where(moving, model.acceleration_mps2(params_at(t), c, eff_mass), 0.0)
+            p_t = params_at(t)
+            dv = jnp.where(moving, model.acceleration_mps2(p_t, c, eff_mass), 0.0)
             ds = jnp.where(moving, v, 0.0)
             d_sens = sensor_rates(sens, wa, wc, vr, psi, sensors, length)
-            return jnp.concatenate([jnp.stack([dv, ds, jnp.ones(())]), d_lp, d_sens])
+            d_lag = -lag / p_t[model.lag_time_constant] - dv if model.lag_time_constant else jnp.zeros(())
+            return jnp.concatenate([jnp.stack([dv, ds, jnp.ones(())]), d_lp, d_sens, d_lag[None]])
 
         def observe(y):
             pos, wa, wc = wind_seen(y)
@@ -354,14 +361,15 @@ def _integrate_runs(params, fields, direction, start_m, masses, consts, sys_nois
         vr0, psi0 = _relative_air(v0, d, wa0, wc0)
         zero = jnp.zeros(())
         y0 = jnp.concatenate([jnp.stack([v0, zero, zero, wa0, zero, wc0, zero]),
-                              sensor_initial_state(wa0, wc0, vr0, psi0)])
+                              sensor_initial_state(wa0, wc0, vr0, psi0), jnp.zeros(1)])
 
         random = kick.shape[1] > 1
 
         def substep(j, yy, kick_k):
             yy = rk4_step(rate, yy, dt)
             if random:
-                yy = yy.at[0].add(jnp.where(yy[0] > v_floor, kick_k[j], 0.0))
+                k = jnp.where(yy[0] > v_floor, kick_k[j], 0.0)
+                yy = yy.at[0].add(k).at[12].add(-k)  # the lagged speed drop follows the speed's kick
             return yy
 
         def sample(y, k):

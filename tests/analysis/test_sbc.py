@@ -20,8 +20,12 @@ from bayes_roadload import config
 from bayes_roadload.analysis.batch import run_batch
 from bayes_roadload.analysis.sbc import (SBC_MODEL, SBC_PARAMETERS, SBC_SAMPLER, ModelDrawnCampaign, PriorDrawnCampaign,
                                          WrongEffectiveMass, draw_from_prior, rank_fractions, rank_histograms,
-                                         sbc_jobs, sbc_markdown, sbc_tests, z_sd_by_truth_q)
+                                         extra_physics, sbc_case, sbc_jobs, sbc_markdown, sbc_tests, with_drawn_truth,
+                                         z_sd_by_truth_q)
 from bayes_roadload.inference.spec import load_model_spec
+from bayes_roadload.simulate import SimulationSettings, simulate_campaign
+
+LAG_MODEL = "four_term_tyre_lag_driveline_informative"
 
 
 def test_prior_draws_are_reproducible_and_in_the_support():
@@ -68,24 +72,50 @@ def test_prior_drawn_campaign_draws_its_random_force_from_the_prior_of_q():
         sbc_jobs(1, exact=True, random_force=True)
 
 
-def test_model_drawn_campaign_follows_the_model_likelihood():
+def test_a_model_with_the_tyre_lag_draws_and_simulates_its_gain():
+    """The lag model's gain is drawn from its prior, simulated as the tyre thermal lag (the
+    model's fixed time constant with it) and recorded as truth; a parameter no term of the
+    model has is refused."""
+    campaign = PriorDrawnCampaign(5, pairs=1, model=LAG_MODEL)()
+    drawn = draw_from_prior(LAG_MODEL, 5 * 1000 + campaign.meta["prior_draws"] - 1)
+    assert campaign.truth["tyre_lag_gain_per_mps"] == drawn["tyre_lag_gain_per_mps"] != 0.0
+    assert campaign.truth["tyre_lag_time_constant_s"] == 400.0
+    terms, params = extra_physics(LAG_MODEL, drawn)
+    assert [t.name for t in terms] == ["tyre_thermal_lag"]
+    assert params == {"tyre_lag_gain_per_mps": drawn["tyre_lag_gain_per_mps"], "tyre_lag_time_constant_s": 400.0}
+    assert extra_physics(SBC_MODEL, draw_from_prior(SBC_MODEL, 5)) == ((), {})
+    with pytest.raises(ValueError, match="no term"):
+        extra_physics(SBC_MODEL, {"tyre_lag_gain_per_mps": 0.005})
+    # the lag acts: the same draw with G_T = 0 coasts to a different trace
+    settings = with_drawn_truth(SimulationSettings(), drawn, LAG_MODEL)
+    assert with_drawn_truth(settings, drawn, LAG_MODEL).extra_terms == settings.extra_terms  # not added twice
+    lagged = simulate_campaign(sbc_case(), 1, 5, driveline=True, settings=settings)
+    still = simulate_campaign(sbc_case(), 1, 5, driveline=True,
+                              settings=with_drawn_truth(settings, {"tyre_lag_gain_per_mps": 0.0}, LAG_MODEL))
+    pd.testing.assert_frame_equal(lagged.runs, campaign.runs)
+    assert len(still.runs) != len(lagged.runs) or not np.allclose(still.runs["speed_mps"], lagged.runs["speed_mps"])
+
+
+@pytest.mark.parametrize("model", [SBC_MODEL, LAG_MODEL])
+def test_model_drawn_campaign_follows_the_model_likelihood(model):
     """Exact SBC data: at the true coefficients the residual of each run is a random walk of
     intensity q plus white noise sigma_r, so its first differences have variance
     q^2 dt + 2 sigma_r^2 and lag-1 autocovariance -sigma_r^2; the logged driveline force
-    scatters about A_t + B_t v + C_t v^2 with sd sigma_d."""
+    scatters about A_t + B_t v + C_t v^2 with sd sigma_d.  The lag model's drop L is recomputed
+    from the drawn speed by the fit, as from any logged speed."""
     from bayes_roadload.inference.bayes import build_problem, integrated_speed
 
-    factory = ModelDrawnCampaign(3, pairs=1)
+    factory = ModelDrawnCampaign(3, pairs=1, model=model)
     assert pickle.loads(pickle.dumps(factory)) == factory
     campaign = factory()
-    template = PriorDrawnCampaign(3, pairs=1)()
+    template = PriorDrawnCampaign(3, pairs=1, model=model)()
     t = campaign.truth
-    for k in ("AD", "BD", "CD0", "KD", "At", "Bt", "Ct"):
+    for k in load_model_spec(model).free:
         assert t[k] == template.truth[k]
     assert campaign.meta["sbc"] == "exact"
     pd.testing.assert_frame_equal(campaign.runs.drop(columns=["speed_mps", "driveline_force_n"]),
                                   template.runs.drop(columns=["speed_mps", "driveline_force_n"]))
-    problem = build_problem(campaign, SBC_MODEL)
+    problem = build_problem(campaign, model)
     b = problem.batch
     first = np.asarray(b.speed_mps)[:, 0]
     v = np.asarray(integrated_speed(problem, {**{k: t[k] for k in problem.free}, "v0_mps": first}))

@@ -432,3 +432,39 @@ def test_another_failed_gate_samples_anew_with_the_remedy(monkeypatch):
 
     assert retry_fields(fit.retries)["retry_continued"] is False
 
+
+
+def test_implausible_least_squares_estimates_are_named():
+    """An estimate is dropped as a start only when the data hardly inform it (se above the
+    prior's scale) and it lies more than START_PRIOR_Z prior scales from the prior's location."""
+    from bayes_roadload.inference.nuts import START_PRIOR_Z, implausible_estimates
+    from bayes_roadload.inference.spec import Prior
+
+    priors = {"a": Prior("normal", loc=0.0, scale=1.0), "b": Prior("normal", loc=0.0, scale=1.0, low=-5.0),
+              "c": Prior("lognormal", loc=0.0, scale=1.0)}
+    far = START_PRIOR_Z + 0.5
+    assert implausible_estimates(priors, {"a": far, "b": far, "c": 100.0}, {"a": 2.0, "b": 0.5, "c": 50.0}) == ["a"]
+    assert implausible_estimates(priors, {"a": START_PRIOR_Z - 0.5}, {"a": 2.0}) == []   # near: kept
+    assert implausible_estimates(priors, {"a": far}, {"a": float("nan")}) == ["a"]       # no se: not informed
+    assert implausible_estimates(priors, {"a": float("nan")}, {"a": 1.0}) == []          # informed, unusable: kept out elsewhere
+
+
+def test_a_two_pair_campaign_whose_least_squares_leave_the_support_starts_inside_it():
+    """The exact-SBC campaign of seed 1 (2 pairs, the lag model with the driveline channel):
+    least squares put the tyre-lag gain at -0.30 /(m/s) (prior 0.0057 +- 0.003), A_t, B_t, C_t
+    far off, and the apparent C_D0 of that start below zero, where the posterior has no mass and
+    numpyro found no valid initial parameters.  The start now takes those at their priors'
+    centres and has a finite posterior density."""
+    from bayes_roadload.analysis.sbc import ModelDrawnCampaign
+    from bayes_roadload.inference.bayes import build_problem
+    from bayes_roadload.inference.nuts import initial_values, unconstrained_posterior
+
+    model = "four_term_tyre_lag_driveline_informative"
+    campaign = ModelDrawnCampaign(1, pairs=2, model=model)()
+    problem = build_problem(campaign, model)
+    init = initial_values(problem, campaign)
+    prior = problem.priors["tyre_lag_gain_per_mps"]
+    assert init["tyre_lag_gain_per_mps"] == prior.center
+    assert init["CD0_apparent"] > 0
+    post = unconstrained_posterior(problem, init)
+    assert np.isfinite(float(post.potential_fn(post.z0)))
