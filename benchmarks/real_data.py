@@ -388,7 +388,14 @@ def gnss_markdown(rec) -> list[str]:
         for c in dg["candidates"]:
             d = c["delta_elpd"]
             lines.append(f"| {c['rank']} | {c['effect']} | {'-' if d is None else f'{d:.1f}'} | {c['statement']} |")
-    lo = rec.get("lopo")
+    for lo in [rec.get("lopo"), *rec.get("lopo_models", {}).values()]:
+        lines += _lopo_lines(lo) if lo else []
+    return lines
+
+
+def _lopo_lines(lo) -> list[str]:
+    """The paragraph of one model's leave-one-pair-out coverage (:func:`gnss_lopo`)."""
+    lines = []
     if lo:
         cov = lo["sample_coverage"]
         failing = "; ".join(f"the fit of {', '.join(f['fitted'])} failed {', '.join(f['failed'])}"
@@ -552,6 +559,9 @@ def main(argv=None):
     ap.add_argument("--gnss-lopo-only", action="store_true",
                     help="read the records in --json, add the eco-car traces' leave-one-pair-out coverage, rewrite "
                          "the markdown")
+    ap.add_argument("--gnss-lopo-model", default="split_f0_f2",
+                    help="the model of --gnss-lopo-only (default %(default)s; four_term_tyre_lag: the speed-trace "
+                         "default of `fit`)")
     ap.add_argument("--diagnose-only", action="store_true",
                     help="read the records in --json, run `diagnose` on every interval campaign and on the "
                          "eco-car speed traces, rewrite the markdown")
@@ -562,7 +572,11 @@ def main(argv=None):
     if args.gnss_lopo_only:
         records = json.loads(args.json.read_text())
         if GNSS_DIR.is_dir() and "gnss" in records.get("_extra", {}):
-            records["_extra"]["gnss"]["lopo"] = gnss_lopo()
+            gnss = records["_extra"]["gnss"]
+            if args.gnss_lopo_model == "split_f0_f2":
+                gnss["lopo"] = gnss_lopo()
+            else:
+                gnss.setdefault("lopo_models", {})[args.gnss_lopo_model] = gnss_lopo(model=args.gnss_lopo_model)
             args.json.write_text(json.dumps(records, indent=2) + "\n")
             _write_markdown(records, args.out)
         return 0

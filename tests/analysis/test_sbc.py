@@ -175,6 +175,19 @@ def test_uniform_ranks_pass_and_shifted_ranks_fail():
     assert "| calibrated | AD | 200 |" in md and "**no**" in md
 
 
+def test_arms_of_another_model_stay_apart():
+    """Records of the default SBC model and of another (the tyre-lag model) read together: the
+    same arm name of each model is tested on its own fits."""
+    rng = np.random.default_rng(1)
+    base = _synthetic_records({"exact_calibrated": rng.uniform(size=100)}).assign(model=SBC_MODEL)
+    other = _synthetic_records({"exact_calibrated": rng.uniform(size=100) ** 3}).assign(model=LAG_MODEL)
+    tests = sbc_tests(pd.concat([base, other], ignore_index=True))
+    assert set(tests["arm"]) == {"exact_calibrated", f"exact_calibrated {LAG_MODEL}"}
+    assert (tests["n"] == 100).all()
+    assert tests.loc[tests["arm"] == "exact_calibrated", "arm_pass"].all()
+    assert not tests.loc[tests["arm"] != "exact_calibrated", "arm_pass"].any()
+
+
 def test_z_sd_by_the_true_q_splits_the_arm_in_thirds():
     """Fits whose true q is in the top third have errors twice their sd: the table shows it
     there and not in the lower thirds (each third's sd(z) within 4 of its standard errors,
