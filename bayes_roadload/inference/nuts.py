@@ -201,26 +201,25 @@ def _latent_wind_start(problem: FitProblem, campaign: Campaign, init: dict, firs
 
 START_PRIOR_Z = 4.0
 """A least-squares estimate further than this many prior standard deviations from a normal
-prior's location, with a standard error above the prior's, is not used as a start
-(:func:`implausible_estimates`)."""
+prior's location is not used as a start (:func:`most_implausible_estimate`)."""
 
 
-def implausible_estimates(priors: dict, estimate: dict[str, float], se: dict[str, float]) -> list[str]:
-    """The free parameters whose least-squares estimate the data hardly inform (standard error
-    above the normal prior's scale, or not finite) and that lie more than
-    :data:`START_PRIOR_Z` prior scales from the prior's location: a start no better than the
-    prior's centre, and a harmful one when it leaves the posterior's support (a two-pair
-    campaign's least squares put the tyre-lag gain at -0.30 /(m/s) against a prior of
-    0.0057 +- 0.003, so that the apparent C_D0 of the start was negative)."""
-    out = []
+def most_implausible_estimate(priors: dict, estimate: dict[str, float]) -> str | None:
+    """The free parameter whose least-squares estimate lies furthest outside its normal prior,
+    when more than :data:`START_PRIOR_Z` prior scales from the prior's location (or not
+    finite); None when every estimate is inside.  Least squares has no prior: on few or short
+    runs its estimates trade along ridges into values the prior all but excludes (the lag gain
+    at -0.30 /(m/s) against 0.0057 +- 0.003 on an exact-SBC campaign of two pairs, so that the
+    apparent C_D0 of that start was negative; C_D0 26 on a light car's speed traces), and such a
+    start is worse than the prior's centre: the MAP from it stopped at a local optimum."""
+    worst, worst_z = None, START_PRIOR_Z
     for k, prior in priors.items():
         if prior.dist != "normal" or not prior.scale or k not in estimate:
             continue
-        est, err = estimate[k], se.get(k, math.nan)
-        weak = not math.isfinite(err) or err > prior.scale
-        if weak and (not math.isfinite(est) or abs(est - prior.loc) > START_PRIOR_Z * prior.scale):
-            out.append(k)
-    return out
+        z = abs(estimate[k] - prior.loc) / prior.scale if math.isfinite(estimate[k]) else math.inf
+        if z > worst_z:
+            worst, worst_z = k, z
+    return worst
 
 
 def with_fixed(spec: ModelSpec, values: dict[str, float]) -> ModelSpec:
@@ -234,9 +233,9 @@ def with_fixed(spec: ModelSpec, values: dict[str, float]) -> ModelSpec:
 def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, float] | None = None) -> dict[str, Any]:
     """Constrained starting values from the classical joint least-squares fit, or, with
     ``start`` (free parameter -> value, e.g. a known population mean), from those values, the
-    first measured speeds and sigma 0.05 m/s without the least-squares fit.  Estimates the
-    data hardly inform and the prior makes implausible (:func:`implausible_estimates`) start
-    at their priors' centres, the others from a least-squares refit with those fixed.
+    first measured speeds and sigma 0.05 m/s without the least-squares fit.  An estimate its
+    prior all but excludes (:func:`most_implausible_estimate`) starts at the prior's centre and
+    the others are refitted with it there, the worst first, until none is left.
     Latent-wind problems start from per-run still-air fits (:func:`_latent_wind_start`)."""
     init: dict[str, Any] = dict(problem.initial)
     r = problem.n_runs
@@ -252,11 +251,10 @@ def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, flo
                 warnings.simplefilter("ignore")
                 g = fit_lsq(campaign, problem.spec, grouping="all").groups[0]
                 centres: dict[str, float] = {}
-                for _ in range(len(problem.free)):  # refit the others with these at their priors' centres
-                    implausible = implausible_estimates(problem.priors, g.estimate, g.se)
-                    if not implausible:
-                        break
-                    centres.update({k: problem.priors[k].center for k in implausible})
+                free = {k: v for k, v in problem.priors.items() if k in problem.free}
+                while (worst := most_implausible_estimate({k: v for k, v in free.items() if k not in centres},
+                                                          g.estimate)) is not None:
+                    centres[worst] = free[worst].center  # the others refitted with it there
                     g = fit_lsq(campaign, with_fixed(problem.spec, centres), grouping="all").groups[0]
                 init.update(centres)
             for k in problem.free:

@@ -434,19 +434,20 @@ def test_another_failed_gate_samples_anew_with_the_remedy(monkeypatch):
 
 
 
-def test_implausible_least_squares_estimates_are_named():
-    """An estimate is dropped as a start only when the data hardly inform it (se above the
-    prior's scale) and it lies more than START_PRIOR_Z prior scales from the prior's location."""
-    from bayes_roadload.inference.nuts import START_PRIOR_Z, implausible_estimates
+def test_the_most_implausible_least_squares_estimate_is_named():
+    """Only normal priors are read; an estimate more than START_PRIOR_Z prior scales from the
+    location (or not finite) is implausible, and the furthest one is named first."""
+    from bayes_roadload.inference.nuts import START_PRIOR_Z, most_implausible_estimate
     from bayes_roadload.inference.spec import Prior
 
-    priors = {"a": Prior("normal", loc=0.0, scale=1.0), "b": Prior("normal", loc=0.0, scale=1.0, low=-5.0),
+    priors = {"a": Prior("normal", loc=0.0, scale=1.0), "b": Prior("normal", loc=10.0, scale=2.0, low=0.0),
               "c": Prior("lognormal", loc=0.0, scale=1.0)}
-    far = START_PRIOR_Z + 0.5
-    assert implausible_estimates(priors, {"a": far, "b": far, "c": 100.0}, {"a": 2.0, "b": 0.5, "c": 50.0}) == ["a"]
-    assert implausible_estimates(priors, {"a": START_PRIOR_Z - 0.5}, {"a": 2.0}) == []   # near: kept
-    assert implausible_estimates(priors, {"a": far}, {"a": float("nan")}) == ["a"]       # no se: not informed
-    assert implausible_estimates(priors, {"a": float("nan")}, {"a": 1.0}) == []          # informed, unusable: kept out elsewhere
+    z = START_PRIOR_Z
+    assert most_implausible_estimate(priors, {"a": z - 0.1, "b": 10.0 + 2 * (z - 0.1), "c": 1e9}) is None
+    assert most_implausible_estimate(priors, {"a": z + 0.1, "b": 10.0}) == "a"
+    assert most_implausible_estimate(priors, {"a": z + 0.1, "b": 10.0 - 2 * (z + 1)}) == "b"   # further out
+    assert most_implausible_estimate(priors, {"a": float("nan"), "b": 10.0 + 2 * (z + 5)}) == "a"
+    assert most_implausible_estimate(priors, {}) is None
 
 
 def test_a_two_pair_campaign_whose_least_squares_leave_the_support_starts_inside_it():
