@@ -220,6 +220,8 @@ class ModelDrawnCampaign:
         delta_r,k = delta_r,k-1 + N(0, q^2 dt_k),  delta_r,0 = 0,
         e_r,k ~ N(0, sigma_r^2 + floor^2)   (config.SPEED_NOISE_FLOOR_MPS),
 
+    (for a model whose forces read the logged speed, the tyre thermal lag, ``v_model`` is
+    integrated with that input from the drawn speed itself: :func:`drawn_speed`),
     with ``v0_r`` the template's first logged speed (the fit's prior of ``v0_mps`` is centred
     on the first sample: data-dependent, so the ranks of ``v0_mps`` are not part of the test);
     and the logged driveline force, when the model fits it, by
@@ -236,7 +238,7 @@ class ModelDrawnCampaign:
     settings: Any = None
 
     def __call__(self) -> Campaign:
-        from ..inference.bayes import build_problem, integrated_speed
+        from ..inference.bayes import build_problem
 
         template = PriorDrawnCampaign(self.seed, pairs=self.pairs, model=self.model, case=self.case,
                                       settings=self.settings)()
@@ -244,23 +246,25 @@ class ModelDrawnCampaign:
         truth = {p: float(template.truth[p]) for p in problem.free}
         b = problem.batch
         first = np.asarray(b.speed_mps)[:, 0]
-        v_model = np.asarray(integrated_speed(problem, {**truth, "v0_mps": first}))
         rng = np.random.default_rng([self.seed, 5381])
         q = rng.gamma(2.0, config.NOISE_PRIORS["q_mps_per_sqrt_s"] / 2.0)
         sigma = rng.gamma(2.0, config.NOISE_PRIORS["sigma_speed_mean_mps"] / 2.0, problem.n_runs)
         sigma_eff = np.sqrt(sigma**2 + config.SPEED_NOISE_FLOOR_MPS**2)  # the likelihood's noise
         runs = template.runs.copy()
-        speed = runs["speed_mps"].to_numpy(float).copy()
         t_all = np.asarray(b.time_s)
         mask = np.asarray(b.mask, bool)
+        noise = np.zeros(mask.shape)  # [R, N] delta + e of each logged sample
         for r, rid in enumerate(problem.run_ids):
-            rows = np.flatnonzero((runs["run"] == rid).to_numpy())
             n = int(mask[r].sum())
-            if n != rows.size:
-                raise ValueError(f"run {rid!r}: {rows.size} rows against {n} batch samples")
+            if n != int((runs["run"] == rid).sum()):
+                raise ValueError(f"run {rid!r}: {int((runs['run'] == rid).sum())} rows against {n} batch samples")
             dt = np.diff(t_all[r, :n], prepend=t_all[r, 0])
             walk = np.cumsum(rng.normal(0.0, 1.0, n) * q * np.sqrt(dt))
-            speed[rows] = v_model[r, :n] + walk + rng.normal(0.0, sigma_eff[r], n)
+            noise[r, :n] = walk + rng.normal(0.0, sigma_eff[r], n)
+        logged = drawn_speed(problem, {**truth, "v0_mps": first}, noise)
+        speed = runs["speed_mps"].to_numpy(float).copy()
+        for r, rid in enumerate(problem.run_ids):
+            speed[np.flatnonzero((runs["run"] == rid).to_numpy())] = logged[r, :int(mask[r].sum())]
         runs["speed_mps"] = speed
         extra: dict[str, Any] = {"q_mps_per_sqrt_s": float(q),
                                  "sigma_mps": [float(x) for x in sigma]}
@@ -273,6 +277,37 @@ class ModelDrawnCampaign:
         meta = dict(template.meta, sbc="exact")
         return Campaign(runs, template.vehicle, template.anemometer, template.tunnel,
                         dict(template.truth, **extra), meta)
+
+
+DRAWN_SPEED_TOLERANCE_MPS = 1e-9
+"""Convergence of :func:`drawn_speed`'s fixed point (m/s, largest change of a sample)."""
+
+
+def drawn_speed(problem, params: dict, noise: np.ndarray, max_iter: int = 50) -> np.ndarray:
+    """[R, N] logged speeds ``v = v_model(theta, v0; v) + noise`` that the likelihood reads as
+    drawn from itself.  A model whose forces read the logged speed (the tyre thermal lag's
+    lagged speed drop, :func:`~bayes_roadload.physics.integrate.lagged_speed_drop`) integrates
+    ``v_model`` with that input computed from the logged speed, so the draw is the fixed point
+    of ``v <- v_model(theta, v0; v) + noise``, iterated from ``problem``'s logged speeds (a
+    contraction: the lag's force changes by ~M g A_D G_T per m/s of the drop, about a tenth of a
+    m/s of speed per m/s over a run).  Other models take one step."""
+    import jax.numpy as jnp
+
+    from ..inference.bayes import integrated_speed
+
+    mask = np.asarray(problem.batch.mask, bool)
+    speed = np.asarray(problem.batch.speed_mps, float)
+    for _ in range(max_iter if problem.model.lag_time_constant else 1):
+        current = dataclasses.replace(problem, batch=problem.batch._replace(speed_mps=jnp.asarray(speed)))
+        new = np.where(mask, np.asarray(integrated_speed(current, params)) + noise, speed)
+        change = float(np.max(np.abs(new - speed)[mask]))
+        speed = new
+        if change < DRAWN_SPEED_TOLERANCE_MPS:
+            break
+    else:
+        if problem.model.lag_time_constant:
+            raise RuntimeError(f"the drawn speed did not converge in {max_iter} iterations (last change {change:.2g} m/s)")
+    return speed
 
 
 @dataclass(frozen=True)

@@ -96,6 +96,29 @@ def test_a_model_with_the_tyre_lag_draws_and_simulates_its_gain():
     assert len(still.runs) != len(lagged.runs) or not np.allclose(still.runs["speed_mps"], lagged.runs["speed_mps"])
 
 
+def test_the_drawn_speed_of_the_lag_model_is_the_likelihoods_fixed_point():
+    """The lag model integrates with the lagged speed drop of the logged speed, so an exact draw
+    must satisfy v = v_model(theta; L(v)) + noise: checked to 1e-8 m/s, where one step from the
+    template's speeds is off by far more than that (the template coasts through turbulence the
+    model sees only at the logged rate)."""
+    import jax.numpy as jnp
+
+    from bayes_roadload.analysis.sbc import drawn_speed
+    from bayes_roadload.inference.bayes import build_problem, integrated_speed
+
+    template = PriorDrawnCampaign(3, pairs=1, model=LAG_MODEL)()
+    problem = build_problem(template, LAG_MODEL)
+    mask = np.asarray(problem.batch.mask, bool)
+    params = {**{k: float(template.truth[k]) for k in problem.free},
+              "v0_mps": np.asarray(problem.batch.speed_mps)[:, 0]}
+    noise = np.where(mask, np.random.default_rng(0).normal(0.0, 0.05, mask.shape), 0.0)
+    v = drawn_speed(problem, params, noise)
+    again = dataclasses.replace(problem, batch=problem.batch._replace(speed_mps=jnp.asarray(v)))
+    assert np.max(np.abs(v - np.asarray(integrated_speed(again, params)) - noise)[mask]) < 1e-8
+    one_step = np.asarray(integrated_speed(problem, params)) + noise
+    assert np.max(np.abs(one_step - v)[mask]) > 1e-4
+
+
 @pytest.mark.parametrize("model", [SBC_MODEL, LAG_MODEL])
 def test_model_drawn_campaign_follows_the_model_likelihood(model):
     """Exact SBC data: at the true coefficients the residual of each run is a random walk of
