@@ -389,7 +389,7 @@ def gnss_markdown(rec) -> list[str]:
             d = c["delta_elpd"]
             lines.append(f"| {c['rank']} | {c['effect']} | {'-' if d is None else f'{d:.1f}'} | {c['statement']} |")
     for lo in [rec.get("lopo"), *rec.get("lopo_models", {}).values()]:
-        lines += _lopo_lines(lo) if lo else []
+        lines += _lopo_lines(lo)
     return lines
 
 

@@ -254,17 +254,18 @@ class ModelDrawnCampaign:
         t_all = np.asarray(b.time_s)
         mask = np.asarray(b.mask, bool)
         noise = np.zeros(mask.shape)  # [R, N] delta + e of each logged sample
+        rows = [np.flatnonzero((runs["run"] == rid).to_numpy()) for rid in problem.run_ids]
         for r, rid in enumerate(problem.run_ids):
             n = int(mask[r].sum())
-            if n != int((runs["run"] == rid).sum()):
-                raise ValueError(f"run {rid!r}: {int((runs['run'] == rid).sum())} rows against {n} batch samples")
+            if n != rows[r].size:
+                raise ValueError(f"run {rid!r}: {rows[r].size} rows against {n} batch samples")
             dt = np.diff(t_all[r, :n], prepend=t_all[r, 0])
             walk = np.cumsum(rng.normal(0.0, 1.0, n) * q * np.sqrt(dt))
             noise[r, :n] = walk + rng.normal(0.0, sigma_eff[r], n)
         logged = drawn_speed(problem, {**truth, "v0_mps": first}, noise)
         speed = runs["speed_mps"].to_numpy(float).copy()
-        for r, rid in enumerate(problem.run_ids):
-            speed[np.flatnonzero((runs["run"] == rid).to_numpy())] = logged[r, :int(mask[r].sum())]
+        for r in range(problem.n_runs):
+            speed[rows[r]] = logged[r, :rows[r].size]
         runs["speed_mps"] = speed
         extra: dict[str, Any] = {"q_mps_per_sqrt_s": float(q),
                                  "sigma_mps": [float(x) for x in sigma]}
