@@ -229,6 +229,13 @@ class ModelDrawnCampaign:
     at the new logged speeds (:func:`~bayes_roadload.inference.bayes.driveline_log_likelihood`).
     ``truth`` then also holds q, the sigmas and sigma_d.  The pooled, integrated-noise
     likelihood is the one drawn from (the default analysis).
+
+    Probes of one campaign (``benchmarks/sbc_cd0_probe.py``): ``replicate`` > 0 draws new
+    noise (and noise scales) for the same template and truth (a calibration check conditional
+    on the coefficients); ``noise`` "white" or "walk" keeps only that part of the noise (q and
+    the sigmas are still drawn, and recorded, as for "both"); ``template_model`` takes the
+    inputs and truth from another model's prior-drawn campaign (its extra parameters, e.g. the
+    tyre-lag gain, shape the template's simulated speed, airspeed and run lengths only).
     """
 
     seed: int
@@ -236,17 +243,24 @@ class ModelDrawnCampaign:
     model: str = SBC_MODEL
     case: Any = None
     settings: Any = None
+    replicate: int = 0
+    noise: str = "both"
+    template_model: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.noise not in ("both", "white", "walk"):
+            raise ValueError(f"noise must be 'both', 'white' or 'walk', not {self.noise!r}")
 
     def __call__(self) -> Campaign:
         from ..inference.bayes import build_problem
 
-        template = PriorDrawnCampaign(self.seed, pairs=self.pairs, model=self.model, case=self.case,
-                                      settings=self.settings)()
+        template = PriorDrawnCampaign(self.seed, pairs=self.pairs, model=self.template_model or self.model,
+                                      case=self.case, settings=self.settings)()
         problem = build_problem(template, self.model)
         truth = {p: float(template.truth[p]) for p in problem.free}
         b = problem.batch
         first = np.asarray(b.speed_mps)[:, 0]
-        rng = np.random.default_rng([self.seed, 5381])
+        rng = np.random.default_rng([self.seed, 5381, self.replicate] if self.replicate else [self.seed, 5381])
         q = rng.gamma(2.0, config.NOISE_PRIORS["q_mps_per_sqrt_s"] / 2.0)
         sigma = rng.gamma(2.0, config.NOISE_PRIORS["sigma_speed_mean_mps"] / 2.0, problem.n_runs)
         sigma_eff = np.sqrt(sigma**2 + config.SPEED_NOISE_FLOOR_MPS**2)  # the likelihood's noise
@@ -261,7 +275,8 @@ class ModelDrawnCampaign:
                 raise ValueError(f"run {rid!r}: {rows[r].size} rows against {n} batch samples")
             dt = np.diff(t_all[r, :n], prepend=t_all[r, 0])
             walk = np.cumsum(rng.normal(0.0, 1.0, n) * q * np.sqrt(dt))
-            noise[r, :n] = walk + rng.normal(0.0, sigma_eff[r], n)
+            white = rng.normal(0.0, sigma_eff[r], n)
+            noise[r, :n] = (walk if self.noise != "white" else 0.0) + (white if self.noise != "walk" else 0.0)
         logged = drawn_speed(problem, {**truth, "v0_mps": first}, noise)
         speed = runs["speed_mps"].to_numpy(float).copy()
         for r in range(problem.n_runs):
@@ -275,7 +290,8 @@ class ModelDrawnCampaign:
             runs["driveline_force_n"] = (p["At"] + p["Bt"] * speed + p["Ct"] * speed**2
                                          + rng.normal(0.0, sigma_d, speed.size))
             extra["sigma_driveline_n"] = float(sigma_d)
-        meta = dict(template.meta, sbc="exact")
+        meta = dict(template.meta, sbc="exact", replicate=self.replicate, noise=self.noise,
+                    template_model=self.template_model or self.model)
         return Campaign(runs, template.vehicle, template.anemometer, template.tunnel,
                         dict(template.truth, **extra), meta)
 

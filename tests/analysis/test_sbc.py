@@ -161,6 +161,37 @@ def test_model_drawn_campaign_follows_the_model_likelihood(model):
     assert np.std(scatter) == pytest.approx(t["sigma_driveline_n"], rel=5 / np.sqrt(2 * scatter.size))
 
 
+def test_a_replicate_redraws_the_noise_and_the_noise_parts_add_up():
+    """A replicate keeps the template and the truth and draws new noise; from one seed and
+    replicate the "white" and "walk" draws hold the two parts of the "both" draw (the same
+    random stream), so white + walk - both is the model's noise-free speed at the truth; a
+    template of another model gives its time grid (the lag model's runs coast longer)."""
+    from bayes_roadload.inference.bayes import build_problem, integrated_speed
+
+    def drawn(**kw):
+        return ModelDrawnCampaign(3, pairs=1, model=SBC_MODEL, **kw)()
+
+    first, again = drawn(), drawn(replicate=1)
+    assert again.meta["replicate"] == 1 and again.meta["noise"] == "both"
+    assert {k: first.truth[k] for k in SBC_PARAMETERS if k in first.truth} == \
+        {k: again.truth[k] for k in SBC_PARAMETERS if k in again.truth}
+    assert not np.allclose(first.runs["speed_mps"], again.runs["speed_mps"])
+    both, white, walk = (drawn(replicate=1, noise=n).runs["speed_mps"].to_numpy() for n in ("both", "white", "walk"))
+    np.testing.assert_array_equal(both, again.runs["speed_mps"].to_numpy())
+    problem = build_problem(again, SBC_MODEL)
+    t = again.truth
+    template = build_problem(PriorDrawnCampaign(3, pairs=1, model=SBC_MODEL)(), SBC_MODEL)
+    v0 = np.asarray(template.batch.speed_mps)[:, 0]  # the draw starts at the template's first logged speed
+    v = np.asarray(integrated_speed(problem, {**{k: t[k] for k in problem.free}, "v0_mps": v0}))
+    mask = np.asarray(problem.batch.mask, bool)
+    np.testing.assert_allclose((white + walk - both), v[mask], atol=1e-9)
+    lagged = drawn(template_model=LAG_MODEL)
+    assert lagged.meta["template_model"] == LAG_MODEL
+    assert lagged.runs["time_s"].max() > first.runs["time_s"].max()
+    with pytest.raises(ValueError, match="noise"):
+        ModelDrawnCampaign(3, noise="pink")
+
+
 def _synthetic_records(u_by_arm: dict[str, np.ndarray], draws: int = 999) -> pd.DataFrame:
     from scipy.stats import norm
 

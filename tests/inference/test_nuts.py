@@ -450,6 +450,8 @@ def test_the_most_implausible_least_squares_estimate_is_named():
     assert most_implausible_estimate(priors, {}) is None
 
 
+@pytest.mark.slow  # ~30 s alone, ~60 s in the default run (the lag model's exact draw and refitted start);
+# the rule itself: test_the_most_implausible_least_squares_estimate_is_named above
 def test_a_two_pair_campaign_whose_least_squares_leave_the_support_starts_inside_it():
     """The exact-SBC campaign of seed 1 (2 pairs, the lag model with the driveline channel):
     least squares put the tyre-lag gain at -0.30 /(m/s) (prior 0.0057 +- 0.003), A_t, B_t, C_t
@@ -469,3 +471,23 @@ def test_a_two_pair_campaign_whose_least_squares_leave_the_support_starts_inside
     assert init["CD0_apparent"] > 0
     post = unconstrained_posterior(problem, init)
     assert np.isfinite(float(post.potential_fn(post.z0)))
+
+
+def test_an_estimate_its_prior_excludes_starts_at_the_prior_centre_and_the_others_are_refitted(small_campaign):
+    """C_D0's prior moved 50 of its scales (0.001) from where least squares puts it: the start
+    holds C_D0 at the prior's centre and the least-squares fit of the others with C_D0 fixed
+    there (they trade along the ridge: the drag the fixed C_D0 adds comes off A_D and B_D)."""
+    from bayes_roadload.inference.bayes import build_problem
+    from bayes_roadload.inference.lsq import fit_lsq
+    from bayes_roadload.inference.nuts import initial_values, with_fixed
+    from bayes_roadload.inference.spec import Prior
+
+    problem = build_problem(small_campaign, "three_term")
+    free = initial_values(problem, small_campaign)
+    far = free["CD0"] + 50 * 0.001
+    moved = dataclasses.replace(problem, priors={**problem.priors, "CD0": Prior("normal", loc=far, scale=0.001)})
+    init = initial_values(moved, small_campaign)
+    assert init["CD0"] == far
+    refit = fit_lsq(small_campaign, with_fixed(problem.spec, {"CD0": far}), grouping="all").groups[0].estimate
+    for k in ("AD", "BD"):
+        assert init[k] == pytest.approx(refit[k], rel=1e-9) and init[k] != pytest.approx(free[k], rel=1e-3), k
