@@ -2,7 +2,7 @@
 truth, many noise draws, several arms.
 
 The exact SBC of ``four_term_tyre_lag_driveline_informative`` (``sbc_study.py --exact --model
-...``) gives C_D0 sd(z) ~1.5 where every other coefficient is calibrated.  This probe holds the
+...``) gives C_D0 sd(z) 1.3-1.5 where every other coefficient is calibrated.  This probe holds the
 truth and inputs of one exact-SBC campaign (``--seed``) and draws ``--replicates`` new noise
 realisations (:class:`~bayes_roadload.analysis.sbc.ModelDrawnCampaign` with ``replicate``), for
 each arm ``TEMPLATE:MODEL:NOISE``:
@@ -18,10 +18,11 @@ intervals are narrower than NUTS's, so the arms are compared with each other, no
 Writes the records (CSV) and prints, per arm, the rms and sd of z = (mean - truth) / sd of
 every coefficient.
 
-Run::
+Run (the committed record ``benchmarks/records/sbc/cd0_probe_seed24.csv``; L, F the lag and
+four_term SBC models)::
 
-    python benchmarks/sbc_cd0_probe.py --seed 24 --replicates 30 --workers 2 \\
-        --records benchmarks/records/sbc/cd0_probe_seed24.csv
+    python benchmarks/sbc_cd0_probe.py --seed 24 --replicates 16 --workers 2 \\
+        --arms $L:$L:both $L:$F:both $F:$F:both --records benchmarks/records/sbc/cd0_probe_seed24.csv
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bayes_roadload.analysis.batch import FitJob, batch_client, run_batch
+from bayes_roadload.analysis.batch import FitJob, batch_client, coverage_summary, run_batch, successful
 from bayes_roadload.analysis.sbc import ModelDrawnCampaign
 
 LAG = "four_term_tyre_lag_driveline_informative"
@@ -58,15 +59,22 @@ def probe_jobs(seed: int, replicates: int, arms: list[str], pairs: int = 2) -> l
 
 
 def summary(records: pd.DataFrame) -> dict:
-    """Per arm: fits, and rms / sd of z of every coefficient the arm's model fits."""
-    ok = records[records["error"].isna()] if "error" in records else records
+    """Per arm: fits, and for every coefficient the arm's model fits sd(z) and 95 % coverage
+    (:func:`~bayes_roadload.analysis.batch.coverage_summary`) and the rms of z, which at one
+    fixed truth also carries the priors' pull (a bias sd(z) does not see)."""
+    ok = successful(records)
+    cov = coverage_summary(ok, by=("arm",), quantities=[k for k in COEFFICIENTS if f"{k}_truth" in ok],
+                           levels=(0.95,))
     out = {}
     for arm, g in ok.groupby("arm", sort=False):
         row = {"fits": len(g)}
-        for k in COEFFICIENTS:
-            if f"{k}_mean" in g and g[f"{k}_mean"].notna().all():
-                z = (g[f"{k}_mean"] - g[f"{k}_truth"]) / g[f"{k}_sd"]
-                row[k] = {"rms_z": round(float(np.sqrt(np.mean(z**2))), 2), "sd_z": round(float(z.std(ddof=1)), 2)}
+        for _, c in cov[cov["arm"] == arm].iterrows():
+            k = c["quantity"]
+            if g[f"{k}_mean"].isna().any():
+                continue  # a coefficient of another arm's model
+            z = (g[f"{k}_mean"] - g[f"{k}_truth"]) / g[f"{k}_sd"]
+            row[k] = {"rms_z": round(float(np.sqrt(np.mean(z**2))), 2), "sd_z": round(float(c["z_sd"]), 2),
+                      "coverage95": round(float(c["coverage"]), 2)}
         out[arm] = row
     return out
 

@@ -254,8 +254,9 @@ class ModelDrawnCampaign:
     def __call__(self) -> Campaign:
         from ..inference.bayes import build_problem
 
-        template = PriorDrawnCampaign(self.seed, pairs=self.pairs, model=self.template_model or self.model,
-                                      case=self.case, settings=self.settings)()
+        template_model = self.template_model or self.model
+        template = PriorDrawnCampaign(self.seed, pairs=self.pairs, model=template_model, case=self.case,
+                                      settings=self.settings)()
         problem = build_problem(template, self.model)
         truth = {p: float(template.truth[p]) for p in problem.free}
         b = problem.batch
@@ -291,7 +292,7 @@ class ModelDrawnCampaign:
                                          + rng.normal(0.0, sigma_d, speed.size))
             extra["sigma_driveline_n"] = float(sigma_d)
         meta = dict(template.meta, sbc="exact", replicate=self.replicate, noise=self.noise,
-                    template_model=self.template_model or self.model)
+                    template_model=template_model)
         return Campaign(runs, template.vehicle, template.anemometer, template.tunnel,
                         dict(template.truth, **extra), meta)
 
