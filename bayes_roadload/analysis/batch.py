@@ -278,12 +278,13 @@ def _interval_fields(name: str, draws: np.ndarray, truth: float | None,
 def retry_fields(retries: list[dict[str, Any]]) -> dict[str, Any]:
     """A batch record's account of a fit's retry (``NutsFit.retries``,
     :func:`~bayes_roadload.inference.nuts.sample_problem`): how many, which gates failed, whether
-    the chains were continued (not sampled anew), and what the first attempt's R-hat and ESS
-    gates read."""
+    the chains were continued (not sampled anew), in which coordinates the retry sampled ("":
+    the first attempt's), and what the first attempt's R-hat and ESS gates read."""
     first = retries[0] if retries else {}
     return {"retries": len(retries),
             "retry_failed": ",".join(first.get("failed", [])),
             "retry_continued": bool(first.get("continued")) if retries else None,
+            "retry_coordinates": first.get("coordinates", "") if retries else None,
             **{f"first_{k}": (first.get("first_attempt") or {}).get(k) if retries else None
                for k in ("max_r_hat", "max_r_hat_quantity", "its_ess_bulk", "min_ess_bulk")}}
 

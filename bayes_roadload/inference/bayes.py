@@ -237,6 +237,17 @@ class FitProblem:
             out["undriven"] = {k: self.fixed[k] for k in ("Au", "Bu")}
         return out
 
+    def alternative_coordinates(self, values: dict[str, Any]) -> tuple["FitProblem", dict[str, Any], str] | None:
+        """A problem sampled in its apparent coefficients (:attr:`apparent`) has the direct
+        coordinates A_D, B_D, C_D0 as its alternative (the same posterior: the densities differ
+        by the Jacobian of :func:`coefficients_from_apparent`); ``values`` lose the apparent
+        sites.  None for a problem sampled directly."""
+        if self.apparent is None:
+            return None
+        direct = dataclasses.replace(self, apparent=None)
+        start = {k: v for k, v in values.items() if k not in APPARENT_SITES.values()}
+        return direct, start, "A_D, B_D, C_D0 sampled directly instead of the apparent coefficients"
+
     def postprocess(self, samples: dict[str, np.ndarray], seed: int) -> dict[str, np.ndarray]:
         """The run-level coefficients of a hierarchical fit (:func:`draw_run_effects`)."""
         return draw_run_effects(self, samples, seed=seed)

@@ -56,6 +56,10 @@ class DrivelineProblem:
     def hessian_runs(self) -> int:
         return 0   # the samples of all runs are pooled: no per-run sites
 
+    def alternative_coordinates(self, values: dict[str, Any]) -> None:
+        """None: one set of coordinates (:class:`~.problem.Problem`)."""
+        return None
+
     def settings(self) -> dict[str, Any]:
         return {"pooling": "pooled", "noise": "driveline", "robust": False}
 

@@ -861,7 +861,11 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
     then NUTS (:func:`run_nuts`) on any :class:`~bayes_roadload.inference.problem.Problem`;
     the fit's ``truth`` is ``truth``.  A campaign of few runs is sampled at the sampler's
     small-campaign target acceptance (:func:`campaign_sampler`), a trace logged with less noise
-    than the likelihood's floor at its quiet-trace acceptance (:func:`quiet_trace_sampler`)."""
+    than the likelihood's floor at its quiet-trace acceptance (:func:`quiet_trace_sampler`).
+    A first attempt that fails its gates is retried once: its chains continued when only more
+    draws are missing (:data:`CONTINUED_GATES`), else sampled anew with :func:`remedy`'s
+    sampler, after divergences in the problem's alternative coordinates where it has them
+    (:func:`retry_coordinates`); ``fit.retries`` records which."""
     sampler = campaign_sampler(sampler, problem)
     map_result = post = None
     if sampler.precondition == "laplace":
@@ -886,25 +890,49 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
         and sampler.num_samples >= config.DEFAULT_SAMPLER.num_samples
     fit = run_nuts(problem, sampler=sampler, map_result=map_result, posterior=post,
                    more_draws=more_draws if retry else None)
+    map_s = map_result.time_s if map_result is not None else None
     failed = checked.get("failed")
     if failed:
         first = {k: (v if not isinstance(v, float) else round(v, 5) if math.isfinite(v) else None)
                  for k, v in checked["extremes"].items()}  # JSON has no NaN
         continued = "extension_s" in fit.timings
+        coordinates = ""
         if not continued:
             second = remedy(sampler, failed)
-            log.warning("gates failed (%s): retrying once with %d + %d draws per chain, target acceptance %.2f",
-                        ", ".join(failed), second.num_warmup, second.num_samples, second.target_accept)
+            other = retry_coordinates(problem, map_result, failed)
+            if other is not None:
+                problem, start, coordinates = other
+                post = unconstrained_posterior(problem, start)
+                map_result = find_map(problem, {}, posterior=post, progress=sampler.progress_bar)
+                map_s += map_result.time_s
+            log.warning("gates failed (%s): retrying once with %d + %d draws per chain, target acceptance %.2f%s",
+                        ", ".join(failed), second.num_warmup, second.num_samples, second.target_accept,
+                        f", {coordinates}" if coordinates else "")
             fit = run_nuts(problem, sampler=second, map_result=map_result, posterior=post)
             fit.timings["first_attempt_s"] = checked["first_s"]
         kept = fit.sampler  # the settings of the draws kept
         fit.retries = [{"failed": failed, "first_attempt_s": round(checked["first_s"], 3), "first_attempt": first,
                         "continued": continued, "num_warmup": kept.num_warmup, "num_samples": kept.num_samples,
-                        "target_accept": kept.target_accept, "seed": kept.seed}]
-    if map_result is not None:
-        fit.timings["map_s"] = map_result.time_s
+                        "target_accept": kept.target_accept, "seed": kept.seed, "coordinates": coordinates}]
+    if map_s is not None:
+        fit.timings["map_s"] = map_s
     fit.truth = truth
     return fit
+
+
+def retry_coordinates(problem: Problem, map_result: MapResult | None, failed: list[str]
+                      ) -> tuple[Problem, dict[str, Any], str] | None:
+    """The coordinates of the retry after divergences: the problem's alternative
+    (:meth:`~bayes_roadload.inference.problem.Problem.alternative_coordinates`), started from
+    the first attempt's MAP; None (the same coordinates) after other gates, without a MAP, or
+    for a problem with one set of coordinates.  Divergences that the geometry of the sampled
+    coordinates makes are not removed by a smaller step: the tyre-lag default on the eco-car's
+    GNSS traces diverged in its apparent coefficients at target acceptance 0.95 and 0.99 (107
+    and more of 2000 draws) and not once with A_D, B_D, C_D0 sampled directly
+    (docs/calibration.md, real data)."""
+    if "divergences" not in failed or map_result is None:
+        return None
+    return problem.alternative_coordinates(map_result.constrained)
 
 
 CONTINUED_GATES = frozenset({"r_hat", "ess_bulk", "ess_tail"})

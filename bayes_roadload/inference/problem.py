@@ -76,6 +76,13 @@ class Problem(Protocol):
         in ``diagnostics.json`` and ``fit.json``."""
         ...
 
+    def alternative_coordinates(self, values: dict[str, Any]) -> "tuple[Problem, dict[str, Any], str] | None":
+        """The same posterior sampled in other coordinates, which the retry after divergences
+        samples (:func:`~bayes_roadload.inference.nuts.sample_problem`): that problem, ``values``
+        (constrained values of this problem's sites, e.g. its MAP) as its starting values, and
+        what changed, for ``diagnostics.json``; None when the problem has no other coordinates."""
+        ...
+
     def postprocess(self, samples: dict[str, np.ndarray], seed: int) -> dict[str, np.ndarray]:
         """Sites added to the NUTS draws ([chain, draw, ...] arrays) after sampling, e.g. the
         run-level coefficients integrated out while sampling; ``{}`` when there are none."""
@@ -111,6 +118,9 @@ class PooledRunProblem:
 
     def settings(self) -> dict[str, Any]:
         return {"pooling": "pooled", "noise": self.noise_model, "robust": False}
+
+    def alternative_coordinates(self, values: dict[str, Any]) -> None:
+        return None
 
     def postprocess(self, samples: dict[str, Any], seed: int) -> dict[str, Any]:
         return {}

@@ -85,6 +85,10 @@ class SpindownProblem:
         # per-wheel sites couple the runs of one wheel; the problems are small)
         return 0
 
+    def alternative_coordinates(self, values: dict[str, Any]) -> None:
+        """None: one set of coordinates (:class:`~.problem.Problem`)."""
+        return None
+
     def settings(self) -> dict[str, Any]:
         return {"pooling": self.pooling, "noise": "white", "robust": False}
 

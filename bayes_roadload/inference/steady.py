@@ -96,6 +96,10 @@ class SteadyProblem:
         # couple two runs each; the problems are small)
         return 0
 
+    def alternative_coordinates(self, values: dict[str, Any]) -> None:
+        """None: one set of coordinates (:class:`~.problem.Problem`)."""
+        return None
+
     def settings(self) -> dict[str, Any]:
         return {"pooling": "pooled", "noise": "run_offset", "robust": False}
 

@@ -431,6 +431,65 @@ def test_another_failed_gate_samples_anew_with_the_remedy(monkeypatch):
     from bayes_roadload.analysis.batch import retry_fields
 
     assert retry_fields(fit.retries)["retry_continued"] is False
+    # a steady-state problem has one set of coordinates: the retry keeps them
+    assert retry["coordinates"] == "" and retry_fields(fit.retries)["retry_coordinates"] == ""
+
+
+def test_divergences_are_retried_in_the_problems_alternative_coordinates(monkeypatch):
+    """After divergences the retry samples the problem that ``alternative_coordinates`` returns,
+    from a MAP of its own started at the values it returns, with the remedy's sampler; the
+    retry records what changed and the MAP time of both.  (A steady-state problem standing in
+    for one with other coordinates: the retry is the same for every kind.)"""
+    from bayes_roadload.inference.steady import SteadyProblem, fit_steady_nuts
+
+    offered = []
+
+    def alternative(self, values):
+        other = dataclasses.replace(self)
+        offered.append((self, other, dict(values)))
+        return other, values, "other coordinates"
+
+    monkeypatch.setattr(SteadyProblem, "alternative_coordinates", alternative)
+    monkeypatch.setattr(config, "DEFAULT_SAMPLER", TINY)
+    found = _first_gates_read_as(monkeypatch, ["divergences"])
+    fit = fit_steady_nuts(_steady_campaign(), "four_term", sampler=TINY)
+    first = found[0][0]
+    ((asked, other, values),) = offered
+    assert asked is first.problem and fit.problem is other and other is not first.problem
+    assert values == {k: v for k, v in first.map.constrained.items()}
+    (retry,) = fit.retries
+    assert retry["coordinates"] == "other coordinates" and retry["target_accept"] == 0.99
+    assert fit.map is not first.map and fit.timings["map_s"] == pytest.approx(first.map.time_s + fit.map.time_s)
+    # other gates than divergences, or no MAP to start from: the retry keeps the coordinates
+    from bayes_roadload.inference.nuts import retry_coordinates
+
+    assert retry_coordinates(first.problem, first.map, ["r_hat", "tree_depth", "e_bfmi"]) is None
+    assert retry_coordinates(first.problem, None, ["divergences"]) is None and len(offered) == 1
+
+
+@pytest.mark.slow  # ~60 s alone: the lag model's two MAPs and samplers compile
+def test_divergences_in_the_apparent_coefficients_are_retried_in_the_direct_ones(monkeypatch, small_campaign):
+    """The tyre-lag model samples its apparent coefficients; after divergences the retry samples
+    A_D, B_D, C_D0 directly (the same posterior), from a MAP of its own started at the first
+    attempt's, with the remedy's sampler, and says so in ``retries``."""
+    from bayes_roadload.analysis.batch import retry_fields
+    from bayes_roadload.inference.bayes import APPARENT_SITES
+    from bayes_roadload.inference.nuts import fit_nuts
+
+    monkeypatch.setattr(config, "DEFAULT_SAMPLER", TINY)
+    found = _first_gates_read_as(monkeypatch, ["divergences"])
+    fit = fit_nuts(small_campaign, "four_term_tyre_lag", sampler=TINY)
+    first = found[0][0]
+    assert first.problem.apparent is not None and set(APPARENT_SITES.values()) <= set(first.samples)
+    (retry,) = fit.retries
+    assert retry["failed"] == ["divergences"] and not retry["continued"] and retry["target_accept"] == 0.99
+    assert "directly" in retry["coordinates"] and retry_fields(fit.retries)["retry_coordinates"] == retry["coordinates"]
+    assert fit.problem.apparent is None and not set(APPARENT_SITES.values()) & set(fit.samples)
+    for name in ("AD", "BD", "CD0", "tyre_lag_gain_per_mps"):
+        assert fit.samples[name].shape == (2, 40) and np.isfinite(fit.samples[name]).all(), name
+    # the retry's own MAP is in the direct coordinates, and its time is counted with the first one's
+    assert set(APPARENT_SITES) <= set(fit.map.z) and not set(APPARENT_SITES.values()) & set(fit.map.z)
+    assert fit.timings["map_s"] > first.map.time_s > 0
 
 
 

@@ -14,7 +14,8 @@ from bayes_roadload.inference.spindown import SpindownProblem
 from bayes_roadload.inference.steady import SteadyProblem
 
 PROBLEMS = (FitProblem, IntervalProblem, DistanceProblem, SpindownProblem, SteadyProblem, DrivelineProblem)
-MEMBERS = ("numpyro_model", "hessian_runs", "n_observations", "settings", "postprocess", "derived", "truth_values", "kind")
+MEMBERS = ("numpyro_model", "hessian_runs", "n_observations", "settings", "alternative_coordinates", "postprocess", "derived",
+           "truth_values", "kind")
 FIELDS = ("spec", "free", "initial", "run_ids", "priors")
 
 
@@ -38,3 +39,18 @@ def test_no_coastdown_fields_on_other_kinds(cls):
 
 def test_problem_is_a_runtime_protocol():
     assert "settings" in dir(Problem) and "hessian_runs" in dir(Problem)
+
+
+def test_only_a_problem_sampled_in_apparent_coefficients_has_other_coordinates(small_campaign):
+    """The speed traces' lag model (apparent coefficients) offers A_D, B_D, C_D0 sampled
+    directly, its starting values without the apparent sites; that problem, and the same traces
+    without the lag, offer none."""
+    from bayes_roadload.inference.bayes import APPARENT_SITES, build_problem, with_apparent
+
+    lag = build_problem(small_campaign, "four_term_tyre_lag")
+    values = with_apparent(lag, {"AD": 0.01, "BD": 2e-4, "CD0": 0.35, "tyre_lag_gain_per_mps": 0.005, "KD": 0.5})
+    direct, start, what = lag.alternative_coordinates(values)
+    assert lag.apparent is not None and direct.apparent is None and "directly" in what
+    assert set(start) == set(values) - set(APPARENT_SITES.values()) and start["CD0"] == 0.35
+    assert direct.alternative_coordinates(start) is None
+    assert build_problem(small_campaign, "four_term").alternative_coordinates({}) is None
