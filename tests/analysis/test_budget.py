@@ -176,6 +176,8 @@ def test_steady_state_sensitivities_to_the_anemometer_and_the_force_transducer()
     assert typeb.sensitivity["F50_N"]["driveline_scale_rel"] == pytest.approx(mode["F50_N"], rel=0.05)
 
 
+@pytest.mark.slow  # ~34 s (two shifted MAPs compile); the equation-of-motion sensitivity of
+# band times, the same F / M_e relation, stays in the default run
 def test_distance_time_mass_sensitivity(clean):
     """Distance-time records (surveyed markers, a clock: no speed-sensor source), like band
     times, depend on F / M_e: dF50/dM = F50 / M_e to 1 %.  The rotating inertia is switched off

@@ -413,13 +413,28 @@ def test_a_failed_r_hat_or_ess_continues_the_same_chains(monkeypatch):
 def test_another_failed_gate_samples_anew_with_the_remedy(monkeypatch):
     """Divergences (also beside an R-hat miss), E-BFMI or tree depth need another adaptation: a
     new run with twice the warm-up and draws (0.99 after divergences) and a new seed, once,
-    recorded."""
-    from bayes_roadload.inference.steady import fit_steady_nuts
+    recorded.  After divergences the retry samples the problem that ``alternative_coordinates``
+    returns, from a MAP of its own started at the values it returns, and records what changed
+    and the MAP time of both (a steady-state problem standing in for one with other
+    coordinates, e.g. the lag model's apparent coefficients: the retry is the same for every
+    kind)."""
+    from bayes_roadload.analysis.batch import retry_fields
+    from bayes_roadload.inference.nuts import retry_coordinates
+    from bayes_roadload.inference.steady import SteadyProblem, fit_steady_nuts
+
+    offered = []
+    own = SteadyProblem.alternative_coordinates
+
+    def alternative(self, values):
+        other = dataclasses.replace(self)
+        offered.append((self, other, dict(values)))
+        return other, values, "other coordinates"
 
     campaign = _steady_campaign()
     monkeypatch.setattr(config, "DEFAULT_SAMPLER", TINY)
+    monkeypatch.setattr(SteadyProblem, "alternative_coordinates", alternative)
     failed = ["r_hat", "divergences"]
-    _first_gates_read_as(monkeypatch, failed)
+    found = _first_gates_read_as(monkeypatch, failed)
     fit = fit_steady_nuts(campaign, "four_term", sampler=TINY)
     (retry,) = fit.retries
     assert not retry["continued"] and retry["failed"] == failed
@@ -428,43 +443,20 @@ def test_another_failed_gate_samples_anew_with_the_remedy(monkeypatch):
     assert retry["target_accept"] == fit.sampler.target_accept == 0.99
     assert fit.samples["CD0"].shape == (2, 40) and fit.timings["first_attempt_s"] > 0
     assert "extension_s" not in fit.timings
-    from bayes_roadload.analysis.batch import retry_fields
-
     assert retry_fields(fit.retries)["retry_continued"] is False
-    # a steady-state problem has one set of coordinates: the retry keeps them
-    assert retry["coordinates"] == "" and retry_fields(fit.retries)["retry_coordinates"] == ""
-
-
-def test_divergences_are_retried_in_the_problems_alternative_coordinates(monkeypatch):
-    """After divergences the retry samples the problem that ``alternative_coordinates`` returns,
-    from a MAP of its own started at the values it returns, with the remedy's sampler; the
-    retry records what changed and the MAP time of both.  (A steady-state problem standing in
-    for one with other coordinates: the retry is the same for every kind.)"""
-    from bayes_roadload.inference.steady import SteadyProblem, fit_steady_nuts
-
-    offered = []
-
-    def alternative(self, values):
-        other = dataclasses.replace(self)
-        offered.append((self, other, dict(values)))
-        return other, values, "other coordinates"
-
-    monkeypatch.setattr(SteadyProblem, "alternative_coordinates", alternative)
-    monkeypatch.setattr(config, "DEFAULT_SAMPLER", TINY)
-    found = _first_gates_read_as(monkeypatch, ["divergences"])
-    fit = fit_steady_nuts(_steady_campaign(), "four_term", sampler=TINY)
+    # the other coordinates: the returned problem, from its own MAP started at the first one
     first = found[0][0]
     ((asked, other, values),) = offered
     assert asked is first.problem and fit.problem is other and other is not first.problem
-    assert values == {k: v for k, v in first.map.constrained.items()}
-    (retry,) = fit.retries
-    assert retry["coordinates"] == "other coordinates" and retry["target_accept"] == 0.99
+    assert values == dict(first.map.constrained)
+    assert retry["coordinates"] == "other coordinates" == retry_fields(fit.retries)["retry_coordinates"]
     assert fit.map is not first.map and fit.timings["map_s"] == pytest.approx(first.map.time_s + fit.map.time_s)
-    # other gates than divergences, or no MAP to start from: the retry keeps the coordinates
-    from bayes_roadload.inference.nuts import retry_coordinates
-
+    # other gates than divergences, no MAP to start from, or a problem with one set of
+    # coordinates (the steady-state problem's own): the retry keeps the coordinates
     assert retry_coordinates(first.problem, first.map, ["r_hat", "tree_depth", "e_bfmi"]) is None
     assert retry_coordinates(first.problem, None, ["divergences"]) is None and len(offered) == 1
+    monkeypatch.setattr(SteadyProblem, "alternative_coordinates", own)
+    assert retry_coordinates(first.problem, first.map, ["divergences"]) is None
 
 
 @pytest.mark.slow  # ~60 s alone: the lag model's two MAPs and samplers compile
