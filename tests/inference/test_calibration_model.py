@@ -183,6 +183,10 @@ def test_calibration_with_hierarchical_pooling_and_robust_noise(small_campaign, 
 
 # ----------------------------------------------------------------------------- recovery
 
+SLOW_FIT = pytest.mark.slow  # the calibrated NUTS fit they share takes ~40 s; the calibration sites
+# and their density stay in the default run (tests above)
+
+
 @pytest.fixture(scope="module")
 def scaled_campaign(small_campaign):
     return scaled(small_campaign)
@@ -195,6 +199,7 @@ def calibrated_fit(scaled_campaign):
     return fit_nuts(scaled_campaign, "three_term_calibrated", sampler=CAL_SAMPLER)
 
 
+@SLOW_FIT
 def test_free_factor_recovers_the_scaled_reading(calibrated_fit, scaled_campaign):
     """The readings are 1 % high: the factor's posterior holds 1 / 1.01, and C_D0 is back
     around its truth (the analysis model is correctly specified on this campaign).  |z| < 3:
@@ -211,6 +216,7 @@ def test_free_factor_recovers_the_scaled_reading(calibrated_fit, scaled_campaign
     assert calibrated_fit.samples["airspeed_factor"].std() < 0.03
 
 
+@SLOW_FIT
 def test_wrongly_fixed_factor_puts_cd0_2_percent_low(scaled_campaign, calibrated_fit):
     """With the factor fixed at 1 the aerodynamic force is C_D0 (1.01 x true airspeed)^2:
     C_D0 comes out 1 / 1.01^2 - 1 = -1.97 % off (thesis 6.6: 2 % per 1 %), give or take its
@@ -227,6 +233,7 @@ def test_wrongly_fixed_factor_puts_cd0_2_percent_low(scaled_campaign, calibrated
     assert calibrated_fit.samples["CD0"].std() > 2.0 * g.se["CD0"]
 
 
+@SLOW_FIT
 def test_summary_has_an_airspeed_factor_row(calibrated_fit):
     from bayes_roadload.inference.results import summary_table, to_inference_data
 

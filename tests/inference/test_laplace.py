@@ -44,6 +44,8 @@ def test_same_map_and_covariance_as_find_map(two_campaigns):
     assert lf.samples["AD"].shape == (1, 1000) and np.isfinite(lf.samples["F50_N"]).all()
 
 
+@pytest.mark.slow  # ~12 s; the correction's batching (below) and the planning refits that use it
+# (tests/analysis/test_planning.py, Pareto k) stay in the default run
 def test_importance_sampling_widens_the_one_pair_laplace_intervals(two_campaigns):
     """On one pair the Gaussian at the mode is too narrow (the coefficients widen with the noise
     scales); PSIS with a widened t proposal has usable weights and widens the intervals, and the
