@@ -122,25 +122,25 @@ def test_forward_and_reverse_gradients_of_the_potential_agree(small_campaign):
         np.testing.assert_allclose(grads[0][k], grads[1][k], rtol=1e-8, atol=1e-10)
 
 
-def test_driveline_channel_is_fitted_with_the_polynomial(monkeypatch):
-    """four_term_driveline on a campaign that logs the driveline force: the logged force enters
-    the likelihood (Normal around A_t + B_t v + C_t v^2), so A_t is measured by that channel
-    instead of trading with M g A_D: its Laplace sd at the MAP is far below the prior's 20 N and
-    the MAP is within 4 of those sd of the truth."""
+def _driveline_campaign():
     import warnings
 
-    import jax.flatten_util
-
-    from bayes_roadload.inference import bayes
-    from bayes_roadload.inference.bayes import driveline_log_likelihood
-    from bayes_roadload.inference.nuts import find_map, unconstrained_posterior
     from bayes_roadload.simulate import simulate_campaign
 
     from ..conftest import clean_case
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        campaign = simulate_campaign(clean_case(), pairs=1, seed=2, driveline=True)
+        return simulate_campaign(clean_case(), pairs=1, seed=2, driveline=True)
+
+
+def test_driveline_channel_enters_the_likelihood(monkeypatch):
+    """four_term_driveline on a campaign that logs the driveline force: the logged force enters
+    the likelihood, Normal around A_t + B_t v + C_t v^2 at the logged speed."""
+    from bayes_roadload.inference import bayes
+    from bayes_roadload.inference.bayes import driveline_log_likelihood
+
+    campaign = _driveline_campaign()
     p = build_problem(campaign, "four_term_driveline")
     assert p.driveline_channel and "sigma_driveline_n" in p.initial
     assert not build_problem(campaign, "four_term").driveline_channel  # measured driveline: an input
@@ -154,6 +154,18 @@ def test_driveline_channel_is_fitted_with_the_polynomial(monkeypatch):
     expected = stats.norm(sample["At"] + sample["Bt"] * v + sample["Ct"] * v**2, 3.0).logpdf(f).sum()
     assert float(driveline_log_likelihood(p, sample, 3.0)) == pytest.approx(expected, rel=1e-10)
 
+
+@pytest.mark.slow  # ~15 s: the MAP of the driveline model compiles
+def test_driveline_channel_measures_the_polynomial():
+    """With the logged force in the likelihood A_t is measured by that channel instead of
+    trading with M g A_D: its Laplace sd at the MAP is far below the prior's 20 N and the MAP is
+    within 4 of those sd of the truth."""
+    import jax.flatten_util
+
+    from bayes_roadload.inference.nuts import find_map, unconstrained_posterior
+
+    campaign = _driveline_campaign()
+    p = build_problem(campaign, "four_term_driveline")
     post = unconstrained_posterior(p, initial_values(p, campaign))
     m = find_map(p, {}, posterior=post)
     flat, _ = jax.flatten_util.ravel_pytree(m.z)
