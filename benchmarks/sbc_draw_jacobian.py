@@ -10,7 +10,8 @@ campaign (J by forward-mode autodiff over every real sample) and its derivative 
 to each coefficient by central differences (5 % of the value).  Multiply a derivative by the
 coefficient's posterior sd (the SBC records) for the change of the left-out term over one sd.
 
-Run: ``python benchmarks/sbc_draw_jacobian.py --seed 24`` (docs/calibration.md quotes it).
+Run: ``python benchmarks/sbc_draw_jacobian.py --seed 24 > benchmarks/records/sbc/draw_jacobian_seed24.json``
+(docs/calibration.md quotes it).
 """
 
 from __future__ import annotations

@@ -41,8 +41,6 @@ def test_a_stated_lag_adds_the_anemometer_term_with_its_distance_constant():
     assert "anemometer_lag" not in load_model_spec("four_term").build(still)[0].term_names  # no reading
 
 
-@pytest.mark.slow  # ~13 s: a study-like check on the independent simulator; the correction's terms
-# are tested in the default run above
 def test_the_lag_correction_shrinks_the_cd0_error_on_the_independent_simulator():
     """Noise-free campaign of the independent simulator with only its anemometer dynamics (cup
     first order with over-speeding: the slow-down distance constant is r x d, r =
