@@ -248,6 +248,9 @@ def integrate_run(
 
     if stride == 2 and schedule is None:
         schedule = stride2_schedule(run.time_s, u)
+    if stride == 2 and model.speed_affine and integrator.parallel:
+        stages = _hold(_affine_stages(model, p, run, schedule))
+        return _compose_affine(stages, v0, schedule, run.time_s.shape[0])
     u, schedule = _with_model_channel(model, p, run, u, schedule)
     y0 = jnp.stack([v0, jnp.zeros_like(v0)])
     if stride == 1:
@@ -266,8 +269,6 @@ def integrate_run(
         _, ys = jax.lax.scan(step, y0, (run.time_s[:-1], run.time_s[1:], u[:-1], u[1:]))
     else:
         n = run.time_s.shape[0]
-        if model.speed_affine and integrator.parallel:
-            return _integrate_affine(model, p, run, v0, schedule, n)
 
         def step(y, xs):
             t0, hk, u0, umk, u2, w = xs
@@ -282,18 +283,16 @@ def integrate_run(
     return ys[:, 0], ys[:, 1]
 
 
-def _integrate_affine(model: DragModel, p, run: RunBatch, v0: Array, schedule, n: int) -> tuple[Array, Array]:
-    """The stride-2 RK4 of :func:`integrate_run` for a model whose deceleration is affine in
-    the speed, a(t, v) = alpha(t) + beta(t) v (``model.speed_affine``), computed in parallel
-    over time.  Each RK4 step is then an affine map of the speed at its start, v_end =
-    Phi v + Gamma (Phi > 0: 1 - h beta + ..., the step is far shorter than the deceleration's
-    time scale), and so are the middle-sample output and the distance increments; the maps
-    are built for all steps at once and composed by cumulative sums.  The arithmetic is
-    RK4's, so the result equals the sequential scan to rounding (tested), and reverse-mode
-    gradients through it are cheap: no sequential loop is left."""
-    t0, h, ua, um, uc, w = (jnp.asarray(x) for x in schedule)
+def _affine_stages(model: DragModel, p, run: RunBatch, schedule) -> tuple:
+    """For a model whose deceleration is affine in the speed, a(t, v) = alpha(t) + beta(t) v
+    (``model.speed_affine``): alpha and beta at the RK4 stage points of every stride-2 step
+    of one run, ``(alpha_1, beta_1, alpha_2, beta_2, alpha_4, beta_4)`` (stage 3 shares
+    stage 2's point), each [K]."""
+    u = jnp.asarray(_inputs(run))
+    _, schedule = _with_model_channel(model, p, run, u, schedule)
+    t0, h, ua, um, uc, _ = (jnp.asarray(x) for x in schedule)
 
-    def coefficients(t, uu):  # alpha, beta at the stage points of every step
+    def coefficients(t, uu):
         def acc(v):
             c = _conditions(model, p, run, v, jnp.zeros_like(v), t, uu.T)
             return model.acceleration_mps2(p, c, run.effective_mass_kg)
@@ -301,9 +300,33 @@ def _integrate_affine(model: DragModel, p, run: RunBatch, v0: Array, schedule, n
         a0 = acc(jnp.zeros_like(t))
         return a0, acc(jnp.ones_like(t)) - a0
 
-    al1, be1 = coefficients(t0, ua)
-    al2, be2 = coefficients(t0 + 0.5 * h, um)
-    al4, be4 = coefficients(t0 + h, uc)
+    return coefficients(t0, ua) + coefficients(t0 + 0.5 * h, um) + coefficients(t0 + h, uc)
+
+
+def _hold(stages: tuple) -> tuple:
+    """``stages`` unchanged, computed once and held in memory: passed through a ``lax.cond``
+    whose predicate, ``x == x`` on the first stage coefficient x, is true unless x is NaN (the
+    other branch then makes every output NaN, where the first run's already is).  XLA's CPU
+    fusion otherwise copies the arithmetic of the model's force terms into each fused loop
+    that reads the stage coefficients, forward and in the gradient, where about 20 loops
+    read them (``jax.lax.optimization_barrier`` is removed before fusion; measured in
+    docs/performance.md, *The gradient's cost*).  Under ``vmap`` the ``cond`` becomes a
+    select: the same values, without the hold."""
+    key = stages[0].reshape(-1)[0]
+    return jax.lax.cond(key == key, lambda x: x, lambda x: tuple(a + 0.0 * key for a in x), stages)
+
+
+def _compose_affine(stages: tuple, v0: Array, schedule, n: int) -> tuple[Array, Array]:
+    """The stride-2 RK4 of :func:`integrate_run` for a speed-affine model, computed in
+    parallel over time from its stage coefficients (:func:`_affine_stages`).  Each RK4 step
+    is then an affine map of the speed at its start, v_end = Phi v + Gamma (Phi > 0:
+    1 - h beta + ..., the step is far shorter than the deceleration's time scale), and so are
+    the middle-sample output and the distance increments; the maps are built for all steps at
+    once and composed by cumulative sums.  The arithmetic is RK4's, so the result equals the
+    sequential scan to rounding (tested), and reverse-mode gradients through it are cheap: no
+    sequential loop is left.  Returns the [n] speed and distance."""
+    al1, be1, al2, be2, al4, be4 = stages
+    h, w = jnp.asarray(schedule[1]), jnp.asarray(schedule[5])
     # stage speeds y_i and slopes k_i as (constant, coefficient of v)
     y1 = (jnp.zeros_like(h), jnp.ones_like(h))
     k1 = (al1, be1)
@@ -354,6 +377,13 @@ def integrate_batch(
     v0 = batch.speed_mps[:, 0] if v0_mps is None else jnp.broadcast_to(jnp.asarray(v0_mps, float), (r,))
 
     schedule = _schedule_of(batch, integrator)
+    if integrator.stride == 2 and model.speed_affine and integrator.parallel:
+        # every run's stage coefficients first, held once for the whole batch (_hold)
+        stages = jax.vmap(lambda pp, run, sched: _affine_stages(model, pp, run, sched),
+                          in_axes=(axes, 0, 0))(p, batch, schedule)
+        stages = _hold(stages)
+        n = batch.time_s.shape[-1]
+        return jax.vmap(lambda st, v, sched: _compose_affine(st, v, sched, n))(stages, v0, schedule)
 
     def one(pp, run, v0r, sched):
         return integrate_run(model, pp, run, v0r, integrator, sched)

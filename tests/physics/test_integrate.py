@@ -243,6 +243,31 @@ def test_linear_equation_of_motion_is_solved_in_parallel_with_the_same_result():
     assert float(jax.grad(loss(par))(0.4)) == pytest.approx(float(jax.grad(loss(seq))(0.4)), rel=1e-10)
 
 
+def test_the_stage_coefficients_are_computed_once_in_the_compiled_gradient():
+    """The parallel solution holds the runs' stage coefficients in one conditional
+    (``integrate._hold``) so that XLA does not copy the force terms' arithmetic into every
+    fused loop of the gradient: the compiled gradient keeps that conditional (were XLA to
+    fold it, the speed-up would silently go), and the batch equals each run solved on its
+    own to rounding, values and gradient."""
+    rng = np.random.default_rng(3)
+    model = full_model(driveline="measured")
+    t = np.arange(200) * 0.25
+    runs = [make_run(t, 31.0 - 0.08 * t, airspeed_mps=30.0 - 0.08 * t + rng.normal(0, 0.3, t.size),
+                     yaw_rad=rng.normal(0.05, 0.05, t.size), driveline_force_n=40 + rng.normal(0, 20, t.size),
+                     **VEHICLE) for _ in range(3)]
+    batch = stack_runs(runs)
+
+    def held(c):
+        return jnp.sum(integrate_batch(model, dict(COEF, CD0=c), batch)[0] ** 2)
+
+    def one_by_one(c):
+        return sum(jnp.sum(integrate_run(model, dict(COEF, CD0=c), run)[0] ** 2) for run in runs)
+
+    assert " conditional(" in jax.jit(jax.grad(held)).lower(0.4).compile().as_text()
+    assert float(held(0.4)) == pytest.approx(float(one_by_one(0.4)), rel=1e-13)
+    assert float(jax.grad(held)(0.4)) == pytest.approx(float(jax.grad(one_by_one)(0.4)), rel=1e-10)
+
+
 def test_a_stopped_vehicle_stays_stopped_in_still_air():
     """Still air (drag quadratic in the ground speed): a trace integrated past v = 0 used to
     run away to -inf (NaN).  The speed now stays at or just below 0 (one RK4 step's
