@@ -3,8 +3,9 @@
 Each campaign is ``simulate_independent(seed, pairs=P)`` (``bayes_roadload.simulate.independent``:
 its own integrator, wind field, instruments and vehicles, every nuisance effect, the Type B
 errors drawn inside the standards' accuracies), P drawn uniformly in ``--pairs MIN MAX`` from the
-seed.  Every campaign is fitted with the options ``bayes-roadload fit`` uses by default (model
-``four_term``, the default pooling and noise of :class:`bayes_roadload.inference.kinds.FitOptions`,
+seed.  Every campaign is fitted with the options ``bayes-roadload fit`` uses by default (the
+speed-trace default model of the kind registry, ``KINDS["traces"].default_model``, unless
+``--model``; the default pooling and noise of :class:`bayes_roadload.inference.kinds.FitOptions`,
 the default sampler) through the batch door (:func:`bayes_roadload.analysis.batch.run_batch`).
 
 The rules are frozen before the confirmatory seeds run (``docs/calibration.md``):
@@ -130,6 +131,12 @@ def main(argv=None) -> int:
         records["error"] = np.nan
     table = calibration_table(records)
     text = calibration_markdown(records, table, wall)
+    if args.from_records and args.records.name.endswith(".partial.csv"):
+        text = (f"**Partial run: {len(records)} of the {args.n} campaigns** (stopped, resumable: `python "
+                f"benchmarks/calibration_study.py --n {args.n} --seed0 {args.seed0} --records "
+                f"{args.records.with_name(args.records.name.replace('.partial.csv', '.csv')).relative_to(ROOT)}` "
+                "fits only the campaigns the partial file lacks); every verdict below is on these campaigns "
+                "alone.\n\n" + text)
     print(text, file=sys.stderr)
     if args.docs:
         replace_section(DOC, MARK_BEGIN, MARK_END, text)

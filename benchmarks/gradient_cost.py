@@ -12,7 +12,9 @@ For each model (``four_term``, pooled, and the speed-trace default), it times, i
 
 Each invocation appends one record per model to ``--records`` with the package's commit, so two
 commits compare by running the script against each (``PYTHONPATH=<other checkout>``), in turn.
-``--docs`` regenerates the table in docs/performance.md (*The gradient's cost*) from the records.
+``--hold-ab`` also compiles the potential with and without the stage coefficients' hold
+(``physics.integrate._hold``) and times the two in alternating blocks in one process, the
+comparison least exposed to the machine's drift.  ``--docs`` regenerates the table in docs/performance.md (*The gradient's cost*) from the records.
 
     python benchmarks/gradient_cost.py --label "hold"
     python benchmarks/gradient_cost.py --docs
@@ -54,7 +56,38 @@ def best_ms(f, arg, repeats: int) -> float:
     return round(best, 4)
 
 
-def measure(model: str, repeats: int) -> dict:
+def hold_comparison(build, arg, repeats: int) -> dict:
+    """The potential's value and gradient compiled with the stage coefficients held
+    (``physics.integrate._hold``) and without (the hold replaced by the identity while tracing),
+    timed in alternating blocks of 50 calls in this process: the medians over ``repeats`` blocks
+    each, in ms, and the median of the per-block ratios."""
+    import jax
+    import numpy as np
+
+    from bayes_roadload.physics import integrate
+
+    held = build()
+    jax.block_until_ready(held(arg))
+    hold, integrate._hold = integrate._hold, lambda stages: stages
+    try:
+        unheld = build()
+        jax.block_until_ready(unheld(arg))
+    finally:
+        integrate._hold = hold
+    times = {"held": [], "unheld": []}
+    for _ in range(repeats):
+        for name, f in (("held", held), ("unheld", unheld)):
+            t0 = time.perf_counter()
+            for _ in range(50):
+                out = f(arg)
+            jax.block_until_ready(out)
+            times[name].append((time.perf_counter() - t0) / 50 * 1e3)
+    ratio = np.median(np.asarray(times["held"]) / np.asarray(times["unheld"]))
+    return {"ab_held_ms": round(float(np.median(times["held"])), 4),
+            "ab_unheld_ms": round(float(np.median(times["unheld"])), 4), "ab_ratio": round(float(ratio), 3)}
+
+
+def measure(model: str, repeats: int, hold_ab: bool = False) -> dict:
     from bayes_roadload._jax import configure_jax
 
     configure_jax()
@@ -74,7 +107,11 @@ def measure(model: str, repeats: int) -> dict:
     flat0, unravel = ravel_pytree(post.z0)
     potential = jax.jit(jax.value_and_grad(lambda u: post.potential_fn(unravel(flat0 + post.scale * u))))
     draw = {k: jnp.asarray(v) for k, v in init.items()}
-    times = {
+    times = {}
+    if hold_ab:
+        times.update(hold_comparison(lambda: jax.jit(jax.value_and_grad(
+            lambda u: post.potential_fn(unravel(flat0 + post.scale * u)))), jnp.zeros(flat0.size), repeats))
+    times |= {
         "potential_grad": best_ms(potential, jnp.zeros(flat0.size), repeats),
         "integrate": best_ms(jax.jit(lambda s: bayes.integrated_speed(problem, s)), draw, repeats),
         "integrate_grad": best_ms(jax.jit(jax.grad(lambda s: bayes.integrated_speed(problem, s).sum())), draw, repeats),
@@ -92,10 +129,11 @@ def markdown(records: list[dict]) -> str:
              "Rows in the order they ran; `load` is the 1-minute load average at the start (the other core "
              "may have been busy).", "",
              "| date (UTC) | label | commit | model | potential value + gradient | integrate | integrate, gradient "
-             "| log-likelihood, gradient | load |", "|---|---|---|---|---|---|---|---|---|"]
+             "| log-likelihood, gradient | in turn: held / unheld (ratio) | load |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in records:
+        ab = (f"{r['ab_held_ms']:.2f} / {r['ab_unheld_ms']:.2f} ({r['ab_ratio']:.2f})" if "ab_ratio" in r else "-")
         lines.append(f"| {r['date']} | {r['label']} | {r['commit']} | {r['model']} | {r['potential_grad']:.2f} "
-                     f"| {r['integrate']:.2f} | {r['integrate_grad']:.2f} | {r['loglik_grad']:.2f} | {r['load']:.2f} |")
+                     f"| {r['integrate']:.2f} | {r['integrate_grad']:.2f} | {r['loglik_grad']:.2f} | {ab} | {r['load']:.2f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -114,6 +152,8 @@ def main() -> None:
     ap.add_argument("--core", type=int, default=1, help="the core to pin to")
     ap.add_argument("--records", type=Path, default=RECORDS)
     ap.add_argument("--docs", action="store_true", help="only regenerate the docs table from the records")
+    ap.add_argument("--hold-ab", action="store_true",
+                    help="also time the potential with and without the stage coefficients' hold, in turn, in this process")
     args = ap.parse_args()
     if args.docs:
         write_doc([json.loads(line) for line in args.records.read_text().splitlines() if line.strip()])
@@ -126,7 +166,7 @@ def main() -> None:
     args.records.parent.mkdir(parents=True, exist_ok=True)
     for model in models:
         rec = {"date": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "label": args.label,
-               "load": round(load, 2), **measure(model, args.repeats)}
+               "load": round(load, 2), **measure(model, args.repeats, args.hold_ab)}
         print(json.dumps(rec), flush=True)
         with args.records.open("a") as f:
             f.write(json.dumps(rec) + "\n")
