@@ -134,7 +134,7 @@ def main(argv=None) -> int:
     if args.from_records and args.records.name.endswith(".partial.csv"):
         text = (f"**Partial run: {len(records)} of the {args.n} campaigns** (stopped, resumable: `python "
                 f"benchmarks/calibration_study.py --n {args.n} --seed0 {args.seed0} --records "
-                f"{args.records.with_name(args.records.name.replace('.partial.csv', '.csv')).relative_to(ROOT)}` "
+                f"{args.records.resolve().with_name(args.records.name.replace('.partial.csv', '.csv')).relative_to(ROOT)}` "
                 "fits only the campaigns the partial file lacks); every verdict below is on these campaigns "
                 "alone.\n\n" + text)
     print(text, file=sys.stderr)
