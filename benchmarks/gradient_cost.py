@@ -2,7 +2,7 @@
 reference campaign (``benchmarks/cold_start.py``: 18 pairs from the independent simulator, seed
 2026, 4 Hz), pinned to one core as each of the two parallel chains runs.
 
-For each model (``four_term``, pooled, and the speed-trace default), it times, in milliseconds
+For each model (``four_term`` and the speed-trace default, both pooled), it times, in milliseconds
 (the fastest of ``--repeats`` blocks of 50 calls, compiled first):
 
 * ``potential_grad``: value and gradient of the MAP-whitened potential NUTS evaluates;
