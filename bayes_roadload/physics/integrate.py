@@ -312,6 +312,8 @@ def _hold(stages: tuple) -> tuple:
     read them (``jax.lax.optimization_barrier`` is removed before fusion; measured in
     docs/performance.md, *The gradient's cost*).  Under ``vmap`` the ``cond`` becomes a
     select: the same values, without the hold."""
+    if stages[0].size == 0:  # a one-sample run has no steps
+        return stages
     key = stages[0].reshape(-1)[0]
     return jax.lax.cond(key == key, lambda x: x, lambda x: tuple(a + 0.0 * key for a in x), stages)
 
