@@ -190,6 +190,13 @@ def _inputs(run: RunBatch):
     return np.stack([np.asarray(x) for x in channels], axis=-1)
 
 
+def _solves_in_parallel(model: DragModel, integrator: config.IntegratorConfig) -> bool:
+    """Whether the integrator solves ``model`` in parallel over time (:func:`_affine_stages`,
+    :func:`_compose_affine`): stride 2, ``integrator.parallel`` and an equation of motion
+    affine in the speed."""
+    return integrator.stride == 2 and integrator.parallel and model.speed_affine
+
+
 def _schedule_of(batch: RunBatch, integrator: config.IntegratorConfig):
     """The stride-2 schedule of a batch (computed once, outside any vmap), else None."""
     return stride2_schedule(batch.time_s, _inputs(batch)) if integrator.stride == 2 else None
@@ -248,7 +255,7 @@ def integrate_run(
 
     if stride == 2 and schedule is None:
         schedule = stride2_schedule(run.time_s, u)
-    if stride == 2 and model.speed_affine and integrator.parallel:
+    if _solves_in_parallel(model, integrator):
         stages = _hold(_affine_stages(model, p, run, schedule))
         return _compose_affine(stages, v0, schedule, run.time_s.shape[0])
     u, schedule = _with_model_channel(model, p, run, u, schedule)
@@ -379,7 +386,7 @@ def integrate_batch(
     v0 = batch.speed_mps[:, 0] if v0_mps is None else jnp.broadcast_to(jnp.asarray(v0_mps, float), (r,))
 
     schedule = _schedule_of(batch, integrator)
-    if integrator.stride == 2 and model.speed_affine and integrator.parallel:
+    if _solves_in_parallel(model, integrator):
         # every run's stage coefficients first, held once for the whole batch (_hold)
         stages = jax.vmap(lambda pp, run, sched: _affine_stages(model, pp, run, sched),
                           in_axes=(axes, 0, 0))(p, batch, schedule)
@@ -563,7 +570,7 @@ def integrate_batch_forward_sensitivity(
     Supports reverse mode (``jax.grad``), which is what NUTS uses.  Forward mode over it is
     not defined (a ``custom_vjp``); use :func:`integrate_batch` for Hessians.
     """
-    if model.speed_affine and integrator.stride == 2 and integrator.parallel:
+    if _solves_in_parallel(model, integrator):
         # no sequential loop to differentiate: reverse mode through the parallel solution is cheap
         return integrate_batch(model, dict(fixed, **free), batch, v0_mps, integrator)[0]
     names = tuple(free)
