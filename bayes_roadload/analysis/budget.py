@@ -89,25 +89,12 @@ class TypeB:
         return {s: (c * self.u[s]) ** 2 for s, c in self.sensitivity.get(quantity, {}).items()}
 
 
-def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[str] = BUDGET_QUANTITIES,
-                         method: str = "linear", options: FitOptions = FitOptions(), fit=None) -> TypeB:
-    """Central-difference sensitivities of the campaign's estimate (module docstring), as its
-    kind computes them (:attr:`~bayes_roadload.inference.kinds.KindEntry.type_b`; ``options``:
-    the fit's, e.g. the runs fitted; ``fit``: the NUTS fit, whose problem's compilation and MAP
-    the kinds that refit MAPs reuse).  For speed traces, ``method="linear"`` takes one
-    Gauss-Newton step from the unshifted least-squares optimum, ``"refit"`` refits each shifted
-    campaign (two least-squares fits per source, all runs); equal to first order in the
-    shifts."""
-    if method not in ("linear", "refit"):
-        raise ValueError(f"method must be 'linear' or 'refit', not {method!r}")
-    entry = kind_of(campaign)
-    if entry.type_b is None:
-        raise ValueError(f"a {entry.label} campaign has no Type B propagation")
-    spec = load_model_spec(spec) if isinstance(spec, str) else spec
-    t0 = time.perf_counter()
+def type_b_shifts(campaign, spec: ModelSpec) -> tuple[dict[str, float], dict, dict[str, str]]:
+    """The campaign's standard uncertainties ``u``, the shifted campaigns ``source -> (campaign
+    shifted by +u, by -u, u)`` of every source that applies, and a note for each that does not
+    (switched off, sampled by the model, refused by the campaign's checks, no channel)."""
     u = standard_uncertainties(campaign)
     notes: dict[str, str] = {}
-    sens: dict[str, dict[str, float]] = {}
     shifts = {}
     for key, source in SOURCES.items():
         if u[key] <= 0.0:
@@ -125,6 +112,27 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
             notes[key] = "not applicable (the campaign has no channel it acts on)"
             continue
         shifts[key] = (plus, minus, u[key])
+    return u, shifts, notes
+
+
+def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[str] = BUDGET_QUANTITIES,
+                         method: str = "linear", options: FitOptions = FitOptions(), fit=None) -> TypeB:
+    """Central-difference sensitivities of the campaign's estimate (module docstring), as its
+    kind computes them (:attr:`~bayes_roadload.inference.kinds.KindEntry.type_b`; ``options``:
+    the fit's, e.g. the runs fitted; ``fit``: the NUTS fit, whose problem's compilation and MAP
+    the kinds that refit MAPs reuse).  For speed traces, ``method="linear"`` takes one
+    Gauss-Newton step from the unshifted least-squares optimum, ``"refit"`` refits each shifted
+    campaign (two least-squares fits per source, all runs); equal to first order in the
+    shifts."""
+    if method not in ("linear", "refit"):
+        raise ValueError(f"method must be 'linear' or 'refit', not {method!r}")
+    entry = kind_of(campaign)
+    if entry.type_b is None:
+        raise ValueError(f"a {entry.label} campaign has no Type B propagation")
+    spec = load_model_spec(spec) if isinstance(spec, str) else spec
+    t0 = time.perf_counter()
+    u, shifts, notes = type_b_shifts(campaign, spec)
+    sens: dict[str, dict[str, float]] = {}
     if shifts and (method == "linear" or not entry.lsq):
         rows = entry.type_b(campaign, spec, shifts, options, fit)
     else:

@@ -25,6 +25,7 @@ PART_OF_TERM = {
     "lift_unloading": "tyre",
     "aero_drag": "aero",
     "aero_drag_table": "aero",
+    "aero_drag_saturating": "aero",
     "side_force_slip": "aero",
     "pitch_attitude": "aero",
     "driveline_polynomial": "driveline",

@@ -22,7 +22,7 @@ def conditions(**kw):
 
 P = {"AD": 0.01, "BD": 2e-4, "KT": 0.0086, "CD0": 0.4, "KD": 0.614, "CL0": 0.273, "KL": 3.64, "KS": 2.4,
      "Cy": 25000.0, "Kalpha": 0.9, "pitch_gain": 0.01, "At": 21.0, "Bt": 2.09, "Ct": -0.02, "Au": 3.24,
-     "Bu": 0.232, "grade_rad": 0.002, "grade_scale": 1.0}
+     "Bu": 0.232, "grade_rad": 0.002, "grade_scale": 1.0, "yaw_saturation_per_rad2": 5.0}
 
 
 def test_air_density_reference():
@@ -38,6 +38,7 @@ def test_terms_match_their_equations():
         "tyre_rolling": tyre,
         "lift_unloading": -q_a * (0.273 + 3.64 * 0.01) * (0.01 + 2e-4 * 25.0),
         "aero_drag": q_a * (0.4 + 0.614 * 0.01),
+        "aero_drag_saturating": q_a * (0.4 + 0.614 * 0.01 / (1.0 + 5.0 * 0.01)),
         "side_force_slip": (q_a * 2.4 * 0.1) ** 2 / (4 * 25000.0),
         "pitch_attitude": q_a * 0.9 * 0.01 * -0.3,
         "driveline_measured": 40.0,
@@ -63,6 +64,37 @@ def test_gradient_reverses_with_direction_and_profile():
     assert float(prof.force_n(P, up)) == pytest.approx(1100 * G * np.sin(0.0012), rel=1e-9)
     with pytest.raises(ValueError):
         T.GradientProfile(position_m=(0.0, 0.0), grade_rad=(0.0, 1.0))
+
+
+def test_saturating_yaw_drag_keeps_the_zero_yaw_curvature_and_levels_off():
+    """c_psi = 0 is the quadratic drag; K_D stays the curvature at zero yaw; the yaw term is
+    half its ceiling K_D / c_psi at psi = 1 / sqrt(c_psi)."""
+    sat, quad = T.AeroDragSaturating(), T.AeroDrag()
+    q_a = 0.5 * 1.2 * 27.0**2 * 1.85
+    for yaw in (0.0, 0.05, 0.3):
+        c = conditions(yaw_rad=yaw)
+        assert float(sat.force_n(dict(P, yaw_saturation_per_rad2=0.0), c)) == pytest.approx(float(quad.force_n(P, c)), rel=1e-14)
+    small = 1e-3
+    yaw_term = float(sat.force_n(P, conditions(yaw_rad=small))) / q_a - 0.4
+    assert yaw_term / small**2 == pytest.approx(0.614, rel=1e-5)
+    half = float(sat.force_n(P, conditions(yaw_rad=1.0 / np.sqrt(5.0)))) / q_a - 0.4
+    assert half == pytest.approx(0.5 * 0.614 / 5.0, rel=1e-12)
+
+
+def test_saturating_yaw_shape_fits_the_thesis_tunnel_table_better_than_the_quadratic():
+    """The docstring's reading of the thesis tunnel table: the saturating shape fits it with
+    an rms under half the quadratic's, and c_psi is positive by more than two of its
+    standard errors."""
+    from scipy.optimize import least_squares
+
+    psi = np.deg2rad(thesis.THESIS_TUNNEL_TABLE["yaw_deg"])
+    cd = np.asarray(thesis.THESIS_TUNNEL_TABLE["cd"])
+    sat = least_squares(lambda x: x[0] + x[1] * psi**2 / (1 + x[2] * psi**2) - cd, [0.4, 0.6, 1.0])
+    quad = least_squares(lambda x: x[0] + x[1] * psi**2 - cd, [0.4, 0.6])
+    rms = lambda r: float(np.sqrt(np.mean(r.fun**2)))  # noqa: E731
+    assert rms(sat) < 0.5 * rms(quad)
+    cov = np.linalg.inv(sat.jac.T @ sat.jac) * np.sum(sat.fun**2) / (psi.size - 3)
+    assert sat.x[2] > 2.0 * np.sqrt(cov[2, 2])
 
 
 def test_tunnel_table_keeps_cd0_at_zero_yaw():
