@@ -76,9 +76,11 @@ _STATIC = object()
 
 def _data_leaves(obj, leaves: list) -> Any:
     """The structure of a problem with its data taken out: every array and float of its own
-    fields and of nested data classes and named tuples (the runs, bands, conditions) is appended to ``leaves``
-    and marked; the model variant, priors, fixed values and the rest stay in the structure
-    (compared by value).  ``initial`` (the MAP's start) is not part of the structure."""
+    fields, of nested data classes and named tuples (the runs, bands, conditions), and of plain
+    tuples and dicts that hold any (a driveline curve, the fixed values a campaign declares, the
+    apparent coefficients' line) is appended to ``leaves`` and marked; the model variant, priors
+    and the rest stay in the structure (compared by value).  ``initial`` (the MAP's start) is
+    not part of the structure."""
     if isinstance(obj, (jax.Array, np.ndarray)) or (isinstance(obj, float) and not isinstance(obj, bool)):
         leaves.append(obj)
         return _STATIC
@@ -87,7 +89,15 @@ def _data_leaves(obj, leaves: list) -> Any:
                                     for f in dataclasses.fields(obj) if f.name != "initial")
     if isinstance(obj, tuple) and hasattr(obj, "_fields"):   # a NamedTuple of arrays (bands, marker runs, conditions)
         return (type(obj),) + tuple((name, _data_leaves(getattr(obj, name), leaves)) for name in obj._fields)
+    if type(obj) is tuple and any(_holds_data(x) for x in obj):   # e.g. a driveline curve (c2, c1, c0)
+        return (tuple,) + tuple((i, _data_leaves(x, leaves)) for i, x in enumerate(obj))
+    if type(obj) is dict and any(_holds_data(x) for x in obj.values()):   # e.g. fixed values from the campaign
+        return (dict,) + tuple((k, _data_leaves(v, leaves)) for k, v in obj.items())
     return obj
+
+
+def _holds_data(x) -> bool:
+    return isinstance(x, (jax.Array, np.ndarray)) or (isinstance(x, float) and not isinstance(x, bool))
 
 
 def _with_leaves(template, structure, leaves: list):
@@ -96,6 +106,10 @@ def _with_leaves(template, structure, leaves: list):
     if structure is _STATIC:
         return leaves.pop(0)
     if isinstance(structure, tuple) and structure and isinstance(structure[0], type):
+        if structure[0] is tuple:
+            return tuple(_with_leaves(template[i], sub, leaves) for i, sub in structure[1:])
+        if structure[0] is dict:
+            return {k: _with_leaves(template[k], sub, leaves) for k, sub in structure[1:]}
         if issubclass(structure[0], tuple):   # NamedTuple
             return template._replace(**{name: _with_leaves(getattr(template, name), sub, leaves)
                                         for name, sub in structure[1:]})

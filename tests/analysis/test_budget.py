@@ -239,3 +239,52 @@ def test_shared_compilation_gives_the_same_sensitivities(interval_campaign):
             assert abs(shared[key][q] - own[key][q]) * u[key] <= 1e-4 * largest, (key, q)
     other = entry.problem(interval_campaign, load_model_spec("three_term"), FitOptions())
     assert SharedPotential(problem, mode_of(problem)).data_of(other) is None
+
+
+def test_plain_tuples_and_dicts_of_numbers_are_data_of_the_shared_compilation():
+    """The shared compilation of the shifted campaigns' potentials takes floats inside plain
+    tuples and dicts as data (a driveline curve, fixed values from the campaign), swaps them
+    back in order, and keeps strings in the structure."""
+    from bayes_roadload.inference.shift import _data_leaves, _with_leaves
+
+    @dataclasses.dataclass(frozen=True)
+    class Problemish:
+        fixed: dict
+        curve: tuple
+        name: str
+        values: np.ndarray
+
+    a = Problemish({"CL0": 0.2, "KL": 1.0}, (0.0, 1.0, 2.0), "x", np.ones(3))
+    b = Problemish({"CL0": 0.3, "KL": 1.5}, (0.5, 1.0, 2.0), "x", np.zeros(3))
+    leaves_a, leaves_b = [], []
+    structure = _data_leaves(a, leaves_a)
+    assert _data_leaves(b, leaves_b) == structure and len(leaves_a) == 6
+    rebuilt = _with_leaves(a, structure, list(leaves_b))
+    assert rebuilt.fixed == b.fixed and rebuilt.curve == b.curve and np.array_equal(rebuilt.values, b.values)
+    assert _data_leaves(dataclasses.replace(a, name="y"), []) != structure
+
+
+def test_every_shifted_speed_trace_problem_shares_the_fitted_problems_structure():
+    """Each Type B source shifts a speed-trace campaign's data only (declared factors, mass,
+    sensors, the driveline curve, the apparent coefficients' line), so every shifted problem
+    can reuse one compilation of the fitted problem's potential."""
+    import warnings
+
+    from bayes_roadload.analysis.budget import type_b_shifts
+    from bayes_roadload.inference.bayes import build_problem
+    from bayes_roadload.inference.shift import _data_leaves
+    from bayes_roadload.inference.spec import load_model_spec
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        campaign = simulate_campaign(14, pairs=1, seed=2)
+    spec = load_model_spec("four_term_tyre_lag")
+    leaves: list = []
+    structure = _data_leaves(build_problem(campaign, spec), leaves)
+    _, shifts, _ = type_b_shifts(campaign, spec)
+    assert len(shifts) >= 6
+    for key, (plus, minus, _) in shifts.items():
+        for shifted in (plus, minus):
+            other: list = []
+            assert _data_leaves(build_problem(shifted, spec), other) == structure, key
+            assert [np.shape(x) for x in other] == [np.shape(x) for x in leaves], key
