@@ -13,8 +13,13 @@ at ``z_MAP + dz``, and central differences.  One JSON line per (seed, pairs, mod
 standard uncertainty ``sqrt(sum_s (c_s u_s)^2)`` of each quantity both ways, the truth, and the
 times.
 
-    python benchmarks/type_b_newton_step.py --seeds 100 101 102 103 104 105 --pairs 3 \
+    python benchmarks/type_b_newton_step.py --models four_term_tyre_lag \
         > benchmarks/records/type_b_newton_step.jsonl
+
+``--lsq-only`` records the least-squares step alone (what ``fit`` uses), e.g. for a model whose
+coefficient least squares hardly identifies::
+
+    python benchmarks/type_b_newton_step.py --lsq-only > benchmarks/records/type_b_lsq_step.jsonl
 """
 
 from __future__ import annotations
@@ -63,11 +68,10 @@ def newton_step_sensitivities(campaign, spec, shifts, pooling="hierarchical"):
             shifted = build_problem(shifted_campaign, spec, pooling=pooling)
             if problem.varying:
                 shifted = linearise_run_effects(shifted, mode.constrained, means)
-            data = shared.data_of(shifted)
-            if data is None:
+            grad_y = shared.gradient_at_start(shifted)
+            if grad_y is None:
                 break
-            _, grad_y = shared._fg(data, jnp.asarray(shared.y0))
-            dx = -np.asarray(mode.cov) @ (np.asarray(grad_y) / shared.scale)
+            dx = -np.asarray(mode.cov) @ (grad_y / shared.scale)
             z = shared.unravel(jnp.asarray(x0 + dx))
             constrained = constrain_fn(shifted.numpyro_model, (shifted,), {}, z, return_deterministic=True)
             values.append(quantities_at(shifted, constrained))
@@ -85,6 +89,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[100, 101, 102, 103, 104, 105])
     ap.add_argument("--pairs", type=int, nargs="+", default=[3])
     ap.add_argument("--models", nargs="+", default=["four_term_tyre_lag", "four_term_tyre_lag_saturating"])
+    ap.add_argument("--lsq-only", action="store_true", help="the least-squares step alone")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     for pairs in args.pairs:
@@ -96,13 +101,14 @@ def main(argv=None) -> int:
                 t0 = time.perf_counter()
                 _, lsq_rows = linear_sensitivities(campaign, spec, shifts)
                 t_lsq = time.perf_counter() - t0
-                newton_rows, t_map, t_steps = newton_step_sensitivities(campaign, spec, shifts)
-                print(json.dumps({"seed": seed, "pairs": pairs, "model": name,
-                                  "truth": {q: campaign.truth.get(q) for q in QUANTITIES},
-                                  "sources": len(shifts), "sources_newton": len(newton_rows),
-                                  "type_b_sd_lsq": type_b_sd(lsq_rows, u),
-                                  "type_b_sd_newton": type_b_sd(newton_rows, u),
-                                  "time_lsq_s": t_lsq, "time_map_s": t_map, "time_steps_s": t_steps}), flush=True)
+                rec = {"seed": seed, "pairs": pairs, "model": name,
+                       "truth": {q: campaign.truth.get(q) for q in QUANTITIES}, "sources": len(shifts),
+                       "type_b_sd_lsq": type_b_sd(lsq_rows, u), "time_lsq_s": t_lsq}
+                if not args.lsq_only:
+                    newton_rows, t_map, t_steps = newton_step_sensitivities(campaign, spec, shifts)
+                    rec.update(sources_newton=len(newton_rows), type_b_sd_newton=type_b_sd(newton_rows, u),
+                               time_map_s=t_map, time_steps_s=t_steps)
+                print(json.dumps(rec), flush=True)
     return 0
 
 

@@ -81,7 +81,7 @@ def _data_leaves(obj, leaves: list) -> Any:
     apparent coefficients' line) is appended to ``leaves`` and marked; the model variant, priors
     and the rest stay in the structure (compared by value).  ``initial`` (the MAP's start) is
     not part of the structure."""
-    if isinstance(obj, (jax.Array, np.ndarray)) or (isinstance(obj, float) and not isinstance(obj, bool)):
+    if _holds_data(obj):
         leaves.append(obj)
         return _STATIC
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type) and not isinstance(obj, (ModelSpec, DragModel)):
@@ -97,6 +97,7 @@ def _data_leaves(obj, leaves: list) -> Any:
 
 
 def _holds_data(x) -> bool:
+    """An array or a float: a data leaf of :func:`_data_leaves`."""
     return isinstance(x, (jax.Array, np.ndarray)) or (isinstance(x, float) and not isinstance(x, bool))
 
 
@@ -158,6 +159,14 @@ class SharedPotential:
         if not _same_structure(structure, self.structure) or [np.shape(x) for x in leaves] != self.shapes:
             return None
         return [jnp.asarray(x) for x in leaves]
+
+    def gradient_at_start(self, problem: Problem) -> np.ndarray | None:
+        """The gradient of ``problem``'s potential at the template's MAP, in the scaled
+        coordinates (None: another structure): what one Newton step from that MAP needs."""
+        data = self.data_of(problem)
+        if data is None:
+            return None
+        return np.asarray(self._fg(data, jnp.asarray(self.y0))[1])
 
     def mode(self, problem: Problem) -> dict[str, Any] | None:
         """The constrained values at the MAP of ``problem`` with the shared compilation
