@@ -42,31 +42,34 @@ def commit_of(path: Path) -> str:
     return git("rev-parse", "--short", "HEAD") + ("+dirty" if git("status", "--porcelain", "bayes_roadload") else "")
 
 
+def block_ms(f, arg) -> float:
+    """Mean time of one call of ``f(arg)`` over a block of 50 calls (ms)."""
+    import jax
+
+    t0 = time.perf_counter()
+    for _ in range(50):
+        out = f(arg)
+    jax.block_until_ready(out)
+    return (time.perf_counter() - t0) / 50 * 1e3
+
+
 def best_ms(f, arg, repeats: int) -> float:
     import jax
 
     jax.block_until_ready(f(arg))
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(50):
-            out = f(arg)
-        jax.block_until_ready(out)
-        best = min(best, (time.perf_counter() - t0) / 50 * 1e3)
-    return round(best, 4)
+    return round(min(block_ms(f, arg) for _ in range(repeats)), 4)
 
 
-def hold_comparison(build, arg, repeats: int) -> dict:
-    """The potential's value and gradient compiled with the stage coefficients held
-    (``physics.integrate._hold``) and without (the hold replaced by the identity while tracing),
-    timed in alternating blocks of 50 calls in this process: the medians over ``repeats`` blocks
-    each, in ms, and the median of the per-block ratios."""
+def hold_comparison(held, build, arg, repeats: int) -> dict:
+    """The potential's value and gradient ``held`` (compiled with the stage coefficients held,
+    ``physics.integrate._hold``) against ``build()`` compiled without (the hold replaced by the
+    identity while tracing), timed in alternating blocks of 50 calls in this process: the
+    medians over ``repeats`` blocks each, in ms, and the median of the per-block ratios."""
     import jax
     import numpy as np
 
     from bayes_roadload.physics import integrate
 
-    held = build()
     jax.block_until_ready(held(arg))
     hold, integrate._hold = integrate._hold, lambda stages: stages
     try:
@@ -77,11 +80,7 @@ def hold_comparison(build, arg, repeats: int) -> dict:
     times = {"held": [], "unheld": []}
     for _ in range(repeats):
         for name, f in (("held", held), ("unheld", unheld)):
-            t0 = time.perf_counter()
-            for _ in range(50):
-                out = f(arg)
-            jax.block_until_ready(out)
-            times[name].append((time.perf_counter() - t0) / 50 * 1e3)
+            times[name].append(block_ms(f, arg))
     ratio = np.median(np.asarray(times["held"]) / np.asarray(times["unheld"]))
     return {"ab_held_ms": round(float(np.median(times["held"])), 4),
             "ab_unheld_ms": round(float(np.median(times["unheld"])), 4), "ab_ratio": round(float(ratio), 3)}
@@ -105,12 +104,14 @@ def measure(model: str, repeats: int, hold_ab: bool = False) -> dict:
     problem, init = prepare_problem(build_problem(campaign, model, pooling="pooled"), campaign)
     post = unconstrained_posterior(problem, init)
     flat0, unravel = ravel_pytree(post.z0)
-    potential = jax.jit(jax.value_and_grad(lambda u: post.potential_fn(unravel(flat0 + post.scale * u))))
+    def build_potential():
+        return jax.jit(jax.value_and_grad(lambda u: post.potential_fn(unravel(flat0 + post.scale * u))))
+
+    potential = build_potential()
     draw = {k: jnp.asarray(v) for k, v in init.items()}
     times = {}
     if hold_ab:
-        times.update(hold_comparison(lambda: jax.jit(jax.value_and_grad(
-            lambda u: post.potential_fn(unravel(flat0 + post.scale * u)))), jnp.zeros(flat0.size), repeats))
+        times.update(hold_comparison(potential, build_potential, jnp.zeros(flat0.size), repeats))
     times |= {
         "potential_grad": best_ms(potential, jnp.zeros(flat0.size), repeats),
         "integrate": best_ms(jax.jit(lambda s: bayes.integrated_speed(problem, s)), draw, repeats),
