@@ -304,7 +304,7 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
                            "rank_draws": int(np.asarray(fit.samples[problem.free[0]]).size), "type_b": job.type_b}
     if job.type_b:  # the draws every interval below is read from get the Type B uncertainty (analysis.budget)
         typeb = type_b_sensitivities(campaign, problem.spec,
-                                     [q for q in BUDGET_QUANTITIES if q in idata.posterior])
+                                     [q for q in BUDGET_QUANTITIES if q in idata.posterior], fit=fit)
         add_type_b_to_idata(idata, typeb, seed=job.sampler.seed)
         rec["time_type_b_s"] = typeb.time_s
     for name in problem.free:

@@ -11,12 +11,19 @@ fixed at their declared values.  They are marginalised to first order after the 
   kind: :class:`~bayes_roadload.data.uncertainty.TypeBChannels`), as the kind's registry entry
   computes them (:attr:`~bayes_roadload.inference.kinds.KindEntry.type_b`):
 
-  - speed traces: the change of the joint least-squares estimate
-    (:func:`~bayes_roadload.inference.lsq.fit_lsq`, one group: the estimate the posterior
-    centres on), by central differences of the residuals at the optimum and one Gauss-Newton
-    step (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`; ``method="refit"``
-    refits each shifted campaign instead, five to seven times slower at 36 runs; the two agree
-    to a few per cent of each source's contribution, tested);
+  - speed traces with the NUTS fit (``fit``, ``batch``): the change of the posterior mode,
+    one Newton step from the fitted MAP per shifted campaign with the noise scales and
+    run-effect spreads held, or the shifted MAPs where a step leaves the potential's quadratic
+    region (:func:`~bayes_roadload.inference.shift.newton_sensitivities`; within 5 % of each
+    quantity's Type B uncertainty of the shifted MAPs refitted, tested).  The priors bound
+    what the data hardly identify: the least-squares step moved A_D's Type B sd to 10x the
+    posterior step's on the design seeds (``benchmarks/type_b_newton_step.py``);
+  - speed traces without a fit (planning's floor): the change of the joint least-squares
+    estimate (:func:`~bayes_roadload.inference.lsq.fit_lsq`, one group), by central
+    differences of the residuals at the optimum and one Gauss-Newton step
+    (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`; ``method="refit"`` refits
+    each shifted campaign instead, five to seven times slower at 36 runs; the two agree to a
+    few per cent of each source's contribution, tested);
   - intervals, distance-time, spin-down and steady state: central differences of the MAPs of
     the shifted campaigns (:func:`~bayes_roadload.inference.shift.map_sensitivities`; they
     share one compilation of the fit's potential and start at its MAP);
@@ -120,10 +127,10 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
     """Central-difference sensitivities of the campaign's estimate (module docstring), as its
     kind computes them (:attr:`~bayes_roadload.inference.kinds.KindEntry.type_b`; ``options``:
     the fit's, e.g. the runs fitted; ``fit``: the NUTS fit, whose problem's compilation and MAP
-    the kinds that refit MAPs reuse).  For speed traces, ``method="linear"`` takes one
-    Gauss-Newton step from the unshifted least-squares optimum, ``"refit"`` refits each shifted
-    campaign (two least-squares fits per source, all runs); equal to first order in the
-    shifts."""
+    the kinds that refit MAPs reuse, and from whose MAP a speed-trace fit's Newton steps
+    start).  For speed traces without ``fit``, ``method="linear"`` takes one Gauss-Newton step
+    from the unshifted least-squares optimum, ``"refit"`` refits each shifted campaign (two
+    least-squares fits per source, all runs); equal to first order in the shifts."""
     if method not in ("linear", "refit"):
         raise ValueError(f"method must be 'linear' or 'refit', not {method!r}")
     entry = kind_of(campaign)

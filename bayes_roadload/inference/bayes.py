@@ -98,7 +98,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
@@ -209,6 +209,20 @@ class FitProblem:
     @property
     def n_runs(self) -> int:
         return len(self.run_ids)
+
+    @property
+    def scale_sites(self) -> tuple[str, ...]:
+        """The sites that scale the likelihood rather than place it: the run-effect spreads
+        ``tau_*``, the speed noise, the integrated noise's intensity, the Student-t degrees of
+        freedom, the driveline channel's noise and the airspeed calibration's scatter (those
+        the problem samples).  The Type B Newton step holds them at the MAP
+        (:meth:`~bayes_roadload.inference.shift.SharedPotential.newton_step`)."""
+        sites = [f"tau_{n}" for n in self.varying] + ["sigma_mps"]
+        sites += ["q_mps_per_sqrt_s"] if self.integrated_noise else []
+        sites += ["student_df"] if self.robust else []
+        sites += ["sigma_driveline_n"] if self.driveline_channel else []
+        sites += ["airspeed_calibration_sd"] if self.calibration_pairs else []
+        return tuple(sites)
 
     @property
     def integrated_noise(self) -> bool:
@@ -635,17 +649,36 @@ def run_effect_reference(problem: FitProblem, reference: dict[str, Any], offsets
     return base, offsets
 
 
-def linearise_run_effects(problem: FitProblem, reference: dict[str, Any], offsets: Any = None) -> FitProblem:
+def linearise_run_effects(problem: FitProblem, reference: dict[str, Any], offsets: Any = None,
+                          sensitivities: Callable[..., Any] | None = None) -> FitProblem:
     """The hierarchical ``problem`` with its run sensitivities ``J_r = d v_r / d(varying)``
     evaluated at each run's coefficients ``reference + offsets[r]`` (``reference``:
     constrained values of the free coefficients and ``v0_mps``, e.g.
     :func:`~bayes_roadload.inference.nuts.initial_values`; ``offsets`` [R, k], default zero,
-    e.g. :func:`run_effect_means` at a first MAP).  A no-op for pooled fits."""
+    e.g. :func:`run_effect_means` at a first MAP) by ``sensitivities`` (default
+    :func:`run_sensitivities`, same arguments; e.g. a compilation shared by many campaigns).
+    A no-op for pooled fits."""
     if not problem.varying:
         return problem
     base, offsets = run_effect_reference(problem, reference, offsets)
-    jac = run_sensitivities(problem, base, jnp.asarray(reference["v0_mps"], float), problem.batch)
+    jac = (sensitivities or run_sensitivities)(problem, base, jnp.asarray(reference["v0_mps"], float), problem.batch)
     return dataclasses.replace(problem, run_jacobian=np.asarray(jac), run_offsets=offsets)
+
+
+def problem_like(problem: FitProblem, campaign: Campaign, reference: dict[str, Any] | None = None,
+                 offsets: Any = None, sensitivities: Callable[..., Any] | None = None) -> FitProblem:
+    """``campaign``'s problem built as ``problem`` was: the same model variant, pooling, noise,
+    likelihood, gradients and sampled coordinates (the same apparent coefficients, or A_D, B_D,
+    C_D0 directly: :attr:`FitProblem.apparent`, the line of ``problem`` kept whatever
+    ``campaign``'s own would be), a hierarchical problem's run effects linearised at
+    ``reference`` and ``offsets`` when given (:func:`linearise_run_effects`, ``sensitivities``
+    as there).  A shifted campaign's problem then differs from ``problem`` in its data only (the
+    Type B steps of :mod:`~bayes_roadload.inference.shift`)."""
+    out = build_problem(campaign, problem.spec, pooling=problem.pooling, noise=problem.noise, robust=problem.robust)
+    out = dataclasses.replace(out, gradients=problem.gradients, apparent=problem.apparent)
+    if not out.varying or reference is None:
+        return out
+    return linearise_run_effects(out, reference, offsets, sensitivities)
 
 
 def _effects_posterior(problem: FitProblem, sample: dict[str, jnp.ndarray]) -> tuple[jnp.ndarray, jnp.ndarray]:

@@ -25,7 +25,7 @@ from .. import config
 from ..data import Campaign, DistanceCampaign, IntervalCampaign, SpindownCampaign, SteadyCampaign
 from .distances import DEFAULT_MODEL as DISTANCE_DEFAULT_MODEL
 from .distances import build_distance_problem, distance_report
-from .bayes import HIERARCHICAL_PARAMETERS
+from .bayes import HIERARCHICAL_PARAMETERS, problem_like, run_effect_means, run_sensitivities
 from .driveline import off_load_channel, on_load_channel
 from .intervals import build_interval_problem, interval_report
 from .lsq import linear_sensitivities
@@ -33,7 +33,7 @@ from .nuts import NutsFit, fit_nuts, sample_problem
 from .problem import Problem
 from .results import FitReport, trace_report
 from .spec import ModelSpec
-from .shift import Shifts, map_sensitivities
+from .shift import SharedData, Shifts, map_sensitivities, newton_sensitivities
 from .spindown import build_spindown_problem, spindown_extras, spindown_report
 from .steady import build_steady_problem, compare_with_coastdown, resolve_wind, steady_extras, steady_report
 
@@ -91,9 +91,11 @@ class KindEntry:
     type_b : (campaign, spec, shifts, options, fit) -> source -> quantity -> sensitivity: how the
         Type B uncertainty of the test's declared values and instruments reaches the kind's
         figures (:mod:`bayes_roadload.analysis.budget`, which adds it to the draws and writes
-        ``budget.csv``; ``shifts`` as :data:`~bayes_roadload.inference.shift.Shifts`): the
-        least-squares step of :func:`~bayes_roadload.inference.lsq.linear_sensitivities` for
-        speed traces, the MAPs of the shifted campaigns
+        ``budget.csv``; ``shifts`` as :data:`~bayes_roadload.inference.shift.Shifts`): for
+        speed traces Newton steps of the fit's posterior mode
+        (:func:`~bayes_roadload.inference.shift.newton_sensitivities`), or without a fit the
+        least-squares step of :func:`~bayes_roadload.inference.lsq.linear_sensitivities`; the
+        MAPs of the shifted campaigns
         (:func:`~bayes_roadload.inference.shift.map_sensitivities`, sharing the compilation of
         ``fit``'s problem when the fit is given) for the kinds fitted through their ``problem``;
         None when the kind has none.
@@ -254,12 +256,37 @@ def _sampled(build: Callable[[Any, ModelSpec, FitOptions], Problem]) -> Callable
 
 def _traces_type_b(campaign, spec, shifts: Shifts, o: FitOptions, fit: NutsFit | None = None
                    ) -> dict[str, dict[str, float]]:
-    """The least-squares step (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`) on
-    the fitted runs."""
+    """On the fitted runs: with the NUTS fit and its MAP, one Newton step of the posterior mode
+    per shifted campaign, the noise scales and run-effect spreads held at the MAP
+    (:func:`~bayes_roadload.inference.shift.newton_sensitivities`; the
+    shifted problems built as the fit's, :func:`~bayes_roadload.inference.bayes.problem_like`,
+    their run effects linearised where the MAP puts each run); without, the least-squares step
+    (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`)."""
     if o.runs is not None and list(o.runs) != list(campaign.run_ids):
         campaign = campaign.subset(o.runs)
         shifts = {k: (p.subset(o.runs), m.subset(o.runs), h) for k, (p, m, h) in shifts.items()}
-    return linear_sensitivities(campaign, spec, shifts)[1]
+    if fit is None or fit.map is None:
+        return linear_sensitivities(campaign, spec, shifts)[1]
+    return newton_sensitivities(_shifted_trace_problems(fit.problem, fit.map, campaign), shifts,
+                                (fit.problem, fit.map), held=fit.problem.scale_sites)
+
+
+def _shifted_trace_problems(problem, mode, campaign) -> Callable[[Any], Any]:
+    """campaign -> its problem built as the fitted ``problem``
+    (:func:`~bayes_roadload.inference.bayes.problem_like`), a hierarchical problem's run effects
+    linearised where the MAP ``mode`` puts each run (its conditional-mean run effects), by one
+    compilation of the run sensitivities shared by every campaign of the fitted one's shape
+    (:class:`~bayes_roadload.inference.shift.SharedData`)."""
+    if not problem.varying:
+        return lambda c: problem_like(problem, c)
+    means = run_effect_means(problem, mode.constrained)
+    shared = SharedData(problem_like(problem, campaign)).compile(
+        lambda p, base, v0: run_sensitivities(p, base, v0, p.batch))
+
+    def sensitivities(p, base, v0, batch):
+        jac = shared(p, base, v0)
+        return run_sensitivities(p, base, v0, batch) if jac is None else jac
+    return lambda c: problem_like(problem, c, mode.constrained, means, sensitivities)
 
 
 def _map_type_b(build: Callable[[Any, ModelSpec, FitOptions], Problem]):

@@ -15,9 +15,11 @@ from the fitted one only in their data: :class:`SharedPotential` compiles the po
 with the data as arguments and starts each shifted MAP at the fit's (1.7-3.2x faster than a
 compilation per campaign, the same sensitivities: ``docs/calibration.md``).  One Newton step
 from the unshifted mode instead of each refit was off by up to 30 % on a spin-down's wheel
-inertia, so the MAPs are refitted.
-The speed-trace kind has the least-squares analogue
-(:func:`~bayes_roadload.inference.lsq.linear_sensitivities`)."""
+inertia, so those kinds refit the MAPs (:func:`map_sensitivities`).  A speed-trace fit takes
+the Newton step (:func:`newton_sensitivities`) with the noise scales and run-effect spreads
+held at the MAP, and keeps it only where the potential is quadratic over it
+(:meth:`SharedPotential.newton_step`); elsewhere it refits.  Without a fit, the speed-trace
+kind has the least-squares analogue (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`)."""
 
 from __future__ import annotations
 
@@ -34,7 +36,7 @@ from jax.flatten_util import ravel_pytree
 from numpyro.infer.util import constrain_fn, potential_energy
 
 from ..physics.model import DragModel
-from .nuts import MapResult, find_map, newton_map, unconstrained_posterior
+from .nuts import MapResult, find_map, newton_map, site_layout, unconstrained_posterior
 from .problem import Problem
 from .spec import ModelSpec
 
@@ -42,6 +44,15 @@ log = logging.getLogger(__name__)
 
 Shifts = Mapping[str, tuple[Any, Any, float]]
 """Source key -> (campaign shifted by +h, campaign shifted by -h, h)."""
+
+NEWTON_STEP_AGREEMENT = 0.1
+"""A Newton step of :meth:`SharedPotential.newton_step` is kept when the decrease of the
+potential it achieves is within this fraction of the quadratic model's prediction.  The error of
+the step is of the relative size of the potential's cubic term over it, and so is this
+mismatch: 10 % keeps each Type B contribution to about the few per cent a budget is read to."""
+NEWTON_STEP_FLOOR = 1e-8
+"""Nats: a step whose predicted decrease is below this (a source that hardly moves the
+posterior) is kept whatever the ratio, which rounding decides at that size."""
 
 
 def _scalars(values: Mapping[str, Any]) -> dict[str, float]:
@@ -55,11 +66,12 @@ def _scalars(values: Mapping[str, Any]) -> dict[str, float]:
 
 def quantities_at(problem: Problem, constrained: Mapping[str, Any]) -> dict[str, float]:
     """Every scalar reported quantity of ``problem`` at one point: the constrained and
-    deterministic sites (``constrained``), the sites the problem adds after sampling
-    (:meth:`~.problem.Problem.postprocess`) and its derived figures
-    (:meth:`~.problem.Problem.derived`), as one draw of one chain."""
+    deterministic sites (``constrained``) and its derived figures
+    (:meth:`~.problem.Problem.derived`), as one draw of one chain.  The sites a problem adds
+    after sampling (:meth:`~.problem.Problem.postprocess`: the run-level coefficients of a
+    hierarchical fit) are per run, not reported quantities of the campaign, and are not
+    computed."""
     samples = {k: np.asarray(v)[None, None] for k, v in constrained.items()}
-    samples.update(problem.postprocess(samples, 0))
     samples.update(problem.derived(samples))
     return _scalars({k: np.asarray(v)[0, 0] for k, v in samples.items()})
 
@@ -129,44 +141,117 @@ def _same_structure(a, b) -> bool:
         return False
 
 
-class SharedPotential:
-    """numpyro's potential of ``template`` and its gradient, compiled once with the problem's
-    data as arguments (:func:`_data_leaves`), so that every problem of the same structure --
-    the same model variant, priors, sites and array shapes, other data -- reuses the
-    compilation: the shifted campaigns of a Type B budget.  ``mode(problem)`` is the MAP of
-    such a problem (:func:`~bayes_roadload.inference.nuts.newton_map` from ``start``, the
-    template's scaled MAP), or None when ``problem`` has another structure."""
+class SharedData:
+    """Functions of a problem compiled once for every problem of ``template``'s structure
+    (:func:`_data_leaves`: the same model variant, priors, sites and array shapes, other
+    data), the data passed as arguments."""
 
-    def __init__(self, template: Problem, start: MapResult):
+    def __init__(self, template: Problem):
         self.template = template
         self.leaves: list = []
         self.structure = _data_leaves(template, self.leaves)
-        post = unconstrained_posterior(template, template.initial)
-        self.unravel, self.scale, self.run_index = post.unravel, post.scale, post.run_index
-        self.y0 = np.asarray(ravel_pytree(start.z)[0]) / self.scale
         self.shapes = [np.shape(x) for x in self.leaves]
-        model = template.numpyro_model
-
-        def objective(leaves, y):
-            problem = _with_leaves(self.template, self.structure, list(leaves))
-            return potential_energy(model, (problem,), {}, self.unravel(y * self.scale))
-
-        self._fg = jax.jit(jax.value_and_grad(objective, argnums=1))
 
     def data_of(self, problem: Problem) -> list | None:
+        """``problem``'s data leaves, or None when it has another structure."""
         leaves: list = []
         structure = _data_leaves(problem, leaves)
         if not _same_structure(structure, self.structure) or [np.shape(x) for x in leaves] != self.shapes:
             return None
         return [jnp.asarray(x) for x in leaves]
 
-    def gradient_at_start(self, problem: Problem) -> np.ndarray | None:
-        """The gradient of ``problem``'s potential at the template's MAP, in the scaled
-        coordinates (None: another structure): what one Newton step from that MAP needs."""
+    def with_data(self, leaves) -> Problem:
+        """The template with the data ``leaves`` (arrays or tracers) in place of its own."""
+        return _with_leaves(self.template, self.structure, list(leaves))
+
+    def compile(self, fn: Callable[..., Any]) -> Callable[..., Any]:
+        """``call(problem, *args)``: ``fn(problem, *args)`` compiled once with the problem's data
+        as arguments; None for a problem of another structure."""
+        jitted = jax.jit(lambda leaves, *args: fn(self.with_data(leaves), *args))
+
+        def call(problem: Problem, *args):
+            data = self.data_of(problem)
+            return None if data is None else jitted(data, *args)
+        return call
+
+
+class SharedPotential(SharedData):
+    """numpyro's potential of ``template`` and its gradient, compiled once with the problem's
+    data as arguments (:func:`_data_leaves`), so that every problem of the same structure --
+    the same model variant, priors, sites and array shapes, other data -- reuses the
+    compilation: the shifted campaigns of a Type B budget.  ``mode(problem)`` is the MAP of
+    such a problem (:func:`~bayes_roadload.inference.nuts.newton_map` from ``start``, the
+    template's scaled MAP), ``newton_step(problem)`` one Newton step towards it; both None
+    when ``problem`` has another structure."""
+
+    def __init__(self, template: Problem, start: MapResult):
+        super().__init__(template)
+        self.start = start
+        self._conditional: dict[tuple[str, ...], Any] = {}
+        self.unravel, self.scale, self.run_index = site_layout(template, start.z)
+        self.y0 = np.asarray(ravel_pytree(start.z)[0]) / self.scale
+        model = template.numpyro_model
+
+        def objective(leaves, y):
+            return potential_energy(model, (self.with_data(leaves),), {}, self.unravel(y * self.scale))
+
+        def constrained(leaves, x):
+            return constrain_fn(model, (self.with_data(leaves),), {}, self.unravel(x), return_deterministic=True)
+
+        self._fg = jax.jit(jax.value_and_grad(objective, argnums=1))
+        self._constrained = jax.jit(constrained)
+
+    def newton_step(self, problem: Problem, held: tuple[str, ...] = ()) -> dict[str, Any] | None:
+        """The constrained values one Newton step from the template's MAP ``x*`` towards the
+        MAP of ``problem``, the sites ``held`` kept at ``x*``: ``dx = -H_kk^-1 g_k`` on the
+        other coordinates k, ``g`` the gradient of ``problem``'s potential ``U`` at ``x*`` and
+        ``H`` the template's Hessian there (the inverse of its Laplace covariance;
+        unconstrained coordinates).  By the implicit function theorem at the mode this is the
+        shifted conditional MAP to first order in the shift, the posterior's own curvature --
+        priors included -- deciding how far each coordinate moves.  Holding the sites that
+        scale the likelihood (noise, run-effect spreads) keeps the step out of their funnels,
+        where a hierarchical posterior of few runs is far from quadratic (a 2-pair fit: the
+        full step raised ``U`` by 42 nats on the airspeed shift, its shifted Hessian having a
+        negative eigenvalue); they weight the residuals and hardly move the centre.
+
+        The step is kept only where ``U`` is quadratic over it: the decrease it achieves,
+        ``U(x*) - U(x* + dx)``, must be within :data:`NEWTON_STEP_AGREEMENT` of the decrease
+        the quadratic model predicts, ``g_k' H_kk^-1 g_k / 2`` (the trust-region ratio of
+        Nocedal and Wright, Numerical Optimization, eq. 4.4).  None: the step failed it,
+        another structure, or a Laplace covariance that is not the inverse Hessian (the MAP
+        did not converge, or its Hessian was regularised)."""
+        cov = self._conditional_covariance(tuple(held))
+        if cov is None:
+            return None
+        keep, cov = cov
         data = self.data_of(problem)
         if data is None:
             return None
-        return np.asarray(self._fg(data, jnp.asarray(self.y0))[1])
+        u0, g = (np.asarray(a, float) for a in self._fg(data, jnp.asarray(self.y0)))
+        if not (np.isfinite(u0) and np.all(np.isfinite(g))):
+            return None
+        gk = (g / self.scale)[keep]
+        dx = np.zeros_like(g)
+        dx[keep] = -cov @ gk
+        predicted = 0.5 * float(gk @ cov @ gk)
+        achieved = float(u0 - self._fg(data, jnp.asarray(self.y0 + dx / self.scale))[0])
+        if not abs(achieved - predicted) <= NEWTON_STEP_AGREEMENT * predicted + NEWTON_STEP_FLOOR:
+            return None
+        return self._constrained(data, jnp.asarray(self.y0 * self.scale + dx))
+
+    def _conditional_covariance(self, held: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray] | None:
+        """(mask of the coordinates not ``held``, the inverse of the Hessian's block on them),
+        or None without a usable Laplace covariance."""
+        if held not in self._conditional:
+            start, out = self.start, None
+            cov = None if start.cov is None else np.asarray(start.cov, float)
+            if cov is not None and start.success and not start.hessian_regularised and np.all(np.isfinite(cov)):
+                keep = ~np.asarray(ravel_pytree({k: jnp.full(np.shape(v), k in held) for k, v in start.z.items()})[0],
+                                   bool)
+                hessian = np.linalg.inv(cov)
+                out = (keep, np.linalg.inv(hessian[np.ix_(keep, keep)]))
+            self._conditional[held] = out
+        return self._conditional[held]
 
     def mode(self, problem: Problem) -> dict[str, Any] | None:
         """The constrained values at the MAP of ``problem`` with the shared compilation
@@ -177,20 +262,70 @@ class SharedPotential:
         res = newton_map(lambda y: self._fg(data, y), self.y0, self.run_index, self.scale)
         if not res["success"]:
             return None
-        z = self.unravel(jnp.asarray(res["y"] * self.scale))
-        return constrain_fn(problem.numpyro_model, (problem,), {}, z, return_deterministic=True)
+        return self._constrained(data, jnp.asarray(res["y"] * self.scale))
 
 
-def _shared_mode(shared: SharedPotential | None, problem: Problem) -> dict[str, Any] | None:
-    """``shared.mode(problem)``, or None (the caller fits the problem on its own) when there is
-    no shared compilation or it does not apply."""
+def _shared_points(shared: SharedPotential | None, problems: list[Problem], how: str,
+                   held: tuple[str, ...] = ()) -> list[dict[str, Any] | None]:
+    """The point of each shifted problem of one source from the shared compilation:
+    ``shared.mode`` (``how="mode"``), or ``shared.newton_step(problem, held)`` for both and,
+    unless both steps are kept, the modes of both (``"newton"``: the two ends of a central
+    difference come from the same approximation); None where there is no shared compilation
+    or it does not apply (the caller fits that problem on its own)."""
     if shared is None:
-        return None
+        return [None] * len(problems)
     try:
-        return shared.mode(problem)
+        if how == "newton":
+            steps = [shared.newton_step(p, held) for p in problems]
+            if all(x is not None for x in steps):
+                return steps
+            log.debug("Type B: a Newton step left the quadratic region; the shifted MAPs are refitted")
+        return [shared.mode(p) for p in problems]
     except Exception as e:  # noqa: BLE001 - e.g. a value the model needs concrete: its own compilation instead
         log.debug("Type B: shared compilation not usable (%s: %s)", type(e).__name__, e)
+        return [None] * len(problems)
+
+
+def _shared(base: tuple[Problem, MapResult] | None) -> SharedPotential | None:
+    if base is None:
         return None
+    try:
+        return SharedPotential(*base)
+    except Exception as e:  # noqa: BLE001 - the problem cannot take its data as arguments
+        log.debug("Type B: no shared compilation (%s: %s); each shifted campaign compiles its own",
+                  type(e).__name__, e)
+        return None
+
+
+def _central_differences(build: Callable[[Any], Problem], shifts: Shifts, shared: SharedPotential | None,
+                         how: str, held: tuple[str, ...] = ()) -> dict[str, dict[str, float]]:
+    """Source -> quantity -> ``(x(+h) - x(-h)) / 2h``, ``x`` every quantity of the shifted
+    problem at the point :func:`_shared_points` gives, or at its own MAP (:func:`mode_of`) when
+    that is None.  A source whose shifted problems differ in their quantities keeps those they
+    share; one whose problem cannot be built, or whose own MAP fails or does not converge, is
+    left out (logged)."""
+    out: dict[str, dict[str, float]] = {}
+    for key, (plus, minus, h) in shifts.items():
+        try:
+            problems = [build(c) for c in (plus, minus)]
+            points = _shared_points(shared, problems, how, held)
+            values = []
+            for shifted, constrained in zip(problems, points):
+                if constrained is None:
+                    mode = mode_of(shifted)
+                    if not mode.success:
+                        log.warning("Type B source %s left out: the MAP of its shifted campaign did not converge "
+                                    "(%s)", key, mode.message)
+                        break
+                    constrained = mode.constrained
+                values.append(quantities_at(shifted, constrained))
+        except Exception as e:  # noqa: BLE001 - a source that cannot be refitted is left out, not fatal
+            log.warning("Type B source %s left out: the MAP of its shifted campaign failed (%s: %s)",
+                        key, type(e).__name__, e)
+            continue
+        if len(values) == 2:
+            out[key] = {q: (values[0][q] - values[1][q]) / (2.0 * h) for q in values[0] if q in values[1]}
+    return out
 
 
 def map_sensitivities(build: Callable[[Any], Problem], shifts: Shifts,
@@ -199,35 +334,18 @@ def map_sensitivities(build: Callable[[Any], Problem], shifts: Shifts,
     (module docstring); ``build`` makes the problem of a campaign.  With ``base`` (the fitted
     problem and its MAP) the shifted problems of its structure share one compilation
     (:class:`SharedPotential`) and start at its MAP; the others, and any whose shared MAP does
-    not converge, are fitted on their own (:func:`mode_of`).  A source whose shifted problems
-    differ in their quantities keeps those they share; one whose shifted MAP fails or does not
-    converge is left out (logged), so that a fit never stops here."""
-    shared = None
-    if base is not None:
-        try:
-            shared = SharedPotential(*base)
-        except Exception as e:  # noqa: BLE001 - the problem cannot take its data as arguments
-            log.debug("Type B: no shared compilation (%s: %s); each shifted campaign compiles its own",
-                      type(e).__name__, e)
-    out: dict[str, dict[str, float]] = {}
-    for key, (plus, minus, h) in shifts.items():
-        values = []
-        for c in (plus, minus):
-            try:
-                shifted = build(c)
-                constrained = _shared_mode(shared, shifted)
-                if constrained is None:
-                    mode = mode_of(shifted)
-                    if not mode.success:
-                        log.warning("Type B source %s left out: the MAP of its shifted campaign did not converge "
-                                    "(%s)", key, mode.message)
-                        break
-                    constrained = mode.constrained
-            except Exception as e:  # noqa: BLE001 - a source that cannot be refitted is left out, not fatal
-                log.warning("Type B source %s left out: the MAP of its shifted campaign failed (%s: %s)",
-                            key, type(e).__name__, e)
-                break
-            values.append(quantities_at(shifted, constrained))
-        if len(values) == 2:
-            out[key] = {q: (values[0][q] - values[1][q]) / (2.0 * h) for q in values[0] if q in values[1]}
-    return out
+    not converge, are fitted on their own (:func:`mode_of`).  A source whose shifted MAP fails
+    or does not converge is left out (logged), so that a fit never stops here."""
+    return _central_differences(build, shifts, _shared(base), "mode")
+
+
+def newton_sensitivities(build: Callable[[Any], Problem], shifts: Shifts, base: tuple[Problem, MapResult],
+                         held: tuple[str, ...] = ()) -> dict[str, dict[str, float]]:
+    """As :func:`map_sensitivities`, each shifted MAP replaced by one Newton step from the
+    fitted MAP (:meth:`SharedPotential.newton_step`, the sites ``held`` at the MAP): two
+    evaluations of the potential per
+    shifted campaign instead of an optimisation, first-order exact, like the central
+    differences themselves.  A step outside the potential's quadratic region is replaced by
+    the shifted MAP (from the fitted one, shared compilation); a shifted problem of another
+    structure, or a fitted MAP without a usable Laplace covariance, by that problem's own MAP."""
+    return _central_differences(build, shifts, _shared(base), "newton", tuple(held))
