@@ -15,6 +15,7 @@ Adding a data kind: its campaign class (``bayes_roadload/data``), its problem
 from __future__ import annotations
 
 import dataclasses
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -36,6 +37,8 @@ from .spec import ModelSpec
 from .shift import SharedData, Shifts, map_sensitivities, newton_sensitivities
 from .spindown import build_spindown_problem, spindown_extras, spindown_report
 from .steady import build_steady_problem, compare_with_coastdown, resolve_wind, steady_extras, steady_report
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -260,15 +263,19 @@ def _traces_type_b(campaign, spec, shifts: Shifts, o: FitOptions, fit: NutsFit |
     per shifted campaign, the noise scales and run-effect spreads held at the MAP
     (:func:`~bayes_roadload.inference.shift.newton_sensitivities`; the
     shifted problems built as the fit's, :func:`~bayes_roadload.inference.bayes.problem_like`,
-    their run effects linearised where the MAP puts each run); without, the least-squares step
-    (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`)."""
+    their run effects linearised where the MAP puts each run); without, or should that fail
+    (logged), the least-squares step (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`)."""
     if o.runs is not None and list(o.runs) != list(campaign.run_ids):
         campaign = campaign.subset(o.runs)
         shifts = {k: (p.subset(o.runs), m.subset(o.runs), h) for k, (p, m, h) in shifts.items()}
-    if fit is None or fit.map is None:
-        return linear_sensitivities(campaign, spec, shifts)[1]
-    return newton_sensitivities(_shifted_trace_problems(fit.problem, fit.map, campaign), shifts,
-                                (fit.problem, fit.map), held=fit.problem.scale_sites)
+    if fit is not None and fit.map is not None:
+        try:
+            return newton_sensitivities(_shifted_trace_problems(fit.problem, fit.map, campaign), shifts,
+                                        (fit.problem, fit.map), held=fit.problem.scale_sites)
+        except Exception as e:  # noqa: BLE001 - the budget falls back, the fit does not stop here
+            log.warning("Type B from the posterior failed (%s: %s); the least-squares step instead",
+                        type(e).__name__, e)
+    return linear_sensitivities(campaign, spec, shifts)[1]
 
 
 def _shifted_trace_problems(problem, mode, campaign) -> Callable[[Any], Any]:

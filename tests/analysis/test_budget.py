@@ -332,3 +332,28 @@ def test_a_speed_trace_fit_takes_its_type_b_step_from_the_posterior():
             assert abs(posterior[key][q] - refit[key][q]) * u[key] <= 0.05 * u_b, (q, key)
         lsq_off[q] = max(abs(lsq[k][q] - refit[k][q]) * u[k] for k in refit) / u_b
     assert lsq_off["KD"] > 0.05, lsq_off
+
+
+def test_a_posterior_type_b_step_that_fails_falls_back_to_least_squares(clean, caplog):
+    """A fit whose posterior step cannot be taken (here a problem without the speed-trace
+    problem's members) gets the least-squares step's sensitivities, with a warning, instead of
+    an exception: the budget never stops a fit."""
+    import logging
+    from types import SimpleNamespace
+
+    from bayes_roadload.analysis.budget import type_b_shifts
+    from bayes_roadload.inference.kinds import FitOptions, kind_of
+    from bayes_roadload.inference.lsq import linear_sensitivities
+    from bayes_roadload.inference.spec import load_model_spec
+
+    spec = load_model_spec("four_term")
+    _, shifts, _ = type_b_shifts(clean, spec)
+    shifts = {k: shifts[k] for k in ("mass_kg", "speed_scale_rel")}
+    broken = SimpleNamespace(problem=SimpleNamespace(), map=SimpleNamespace())
+    with caplog.at_level(logging.WARNING, logger="bayes_roadload.inference.kinds"):
+        got = kind_of(clean).type_b(clean, spec, shifts, FitOptions(), broken)
+    assert "least-squares step instead" in caplog.text
+    want = linear_sensitivities(clean, spec, shifts)[1]
+    assert set(got) == set(want) == set(shifts)
+    for key in shifts:
+        assert got[key]["F50_N"] == pytest.approx(want[key]["F50_N"], rel=1e-9)
