@@ -129,6 +129,8 @@ from .problem import road_load_draws, road_load_truth
 from .spec import ModelSpec, Prior, load_model_spec
 
 POOLINGS = ("pooled", "hierarchical")
+NOISE_SITES = ("q_mps_per_sqrt_s", "student_df", "sigma_driveline_n", "airspeed_calibration_sd")
+"""The nuisance sites besides the per-run ``sigma_mps`` that a speed-trace problem may sample."""
 NOISE_MODELS = ("integrated", "white", "reverting")
 """Speed-residual likelihoods: white noise plus an integrated error that is a random walk
 (``integrated``, the default), that reverts to zero through the model's speed-dependent forces
@@ -213,16 +215,12 @@ class FitProblem:
     @property
     def scale_sites(self) -> tuple[str, ...]:
         """The sites that scale the likelihood rather than place it: the run-effect spreads
-        ``tau_*``, the speed noise, the integrated noise's intensity, the Student-t degrees of
-        freedom, the driveline channel's noise and the airspeed calibration's scatter (those
-        the problem samples).  The Type B Newton step holds them at the MAP
+        ``tau_*``, the speed noise and the other nuisance sites (:data:`NOISE_SITES`: the
+        integrated noise's intensity, the Student-t degrees of freedom, the driveline channel's
+        noise, the airspeed calibration's scatter; a site the problem does not sample holds
+        nothing).  The Type B Newton step holds them at the MAP
         (:meth:`~bayes_roadload.inference.shift.SharedPotential.newton_step`)."""
-        sites = [f"tau_{n}" for n in self.varying] + ["sigma_mps"]
-        sites += ["q_mps_per_sqrt_s"] if self.integrated_noise else []
-        sites += ["student_df"] if self.robust else []
-        sites += ["sigma_driveline_n"] if self.driveline_channel else []
-        sites += ["airspeed_calibration_sd"] if self.calibration_pairs else []
-        return tuple(sites)
+        return tuple(f"tau_{n}" for n in self.varying) + ("sigma_mps",) + NOISE_SITES
 
     @property
     def integrated_noise(self) -> bool:

@@ -32,13 +32,12 @@ import pandas as pd
 
 from .. import config
 from ..physics.residuals import integrated_error_draws
-from .bayes import FitProblem, integrated_speed, reversion_along, run_log_likelihood
+from .bayes import NOISE_SITES, FitProblem, integrated_speed, reversion_along, run_log_likelihood
 from .nuts import NutsFit
 from .problem import ROAD_LOAD_DERIVED, road_load_truth
 
 SUMMARY_COLUMNS = ("parameter", "mean", "sd", "q2.5", "q50", "q97.5", "r_hat", "ess_bulk", "ess_tail")
 DERIVED = ROAD_LOAD_DERIVED
-NOISE_SITES = ("q_mps_per_sqrt_s", "student_df", "sigma_driveline_n", "airspeed_calibration_sd")
 
 
 def _flat(x: np.ndarray) -> np.ndarray:

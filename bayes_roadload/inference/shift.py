@@ -276,8 +276,12 @@ def _shared_points(shared: SharedPotential | None, problems: list[Problem], how:
         return [None] * len(problems)
     try:
         if how == "newton":
-            steps = [shared.newton_step(p, held) for p in problems]
-            if all(x is not None for x in steps):
+            steps = []
+            for p in problems:   # the second step is not taken once the first is refused
+                steps.append(shared.newton_step(p, held))
+                if steps[-1] is None:
+                    break
+            else:
                 return steps
             log.debug("Type B: a Newton step left the quadratic region; the shifted MAPs are refitted")
         return [shared.mode(p) for p in problems]
@@ -343,9 +347,8 @@ def newton_sensitivities(build: Callable[[Any], Problem], shifts: Shifts, base: 
                          held: tuple[str, ...] = ()) -> dict[str, dict[str, float]]:
     """As :func:`map_sensitivities`, each shifted MAP replaced by one Newton step from the
     fitted MAP (:meth:`SharedPotential.newton_step`, the sites ``held`` at the MAP): two
-    evaluations of the potential per
-    shifted campaign instead of an optimisation, first-order exact, like the central
-    differences themselves.  A step outside the potential's quadratic region is replaced by
+    evaluations of the potential per shifted campaign instead of an optimisation, first-order
+    exact, like the central differences themselves.  A step outside the potential's quadratic region is replaced by
     the shifted MAP (from the fitted one, shared compilation); a shifted problem of another
     structure, or a fitted MAP without a usable Laplace covariance, by that problem's own MAP."""
     return _central_differences(build, shifts, _shared(base), "newton", tuple(held))
