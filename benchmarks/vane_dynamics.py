@@ -21,7 +21,7 @@ its instrument noise) with the turbulence that identifies K_D, fitted by joint l
 Same seed, same draws in every arm but the anemometer's (the arms with the anemometer draw
 its four parameters, which shifts later draws of that campaign).
 
-    python benchmarks/vane_dynamics.py --out benchmarks/records/vane_dynamics.csv
+    python benchmarks/vane_dynamics.py --out benchmarks/records/vane_dynamics.csv --docs
 """
 
 from __future__ import annotations
@@ -41,8 +41,11 @@ sys.path.insert(0, str(ROOT))
 import bayes_roadload.simulate.independent.campaign as independent_campaign  # noqa: E402
 from bayes_roadload.inference.lsq import fit_lsq  # noqa: E402
 from bayes_roadload.simulate.independent import simulate_independent  # noqa: E402
+from doc_sections import replace_section  # noqa: E402
 
 QUANTITIES = ("KD", "CD0", "AD", "F50_N")
+DOC = ROOT / "docs" / "calibration.md"
+MARKS = ("<!-- vane_dynamics:begin -->", "<!-- vane_dynamics:end -->")
 
 
 def inverted_vane(time_s, yaw_rad, airspeed_mps, damping, wavelength_m):
@@ -123,6 +126,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rates", type=float, nargs="*", default=[10.0, 20.0])
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "records" / "vane_dynamics.csv")
     ap.add_argument("--from-records", action="store_true", help="summarise --out without fitting")
+    ap.add_argument("--docs", action="store_true", help="regenerate the table of docs/calibration.md")
     args = ap.parse_args(argv)
     if args.from_records:
         df = pd.read_csv(args.out)
@@ -135,6 +139,8 @@ def main(argv=None) -> int:
                 pd.DataFrame(rows).to_csv(args.out, index=False)
         df = pd.DataFrame(rows)
     print(markdown(df))
+    if args.docs:
+        replace_section(DOC, *MARKS, markdown(df))
     shift = df.pivot_table(index=["sample_rate_hz", "seed"], columns="arm", values="KD_err_pct")
     print(json.dumps({"benchmark": "vane_dynamics", "records": str(args.out),
                       "kd_shift_by_anemometer_pct": (shift["+ anemometer"] - shift["turbulence"]).round(2).tolist(),
