@@ -176,10 +176,7 @@ class CompiledProblem:
         res = newton_map(lambda y: fg(y, data), y0, self.run_index, self.scale, max_iter=max_iter)
         z = self.unravel(jnp.asarray(res["y"] * self.scale))
         constrained = self._fns["constrain"](jnp.asarray(res["y"]), data)
-        return MapResult(z=z, constrained=constrained, cov=res["cov"], success=res["success"],
-                         n_iter=res["n_iter"], message=res["message"], grad_max=res["grad_max"],
-                         neg_log_posterior=res["fun"], time_s=time.perf_counter() - t0,
-                         min_eigenvalue=res["min_eigenvalue"])
+        return MapResult.of(res, z, constrained, time.perf_counter() - t0)
 
 
 def compiled_problem(problem: FitProblem, init: dict[str, Any]) -> CompiledProblem:

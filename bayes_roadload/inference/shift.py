@@ -219,7 +219,11 @@ class SharedPotential(SharedData):
         the quadratic model predicts, ``g_k' H_kk^-1 g_k / 2`` (the trust-region ratio of
         Nocedal and Wright, Numerical Optimization, eq. 4.4).  None: the step failed it,
         another structure, or a Laplace covariance that is not the inverse Hessian (the MAP
-        did not converge, or its Hessian was regularised)."""
+        did not converge, its Hessian was not positive definite or was replaced by the
+        L-BFGS-B estimate).  A positive definite Hessian whose small eigenvalues were raised
+        to bound its condition (:func:`~bayes_roadload.inference.nuts.laplace_covariance`) is
+        used: the raised directions shorten the step there, and the test rejects the step
+        where that matters."""
         cov = self._conditional_covariance(tuple(held))
         if cov is None:
             return None
@@ -245,7 +249,10 @@ class SharedPotential(SharedData):
         if held not in self._conditional:
             start, out = self.start, None
             cov = None if start.cov is None else np.asarray(start.cov, float)
-            if cov is not None and start.success and not start.hessian_regularised and np.all(np.isfinite(cov)):
+            # a Hessian clipped only for its condition (positive definite, differenced, not
+            # replaced) is used: the step's agreement test rejects it where the clipping matters
+            usable = not start.hessian_regularised or (start.min_eigenvalue > 0.0 and start.hessian_step > 0.0)
+            if cov is not None and start.success and usable and np.all(np.isfinite(cov)):
                 keep = ~np.asarray(ravel_pytree({k: jnp.full(np.shape(v), k in held) for k, v in start.z.items()})[0],
                                    bool)
                 hessian = np.linalg.inv(cov)

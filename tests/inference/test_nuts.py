@@ -7,6 +7,7 @@ import pytest
 
 from bayes_roadload import config
 from bayes_roadload.inference.results import diagnostics, summary_table, to_inference_data
+from bayes_roadload.inference.nuts import MAP_NEWTON_DECREMENT
 
 FREE = ("AD", "BD", "CD0", "KD")
 
@@ -22,8 +23,10 @@ def test_fit_passes_its_gates(pooled_fit):
     assert diag["mean_tree_depth"] <= 5.0
     assert pooled_fit.map.success
     # a well-posed campaign needs none of the MAP's guards, and says so
-    assert pooled_fit.map.diagnostics() == {"map_method": "trust-exact", "map_fallback": "", "hessian_regularised": False,
-                                            "n_eigenvalues_clipped": 0, "hessian_step": 1e-4}
+    guards = pooled_fit.map.diagnostics()
+    assert 0.0 <= guards.pop("newton_decrement") < MAP_NEWTON_DECREMENT
+    assert guards == {"map_method": "trust-exact", "map_fallback": "", "hessian_regularised": False,
+                      "n_eigenvalues_clipped": 0, "hessian_step": 1e-4}
 
 
 def test_truth_within_the_posterior(pooled_fit, small_campaign):
@@ -89,8 +92,10 @@ def test_fd_hessian_matches_the_exact_hessian(small_campaign):
     m = find_map(problem, {}, posterior=post)
     assert m.success and m.min_eigenvalue > 0
     # a well-posed campaign needs none of the guards, and says so
-    assert m.diagnostics() == {"map_method": "trust-exact", "map_fallback": "", "hessian_regularised": False,
-                               "n_eigenvalues_clipped": 0, "hessian_step": 1e-4}
+    guards = m.diagnostics()
+    assert 0.0 <= guards.pop("newton_decrement") < MAP_NEWTON_DECREMENT
+    assert guards == {"map_method": "trust-exact", "map_fallback": "", "hessian_regularised": False,
+                      "n_eigenvalues_clipped": 0, "hessian_step": 1e-4}
     exact_post = unconstrained_posterior(dataclasses.replace(problem, gradients="reverse"), m.constrained)
     y = np.asarray(jax.flatten_util.ravel_pytree(m.z)[0]) / post.scale
 
@@ -202,6 +207,29 @@ def test_newton_map_falls_back_to_lbfgs_and_records_it():
     assert np.all(np.isfinite(cov)) and np.all(np.linalg.eigvalsh(cov) > 0)
     # L-BFGS-B's estimate of a 3-d quadratic after ~10 steps: within 5 % of the true Hessian
     assert np.abs(np.linalg.inv(cov) - a).max() < 0.05 * np.abs(a).max()
+
+
+def test_newton_map_is_converged_by_its_newton_decrement_when_one_direction_is_stiff():
+    """A potential of 1000 nats whose first coordinate is 1e10 times stiffer than the second
+    (a campaign of little noise fixes one combination of A_D, B_D, C_D0 that tightly),
+    started 5e-13 from that coordinate's optimum: its gradient there is 5e-3, above the
+    1e-3 threshold, but stepping to the optimum gains 1.25e-15 nats, below the rounding of
+    1000, so trust-exact cannot see the gain and stops.  The MAP is converged (its Newton
+    decrement g' H^-1 g is 2.5e-15) and says so; a start 1e-6 away (decrement 1e-2 nats, a
+    gain rounding can show) still converges by iterating, not by the criterion."""
+    from bayes_roadload.inference.nuts import MAP_NEWTON_DECREMENT, newton_map
+
+    stiff = 1e10
+
+    def fg(y):
+        return 1000.0 + 0.5 * stiff * y[0] ** 2 + 0.5 * y[1] ** 2, np.array([stiff * y[0], y[1]])
+
+    res = newton_map(fg, np.array([5e-13, 0.0]), np.full(2, -1), np.ones(2))
+    assert res["grad_max"] > 1e-3          # the old criterion alone would call it unconverged
+    assert res["newton_decrement"] < MAP_NEWTON_DECREMENT and res["success"]
+    np.testing.assert_allclose(res["newton_decrement"], res["grad_max"] ** 2 / stiff, rtol=1e-3)
+    far = newton_map(fg, np.array([1e-6, 1.0]), np.full(2, -1), np.ones(2))
+    assert far["success"] and abs(far["y"][0]) < 1e-12 and abs(far["y"][1]) < 1e-8
 
 
 def test_newton_map_names_the_coordinate_with_a_non_finite_gradient_at_the_start():
