@@ -335,6 +335,35 @@ def test_a_speed_trace_fit_takes_its_type_b_step_from_the_posterior():
     assert lsq_off["KD"] > 0.05, lsq_off
 
 
+def test_the_newton_step_takes_a_hessian_clipped_only_for_its_condition():
+    """The posterior Type B step's Hessian (the MAP's Laplace covariance, inverted on the
+    coordinates not held): used when it is exact, and when eigenvalues were raised only to bound
+    its condition (positive definite, differenced); not when the MAP did not converge, the
+    Hessian was not positive definite, or L-BFGS-B's estimate replaced it (step 0)."""
+    from types import SimpleNamespace
+
+    import jax.numpy as jnp
+
+    from bayes_roadload.inference.shift import SharedPotential
+
+    cov = np.array([[2.0, 0.3, 0.1], [0.3, 1.0, 0.0], [0.1, 0.0, 0.5]])
+    z = {"a": jnp.zeros(2), "sigma": jnp.zeros(1)}
+
+    def conditional(**start):
+        base = dict(cov=cov, z=z, success=True, hessian_regularised=False, min_eigenvalue=0.4, hessian_step=1e-4)
+        shared = SimpleNamespace(start=SimpleNamespace(**{**base, **start}), _conditional={})
+        return SharedPotential._conditional_covariance(shared, ("sigma",))
+
+    keep, held_out = conditional()
+    assert keep.tolist() == [True, True, False]
+    np.testing.assert_allclose(held_out, np.linalg.inv(np.linalg.inv(cov)[:2, :2]))
+    assert conditional(hessian_regularised=True) is not None            # clipped for its condition
+    assert conditional(hessian_regularised=True, min_eigenvalue=-0.1) is None
+    assert conditional(hessian_regularised=True, hessian_step=0.0) is None
+    assert conditional(success=False) is None
+
+
+@pytest.mark.slow   # ~35 s of compilation; the two rules it relies on have fast tests
 def test_the_posterior_type_b_step_holds_on_a_campaign_of_little_noise(clean, caplog):
     """Case 1 (no noise) on one pair fixes a combination of A_D, B_D, C_D0 ~1e4 times more
     tightly than the MAP's O(1) scaling assumes: the MAP stops on rounding with |g| ~ 1e-2
