@@ -649,27 +649,53 @@ def find_map(problem: FitProblem, init: dict[str, Any], *, max_iter: int = 200,
     them with the run structure exploited (:func:`fd_hessian`), so its cost does not grow with
     the number of runs and no second-order derivative has to be compiled.  ``init`` (constrained
     starting values) is ignored when a ``posterior`` built from them is given.  The campaign's
-    data are constants of the compiled code: :mod:`.laplace` compiles once for many
-    same-shaped campaigns.
+    data are arguments of the compiled potential
+    (:func:`~bayes_roadload.inference.shift.potential_program`), so that the fit's Type B step
+    reuses it on its shifted campaigns; where they cannot be, constants.
     """
     t0 = time.perf_counter()
     with stage("map"):
         post = posterior or unconstrained_posterior(problem, init)
         scale = post.scale
-
-        def objective(y):
-            return post.potential_fn(post.unravel(y * scale))
-
+        fg, constrain = _map_functions(problem, post)
         log.info("MAP: %d unknowns, trust-region Newton from the least-squares start ...", post.flat0.size)
-        res = newton_map(jax.jit(jax.value_and_grad(objective)), post.flat0 / scale, post.run_index,
+        res = newton_map(fg, post.flat0 / scale, post.run_index,
                          scale, max_iter=max_iter, names=_coordinate_names(post.z0), progress=progress)
         z_map = post.unravel(jnp.asarray(res["y"] * scale))
-        # jitted: with deterministic sites numpyro's postprocessing runs the whole model (the
-        # tyre-lag model's coefficients), which op by op took ~9 s at 36 runs
-        constrained = jax.jit(post.postprocess_fn)(z_map)
+        constrained = constrain(z_map)
     log.info("MAP: %s, %d iterations, max |gradient| %.2g, %.1f s%s", res["map_method"], res["n_iter"],
              res["grad_max"], time.perf_counter() - t0, f" ({res['map_fallback']})" if res["map_fallback"] else "")
     return MapResult.of(res, z_map, constrained, time.perf_counter() - t0)
+
+
+def _map_functions(problem: FitProblem, post: Posterior):
+    """(value and gradient of the potential in the scaled coordinates ``y``, the constrained and
+    deterministic values of an unconstrained point ``z``) for :func:`find_map`: from the
+    problem's :class:`~bayes_roadload.inference.shift.PotentialProgram` (the data as arguments),
+    or, where the problem's data cannot be arguments, compiled with them as constants.  Both
+    jitted: with deterministic sites numpyro's postprocessing runs the whole model (the
+    tyre-lag model's coefficients), which op by op took ~9 s at 36 runs."""
+    from .shift import potential_program
+
+    try:
+        program = potential_program(problem, post.z0)
+        data = program.data_of(problem)
+        if data is not None and np.array_equal(program.scale, post.scale):
+            def fg(y):
+                return program.fg(data, y)
+
+            def constrain(z):
+                return program.constrained(data, ravel_pytree(z)[0])
+
+            fg(post.flat0 / post.scale)   # compiles; raises here if it cannot
+            return fg, constrain
+    except Exception as e:  # noqa: BLE001 - the data as constants instead
+        log.debug("MAP: potential with the data as arguments not usable (%s: %s)", type(e).__name__, e)
+
+    def objective(y):
+        return post.potential_fn(post.unravel(y * post.scale))
+
+    return jax.jit(jax.value_and_grad(objective)), jax.jit(post.postprocess_fn)
 
 
 def _physical_memory_bytes() -> float | None:

@@ -175,31 +175,75 @@ class SharedData:
         return call
 
 
-class SharedPotential(SharedData):
-    """numpyro's potential of ``template`` and its gradient, compiled once with the problem's
-    data as arguments (:func:`_data_leaves`), so that every problem of the same structure --
-    the same model variant, priors, sites and array shapes, other data -- reuses the
-    compilation: the shifted campaigns of a Type B budget.  ``mode(problem)`` is the MAP of
-    such a problem (:func:`~bayes_roadload.inference.nuts.newton_map` from ``start``, the
-    template's scaled MAP), ``newton_step(problem)`` one Newton step towards it; both None
-    when ``problem`` has another structure."""
+class PotentialProgram(SharedData):
+    """numpyro's potential of ``template`` and its gradient, ``fg(leaves, y)``, and the
+    constrained and deterministic values of an unconstrained point, ``constrained(leaves, x)``,
+    compiled once with the data as arguments (:func:`_data_leaves`) in the O(1)-scaled
+    unconstrained coordinates of :func:`~bayes_roadload.inference.nuts.site_layout` (``x = y
+    scale``).  Every problem of the template's structure -- the same model variant, priors,
+    sites and array shapes, other data -- reuses the compilation."""
 
-    def __init__(self, template: Problem, start: MapResult):
+    def __init__(self, template: Problem, z: dict[str, Any]):
         super().__init__(template)
-        self.start = start
-        self._conditional: dict[tuple[str, ...], Any] = {}
-        self.unravel, self.scale, self.run_index = site_layout(template, start.z)
-        self.y0 = np.asarray(ravel_pytree(start.z)[0]) / self.scale
-        model = template.numpyro_model
+        self.unravel, self.scale, self.run_index = site_layout(template, z)
+        model, unravel, scale = template.numpyro_model, self.unravel, self.scale
 
         def objective(leaves, y):
-            return potential_energy(model, (self.with_data(leaves),), {}, self.unravel(y * self.scale))
+            return potential_energy(model, (self.with_data(leaves),), {}, unravel(y * scale))
 
         def constrained(leaves, x):
-            return constrain_fn(model, (self.with_data(leaves),), {}, self.unravel(x), return_deterministic=True)
+            return constrain_fn(model, (self.with_data(leaves),), {}, unravel(x), return_deterministic=True)
 
-        self._fg = jax.jit(jax.value_and_grad(objective, argnums=1))
-        self._constrained = jax.jit(constrained)
+        self.fg_compiled = jax.jit(jax.value_and_grad(objective, argnums=1))
+        self.constrained_compiled = jax.jit(constrained)
+
+    def fg(self, leaves, y):
+        """The potential and its gradient at the scaled point ``y`` (taken as a NumPy array:
+        a JAX array of the same values is another entry of the compilation cache)."""
+        return self.fg_compiled(leaves, np.asarray(y, float))
+
+    def constrained(self, leaves, x):
+        """The constrained and deterministic values at the unconstrained point ``x`` (likewise)."""
+        return self.constrained_compiled(leaves, np.asarray(x, float))
+
+
+_RECENT_PROGRAMS: list[PotentialProgram] = []
+PROGRAMS_KEPT = 2
+"""The potential programs of the last problems :func:`potential_program` was asked for: a
+fit's MAP compiles its problem's and the fit's Type B step reuses it."""
+
+
+def potential_program(problem: Problem, z: dict[str, Any]) -> PotentialProgram:
+    """The :class:`PotentialProgram` of ``problem`` (the object itself) with the site layout of
+    ``z``: the one built for it earlier in this process when one of the last
+    :data:`PROGRAMS_KEPT` was, else a new one."""
+    structure = jax.tree_util.tree_structure({k: jnp.asarray(v) for k, v in z.items()})
+    for program in _RECENT_PROGRAMS:
+        if program.template is problem and program.z_structure == structure:
+            return program
+    program = PotentialProgram(problem, z)
+    program.z_structure = structure
+    _RECENT_PROGRAMS.insert(0, program)
+    del _RECENT_PROGRAMS[PROGRAMS_KEPT:]
+    return program
+
+
+class SharedPotential:
+    """The Type B step's use of the fitted problem's :class:`PotentialProgram` (the one its MAP
+    compiled: :func:`potential_program`): the shifted campaigns of a budget differ from the
+    fitted one only in their data, so every problem of the same structure reuses the
+    compilation.  ``mode(problem)`` is the MAP of such a problem
+    (:func:`~bayes_roadload.inference.nuts.newton_map` from ``start``, the template's scaled
+    MAP), ``newton_step(problem)`` one Newton step towards it; both None when ``problem`` has
+    another structure."""
+
+    def __init__(self, template: Problem, start: MapResult):
+        program = potential_program(template, start.z)
+        self.program, self.start = program, start
+        self._conditional: dict[tuple[str, ...], Any] = {}
+        self.unravel, self.scale, self.run_index = program.unravel, program.scale, program.run_index
+        self.y0 = np.asarray(ravel_pytree(start.z)[0]) / self.scale
+        self._fg, self._constrained, self.data_of = program.fg, program.constrained, program.data_of
 
     def newton_step(self, problem: Problem, held: tuple[str, ...] = ()) -> dict[str, Any] | None:
         """The constrained values one Newton step from the template's MAP ``x*`` towards the

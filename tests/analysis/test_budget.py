@@ -301,7 +301,8 @@ def test_a_speed_trace_fit_takes_its_type_b_step_from_the_posterior():
     least-squares step against its own refits (above).  The least-squares step, without the
     priors, moves the tyre-lag model's K_D by more than that on one pair (measured: the yaw
     offset's contribution off by 32 % of u_b over these sources, 12 % over all nine), which is
-    what this test tells apart."""
+    what this test tells apart.  The step evaluates the potential the fit's MAP compiled
+    (``shift.potential_program``), compiling none of its own."""
     import math
     import warnings
     from types import SimpleNamespace
@@ -311,7 +312,7 @@ def test_a_speed_trace_fit_takes_its_type_b_step_from_the_posterior():
     from bayes_roadload.inference.kinds import FitOptions, _shifted_trace_problems, kind_of
     from bayes_roadload.inference.lsq import linear_sensitivities
     from bayes_roadload.inference.nuts import find_map, prepare_problem
-    from bayes_roadload.inference.shift import map_sensitivities
+    from bayes_roadload.inference.shift import map_sensitivities, potential_program
     from bayes_roadload.inference.spec import load_model_spec
 
     spec = load_model_spec("four_term_tyre_lag")
@@ -322,7 +323,10 @@ def test_a_speed_trace_fit_takes_its_type_b_step_from_the_posterior():
         fit = SimpleNamespace(problem=problem, map=find_map(problem, init))   # what `fit` holds before sampling
         u, shifts, _ = type_b_shifts(campaign, spec)
         shifts = {k: shifts[k] for k in ("mass_kg", "airspeed_factor_rel", "yaw_offset_rad")}
+        program = potential_program(problem, fit.map.z)   # the one the MAP compiled
+        compiled = program.fg_compiled._cache_size()
         posterior = kind_of(campaign).type_b(campaign, spec, shifts, FitOptions(), fit)
+        assert compiled == 1 and program.fg_compiled._cache_size() == 1   # the step compiled no potential of its own
         refit = map_sensitivities(_shifted_trace_problems(problem, fit.map, campaign), shifts, (problem, fit.map))
         lsq = linear_sensitivities(campaign, spec, shifts)[1]
     assert set(posterior) == set(refit) == set(shifts)

@@ -86,8 +86,9 @@ def test_the_potential_of_many_draws_goes_in_batches_and_equals_one_by_one(two_c
     problem = build_problem(c, "three_term")
     per_draw = int(np.prod(np.shape(problem.batch.speed_mps)))
     monkeypatch.setattr(results, "PER_DRAW_BATCH_ELEMENTS", 3 * per_draw)
-    comp = laplace.CompiledProblem.build(problem, initial_values(problem, c))
-    y0 = np.asarray(comp._fns["to_scaled"]({k: jnp.asarray(v) for k, v in initial_values(problem, c).items()},
+    init = initial_values(problem, c)
+    comp = laplace.CompiledProblem.build(problem, init)
+    y0 = np.asarray(comp._fns["to_scaled"]({k: jnp.asarray(v) for k, v in init.items()},
                                            laplace._data(problem)))
     ys = y0 + 0.01 * np.random.default_rng(0).standard_normal((7, y0.size))
     many = np.asarray(comp._fns["f_many"](jnp.asarray(ys), laplace._data(problem)))
