@@ -15,6 +15,7 @@ Implementations: :class:`~.bayes.FitProblem` (speed traces), :class:`~.intervals
 
 from __future__ import annotations
 
+from functools import lru_cache, partial
 from typing import Any, Callable, Protocol, runtime_checkable
 
 import jax
@@ -140,14 +141,26 @@ def road_load_draws(problem, samples: dict[str, np.ndarray], *,
     ``frontal_area_m2``); ``driveline_curve`` (c2, c1, c0) adds a measured driveline loss."""
     chains = samples[problem.free[0]].shape[0] if problem.free else 1
     free = {k: jnp.asarray(_flat(samples[k])) for k in problem.free}
-
-    def one(values):
-        params = dict(problem.fixed, **values)
-        return road_load_summary(problem.model, params, problem.mass_kg, problem.frontal_area_m2,
-                                 driveline_curve=driveline_curve)
-
-    out = jax.jit(jax.vmap(one))(free)
+    fixed = {k: jnp.asarray(v, float) for k, v in problem.fixed.items()}
+    args = (fixed, jnp.asarray(problem.mass_kg, float), jnp.asarray(problem.frontal_area_m2, float),
+            tuple(jnp.asarray(c, float) for c in driveline_curve))
+    try:
+        out = _road_load_program(problem.model)(free, *args)
+    except TypeError:  # a model that is not hashable: compiled for this call alone
+        out = jax.jit(jax.vmap(partial(_road_load_one, problem.model), in_axes=(0, None, None, None, None)))(free, *args)
     return {k: _unflat(np.asarray(out[k]), chains) for k in ROAD_LOAD_DERIVED}
+
+
+def _road_load_one(model, values, fixed, mass_kg, frontal_area_m2, driveline_curve):
+    return road_load_summary(model, dict(fixed, **values), mass_kg, frontal_area_m2, driveline_curve=driveline_curve)
+
+
+@lru_cache(maxsize=32)
+def _road_load_program(model) -> Callable[..., Any]:
+    """:func:`road_load_summary` of ``model`` over draws, compiled once per model with the
+    fixed values, mass, area and driveline curve as arguments: the draws of a fit and the
+    Type B step's shifted campaigns (another mass, other fixed values) reuse it."""
+    return jax.jit(jax.vmap(partial(_road_load_one, model), in_axes=(0, None, None, None, None)))
 
 
 def road_load_truth(problem, truth: dict | None, *, driveline_curve=(0.0, 0.0, 0.0)) -> dict[str, float]:

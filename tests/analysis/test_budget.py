@@ -302,7 +302,8 @@ def test_a_speed_trace_fit_takes_its_type_b_step_from_the_posterior():
     priors, moves the tyre-lag model's K_D by more than that on one pair (measured: the yaw
     offset's contribution off by 32 % of u_b over these sources, 12 % over all nine), which is
     what this test tells apart.  The step evaluates the potential the fit's MAP compiled
-    (``shift.potential_program``), compiling none of its own."""
+    (``shift.potential_program``), compiling none of its own, and the road load of every shifted
+    campaign comes from one compiled program (``problem._road_load_program``)."""
     import math
     import warnings
     from types import SimpleNamespace
@@ -312,6 +313,7 @@ def test_a_speed_trace_fit_takes_its_type_b_step_from_the_posterior():
     from bayes_roadload.inference.kinds import FitOptions, _shifted_trace_problems, kind_of
     from bayes_roadload.inference.lsq import linear_sensitivities
     from bayes_roadload.inference.nuts import find_map, prepare_problem
+    from bayes_roadload.inference.problem import _road_load_program
     from bayes_roadload.inference.shift import map_sensitivities, potential_program
     from bayes_roadload.inference.spec import load_model_spec
 
@@ -327,6 +329,8 @@ def test_a_speed_trace_fit_takes_its_type_b_step_from_the_posterior():
         compiled = program.fg_compiled._cache_size()
         posterior = kind_of(campaign).type_b(campaign, spec, shifts, FitOptions(), fit)
         assert compiled == 1 and program.fg_compiled._cache_size() == 1   # the step compiled no potential of its own
+        # and one road-load program served the quantities of all six shifted campaigns
+        assert _road_load_program(problem.model)._cache_size() == 1
         refit = map_sensitivities(_shifted_trace_problems(problem, fit.map, campaign), shifts, (problem, fit.map))
         lsq = linear_sensitivities(campaign, spec, shifts)[1]
     assert set(posterior) == set(refit) == set(shifts)
