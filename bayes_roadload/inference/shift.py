@@ -11,9 +11,11 @@ which may read the shifted campaign directly (a mass enters the road load itself
 the central difference of the measurement result that GUM 5.1.3 takes as the sensitivity
 coefficient.  Compiling is most of a small MAP's time (a distance-time gradient: 8.8 s to
 compile, 0.9 ms to evaluate, ``benchmarks/type_b_cost.py``), and the shifted campaigns differ
-from the fitted one only in their data: :class:`SharedPotential` compiles the potential once
-with the data as arguments and starts each shifted MAP at the fit's (1.7-3.2x faster than a
-compilation per campaign, the same sensitivities: ``docs/calibration.md``).  One Newton step
+from the fitted one only in their data: the fit's MAP compiles the potential with the data as
+arguments (:func:`potential_program`), and :class:`SharedPotential` evaluates the shifted
+campaigns with that compilation and starts each shifted MAP at the fit's (1.7-3.2x faster than a
+compilation per campaign, the same sensitivities: ``docs/calibration.md``; no compilation of its
+own when the MAP's program is at hand).  One Newton step
 from the unshifted mode instead of each refit was off by up to 30 % on a spin-down's wheel
 inertia, so those kinds refit the MAPs (:func:`map_sensitivities`).  A speed-trace fit takes
 the Newton step (:func:`newton_sensitivities`) with the noise scales and run-effect spreads
