@@ -570,3 +570,35 @@ def test_an_estimate_its_prior_excludes_starts_at_the_prior_centre_and_the_other
     refit = fit_lsq(small_campaign, with_fixed(problem.spec, {"CD0": far}), grouping="all").groups[0].estimate
     for k in ("AD", "BD"):
         assert init[k] == pytest.approx(refit[k], rel=1e-9) and init[k] != pytest.approx(free[k], rel=1e-3), k
+
+
+def test_the_map_is_the_same_with_the_data_as_arguments_or_as_constants(small_campaign, monkeypatch):
+    """``find_map`` evaluates the potential compiled with the campaign's data as arguments
+    (``shift.potential_program``, which the Type B step reuses); where that program cannot be
+    built it compiles the potential with the data as constants.  Both take the same Newton
+    iterations on the same function, so they differ only by the rounding of two compilations
+    (~1e-12 relative, measured 2e-11 apart in the O(1)-scaled coordinates); 1e-8 leaves that
+    rounding a factor 500 for the Hessian's conditioning, and fails for any difference in the
+    potential itself (the optimiser's own tolerance, scaled gradients below 1e-3, is far
+    larger)."""
+    from jax.flatten_util import ravel_pytree
+
+    from bayes_roadload.inference import shift
+    from bayes_roadload.inference.bayes import build_problem
+    from bayes_roadload.inference.nuts import find_map, prepare_problem, site_layout
+
+    problem, init = prepare_problem(build_problem(small_campaign, "three_term"), small_campaign)
+    with_arguments = find_map(problem, init)
+    assert any(p.template is problem for p in shift._RECENT_PROGRAMS)
+
+    def unavailable(*args, **kwargs):
+        raise TypeError("data cannot be arguments")
+
+    monkeypatch.setattr(shift, "potential_program", unavailable)
+    with_constants = find_map(problem, init)
+    assert with_arguments.success and with_constants.success
+    assert with_arguments.n_iter == with_constants.n_iter
+    scale = site_layout(problem, with_arguments.z)[1]
+    y = [np.asarray(ravel_pytree(m.z)[0]) / scale for m in (with_arguments, with_constants)]
+    np.testing.assert_allclose(y[0], y[1], rtol=0, atol=1e-8)
+    assert with_arguments.neg_log_posterior == pytest.approx(with_constants.neg_log_posterior, abs=1e-8)
