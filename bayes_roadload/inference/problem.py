@@ -145,9 +145,12 @@ def road_load_draws(problem, samples: dict[str, np.ndarray], *,
     args = (fixed, jnp.asarray(problem.mass_kg, float), jnp.asarray(problem.frontal_area_m2, float),
             tuple(jnp.asarray(c, float) for c in driveline_curve))
     try:
-        out = _road_load_program(problem.model)(free, *args)
+        hash(problem.model)
     except TypeError:  # a model that is not hashable: compiled for this call alone
-        out = jax.jit(jax.vmap(partial(_road_load_one, problem.model), in_axes=(0, None, None, None, None)))(free, *args)
+        program = jax.jit(jax.vmap(partial(_road_load_one, problem.model), in_axes=(0, None, None, None, None)))
+    else:
+        program = _road_load_program(problem.model)
+    out = program(free, *args)
     return {k: _unflat(np.asarray(out[k]), chains) for k in ROAD_LOAD_DERIVED}
 
 

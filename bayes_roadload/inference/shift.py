@@ -187,6 +187,7 @@ class PotentialProgram(SharedData):
 
     def __init__(self, template: Problem, z: dict[str, Any]):
         super().__init__(template)
+        self.z_structure = _site_structure(z)
         self.unravel, self.scale, self.run_index = site_layout(template, z)
         model, unravel, scale = template.numpyro_model, self.unravel, self.scale
 
@@ -209,6 +210,12 @@ class PotentialProgram(SharedData):
         return self.constrained_compiled(leaves, np.asarray(x, float))
 
 
+def _site_structure(z: dict[str, Any]) -> tuple:
+    """The sites of ``z`` and their shapes, in the order of their names (a MAP's values come in
+    another order than the trace's)."""
+    return tuple(sorted((k, np.shape(v)) for k, v in z.items()))
+
+
 _RECENT_PROGRAMS: list[PotentialProgram] = []
 PROGRAMS_KEPT = 2
 """The potential programs of the last problems :func:`potential_program` was asked for: a
@@ -219,12 +226,11 @@ def potential_program(problem: Problem, z: dict[str, Any]) -> PotentialProgram:
     """The :class:`PotentialProgram` of ``problem`` (the object itself) with the site layout of
     ``z``: the one built for it earlier in this process when one of the last
     :data:`PROGRAMS_KEPT` was, else a new one."""
-    structure = jax.tree_util.tree_structure({k: jnp.asarray(v) for k, v in z.items()})
+    structure = _site_structure(z)
     for program in _RECENT_PROGRAMS:
         if program.template is problem and program.z_structure == structure:
             return program
     program = PotentialProgram(problem, z)
-    program.z_structure = structure
     _RECENT_PROGRAMS.insert(0, program)
     del _RECENT_PROGRAMS[PROGRAMS_KEPT:]
     return program
