@@ -147,7 +147,7 @@ def road_load_draws(problem, samples: dict[str, np.ndarray], *,
     try:
         hash(problem.model)
     except TypeError:  # a model that is not hashable: compiled for this call alone
-        program = jax.jit(jax.vmap(partial(_road_load_one, problem.model), in_axes=(0, None, None, None, None)))
+        program = _road_load_program.__wrapped__(problem.model)
     else:
         program = _road_load_program(problem.model)
     out = program(free, *args)

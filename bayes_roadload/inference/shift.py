@@ -246,12 +246,13 @@ class SharedPotential:
     another structure."""
 
     def __init__(self, template: Problem, start: MapResult):
-        program = potential_program(template, start.z)
-        self.program, self.start = program, start
+        self.program, self.start = potential_program(template, start.z), start
         self._conditional: dict[tuple[str, ...], Any] = {}
-        self.unravel, self.scale, self.run_index = program.unravel, program.scale, program.run_index
-        self.y0 = np.asarray(ravel_pytree(start.z)[0]) / self.scale
-        self._fg, self._constrained, self.data_of = program.fg, program.constrained, program.data_of
+        self.y0 = np.asarray(ravel_pytree(start.z)[0]) / self.program.scale
+
+    def data_of(self, problem: Problem) -> list | None:
+        """``problem``'s data leaves, or None when it has another structure."""
+        return self.program.data_of(problem)
 
     def newton_step(self, problem: Problem, held: tuple[str, ...] = ()) -> dict[str, Any] | None:
         """The constrained values one Newton step from the template's MAP ``x*`` towards the
@@ -283,17 +284,18 @@ class SharedPotential:
         data = self.data_of(problem)
         if data is None:
             return None
-        u0, g = (np.asarray(a, float) for a in self._fg(data, jnp.asarray(self.y0)))
+        fg, scale = self.program.fg, self.program.scale
+        u0, g = (np.asarray(a, float) for a in fg(data, self.y0))
         if not (np.isfinite(u0) and np.all(np.isfinite(g))):
             return None
-        gk = (g / self.scale)[keep]
+        gk = (g / scale)[keep]
         dx = np.zeros_like(g)
         dx[keep] = -cov @ gk
         predicted = 0.5 * float(gk @ cov @ gk)
-        achieved = float(u0 - self._fg(data, jnp.asarray(self.y0 + dx / self.scale))[0])
+        achieved = float(u0 - fg(data, self.y0 + dx / scale)[0])
         if not abs(achieved - predicted) <= NEWTON_STEP_AGREEMENT * predicted + NEWTON_STEP_FLOOR:
             return None
-        return self._constrained(data, jnp.asarray(self.y0 * self.scale + dx))
+        return self.program.constrained(data, self.y0 * scale + dx)
 
     def _conditional_covariance(self, held: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray] | None:
         """(mask of the coordinates not ``held``, the inverse of the Hessian's block on them),
@@ -318,10 +320,11 @@ class SharedPotential:
         data = self.data_of(problem)
         if data is None:
             return None
-        res = newton_map(lambda y: self._fg(data, y), self.y0, self.run_index, self.scale)
+        program = self.program
+        res = newton_map(lambda y: program.fg(data, y), self.y0, program.run_index, program.scale)
         if not res["success"]:
             return None
-        return self._constrained(data, jnp.asarray(res["y"] * self.scale))
+        return program.constrained(data, res["y"] * program.scale)
 
 
 def _shared_points(shared: SharedPotential | None, problems: list[Problem], how: str,
