@@ -485,6 +485,11 @@ LAPLACE_PROPOSAL_INFLATION = (1.0, 1.5, 2.0)
 ``LAPLACE_GOOD_PARETO_K`` (the best proposal is kept).  Measured on one pair, pooled: k 0.81 at
 1.0, 0.63 at 2.0 (the coefficients' posterior sd there is ~2x the Laplace sd)."""
 
+LAPLACE_PROPOSAL_COMBINE = "sequential"
+"""How the proposals of ``LAPLACE_PROPOSAL_INFLATION`` are used: "sequential" (in turn while the
+Pareto k is above ``LAPLACE_GOOD_PARETO_K``, the best kept) or "mixture" (one set of draws of
+their equal-weight mixture; ``laplace._mixture_draws``)."""
+
 LAPLACE_GOOD_PARETO_K = 0.5
 """Pareto k below which the first proposal is accepted without trying wider ones."""
 

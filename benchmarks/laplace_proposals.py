@@ -7,7 +7,8 @@ planning jobs of ``plan_jobs`` from a source fit, by default the issue's 12-pair
 ``benchmarks/plan_time.py`` (thesis case 14, seed 1, hierarchical four_term) -- by
 
 * each importance-sampling scheme of ``SCHEMES`` (a proposal family and its inflations, tried in
-  turn as ``laplace._importance_draws`` does), the same MAP for all, and
+  turn or mixed as ``laplace._importance_draws`` does; ``--schemes`` picks some), the same MAP for
+  all, and
 * NUTS with the fit's defaults (``method="nuts"`` through the batch door, without the Type B
   draws: the posterior itself, the reference),
 
@@ -42,11 +43,12 @@ RECORDS = ROOT / "benchmarks" / "records" / "performance" / "laplace_proposals.j
 DOC = ROOT / "docs" / "planning.md"
 BEGIN, END = "<!-- laplace proposals: begin -->", "<!-- laplace proposals: end -->"
 QUANTITIES = ("AD", "BD", "CD0", "F50_N")
-SCHEMES = {
-    "t5 1.0/1.5/2.0 (shipped)": ("t", (1.0, 1.5, 2.0)),
-    "normal 1.1/1.25/1.5": ("normal", (1.1, 1.25, 1.5)),
-    "normal 1.1": ("normal", (1.1,)),
-    "normal 1.35": ("normal", (1.35,)),
+SCHEMES = {  # name: (family, inflations, combine); the names of earlier records are kept
+    "t5 1.0/1.5/2.0 (shipped)": ("t", (1.0, 1.5, 2.0), "sequential"),
+    "normal 1.1/1.25/1.5": ("normal", (1.1, 1.25, 1.5), "sequential"),
+    "normal 1.1": ("normal", (1.1,), "sequential"),
+    "normal 1.35": ("normal", (1.35,), "sequential"),
+    "t5 mixture 1.0/1.5/2.0": ("t", (1.0, 1.5, 2.0), "mixture"),
 }
 
 
@@ -59,7 +61,7 @@ def _half_widths(samples) -> dict[str, float]:
     return out
 
 
-def run(fit_dir: Path, pairs: list[int], campaigns: int, note: str) -> None:
+def run(fit_dir: Path, pairs: list[int], campaigns: int, note: str, schemes: list[str]) -> None:
     from bayes_roadload.analysis.batch import run_job
     from bayes_roadload.analysis.planning import half_widths, plan_jobs, population_from_samples
     from bayes_roadload.data import load_campaign
@@ -76,9 +78,10 @@ def run(fit_dir: Path, pairs: list[int], campaigns: int, note: str) -> None:
         base = {**stamp, "pairs": job.tags["n_pairs"], "simulation": job.tags["simulation"], "model": job.model,
                 "pooling": job.pooling}
         rows = []
-        for name, (family, inflations) in SCHEMES.items():
+        for name in schemes:
+            family, inflations, combine = SCHEMES[name]
             fit = fit_laplace(campaign, job.model, pooling=job.pooling, start=job.start, proposal=family,
-                              inflations=inflations)
+                              inflations=inflations, combine=combine)
             d = fit.diagnostics
             rows.append({**base, "method": name, "half_width_pct": _half_widths(fit.samples),
                          "pareto_k": d["pareto_k"], "is_ess": d["is_ess"], "inflation": d["proposal_inflation"],
@@ -102,12 +105,13 @@ def run(fit_dir: Path, pairs: list[int], campaigns: int, note: str) -> None:
 def summary(records: pd.DataFrame) -> pd.DataFrame:
     """Per size and scheme: the median and range of the half-width ratio to NUTS over campaigns
     and quantities, the median Pareto k, effective sample size and posterior evaluations."""
-    key = ["pairs", "simulation"]
+    key = ["date", "pairs", "simulation"]  # each invocation refits its own campaigns with NUTS
     nuts = records[records["method"] == "nuts"].set_index(key)["half_width_pct"]
     rows = []
     for (pairs, method), g in records[records["method"] != "nuts"].groupby(["pairs", "method"], sort=True):
-        ratios = [r["half_width_pct"][q] / nuts.loc[(r["pairs"], r["simulation"])][q]
-                  for _, r in g.iterrows() if (r["pairs"], r["simulation"]) in nuts.index for q in QUANTITIES]
+        ratios = [r["half_width_pct"][q] / nuts.loc[(r["date"], r["pairs"], r["simulation"])][q]
+                  for _, r in g.iterrows() if (r["date"], r["pairs"], r["simulation"]) in nuts.index
+                  for q in QUANTITIES]
         rows.append({"pairs": int(pairs), "scheme": method, "campaigns": len(g),
                      "median ratio": round(float(np.median(ratios)), 3),
                      "ratio 10-90 %": f"{np.quantile(ratios, 0.1):.2f}-{np.quantile(ratios, 0.9):.2f}",
@@ -143,6 +147,8 @@ def main() -> None:
     p.add_argument("--campaigns", type=int, default=6)
     p.add_argument("--fit-dir", type=Path, default=None, help="source fit (default: plan_time's reference fit)")
     p.add_argument("--note", default="")
+    p.add_argument("--schemes", nargs="+", default=list(SCHEMES), choices=list(SCHEMES), metavar="SCHEME",
+                   help=f"the importance schemes to run (default: all of {list(SCHEMES)})")
     p.add_argument("--docs", action="store_true", help="only regenerate the docs section from the records")
     a = p.parse_args()
     if a.docs:
@@ -152,9 +158,9 @@ def main() -> None:
         from plan_time import reference_fit
 
         with tempfile.TemporaryDirectory(prefix="laplace_proposals_") as tmp:
-            run(reference_fit(Path(tmp)), a.pairs, a.campaigns, a.note)
+            run(reference_fit(Path(tmp)), a.pairs, a.campaigns, a.note, a.schemes)
     else:
-        run(a.fit_dir, a.pairs, a.campaigns, a.note)
+        run(a.fit_dir, a.pairs, a.campaigns, a.note, a.schemes)
     docs()
 
 

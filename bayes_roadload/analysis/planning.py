@@ -126,8 +126,17 @@ class Population:
         return int(np.size(self.sigma_mps))
 
     def mean_values(self) -> dict[str, float]:
-        """Posterior means of the population means (a starting point for the refits)."""
+        """Posterior means of the population means."""
         return {k: float(np.mean(v)) for k, v in self.means.items()}
+
+    def start_values(self) -> dict[str, float]:
+        """The refits' start (:func:`~bayes_roadload.inference.nuts.initial_values`): the
+        posterior means of the population means, and the medians of the integrated noise's
+        intensity and of the run-to-run spreads where positive."""
+        start = self.mean_values()
+        noise = {"q_mps_per_sqrt_s": self.q_mps_per_sqrt_s, **{f"tau_{k}": v for k, v in self.tau.items()}}
+        start.update({k: float(np.median(v)) for k, v in noise.items() if float(np.median(v)) > 0.0})
+        return start
 
     @property
     def pooling(self) -> str:
@@ -336,7 +345,7 @@ def plan_jobs(population: Population, pairs: Sequence[int] = config.PLAN_PAIRS, 
     instruments (:mod:`.budget`): the intervals the engineer's own fit will report."""
     model = model or population.model
     label = PurePath(str(model)).stem  # a model file's path labels the jobs by the file's name
-    start = population.mean_values()
+    start = population.start_values()
     jobs = []
     for n in pairs:
         for k in range(first, simulations):

@@ -27,6 +27,7 @@ run-to-run spreads' posterior has a long right tail.  The Pareto k of the weight
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -56,6 +57,7 @@ from .spec import ModelSpec
 DEFAULT_LAPLACE_DRAWS = config.LAPLACE_DRAWS
 PROPOSAL_DF = config.LAPLACE_PROPOSAL_DF
 PROPOSAL_FAMILIES = ("t", "normal")
+PROPOSAL_COMBINATIONS = ("mixture", "sequential")
 
 _CACHE: dict[Any, "CompiledProblem"] = {}
 _CACHE_MAX = 16
@@ -206,43 +208,81 @@ class LaplaceFit:
     diagnostics: dict[str, float] = field(default_factory=dict)
 
 
+def _proposal_logpdf(e: np.ndarray, family: str, inflation: float) -> np.ndarray:
+    """Log density of whitened offsets ``e`` [n, d] under the proposal of ``family`` whose
+    covariance is the Laplace one times ``inflation**2`` ("t": multivariate t with
+    ``PROPOSAL_DF`` degrees of freedom; "normal": Gaussian), normalised (the log determinant of
+    the Laplace factor, shared by every proposal, left out)."""
+    from scipy import stats
+
+    d = e.shape[1]
+    if family == "t":
+        return stats.multivariate_t(loc=np.zeros(d), shape=inflation**2 * np.eye(d), df=PROPOSAL_DF).logpdf(e)
+    if family == "normal":
+        return stats.norm(scale=inflation).logpdf(e).sum(axis=1)
+    raise ValueError(f"proposal family must be one of {PROPOSAL_FAMILIES}, got {family!r}")
+
+
+def _proposal_offsets(n: int, d: int, family: str, inflation: float, rng: np.random.Generator) -> np.ndarray:
+    """``n`` whitened offsets [n, d] of the proposal of ``family`` scaled by ``inflation``."""
+    if family == "t":
+        nu = PROPOSAL_DF
+        return inflation * rng.standard_normal((n, d)) / np.sqrt(rng.chisquare(nu, n) / nu)[:, None]
+    if family == "normal":
+        return inflation * rng.standard_normal((n, d))
+    raise ValueError(f"proposal family must be one of {PROPOSAL_FAMILIES}, got {family!r}")
+
+
 def _proposal_draws(y_map: np.ndarray, chol: np.ndarray, n: int, family: str, inflation: float,
                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """``n`` draws of a proposal centred on the MAP with the Laplace covariance times
-    ``inflation**2`` -- ``family`` "t": multivariate t with ``PROPOSAL_DF`` degrees of freedom;
-    "normal": Gaussian -- and the log proposal density of each (up to a constant shared by the
-    draws)."""
-    from scipy import stats
+    ``inflation**2`` (:func:`_proposal_offsets`) and the log proposal density of each (up to a
+    constant shared by the draws)."""
+    e = _proposal_offsets(n, y_map.size, family, inflation, rng)
+    return y_map + e @ chol.T, _proposal_logpdf(e, family, inflation)
 
-    d = y_map.size
-    if family == "t":
-        nu = PROPOSAL_DF
-        e = inflation * rng.standard_normal((n, d)) / np.sqrt(rng.chisquare(nu, n) / nu)[:, None]
-        log_q = stats.multivariate_t(loc=np.zeros(d), shape=inflation**2 * np.eye(d), df=nu).logpdf(e)
-    elif family == "normal":
-        e = inflation * rng.standard_normal((n, d))
-        log_q = stats.norm(scale=inflation).logpdf(e).sum(axis=1)
-    else:
-        raise ValueError(f"proposal family must be one of {PROPOSAL_FAMILIES}, got {family!r}")
-    return y_map + e @ chol.T, log_q
+
+def _mixture_draws(y_map: np.ndarray, chol: np.ndarray, n: int, family: str, inflations: tuple[float, ...],
+                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` draws of the equal-weight mixture of the proposals scaled by ``inflations``, an
+    equal share from each (the deterministic mixture of Veach and Guibas 1995, Owen and Zhou
+    2000): each draw is weighted against the mixture's density, so the narrow components give
+    the bulk its resolution and the wide ones bound the weights in the tails, in one pass of
+    ``n`` posterior evaluations.  Returns the draws and their log mixture density (up to the
+    shared constant of :func:`_proposal_logpdf`)."""
+    from scipy.special import logsumexp
+
+    shares = np.full(len(inflations), n // len(inflations))
+    shares[: n - shares.sum()] += 1
+    e = np.concatenate([_proposal_offsets(int(m), y_map.size, family, s, rng) for m, s in zip(shares, inflations)])
+    log_components = np.stack([np.log(m / n) + _proposal_logpdf(e, family, s) for m, s in zip(shares, inflations)])
+    return y_map + e @ chol.T, logsumexp(log_components, axis=0)
 
 
 def _importance_draws(comp: CompiledProblem, problem: FitProblem, y_map: np.ndarray, chol: np.ndarray, draws: int,
                       rng: np.random.Generator, family: str = config.LAPLACE_PROPOSAL_FAMILY,
-                      inflations: tuple[float, ...] = config.LAPLACE_PROPOSAL_INFLATION
+                      inflations: tuple[float, ...] = config.LAPLACE_PROPOSAL_INFLATION,
+                      combine: str = config.LAPLACE_PROPOSAL_COMBINE,
                       ) -> tuple[np.ndarray, float, float, float, int]:
-    """``draws`` draws of the posterior by PSIS from a proposal of ``family`` around the MAP
-    (module docstring; :func:`_proposal_draws`): the Laplace covariance scaled by the first
-    factor of ``inflations``, the next while the Pareto k exceeds
-    :data:`~bayes_roadload.config.LAPLACE_GOOD_PARETO_K` (small campaigns: the posterior's
-    coefficients widen with the noise scales and the Gaussian at the mode is too narrow); the
-    proposal with the smallest k is kept.  Returns resampled draws, Pareto k, effective sample
-    size, the inflation used and the number of posterior evaluations."""
+    """``draws`` draws of the posterior by PSIS from proposals of ``family`` around the MAP
+    (module docstring).  ``combine`` "mixture": one set of ``draws`` draws of the mixture of
+    the Laplace covariance scaled by each of ``inflations`` (:func:`_mixture_draws`);
+    "sequential": the proposal scaled by the first factor of ``inflations``, the next while the
+    Pareto k exceeds :data:`~bayes_roadload.config.LAPLACE_GOOD_PARETO_K`, the one with the
+    smallest k kept (up to ``len(inflations) x draws`` evaluations).  Returns resampled draws,
+    Pareto k, effective sample size, the inflation used (NaN for a mixture) and the number of
+    posterior evaluations."""
     import arviz as az
 
+    if combine not in PROPOSAL_COMBINATIONS:
+        raise ValueError(f"combine must be one of {PROPOSAL_COMBINATIONS}, got {combine!r}")
+    if combine == "mixture":
+        proposals = [(lambda: _mixture_draws(y_map, chol, draws, family, tuple(inflations), rng), math.nan)]
+    else:
+        proposals = [((lambda s=s: _proposal_draws(y_map, chol, draws, family, s, rng)), s) for s in inflations]
     best, evaluations = None, 0
-    for inflation in inflations:
-        ys, log_q = _proposal_draws(y_map, chol, draws, family, inflation, rng)
+    for propose, inflation in proposals:
+        ys, log_q = propose()
         log_p = -np.asarray(comp._fns["f_many"](jnp.asarray(ys), _data(problem)))
         evaluations += draws
         log_w = np.where(np.isfinite(log_p), log_p - log_q, -np.inf)
@@ -263,7 +303,8 @@ def fit_laplace(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pool
                 noise: str = "integrated", robust: bool = False, draws: int = DEFAULT_LAPLACE_DRAWS,
                 seed: int = 0, start: dict[str, float] | None = None, importance: bool = True,
                 proposal: str = config.LAPLACE_PROPOSAL_FAMILY,
-                inflations: tuple[float, ...] = config.LAPLACE_PROPOSAL_INFLATION) -> LaplaceFit:
+                inflations: tuple[float, ...] = config.LAPLACE_PROPOSAL_INFLATION,
+                combine: str = config.LAPLACE_PROPOSAL_COMBINE) -> LaplaceFit:
     """MAP + Laplace fit of a campaign, compiled once per kind of campaign.
 
     The same starting values (:func:`~bayes_roadload.inference.nuts.initial_values`) and, for
@@ -271,8 +312,9 @@ def fit_laplace(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pool
     :func:`~bayes_roadload.inference.nuts.fit_nuts`; then ``draws`` independent draws of the
     Gaussian approximation at the MAP -- with ``importance`` (default) corrected by
     Pareto-smoothed importance sampling (module docstring) from ``proposal`` ("t" or "normal")
-    proposals scaled by ``inflations`` in turn (:func:`_importance_draws`).  ``start`` (free parameter ->
-    value) replaces the least-squares start
+    proposals scaled by ``inflations``, their mixture or in turn (``combine``,
+    :func:`_importance_draws`).  ``start`` (sample site -> value: the free parameters, and the
+    noise scales and spreads where known) replaces the least-squares start
     (:func:`~bayes_roadload.inference.nuts.initial_values`).
 
     Campaigns with the same model, number of runs and padded length share one compilation:
@@ -300,7 +342,7 @@ def fit_laplace(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pool
     t_is = time.perf_counter()
     if importance:
         ys, k, ess, inflation, evaluations = _importance_draws(comp, problem, y_map, chol, draws, rng, proposal,
-                                                               tuple(inflations))
+                                                               tuple(inflations), combine)
         diagnostics = {"pareto_k": k, "is_ess": ess, "proposal_inflation": inflation,
                        "is_evaluations": evaluations}
     else:

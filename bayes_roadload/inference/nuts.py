@@ -248,7 +248,9 @@ def with_fixed(spec: ModelSpec, values: dict[str, float]) -> ModelSpec:
 def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, float] | None = None) -> dict[str, Any]:
     """Constrained starting values from the classical joint least-squares fit, or, with
     ``start`` (free parameter -> value, e.g. a known population mean), from those values, the
-    first measured speeds and sigma 0.05 m/s without the least-squares fit.  An estimate its
+    first measured speeds and sigma 0.05 m/s without the least-squares fit; ``start`` may also
+    give the integrated noise's intensity ``q_mps_per_sqrt_s`` and the spreads ``tau_*``
+    (positive values; otherwise they start at 0.002 and at their prior's mode).  An estimate its
     prior all but excludes (:func:`most_implausible_estimate`) starts at the prior's centre and
     the others are refitted with it there, the worst first, until none is left.
     Latent-wind problems start from per-run still-air fits (:func:`_latent_wind_start`)."""
@@ -294,6 +296,11 @@ def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, flo
         init["student_df"] = 10.0
     for name in problem.varying:
         init[f"tau_{name}"] = 0.5 * config.TAU_PRIOR_SCALES[name]
+    if start is not None:  # noise intensity and spreads known from elsewhere (a source fit's posterior)
+        for k in (("q_mps_per_sqrt_s",) if problem.integrated_noise else ()) + tuple(f"tau_{n}" for n in problem.varying):
+            v = start.get(k)
+            if v is not None and math.isfinite(v) and v > 0.0:
+                init[k] = float(v)
     return with_apparent(problem, init)
 
 
@@ -579,8 +586,13 @@ def newton_map(fg, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *,
         v, d = evaluate(y)
         return (v, d) if math.isfinite(v) else (best["f"] + 1e6 * (1.0 + abs(best["f"])), d)
 
-    def hess(y):
-        return finite_hessian(g, y, run_index)[0]
+    last_hessian: dict[bytes, tuple[np.ndarray, float]] = {}
+
+    def hess(y):  # the last one kept: trust-exact's Hessian at its final iterate is the Laplace one
+        y = np.asarray(y, float)
+        last_hessian.clear()
+        last_hessian[y.tobytes()] = finite_hessian(g, y, run_index)
+        return last_hessian[y.tobytes()][0]
 
     method, fallback, n_iter, message = "trust-exact", "", 0, ""
     res = None
@@ -617,7 +629,7 @@ def newton_map(fg, y0: np.ndarray, run_index: np.ndarray, scale: np.ndarray, *,
     grad_max = float(np.max(np.abs(grad))) if np.all(np.isfinite(grad)) else math.inf
     decrement = math.inf   # unless the Hessian at the optimum is positive definite
     try:
-        hmat, step = finite_hessian(g, y, run_index, steps=(1e-4, 1e-6, 1e-3))
+        hmat, step = last_hessian.get(y.tobytes()) or finite_hessian(g, y, run_index, steps=(1e-4, 1e-6, 1e-3))
         cov_y, min_eig, n_clipped = laplace_covariance(hmat)
         replaced = False
         if min_eig > 0.0 and np.all(np.isfinite(grad)):   # unclipped: clipping would understate it

@@ -171,6 +171,20 @@ def test_plan_through_the_batch_door(conditions):
     assert records.groupby("n_pairs")["time_compile_s"].min().max() < 0.5 * records["time_compile_s"].max()
 
 
+def test_refits_start_from_the_population_and_its_noise_medians(conditions):
+    """The refits start at the population means and, where positive, at the medians of the
+    source posterior's noise intensity and spreads (a spread whose median is 0 keeps the
+    default start)."""
+    tau = {"AD": np.linspace(1e-4, 3e-4, 50), "BD": np.zeros(50)}
+    pop = _population(conditions, tau=tau, sigma=0.05, q=0.0013)
+    job = plan_jobs(pop, pairs=(1,), simulations=1, type_b=False)[0]
+    start = dict(job.start)
+    for k in ("AD", "BD", "CD0"):
+        assert start[k] == pytest.approx(conditions.truth[k], rel=1e-12)
+    assert start["q_mps_per_sqrt_s"] == pytest.approx(0.0013) and start["tau_AD"] == pytest.approx(2e-4)
+    assert "tau_BD" not in start
+
+
 def _bisect(pairs, curves, assurance=0.8):
     """Run sizes_to_fit to its end against assurance curves (quantity -> size -> assurance);
     returns the table of the simulated sizes and the rounds taken."""
