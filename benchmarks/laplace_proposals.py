@@ -44,11 +44,13 @@ DOC = ROOT / "docs" / "planning.md"
 BEGIN, END = "<!-- laplace proposals: begin -->", "<!-- laplace proposals: end -->"
 QUANTITIES = ("AD", "BD", "CD0", "F50_N")
 SCHEMES = {  # name: (family, inflations, combine); the names of earlier records are kept
-    "t5 1.0/1.5/2.0 (shipped)": ("t", (1.0, 1.5, 2.0), "sequential"),
+    "t5 1.0/1.5/2.0": ("t", (1.0, 1.5, 2.0), "sequential"),
     "normal 1.1/1.25/1.5": ("normal", (1.1, 1.25, 1.5), "sequential"),
     "normal 1.1": ("normal", (1.1,), "sequential"),
     "normal 1.35": ("normal", (1.35,), "sequential"),
     "t5 mixture 1.0/1.5/2.0": ("t", (1.0, 1.5, 2.0), "mixture"),
+    "t5 1.5/2.0": ("t", (1.5, 2.0), "sequential"),
+    "t5 mixture 1.5/2.0": ("t", (1.5, 2.0), "mixture"),
 }
 
 
@@ -61,7 +63,7 @@ def _half_widths(samples) -> dict[str, float]:
     return out
 
 
-def run(fit_dir: Path, pairs: list[int], campaigns: int, note: str, schemes: list[str]) -> None:
+def run(fit_dir: Path, pairs: list[int], campaigns: int, note: str, schemes: list[str], nuts: bool = True) -> None:
     from bayes_roadload.analysis.batch import run_job
     from bayes_roadload.analysis.planning import half_widths, plan_jobs, population_from_samples
     from bayes_roadload.data import load_campaign
@@ -87,6 +89,9 @@ def run(fit_dir: Path, pairs: list[int], campaigns: int, note: str, schemes: lis
                          "pareto_k": d["pareto_k"], "is_ess": d["is_ess"], "inflation": d["proposal_inflation"],
                          "evaluations": d["is_evaluations"], "importance_s": fit.timings["importance_s"],
                          "map_s": fit.timings["map_s"]})
+        if not nuts:
+            _write(rows, base)
+            continue
         # the posterior itself on both sides: no Type B draws added (the Laplace fits above have none)
         rec = run_job(dataclasses.replace(job, method="nuts", type_b=False, name=job.name.replace("laplace", "nuts")))
         frame = pd.DataFrame([rec])
@@ -94,28 +99,41 @@ def run(fit_dir: Path, pairs: list[int], campaigns: int, note: str, schemes: lis
                                                                   for q in QUANTITIES},
                      "gate_pass": bool(rec["gate_pass"]), "gates_failed": rec.get("gates_failed", ""),
                      "fit_s": float(rec["time_fit_s"])})
-        with RECORDS.open("a") as f:
-            for r in rows:
-                f.write(json.dumps(r) + "\n")
-        print(json.dumps({"pairs": base["pairs"], "simulation": base["simulation"],
-                          **{r["method"]: {q: round(v, 3) for q, v in r["half_width_pct"].items()} for r in rows}}),
-              flush=True)
+        _write(rows, base)
+
+
+def _write(rows: list[dict], base: dict) -> None:
+    with RECORDS.open("a") as f:
+        for r in rows:
+            f.write(json.dumps(r) + "\n")
+    print(json.dumps({"pairs": base["pairs"], "simulation": base["simulation"],
+                      **{r["method"]: {q: round(v, 3) for q, v in r["half_width_pct"].items()} for r in rows}}),
+          flush=True)
 
 
 def summary(records: pd.DataFrame) -> pd.DataFrame:
-    """Per size and scheme: the median and range of the half-width ratio to NUTS over campaigns
-    and quantities, the median Pareto k, effective sample size and posterior evaluations."""
+    """Per refitted model, size and scheme: the median and range of the half-width ratio to NUTS
+    over campaigns and quantities (where the invocation ran NUTS: "-" otherwise), the share of
+    refits whose Pareto k fails the gate, the median k, effective sample size and posterior
+    evaluations."""
+    from bayes_roadload.config import LAPLACE_GOOD_PARETO_K, LAPLACE_MAX_PARETO_K
+
+    records = records.assign(refit_model=records["model"].map(lambda m: Path(str(m)).stem))
     key = ["date", "pairs", "simulation"]  # each invocation refits its own campaigns with NUTS
     nuts = records[records["method"] == "nuts"].set_index(key)["half_width_pct"]
     rows = []
-    for (pairs, method), g in records[records["method"] != "nuts"].groupby(["pairs", "method"], sort=True):
+    for (model, pairs, method), g in records[records["method"] != "nuts"].groupby(["refit_model", "pairs", "method"],
+                                                                                  sort=True):
         ratios = [r["half_width_pct"][q] / nuts.loc[(r["date"], r["pairs"], r["simulation"])][q]
                   for _, r in g.iterrows() if (r["date"], r["pairs"], r["simulation"]) in nuts.index
                   for q in QUANTITIES]
-        rows.append({"pairs": int(pairs), "scheme": method, "campaigns": len(g),
-                     "median ratio": round(float(np.median(ratios)), 3),
-                     "ratio 10-90 %": f"{np.quantile(ratios, 0.1):.2f}-{np.quantile(ratios, 0.9):.2f}",
-                     "median k": round(float(g["pareto_k"].median()), 2),
+        k = g["pareto_k"].astype(float)
+        rows.append({"model": model, "pairs": int(pairs), "scheme": method, "campaigns": len(g),
+                     "median ratio": round(float(np.median(ratios)), 3) if ratios else "-",
+                     "ratio 10-90 %": f"{np.quantile(ratios, 0.1):.2f}-{np.quantile(ratios, 0.9):.2f}" if ratios else "-",
+                     f"k > {LAPLACE_GOOD_PARETO_K}": f"{int((k > LAPLACE_GOOD_PARETO_K).sum())} / {len(k)}",
+                     f"k > {LAPLACE_MAX_PARETO_K} (gate)": f"{int((k > LAPLACE_MAX_PARETO_K).sum())} / {len(k)}",
+                     "median k": round(float(k.median()), 2),
                      "median ESS": round(float(g["is_ess"].median())),
                      "mean evaluations": round(float(g["evaluations"].mean())),
                      "mean correction s": round(float(g["importance_s"].mean()), 2)})
@@ -132,12 +150,13 @@ def docs() -> None:
     records = pd.read_json(RECORDS, lines=True)
     table = summary(records)
     nuts = records[records["method"] == "nuts"]
-    text = (f"Generated by `benchmarks/laplace_proposals.py --docs` from `{RECORDS.relative_to(ROOT)}`: "
-            f"{nuts.groupby('pairs').size().to_dict()} future campaigns per size (pairs: campaigns) of the "
-            "12-pair reference fit's population, each refitted by MAP + Laplace with every importance scheme "
-            f"(same MAP) and by NUTS with the fit's defaults ({int(nuts['gate_pass'].sum())} of {len(nuts)} "
-            "NUTS fits passed their gates).  Ratio: Laplace / NUTS 95 % half-width of AD, BD, CD0 and "
-            "F50_N, over campaigns and quantities.\n\n" + _markdown(table))
+    text = (f"Generated by `benchmarks/laplace_proposals.py --docs` from `{RECORDS.relative_to(ROOT)}`: future "
+            "campaigns of the 12-pair reference fit's population (by refitted model), each refitted by MAP + "
+            "Laplace with every importance scheme of its invocation (same MAP) and, except with `--no-nuts`, "
+            f"by NUTS with the fit's defaults ({nuts.groupby('pairs').size().to_dict()} NUTS refits by size, "
+            f"{int(nuts['gate_pass'].sum())} of {len(nuts)} passed their gates).  Ratio: Laplace / NUTS 95 % "
+            "half-width of AD, BD, CD0 and F50_N, over campaigns and quantities ('-': no NUTS refit).  A refit "
+            "whose k exceeds the gate fails it.\n\n" + _markdown(table))
     replace_section(DOC, BEGIN, END, text, heading="## 9. The importance correction's proposal against NUTS")
 
 
@@ -149,6 +168,8 @@ def main() -> None:
     p.add_argument("--note", default="")
     p.add_argument("--schemes", nargs="+", default=list(SCHEMES), choices=list(SCHEMES), metavar="SCHEME",
                    help=f"the importance schemes to run (default: all of {list(SCHEMES)})")
+    p.add_argument("--no-nuts", action="store_true",
+                   help="compare the schemes with each other only (no NUTS refit: no half-width ratio)")
     p.add_argument("--docs", action="store_true", help="only regenerate the docs section from the records")
     a = p.parse_args()
     if a.docs:
@@ -158,9 +179,9 @@ def main() -> None:
         from plan_time import reference_fit
 
         with tempfile.TemporaryDirectory(prefix="laplace_proposals_") as tmp:
-            run(reference_fit(Path(tmp)), a.pairs, a.campaigns, a.note, a.schemes)
+            run(reference_fit(Path(tmp)), a.pairs, a.campaigns, a.note, a.schemes, not a.no_nuts)
     else:
-        run(a.fit_dir, a.pairs, a.campaigns, a.note, a.schemes)
+        run(a.fit_dir, a.pairs, a.campaigns, a.note, a.schemes, not a.no_nuts)
     docs()
 
 
