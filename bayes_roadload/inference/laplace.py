@@ -1,14 +1,15 @@
 """MAP + Laplace fits that share one compilation across same-shaped campaigns.
 
-:func:`~bayes_roadload.inference.nuts.find_map` compiles the potential of each campaign
-afresh: the campaign's data are constants of the compiled code.  A study that fits many
-simulated campaigns of the same size (test planning, the withheld-effect suite) would spend
-most of its time compiling.  Here the data (the padded runs, and for hierarchical fits the
-run sensitivities and offsets) are *arguments* of the compiled functions, so every campaign
-with the same model, run count and padded length reuses one compilation: the numpyro
-potential and its gradient (:func:`numpyro.infer.util.potential_energy`), the map between
-constrained and unconstrained values, the run-effect linearisation and the road load of the
-draws.
+:func:`~bayes_roadload.inference.nuts.find_map` compiles the potential of each fit (its
+:class:`~bayes_roadload.inference.shift.PotentialProgram`, which that fit's Type B step
+reuses).  A study that fits many simulated campaigns of the same size (test planning, the
+withheld-effect suite) would spend most of its time compiling.  Here one
+:class:`CompiledProblem` per structure of problem is kept in the process: the same potential
+program, the data (the padded runs, the run effects' sensitivities and offsets, the vehicle
+and the fixed values) as *arguments*, so every campaign with the same model, run count and
+padded length reuses one compilation of the numpyro potential and its gradient
+(:func:`numpyro.infer.util.potential_energy`), the map between constrained and unconstrained
+values, the run-effect linearisation and the road load of the draws.
 
 :func:`fit_laplace` is the cheap fit: the same problem, starting values, re-linearisation
 and trust-region Newton as the NUTS path (:func:`~bayes_roadload.inference.nuts.
@@ -52,6 +53,7 @@ from .bayes import (
 )
 from .nuts import MapResult, initial_values, newton_map, site_layout, unconstrained_posterior
 from .results import draws_at_once
+from .shift import PotentialProgram
 from .spec import ModelSpec
 
 DEFAULT_LAPLACE_DRAWS = config.LAPLACE_DRAWS
@@ -59,136 +61,179 @@ PROPOSAL_DF = config.LAPLACE_PROPOSAL_DF
 PROPOSAL_FAMILIES = ("t", "normal")
 PROPOSAL_COMBINATIONS = ("mixture", "sequential")
 
-_CACHE: dict[Any, "CompiledProblem"] = {}
+_CACHE: list["CompiledProblem"] = []
 _CACHE_MAX = 16
 
 
-def _data(problem: FitProblem) -> tuple:
-    """The arguments that differ between same-shaped campaigns (the apparent coefficients'
-    line too: :attr:`~bayes_roadload.inference.bayes.FitProblem.apparent`)."""
-    return (problem.batch, problem.run_jacobian, problem.run_offsets, problem.apparent)
-
-
-def _with_data(template: FitProblem, data: tuple) -> FitProblem:
-    batch, jac, offsets, apparent = data
-    return dataclasses.replace(template, batch=batch, run_jacobian=jac, run_offsets=offsets, apparent=apparent)
-
-
-def _key(problem: FitProblem) -> tuple:
-    """What the compiled functions depend on besides their arguments."""
-    shapes = tuple(np.shape(x) for x in problem.batch)
-    return (repr(problem.spec), problem.model, tuple(sorted(problem.fixed.items())), problem.free,
-            problem.pooling, problem.noise, problem.robust, problem.calibration_pairs,
-            problem.driveline_channel, problem.gradients, shapes, problem.mass_kg, problem.frontal_area_m2,
-            tuple(problem.driveline_curve))
+def _with_placeholders(problem: FitProblem) -> FitProblem:
+    """A hierarchical problem before its run effects are linearised, with zero sensitivities
+    and offsets of their final shapes: the same structure as after (its compiled functions
+    take them as data)."""
+    if problem.varying and problem.run_jacobian is None:
+        r, n, k = problem.n_runs, np.shape(problem.batch.time_s)[-1], len(problem.varying)
+        return dataclasses.replace(problem, run_jacobian=np.zeros((r, n, k)), run_offsets=np.zeros((r, k)))
+    return problem
 
 
 @dataclass
 class CompiledProblem:
-    """The jitted functions of one kind of problem, with the data as arguments.
+    """The jitted functions of one structure of problem, with the data as arguments.
+
+    Built on the problem's :class:`~bayes_roadload.inference.shift.PotentialProgram` (the
+    potential and its gradient in the O(1)-scaled coordinates ``y``, and the constrained values,
+    as the MAP of a NUTS fit and its Type B step use them), which decides what is data (every
+    array and float of the problem: the runs, the run effects' sensitivities, the mass, the fixed
+    values) and what is structure (the model variant, priors, sites, shapes): every problem of
+    the same structure reuses the compilation.  Adds the functions of a Laplace fit: the
+    potential of many draws, the start's scaled coordinates, the run-effect linearisation, the
+    run effects' means and the road load of the draws.
 
     Attributes
     ----------
-    template : a problem of this kind (its data are not used).
-    unravel : flat unconstrained vector -> dict of sites.
-    scale : O(1) scaling of the flat unconstrained vector.
-    run_index : run of each flat coordinate (-1: shared).
+    program : the potential program (its ``template``, ``unravel``, ``scale``, ``run_index``).
     sites : the sample sites (a start may also hold deterministic ones, e.g. the tyre-lag
         model's coefficients beside its apparent ones).
     """
 
-    template: FitProblem
-    unravel: Any
-    scale: np.ndarray
-    run_index: np.ndarray
+    program: PotentialProgram
     sites: tuple[str, ...] = ()
     _fns: dict = field(default_factory=dict)
 
+    @property
+    def template(self) -> FitProblem:
+        return self.program.template
+
+    @property
+    def scale(self) -> np.ndarray:
+        return self.program.scale
+
+    @property
+    def run_index(self) -> np.ndarray:
+        return self.program.run_index
+
+    @property
+    def unravel(self):
+        return self.program.unravel
+
     @classmethod
     def build(cls, problem: FitProblem, init: dict[str, Any]) -> "CompiledProblem":
-        if problem.varying and problem.run_jacobian is None:  # placeholders of the right shape
-            r, n, k = problem.n_runs, np.shape(problem.batch.time_s)[-1], len(problem.varying)
-            problem = dataclasses.replace(problem, run_jacobian=np.zeros((r, n, k)), run_offsets=np.zeros((r, k)))
+        problem = _with_placeholders(problem)
         # the sites from an abstract trace (nuts.unconstrained_posterior): running the model
         # op by op took ~3 s per kind of campaign
         z0 = unconstrained_posterior(problem, init).z0
-        unravel, scale, run_index = site_layout(problem, z0)
-        self = cls(template=problem, unravel=unravel, scale=scale, run_index=run_index, sites=tuple(z0))
+        self = cls(program=PotentialProgram(problem, z0), sites=tuple(z0))
         self._compile()
         return self
 
+    def data(self, problem: FitProblem) -> list | None:
+        """``problem``'s data as the compiled functions take them; None for another structure."""
+        return self.program.data_of(_with_placeholders(problem))
+
+    def _data(self, problem: FitProblem) -> list:
+        data = self.data(problem)
+        if data is None:
+            raise ValueError("the problem's structure differs from the compiled one")
+        return data
+
     def _compile(self) -> None:
-        tpl, unravel, scale = self.template, self.unravel, jnp.asarray(self.scale)
+        program, unravel, scale = self.program, self.program.unravel, jnp.asarray(self.program.scale)
+        with_data, sites = program.with_data, self.sites
 
-        def objective(y, data):
-            return potential_energy(coastdown_model, (_with_data(tpl, data),), {}, unravel(y * scale))
+        def objective(y, leaves):
+            return potential_energy(coastdown_model, (with_data(leaves),), {}, unravel(y * scale))
 
-        sites = self.sites
-
-        def to_scaled(init, data):
-            z = unconstrain_fn(coastdown_model, (_with_data(tpl, data),), {}, {k: init[k] for k in sites})
+        def to_scaled(init, leaves):
+            z = unconstrain_fn(coastdown_model, (with_data(leaves),), {}, {k: init[k] for k in sites})
             return ravel_pytree(z)[0] / scale
 
-        def constrain(y, data):
-            return constrain_fn(coastdown_model, (_with_data(tpl, data),), {}, unravel(y * scale),
+        def constrain(y, leaves):
+            return constrain_fn(coastdown_model, (with_data(leaves),), {}, unravel(y * scale),
                                 return_deterministic=True)
 
-        def linearise(base, v0, batch):
-            return run_sensitivities(tpl, base, v0, batch)
+        def linearise(base, v0, leaves):
+            problem = with_data(leaves)
+            return run_sensitivities(problem, base, v0, problem.batch)
 
-        def effect_means(sample, data):
-            return _effects_posterior(_with_data(tpl, data), sample)[0]
+        def effect_means(sample, leaves):
+            return _effects_posterior(with_data(leaves), sample)[0]
 
-        def derived(values):
-            return road_load_summary(tpl.model, dict(tpl.fixed, **values), tpl.mass_kg, tpl.frontal_area_m2,
-                                     driveline_curve=tpl.driveline_curve)
+        def derived(values, leaves):
+            p = with_data(leaves)
+            return road_load_summary(p.model, dict(p.fixed, **values), p.mass_kg, p.frontal_area_m2,
+                                     driveline_curve=p.driveline_curve)
 
         # the potential of many draws in batches (results.draws_at_once): all 2000 importance
         # draws of a 24-pair campaign at once held 8.6 GB, and the batch door then cleared JAX's
         # caches after every other refit (docs/planning.md section 7)
-        batch = draws_at_once(tpl)
+        batch = draws_at_once(program.template)
 
-        def objective_many(ys, data):
-            return jax.lax.map(lambda y: objective(y, data), ys, batch_size=batch)
+        def objective_many(ys, leaves):
+            return jax.lax.map(lambda y: objective(y, leaves), ys, batch_size=batch)
 
         self._fns = {
-            "fg": jax.jit(jax.value_and_grad(objective)), "to_scaled": jax.jit(to_scaled),
-            "f_many": jax.jit(objective_many),
-            "constrain": jax.jit(constrain), "constrain_many": jax.jit(jax.vmap(constrain, in_axes=(0, None))),
+            "to_scaled": jax.jit(to_scaled), "f_many": jax.jit(objective_many),
+            "constrain_many": jax.jit(jax.vmap(constrain, in_axes=(0, None))),
             "linearise": jax.jit(linearise), "effect_means": jax.jit(effect_means),
-            "derived": jax.jit(jax.vmap(derived)),
+            "derived": jax.jit(jax.vmap(derived, in_axes=(0, None))),
         }
 
     # ------------------------------------------------------------------ pieces
+    def potential(self, problem: FitProblem, y: np.ndarray) -> tuple[Any, Any]:
+        """The potential and its gradient at the scaled point ``y``."""
+        return self.program.fg(self._data(problem), y)
+
+    def potential_many(self, problem: FitProblem, ys: np.ndarray) -> np.ndarray:
+        """The potential at each scaled point of ``ys`` [n, d], in batches."""
+        return np.asarray(self._fns["f_many"](jnp.asarray(ys), self._data(problem)))
+
+    def to_scaled(self, problem: FitProblem, init: dict[str, Any]) -> np.ndarray:
+        """The scaled coordinates of the constrained values ``init`` (its sample sites)."""
+        return np.asarray(self._fns["to_scaled"]({k: jnp.asarray(v) for k, v in init.items()}, self._data(problem)))
+
+    def constrained_many(self, problem: FitProblem, ys: np.ndarray) -> dict[str, Any]:
+        """The constrained and deterministic values of each scaled point of ``ys``."""
+        return self._fns["constrain_many"](jnp.asarray(ys), self._data(problem))
+
+    def effect_means(self, problem: FitProblem, sample: dict[str, Any]) -> np.ndarray:
+        """The run effects' means at one population sample (:func:`~bayes_roadload.inference.
+        bayes.population_sample`)."""
+        return np.asarray(self._fns["effect_means"]({k: jnp.asarray(v) for k, v in sample.items()},
+                                                    self._data(problem)))
+
+    def derived(self, problem: FitProblem, values: dict[str, Any]) -> dict[str, Any]:
+        """The road load of draws of the free parameters (arrays [draw])."""
+        return self._fns["derived"]({k: jnp.asarray(v) for k, v in values.items()}, self._data(problem))
+
     def linearise(self, problem: FitProblem, reference: dict[str, Any], offsets=None) -> FitProblem:
         """:func:`~bayes_roadload.inference.bayes.linearise_run_effects`, compiled once."""
         if not problem.varying:
             return problem
         base, offsets = run_effect_reference(problem, reference, offsets)
-        jac = self._fns["linearise"](base, jnp.asarray(reference["v0_mps"], float), problem.batch)
+        jac = self._fns["linearise"](base, jnp.asarray(reference["v0_mps"], float), self._data(problem))
         return dataclasses.replace(problem, run_jacobian=np.asarray(jac), run_offsets=offsets)
 
     def find_map(self, problem: FitProblem, init: dict[str, Any], max_iter: int = 200) -> MapResult:
-        """MAP and Laplace covariance of ``problem`` (same kind as the template) from the
+        """MAP and Laplace covariance of ``problem`` (same structure as the template) from the
         constrained starting values ``init``."""
         t0 = time.perf_counter()
-        data = _data(problem)
-        fg = self._fns["fg"]
-        y0 = np.asarray(self._fns["to_scaled"]({k: jnp.asarray(v) for k, v in init.items()}, data))
-        res = newton_map(lambda y: fg(y, data), y0, self.run_index, self.scale, max_iter=max_iter)
+        data = self._data(problem)
+        y0 = self.to_scaled(problem, init)
+        res = newton_map(lambda y: self.program.fg(data, y), y0, self.run_index, self.scale, max_iter=max_iter)
         z = self.unravel(jnp.asarray(res["y"] * self.scale))
-        constrained = self._fns["constrain"](jnp.asarray(res["y"]), data)
+        constrained = self.program.constrained(data, np.asarray(res["y"]) * self.scale)
         return MapResult.of(res, z, constrained, time.perf_counter() - t0)
 
 
 def compiled_problem(problem: FitProblem, init: dict[str, Any]) -> CompiledProblem:
-    """The :class:`CompiledProblem` of ``problem``'s kind (cached in this process)."""
-    key = _key(problem)
-    hit = _CACHE.get(key)
-    if hit is None:
-        if len(_CACHE) >= _CACHE_MAX:
-            _CACHE.pop(next(iter(_CACHE)))
-        hit = _CACHE[key] = CompiledProblem.build(problem, init)
+    """The :class:`CompiledProblem` of ``problem``'s structure (the last ``_CACHE_MAX`` kept in
+    this process)."""
+    for hit in _CACHE:
+        if hit.data(problem) is not None:
+            return hit
+    if len(_CACHE) >= _CACHE_MAX:
+        _CACHE.pop(0)
+    hit = CompiledProblem.build(problem, init)
+    _CACHE.append(hit)
     return hit
 
 
@@ -283,7 +328,7 @@ def _importance_draws(comp: CompiledProblem, problem: FitProblem, y_map: np.ndar
     best, evaluations = None, 0
     for propose, inflation in proposals:
         ys, log_q = propose()
-        log_p = -np.asarray(comp._fns["f_many"](jnp.asarray(ys), _data(problem)))
+        log_p = -comp.potential_many(problem, ys)
         evaluations += draws
         log_w = np.where(np.isfinite(log_p), log_p - log_q, -np.inf)
         lw, k = az.psislw(log_w - np.max(log_w[np.isfinite(log_w)]))
@@ -327,9 +372,7 @@ def fit_laplace(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pool
     problem = comp.linearise(problem, init)
     if problem.varying:
         first = comp.find_map(problem, init)
-        means = np.asarray(comp._fns["effect_means"](
-            {k: jnp.asarray(v) for k, v in population_sample(problem, first.constrained).items()},
-            _data(problem)))
+        means = comp.effect_means(problem, population_sample(problem, first.constrained))
         problem = comp.linearise(problem, first.constrained, means)
         init = dict(init, **{k: v for k, v in first.constrained.items() if k in init})
     result = comp.find_map(problem, init)
@@ -347,9 +390,9 @@ def fit_laplace(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pool
                        "is_evaluations": evaluations}
     else:
         ys = y_map + rng.standard_normal((draws, y_map.size)) @ chol.T
-    constrained = comp._fns["constrain_many"](jnp.asarray(ys), _data(problem))
+    constrained = comp.constrained_many(problem, ys)
     samples = {k: np.asarray(v)[None] for k, v in constrained.items()}
-    derived = comp._fns["derived"]({k: jnp.asarray(samples[k][0]) for k in problem.free})
+    derived = comp.derived(problem, {k: samples[k][0] for k in problem.free})
     samples.update({k: np.asarray(v)[None] for k, v in derived.items()})
     fit = LaplaceFit(problem=problem, map=result, samples=samples, truth=campaign.truth, diagnostics=diagnostics)
     fit.timings = {"map_s": result.time_s, "importance_s": time.perf_counter() - t_is if importance else 0.0,

@@ -75,11 +75,9 @@ def test_same_shaped_campaigns_share_one_compilation(two_campaigns):
 
 
 def test_the_potential_of_many_draws_goes_in_batches_and_equals_one_by_one(two_campaigns, monkeypatch):
-    """``f_many`` (the importance draws' potential) runs over the draws in batches of
+    """``potential_many`` (the importance draws' potential) runs over the draws in batches of
     results.PER_DRAW_BATCH_ELEMENTS / samples (results.draws_at_once); with batches of 3 draws, 7 draws give exactly
     the one-by-one values (a remainder batch included)."""
-    import jax.numpy as jnp
-
     from bayes_roadload.inference import laplace, results
 
     c = two_campaigns[1]
@@ -88,11 +86,10 @@ def test_the_potential_of_many_draws_goes_in_batches_and_equals_one_by_one(two_c
     monkeypatch.setattr(results, "PER_DRAW_BATCH_ELEMENTS", 3 * per_draw)
     init = initial_values(problem, c)
     comp = laplace.CompiledProblem.build(problem, init)
-    y0 = np.asarray(comp._fns["to_scaled"]({k: jnp.asarray(v) for k, v in init.items()},
-                                           laplace._data(problem)))
+    y0 = comp.to_scaled(problem, init)
     ys = y0 + 0.01 * np.random.default_rng(0).standard_normal((7, y0.size))
-    many = np.asarray(comp._fns["f_many"](jnp.asarray(ys), laplace._data(problem)))
-    one = np.array([float(comp._fns["fg"](jnp.asarray(y), laplace._data(problem))[0]) for y in ys])
+    many = comp.potential_many(problem, ys)
+    one = np.array([float(comp.potential(problem, y)[0]) for y in ys])
     assert np.all(np.isfinite(one)) and np.ptp(one) > 0
     np.testing.assert_allclose(many, one, rtol=1e-12, atol=1e-9)
 
@@ -134,8 +131,8 @@ def test_importance_draws_recover_a_posterior_wider_than_the_laplace_one(combine
 
     d, width, df = 3, 1.6, 4
     target = stats.multivariate_t(loc=np.zeros(d), shape=width**2 * np.eye(d), df=df)
-    comp = SimpleNamespace(_fns={"f_many": lambda ys, data: -target.logpdf(np.asarray(ys))})
-    problem = SimpleNamespace(batch=None, run_jacobian=None, run_offsets=None, apparent=None)
+    comp = SimpleNamespace(potential_many=lambda problem, ys: -target.logpdf(np.asarray(ys)))
+    problem = None
     draws = 4000
     ys, k, ess, inflation, evaluations = _importance_draws(
         comp, problem, np.zeros(d), np.eye(d), draws, np.random.default_rng(3), "t", (1.0, 1.5, 2.0), combine)
