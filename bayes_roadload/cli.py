@@ -723,6 +723,8 @@ def _cmd_plan(args) -> int:
     pairs = sorted(set(args.pairs))
     if args.simulations < 1:
         raise ValueError("--simulations must be at least 1")
+    if not 0 <= args.confirm <= args.simulations:
+        raise ValueError("--confirm N refits N of the simulated campaigns with NUTS: 0 <= N <= --simulations")
     quantities = [t.quantity for t in targets]
     floors = None
     if not args.no_type_b:
@@ -818,6 +820,8 @@ def _cmd_plan(args) -> int:
     caveat = small_size_caveat(rec, population.pooling)
     if caveat:
         echo(caveat)
+    if args.confirm:
+        _plan_confirm(args, population, fit_model, targets, records, rec, out, progress)
     if failed or not_converged:
         echo(f"!! {failed} refits raised (left out of the table), {not_converged} failed their gate (MAP not "
               "converged, or importance weights with Pareto k > 0.7: the Laplace approximation is poor there; kept, "
@@ -835,6 +839,42 @@ def _cmd_plan(args) -> int:
           + (", regulation.csv" if (out / "regulation.csv").exists() else ""))
     return 0
 
+
+
+def _plan_confirm(args, population, fit_model, targets, records, rec, out: Path, progress: bool) -> None:
+    """``plan --confirm N``: NUTS refits of the first N simulated campaigns at each recommended
+    size, against their MAP + Laplace refits (:func:`~bayes_roadload.analysis.planning.
+    confirm_table`); writes confirm.csv and says where the posterior itself does not meet the
+    target."""
+    import dataclasses
+
+    from .analysis.batch import batch_client, run_batch
+    from .analysis.planning import confirm_table, plan_jobs
+
+    sizes = sorted({int(n) for n in rec.loc[rec["reached"].astype(bool), "n_pairs"]})
+    if not sizes:
+        echo("\n--confirm: no target is reached at a simulated size; nothing to confirm")
+        return
+    sampler = dataclasses.replace(_sampler(args), progress_bar=False)
+    echo(f"\nConfirming with NUTS: {args.confirm} of the simulated campaigns at {sizes} pairs ...")
+    jobs = [dataclasses.replace(j, sampler=sampler)
+            for j in plan_jobs(population, sizes, simulations=args.confirm, model=fit_model,
+                               confidence=args.confidence, seed=args.seed, method="nuts",
+                               type_b=not args.no_type_b)]
+    with batch_client(args.workers, args.scheduler) as client:
+        nuts = run_batch(jobs, client, progress=progress)
+    nuts.to_csv(out / "confirm_records.csv", index=False)
+    table = confirm_table(records, nuts, targets, args.confidence, args.assurance)
+    table.to_csv(out / "confirm.csv", index=False)
+    echo(f"{'quantity':<15}{'pairs':>6}{'campaigns':>10}{'NUTS/Laplace':>14}{'assurance Laplace':>19}"
+         f"{'NUTS [95 % interval]':>26}")
+    for _, r in table.iterrows():
+        flag = "  OPTIMISTIC: by NUTS this size does not meet the target" if r["optimistic"] else ""
+        echo(f"{r['quantity']:<15}{int(r['n_pairs']):>6}{int(r['campaigns']):>10}{r['median_ratio']:>14.2f}"
+             f"{r['laplace_assurance']:>19.2f}{r['nuts_assurance']:>10.2f} [{r['nuts_assurance_low']:.2f}, "
+             f"{r['nuts_assurance_high']:.2f}]{flag}")
+    echo("(NUTS/Laplace: median ratio of the half-widths on the same campaigns; below 1 the plan's refits are "
+         f"too narrow and its answers optimistic; wrote {out / 'confirm.csv'}, confirm_records.csv)")
 
 
 def _cmd_import_vbox(args) -> int:
@@ -1092,6 +1132,10 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--simulations", type=int, default=config.PLAN_SIMULATIONS,
                     help="future campaigns per size: half of them at every size, the rest only at sizes where a "
                          "target's assurance is still undecided (Wilson 95 %% interval around --assurance)")
+    pl.add_argument("--confirm", type=int, default=0, metavar="N",
+                    help="refit N of the simulated campaigns at each recommended size with NUTS (--warmup, "
+                         "--draws, --chains) and compare their half-widths and assurance with the MAP + Laplace "
+                         "refits' (confirm.csv); 0: no confirmation")
     pl.add_argument("--all-simulations", action="store_true",
                     help="simulate --simulations campaigns at every size (no adaptive top-up)")
     pl.add_argument("--all-sizes", action="store_true",

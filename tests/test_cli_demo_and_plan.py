@@ -96,8 +96,17 @@ def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys):
     assert "pairs needed" in printed and "Regulation precision" in printed
     assert "NOT REACHABLE" in printed and "none (Type B floor)" in printed
 
-    code = main(args + ["--no-type-b", "--out", str(tmp_path / "data_only")])
+    # --confirm: the recommended size refitted by NUTS (one campaign, short chains), beside its
+    # Laplace refit of the same campaign
+    code = main(args + ["--no-type-b", "--confirm", "1", "--warmup", "100", "--draws", "100",
+                        "--out", str(tmp_path / "data_only")])
     assert code == 0 and not (tmp_path / "data_only" / "type_b_floors.csv").exists()
+    confirm = pd.read_csv(tmp_path / "data_only" / "confirm.csv")
+    reached = pd.read_csv(tmp_path / "data_only" / "recommendation.csv").query("reached")
+    assert len(reached) and set(confirm["n_pairs"]) == set(reached["n_pairs"].astype(int))
+    assert (confirm["campaigns"] == 1).all() and (confirm["median_ratio"] > 0).all()
+    assert confirm["nuts_assurance"].isin([0.0, 1.0]).all()
+    assert "Confirming with NUTS" in capsys.readouterr().out
     data_only = pd.read_csv(tmp_path / "data_only" / "plan.csv").set_index("quantity")
     assert data_only.loc["CD0", "median_half_width"] < cd0["median_half_width"]
     assert "reachable" not in pd.read_csv(tmp_path / "data_only" / "recommendation.csv").columns

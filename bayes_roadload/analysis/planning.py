@@ -504,6 +504,49 @@ def sizes_to_fit(table: pd.DataFrame, pairs: Sequence[int], quantities: Sequence
     return sorted(out - {int(n) for n in simulated})
 
 
+def confirm_table(laplace: pd.DataFrame, nuts: pd.DataFrame, targets: Sequence[Target],
+                  confidence: float = config.PLAN_CONFIDENCE,
+                  assurance: float = config.PLAN_ASSURANCE) -> pd.DataFrame:
+    """The MAP + Laplace refits checked by NUTS refits of the same future campaigns (the same
+    ``n_pairs`` and ``simulation``, hence the same seed: :func:`plan_jobs`).
+
+    Returns one row per target quantity and ``n_pairs`` of ``nuts``: ``campaigns`` (refitted
+    without error by both), ``median_ratio`` (NUTS / Laplace half-width of each campaign, the
+    median), ``laplace_assurance`` and ``nuts_assurance`` over those campaigns (the share whose
+    half-width meets the target), the Wilson 95 % interval of the latter (``nuts_assurance_low``,
+    ``nuts_assurance_high``), ``nuts_gate_pass_frac`` and ``optimistic``: the interval lies
+    below ``assurance``, so by the posterior itself the size does not meet the target."""
+    from .batch import _wilson
+
+    lap, nut = successful(laplace), successful(nuts)
+    rows = []
+    for n, g in nut.groupby("n_pairs", sort=True):
+        g = g.drop_duplicates("simulation").set_index("simulation")
+        ref = lap[lap["n_pairs"] == n].drop_duplicates("simulation").set_index("simulation")
+        common = g.index.intersection(ref.index)
+        for t in targets:
+            if f"{t.quantity}_mean" not in g or f"{t.quantity}_mean" not in ref:
+                continue
+            hn = half_widths(g.loc[common], t.quantity, confidence, t.relative)
+            hl = half_widths(ref.loc[common], t.quantity, confidence, t.relative)
+            ok = (hn.notna() & hl.notna()).to_numpy()
+            m = int(ok.sum())
+            if m == 0:
+                continue
+            met = int((hn[ok] <= t.value).sum())
+            lo, hi = _wilson(met, m)
+            rows.append({"quantity": t.quantity, "n_pairs": int(n), "campaigns": m,
+                         "median_ratio": float(np.median(hn[ok].to_numpy() / hl[ok].to_numpy())),
+                         "laplace_assurance": float((hl[ok] <= t.value).mean()), "nuts_assurance": met / m,
+                         "nuts_assurance_low": lo, "nuts_assurance_high": hi,
+                         "nuts_gate_pass_frac": float(g.loc[common, "gate_pass"].astype(bool).mean())
+                         if "gate_pass" in g else math.nan,
+                         "optimistic": bool(hi < assurance)})
+    return pd.DataFrame(rows, columns=["quantity", "n_pairs", "campaigns", "median_ratio", "laplace_assurance",
+                                       "nuts_assurance", "nuts_assurance_low", "nuts_assurance_high",
+                                       "nuts_gate_pass_frac", "optimistic"])
+
+
 def recommend(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE, by: Sequence[str] = (),
               floors: pd.DataFrame | None = None) -> pd.DataFrame:
     """The smallest ``n_pairs`` whose assurance reaches ``assurance``, per (group and) quantity;

@@ -15,6 +15,7 @@ from bayes_roadload.analysis.planning import (
     undecided_sizes,
     Population,
     Target,
+    confirm_table,
     pilot_summary_half_widths,
     plan_jobs,
     plan_table,
@@ -103,6 +104,28 @@ def test_plan_table_and_recommendation():
     assert recommend(table, 0.7).iloc[0]["n_pairs"] == 2
     tight = recommend(plan_table(rec, [Target.parse("CD0=0.1%")]), 0.8).iloc[0]
     assert tight["n_pairs"] is None and not tight["reached"]
+
+
+def test_the_nuts_confirmation_pairs_campaigns_and_flags_an_optimistic_size():
+    """confirm_table compares each NUTS refit with the Laplace refit of the same campaign
+    (n_pairs, simulation): NUTS half-widths 1.5x the Laplace ones (two of them 0.9 %) give their median ratio;
+    at 4 pairs all ten Laplace refits meet CD0=1 % and two of ten NUTS refits do, whose Wilson
+    interval (0.06-0.51) lies below the 0.8 required: optimistic.  A NUTS refit without its
+    Laplace twin, and one that raised, are left out."""
+    lap_hw = [0.7, 0.75, 0.72, 0.78, 0.74, 0.79, 0.71, 0.73, 0.76, 0.77]
+    laplace = _records({4: lap_hw}).assign(simulation=list(range(10)))
+    nuts = _records({4: [1.5 * h for h in lap_hw] + [0.5, 0.5]}).assign(simulation=list(range(12)), gate_pass=True)
+    nuts.loc[11, "error"] = "raised"
+    nuts.loc[[2, 5], ["CD0_q2.5", "CD0_q97.5"]] = [[0.4 * 0.991, 0.4 * 1.009]] * 2   # these two meet 1 %
+    table = confirm_table(laplace, nuts, [Target.parse("CD0=1%")], assurance=0.8).set_index("n_pairs")
+    row = table.loc[4]
+    assert row["campaigns"] == 10
+    assert row["laplace_assurance"] == pytest.approx(1.0) and row["nuts_assurance"] == pytest.approx(0.2)
+    ratios = np.array([1.5 * h for h in lap_hw]) / np.array(lap_hw)
+    ratios[[2, 5]] = 0.9 / np.array(lap_hw)[[2, 5]]
+    assert row["median_ratio"] == pytest.approx(np.median(ratios))
+    assert row["nuts_assurance_high"] < 0.8 and bool(row["optimistic"])
+    assert not confirm_table(laplace, nuts, [Target.parse("CD0=2%")], assurance=0.8)["optimistic"].any()
 
 
 def test_a_target_below_its_type_b_floor_is_never_reached():
