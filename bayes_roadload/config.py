@@ -327,6 +327,15 @@ LSQ_PAD_SIZES_PER_OCTAVE = 8
 so same-shaped campaigns then share their compilation (padded samples are masked: the
 estimates of a one-pair campaign padded from 493 to 512 samples agreed to 1e-13)."""
 
+LSQ_START_MAX_JACOBIAN_BYTES = 512e6
+"""Largest dense Jacobian (8 bytes x padded samples x (free coefficients + runs)) for which the
+Bayesian fits' least-squares start fits every run's initial speed jointly with the
+coefficients (``LsqSettings(initial_speed="fitted")``); above it the start keeps the measured
+first speeds and fits the coefficients alone (:func:`bayes_roadload.inference.nuts.
+start_lsq_settings`).  The fitted speeds' Jacobian grows as the square of the campaign: 385 MB
+at 162 pairs (the fit peaked at 4.7 GB), 3.6 GB at 500 pairs, where its forward-mode
+evaluation took the process past 23 GB in under a minute and the system killed it."""
+
 PARALLEL_CHAIN_GROWTH_BYTES = 27.0
 """Resident memory that numpyro's parallel chains (one XLA device per chain) gain per
 observation (:attr:`~bayes_roadload.inference.problem.Problem.n_observations`) per iteration of

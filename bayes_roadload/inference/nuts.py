@@ -55,7 +55,7 @@ from .bayes import (
     with_apparent,
 )
 from .problem import Problem
-from .lsq import fit_lsq
+from .lsq import DEFAULT_LSQ, LsqSettings, fit_lsq
 from .spec import ModelSpec
 
 log = logging.getLogger(__name__)
@@ -245,6 +245,20 @@ def with_fixed(spec: ModelSpec, values: dict[str, float]) -> ModelSpec:
                                initial={k: v for k, v in spec.initial.items() if k not in values})
 
 
+def start_lsq_settings(problem: FitProblem) -> LsqSettings:
+    """The least-squares start's settings for ``problem``: every run's initial speed fitted with
+    the coefficients (the default, :data:`~bayes_roadload.inference.lsq.DEFAULT_LSQ`) while
+    the dense Jacobian of every padded sample against both stays within
+    :data:`~bayes_roadload.config.LSQ_START_MAX_JACOBIAN_BYTES`, else the measured first
+    speeds and the coefficients alone (a Jacobian of one column per coefficient)."""
+    jacobian_bytes = 8.0 * np.size(problem.batch.speed_mps) * (len(problem.free) + problem.n_runs)
+    if jacobian_bytes <= config.LSQ_START_MAX_JACOBIAN_BYTES:
+        return DEFAULT_LSQ
+    log.info("least-squares start: the measured first speeds (fitting all %d runs' speeds would need a "
+             "%.1f GB Jacobian)", problem.n_runs, jacobian_bytes / 1e9)
+    return dataclasses.replace(DEFAULT_LSQ, initial_speed="measured")
+
+
 def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, float] | None = None) -> dict[str, Any]:
     """Constrained starting values from the classical joint least-squares fit, or, with
     ``start`` (free parameter -> value, e.g. a known population mean), from those values, the
@@ -266,13 +280,15 @@ def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, flo
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                g = fit_lsq(campaign, problem.spec, grouping="all").groups[0]
+                settings = start_lsq_settings(problem)
+                g = fit_lsq(campaign, problem.spec, grouping="all", settings=settings).groups[0]
                 centres: dict[str, float] = {}
                 free = {k: v for k, v in problem.priors.items() if k in problem.free}
                 while (worst := most_implausible_estimate({k: v for k, v in free.items() if k not in centres},
                                                           g.estimate)) is not None:
                     centres[worst] = free[worst].center  # the others refitted with it there
-                    g = fit_lsq(campaign, with_fixed(problem.spec, centres), grouping="all").groups[0]
+                    g = fit_lsq(campaign, with_fixed(problem.spec, centres), grouping="all",
+                                settings=settings).groups[0]
                 init.update(centres)
             for k in problem.free:
                 val = g.estimate.get(k, math.nan)

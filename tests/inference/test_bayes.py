@@ -217,3 +217,28 @@ def test_reverting_noise_scores_the_reverting_residual(small_campaign, pooling):
         assert np.all(np.isfinite(np.asarray(run_log_likelihood(p, sample))))
     with pytest.raises(ValueError, match="reverting"):
         build_problem(small_campaign, "four_term", noise="reverting", robust=True)
+
+
+def test_the_least_squares_start_keeps_the_measured_speeds_above_its_jacobian_budget(small_campaign, monkeypatch):
+    """``initial_values`` fits every run's initial speed with the coefficients while the dense
+    Jacobian (8 bytes x padded samples x (free + runs)) fits config.LSQ_START_MAX_JACOBIAN_BYTES;
+    with a budget one byte below it the start keeps the measured first speeds and still fits
+    the coefficients (the same estimates to the least-squares fit with measured speeds)."""
+    from bayes_roadload.inference.lsq import fit_lsq
+    from bayes_roadload.inference.nuts import start_lsq_settings
+
+    p = build_problem(small_campaign, "three_term")
+    need = 8.0 * np.size(p.batch.speed_mps) * (len(p.free) + p.n_runs)
+    monkeypatch.setattr(config, "LSQ_START_MAX_JACOBIAN_BYTES", need)
+    assert start_lsq_settings(p).initial_speed == "fitted"
+    fitted = initial_values(p, small_campaign)
+    monkeypatch.setattr(config, "LSQ_START_MAX_JACOBIAN_BYTES", need - 1)
+    settings = start_lsq_settings(p)
+    assert settings.initial_speed == "measured"
+    measured = initial_values(p, small_campaign)
+    first = np.asarray(p.batch.speed_mps[:, 0])
+    np.testing.assert_array_equal(np.asarray(measured["v0_mps"]), first)
+    assert not np.array_equal(np.asarray(fitted["v0_mps"]), first)
+    g = fit_lsq(small_campaign, p.spec, grouping="all", settings=settings).groups[0]
+    for k in p.free:
+        assert measured[k] == pytest.approx(g.estimate[k], rel=1e-12)
