@@ -723,8 +723,11 @@ def _cmd_plan(args) -> int:
     pairs = sorted(set(args.pairs))
     if args.simulations < 1:
         raise ValueError("--simulations must be at least 1")
-    if not 0 <= args.confirm <= args.simulations:
-        raise ValueError("--confirm N refits N of the simulated campaigns with NUTS: 0 <= N <= --simulations")
+    # campaigns refitted at every simulated size (the rest only where a target stays undecided)
+    first = args.simulations if args.all_simulations else max(1, math.ceil(args.simulations / 2))
+    if not 0 <= args.confirm <= first:
+        raise ValueError(f"--confirm N refits N of the campaigns simulated at every size with NUTS: 0 <= N <= "
+                         f"{first} (half of --simulations, all of them with --all-simulations)")
     quantities = [t.quantity for t in targets]
     floors = None
     if not args.no_type_b:
@@ -748,7 +751,6 @@ def _cmd_plan(args) -> int:
     # (planning.sizes_to_fit; --all-sizes: every size), and half the simulations at a size, the
     # other half only where a target's assurance is still undecided (planning.undecided_sizes;
     # --all-simulations: all at once)
-    first = args.simulations if args.all_simulations else max(1, math.ceil(args.simulations / 2))
     echo(f"Population: {population.source}; {population.n_draws} draws; refitting {first} simulated campaigns at "
           + (f"each of {pairs} pairs" if args.all_sizes else
              f"the sizes among {pairs} pairs that locate each target's smallest passing size (bisection)")
