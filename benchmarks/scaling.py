@@ -158,7 +158,10 @@ def markdown(rec: dict) -> str:
     lines += ["", "Target: a 500-pair (1000-run) pooled fit within 600 s with its gates passed: "
               + ("not measured yet." if big is None else
                  f"{big['wall_s']:.0f} s, gates {'passed' if big['pass'] else 'failed'} -- "
-                 f"**{'met' if big['pass'] and big['wall_s'] <= TARGET_500_S else 'not met'}**."), ""]
+                 f"**{'met' if big['pass'] and big['wall_s'] <= TARGET_500_S else 'not met'}**."
+                 if big["rc"] in (0, 3) else
+                 f"the run ended with exit {big['rc']} after {big['wall_s']:.0f} s, before its gates were decided -- "
+                 f"**not met**."), ""]
     return "\n".join(lines) + "\n"
 
 
