@@ -495,9 +495,9 @@ LAPLACE_PROPOSAL_INFLATION = (1.5, 2.0)
 approximation (the spreads' right tail; on one pair, pooled, the coefficients' posterior sd is
 ~2x the Laplace sd: k 0.81 at 1.0, 0.63 at 2.0), so the Laplace scale itself is not tried:
 in ``benchmarks/laplace_proposals.py``'s records the sequence 1.0/1.5/2.0 kept 1.0 in 1 of 26
-refits at 2-12 pairs, and 1.5/2.0 failed the k gate in 0 of 12 tyre-lag refits at 6 and 12
-pairs (1.0/1.5/2.0: 2 of 12) with 3000 posterior evaluations on average against 5300
-(docs/planning.md section 9)."""
+refits at 2-12 pairs, and 1.5/2.0 failed the k gate in 0 of 14 tyre-lag refits at 6 and 12
+pairs (1.0/1.5/2.0: 3 of 14) with 3000 posterior evaluations on average against 5000-5700
+(docs/planning.md section 9; there also: both give 6-pair tyre-lag intervals ~0.85 of NUTS')."""
 
 LAPLACE_PROPOSAL_COMBINE = "sequential"
 """How the proposals of ``LAPLACE_PROPOSAL_INFLATION`` are used: "sequential" (in turn while the
