@@ -43,7 +43,7 @@ RECORDS = ROOT / "benchmarks" / "records" / "performance" / "laplace_proposals.j
 DOC = ROOT / "docs" / "planning.md"
 BEGIN, END = "<!-- laplace proposals: begin -->", "<!-- laplace proposals: end -->"
 QUANTITIES = ("AD", "BD", "CD0", "F50_N")
-SCHEMES = {  # name: (family, inflations, combine); the names of earlier records are kept
+SCHEMES = {  # name (as the records call it): (family, inflations, combine)
     "t5 1.0/1.5/2.0": ("t", (1.0, 1.5, 2.0), "sequential"),
     "normal 1.1/1.25/1.5": ("normal", (1.1, 1.25, 1.5), "sequential"),
     "normal 1.1": ("normal", (1.1,), "sequential"),
@@ -112,7 +112,8 @@ def _write(rows: list[dict], base: dict) -> None:
 
 
 def summary(records: pd.DataFrame) -> pd.DataFrame:
-    """Per refitted model, size and scheme: the median and range of the half-width ratio to NUTS
+    """Per refitted model, size and scheme (refits: one per campaign and invocation; invocations
+    with the same sizes refit the same campaigns): the median and range of the half-width ratio to NUTS
     over campaigns and quantities (where the invocation ran NUTS: "-" otherwise), the share of
     refits whose Pareto k fails the gate, the median k, effective sample size and posterior
     evaluations."""
@@ -128,7 +129,7 @@ def summary(records: pd.DataFrame) -> pd.DataFrame:
                   for _, r in g.iterrows() if (r["date"], r["pairs"], r["simulation"]) in nuts.index
                   for q in QUANTITIES]
         k = g["pareto_k"].astype(float)
-        rows.append({"model": model, "pairs": int(pairs), "scheme": method, "campaigns": len(g),
+        rows.append({"model": model, "pairs": int(pairs), "scheme": method, "refits": len(g),
                      "median ratio": round(float(np.median(ratios)), 3) if ratios else "-",
                      "ratio 10-90 %": f"{np.quantile(ratios, 0.1):.2f}-{np.quantile(ratios, 0.9):.2f}" if ratios else "-",
                      f"k > {LAPLACE_GOOD_PARETO_K}": f"{int((k > LAPLACE_GOOD_PARETO_K).sum())} / {len(k)}",

@@ -51,7 +51,7 @@ from .bayes import (
     run_effect_reference,
     run_sensitivities,
 )
-from .nuts import MapResult, initial_values, newton_map, site_layout, unconstrained_posterior
+from .nuts import MapResult, initial_values, newton_map, unconstrained_posterior
 from .results import draws_at_once
 from .shift import PotentialProgram
 from .spec import ModelSpec
@@ -188,7 +188,10 @@ class CompiledProblem:
 
     def to_scaled(self, problem: FitProblem, init: dict[str, Any]) -> np.ndarray:
         """The scaled coordinates of the constrained values ``init`` (its sample sites)."""
-        return np.asarray(self._fns["to_scaled"]({k: jnp.asarray(v) for k, v in init.items()}, self._data(problem)))
+        return self._scaled(init, self._data(problem))
+
+    def _scaled(self, init: dict[str, Any], data: list) -> np.ndarray:
+        return np.asarray(self._fns["to_scaled"]({k: jnp.asarray(v) for k, v in init.items()}, data))
 
     def constrained_many(self, problem: FitProblem, ys: np.ndarray) -> dict[str, Any]:
         """The constrained and deterministic values of each scaled point of ``ys``."""
@@ -217,7 +220,7 @@ class CompiledProblem:
         constrained starting values ``init``."""
         t0 = time.perf_counter()
         data = self._data(problem)
-        y0 = self.to_scaled(problem, init)
+        y0 = self._scaled(init, data)
         res = newton_map(lambda y: self.program.fg(data, y), y0, self.run_index, self.scale, max_iter=max_iter)
         z = self.unravel(jnp.asarray(res["y"] * self.scale))
         constrained = self.program.constrained(data, np.asarray(res["y"]) * self.scale)
