@@ -700,9 +700,9 @@ def _cmd_plan(args) -> int:
     import pandas as pd
 
     from . import config
-    from .analysis.batch import batch_client, run_batch
-    from .analysis.planning import (Target, plan_jobs, plan_table, plot_plan, recommend, refit_work, sizes_to_fit,
-                                    small_size_caveat, type_b_floors, undecided_sizes)
+    from .analysis.batch import batch_client, compilation_cache_dir, run_batch
+    from .analysis.planning import (Target, plan_jobs, plan_table, plot_plan, recommend, refit_size, refit_work,
+                                    sizes_to_fit, small_size_caveat, type_b_floors, undecided_sizes)
     from .analysis.regulation import regulation_checks
 
     if args.identify:
@@ -770,9 +770,12 @@ def _cmd_plan(args) -> int:
             if not args.all_sizes:
                 echo(f"round {round_} (at most {rounds}): {todo} pairs")
             # the batch door draws a bar on a terminal and plain lines elsewhere; --quiet: neither
+            # a new size's programs are compiled by its first refit, then loaded by the other
+            # workers from the persistent compilation cache (batch_map's lead)
             new = run_batch(plan_jobs(population, todo, simulations=first, model=fit_model,
                                       confidence=args.confidence, seed=args.seed, type_b=not args.no_type_b),
-                            client, progress=progress, weight=refit_work)
+                            client, progress=progress, weight=refit_work,
+                            lead=refit_size if compilation_cache_dir() else None)
             simulated += todo
             if first < args.simulations:
                 new_table = plan_table(new, targets, args.confidence)

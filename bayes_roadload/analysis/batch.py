@@ -54,7 +54,7 @@ import time
 import traceback
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
+from typing import Any, Callable, Hashable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -502,6 +502,13 @@ def usable_cores() -> int:
         return max(os.cpu_count() or 1, 1)
 
 
+NANNY_ENVIRON_UNSET = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+"""Dask settings of a local cluster's workers that this package removes: Dask's nanny sets
+``MALLOC_TRIM_THRESHOLD_=65536`` in every worker (its "automatically trim memory"), and a set
+trim threshold turns off glibc's dynamic mmap threshold, so every block of 128 KiB or more that
+XLA allocates is a fresh ``mmap`` whose pages fault in again on each refit."""
+
+
 def worker_environment(workers: int, cores: int | None = None) -> dict[str, str]:
     """Environment of the worker processes of a local cluster of ``workers`` processes.
 
@@ -570,8 +577,10 @@ def batch_client(workers: int | None = None, scheduler: str | None = None, *,
     if workers <= 1:
         yield None
         return
+    import dask
+
     env = worker_environment(workers)
-    with _environ(env):  # XLA reads its flags when the spawned worker first imports JAX
+    with _environ(env), dask.config.set(NANNY_ENVIRON_UNSET):  # XLA reads its flags when the worker imports JAX
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                                memory_limit=memory_limit, silence_logs=logging.ERROR, env=env)
     with cluster, Client(cluster) as client:
@@ -656,7 +665,8 @@ def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None
               progress: bool = True, desc: str = "batch",
               on_result: Callable[[Any], None] | None = None,
               on_error: Callable[[Any, BaseException, str], Any] | None = None,
-              weight: Callable[[Any], float] | None = None) -> list[Any]:
+              weight: Callable[[Any], float] | None = None,
+              lead: Callable[[Any], Hashable] | None = None) -> list[Any]:
     """``[fn(item) for item in items]`` through the batch door, in item order.
 
     Parameters
@@ -683,6 +693,14 @@ def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None
         items already submitted have finished (Dask) or at once (in this process, executor).
     weight : callable, optional
         ``weight(item)``: the item's share of the work, for the time left (default: equal).
+    lead : callable, optional
+        ``lead(item)``: a key shared by the items that run the same compiled programs (e.g. the
+        campaign size of planning refits).  With a Dask client the first item of each key is
+        submitted alone and the key's other items when it has finished, so that the other
+        workers load its programs from the persistent compilation cache
+        (:func:`~bayes_roadload._jax.enable_compilation_cache`) instead of compiling them at
+        the same time (the items of other keys run meanwhile).  Useful only with that cache
+        on; ignored without a Dask client.
 
     Returns
     -------
@@ -711,10 +729,22 @@ def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None
         if _is_dask_client(client):
             from distributed import as_completed
 
-            futures = client.map(fn, items, pure=False)
-            index = {f.key: i for i, f in enumerate(futures)}
-            for future in as_completed(futures):
+            groups: dict[Hashable, list[int]] = {}
+            for i, item in enumerate(items):
+                groups.setdefault(lead(item) if lead is not None else None, []).append(i)
+            waiting = {g[0]: g[1:] for g in groups.values()} if lead is not None else {}
+            index: dict[Any, int] = {}
+
+            def submit(indices: list[int]) -> list[Any]:
+                futures = client.map(fn, [items[i] for i in indices], pure=False)
+                index.update({f.key: i for f, i in zip(futures, indices)})
+                return futures
+
+            pending = as_completed(submit(list(waiting) if lead is not None else list(range(len(items)))))
+            for future in pending:
                 i = index[future.key]
+                if waiting.get(i):  # a key's first item has finished: its programs are compiled
+                    pending.update(submit(waiting.pop(i)))
                 if future.status == "finished":
                     settle(i, future.result())
                 else:  # the job raised, its worker died, or it was cancelled
@@ -764,7 +794,8 @@ def _error_record(job: Any, exc: BaseException, tb: str) -> dict[str, Any]:
 
 def run_batch(jobs: Iterable[FitJob], client: Any | None = None, *, progress: bool = True,
               on_record: Callable[[dict[str, Any]], None] | None = None,
-              executor: Any | None = None, weight: Callable[[Any], float] | None = None) -> pd.DataFrame:
+              executor: Any | None = None, weight: Callable[[Any], float] | None = None,
+              lead: Callable[[Any], Hashable] | None = None) -> pd.DataFrame:
     """Run many fit jobs and collect their records, one row per job, in job order.
 
     Parameters
@@ -782,6 +813,9 @@ def run_batch(jobs: Iterable[FitJob], client: Any | None = None, *, progress: bo
         Same as ``client`` (the keyword of callers written for ``concurrent.futures``).
     weight : callable, optional
         A job's share of the work for the progress bar's time left (:func:`batch_map`).
+    lead : callable, optional
+        A key of the jobs that share compiled programs: the first of each runs before the
+        others start (:func:`batch_map`).
 
     Returns
     -------
@@ -792,7 +826,7 @@ def run_batch(jobs: Iterable[FitJob], client: Any | None = None, *, progress: bo
     if client is not None and executor is not None:
         raise TypeError("give client or executor, not both")
     records = batch_map(run_job, jobs, client if client is not None else executor, progress=progress,
-                        desc="fits", on_result=on_record, on_error=_error_record, weight=weight)
+                        desc="fits", on_result=on_record, on_error=_error_record, weight=weight, lead=lead)
     return pd.DataFrame.from_records(records)
 
 

@@ -456,6 +456,12 @@ def refit_work(job: FitJob) -> float:
     return 1.0 + float(job.tags.get("n_pairs", 0))
 
 
+def refit_size(job: FitJob) -> int:
+    """A planning refit's campaign size (pairs): the refits of one size share their compiled
+    programs (:func:`~bayes_roadload.analysis.batch.batch_map`'s ``lead``)."""
+    return int(job.tags["n_pairs"])
+
+
 def undecided_sizes(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANCE) -> list[int]:
     """The sizes (``n_pairs``) at which some target is still undecided: the Wilson 95 % interval
     of its assurance (``assurance`` x ``n_sims`` refits meeting the target) contains the required

@@ -140,6 +140,43 @@ def test_local_workers_share_this_process_s_compilation_cache(client):
     assert len(per_worker) == 2 and set(per_worker.values()) == {compilation_cache_dir()}
 
 
+def _malloc_trim_of_worker():
+    import os
+
+    return os.environ.get("MALLOC_TRIM_THRESHOLD_")
+
+
+def test_local_workers_keep_glibc_s_dynamic_mmap_threshold(client):
+    """Dask's nanny sets ``MALLOC_TRIM_THRESHOLD_`` in its workers, which turns off glibc's
+    dynamic mmap threshold; the batch door's local workers are started without it
+    (``batch.NANNY_ENVIRON_UNSET``)."""
+    assert set(client.run(_malloc_trim_of_worker).values()) == {None}
+
+
+def _timed(item):
+    import time
+
+    start = time.time()
+    time.sleep(0.3)
+    return item, start, time.time()
+
+
+def test_lead_runs_each_key_s_first_item_before_the_others(client):
+    """``batch_map(..., lead=key)``: the first item of each key finishes before any other item
+    of that key starts (its programs compiled once, then loaded from the persistent cache),
+    the keys' first items run side by side, and the results keep the items' order."""
+    from bayes_roadload.analysis.batch import batch_map
+
+    items = [("a", 0), ("b", 0), ("a", 1), ("a", 2), ("b", 1)]
+    out = batch_map(_timed, items, client, progress=False, lead=lambda item: item[0])
+    assert [r[0] for r in out] == items
+    by = {item: (start, end) for item, start, end in out}
+    for key in ("a", "b"):
+        leader_end = by[(key, 0)][1]
+        assert all(by[i][0] >= leader_end for i in items if i[0] == key and i[1] > 0)
+    assert by[("a", 0)][0] < by[("b", 0)][1] and by[("b", 0)][0] < by[("a", 0)][1]  # side by side
+
+
 def test_options_are_checked_and_passed_through():
     parser = batch_parser()
     args = parser.parse_args(["batch", "d", "--out", "o", "--workers", "2", "--chains", "2", "--robust",
