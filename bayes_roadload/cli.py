@@ -723,11 +723,12 @@ def _cmd_plan(args) -> int:
     pairs = sorted(set(args.pairs))
     if args.simulations < 1:
         raise ValueError("--simulations must be at least 1")
-    # campaigns refitted at every simulated size (the rest only where a target stays undecided)
-    first = args.simulations if args.all_simulations else max(1, math.ceil(args.simulations / 2))
+    # campaigns refitted at every simulated size, and the further steps where a target stays undecided
+    first = args.simulations if args.all_simulations else max(1, math.ceil(args.simulations / config.PLAN_STEPS))
     if not 0 <= args.confirm <= first:
         raise ValueError(f"--confirm N refits N of the campaigns simulated at every size with NUTS: 0 <= N <= "
-                         f"{first} (half of --simulations, all of them with --all-simulations)")
+                         f"{first} (the first of {config.PLAN_STEPS} steps of --simulations, all of them with "
+                         "--all-simulations)")
     quantities = [t.quantity for t in targets]
     floors = None
     if not args.no_type_b:
@@ -748,14 +749,15 @@ def _cmd_plan(args) -> int:
                  "calibration) lowers the floor; `plan --no-type-b` plans the data's share alone")
         quantities = [q for q in quantities if q not in unreachable]
     # adaptive in two ways: the sizes by bisection on each target's smallest size meeting it
-    # (planning.sizes_to_fit; --all-sizes: every size), and half the simulations at a size, the
-    # other half only where a target's assurance is still undecided (planning.undecided_sizes;
-    # --all-simulations: all at once)
+    # (planning.sizes_to_fit; --all-sizes: every size), and the simulations at a size in steps,
+    # each after the first only where a target's assurance is still undecided
+    # (planning.undecided_sizes; --all-simulations: all at once)
     echo(f"Population: {population.source}; {population.n_draws} draws; refitting {first} simulated campaigns at "
           + (f"each of {pairs} pairs" if args.all_sizes else
              f"the sizes among {pairs} pairs that locate each target's smallest passing size (bisection)")
           + f" with {fit_model} ({population.pooling}, MAP + Laplace)"
-          + (f", {args.simulations} where a target stays undecided" if first < args.simulations else "") + " ...")
+          + (f", {first} more at a time up to {args.simulations} where a target stays undecided"
+             if first < args.simulations else "") + " ...")
     progress = not args.no_progress and _output.isEnabledFor(logging.INFO)
     records = pd.DataFrame()
     simulated: list[int] = []
@@ -777,17 +779,20 @@ def _cmd_plan(args) -> int:
                             client, progress=progress, weight=refit_work,
                             lead=refit_size if compilation_cache_dir() else None)
             simulated += todo
-            if first < args.simulations:
+            done = first
+            while done < args.simulations:
                 new_table = plan_table(new, targets, args.confidence)
                 undecided = undecided_sizes(new_table, args.assurance) if not new_table.empty else []
-                if undecided:
-                    echo(f"undecided after {first} simulations at {undecided} pairs (a target's assurance within the "
-                          f"Wilson 95 % interval of {args.assurance:g}): {args.simulations - first} more at each ...")
-                    more = run_batch(plan_jobs(population, undecided, simulations=args.simulations, model=fit_model,
-                                               confidence=args.confidence, seed=args.seed, first=first,
-                                               type_b=not args.no_type_b),
-                                     client, progress=progress, weight=refit_work)
-                    new = pd.concat([new, more], ignore_index=True)
+                if not undecided:
+                    break
+                upto = min(done + first, args.simulations)
+                echo(f"undecided after {done} simulations at {undecided} pairs (a target's assurance within the "
+                      f"Wilson 95 % interval of {args.assurance:g}): {upto - done} more at each ...")
+                more = run_batch(plan_jobs(population, undecided, simulations=upto, model=fit_model,
+                                           confidence=args.confidence, seed=args.seed, first=done,
+                                           type_b=not args.no_type_b),
+                                 client, progress=progress, weight=refit_work)
+                new, done = pd.concat([new, more], ignore_index=True), upto
             records = pd.concat([records, new], ignore_index=True)
     skipped = [n for n in pairs if n not in simulated]
     if skipped and quantities:
@@ -1135,8 +1140,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--pairs", type=int, nargs="+", default=list(config.PLAN_PAIRS),
                     help="campaign sizes (pairs) to simulate")
     pl.add_argument("--simulations", type=int, default=config.PLAN_SIMULATIONS,
-                    help="future campaigns per size: half of them at every size, the rest only at sizes where a "
-                         "target's assurance is still undecided (Wilson 95 %% interval around --assurance)")
+                    help="future campaigns per size, at most: a quarter of them at every size, a quarter more at a "
+                         "time only at sizes where a target's assurance is still undecided (Wilson 95 %% interval "
+                         "around --assurance)")
     pl.add_argument("--confirm", type=int, default=0, metavar="N",
                     help="refit N of the simulated campaigns at each recommended size with NUTS (--warmup, "
                          "--draws, --chains) and compare their half-widths and assurance with the MAP + Laplace "

@@ -534,6 +534,12 @@ PLAN_PAIRS = (1, 2, 3, 4, 6, 8, 12, 16, 24)
 PLAN_SIMULATIONS = 40
 """Future campaigns simulated per number of pairs (the assurance's binomial sd is <= 0.08)."""
 
+PLAN_STEPS = 4
+"""`plan` simulates a size's campaigns in this many equal steps (10 at a time of the default 40):
+after each step a size where every target's assurance is decided -- its Wilson 95 % interval
+excludes the required assurance (:func:`~bayes_roadload.analysis.planning.undecided_sizes`) --
+gets no more; a size far from a target is then settled by its first 10 refits."""
+
 PLAN_SMALL_SIZE_CAVEAT_PAIRS = 3
 """`plan` warns when a hierarchical plan recommends this many pairs or fewer: there the Laplace
 refits' intervals are narrower than NUTS' (median 0.75 of NUTS' half-width at 2 pairs,

@@ -7,6 +7,7 @@ import json
 
 import pandas as pd
 
+from bayes_roadload.analysis.planning import half_widths
 from bayes_roadload.cli import EXIT_REFUSED, main
 
 
@@ -95,6 +96,13 @@ def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "pairs needed" in printed and "Regulation precision" in printed
     assert "NOT REACHABLE" in printed and "none (Type B floor)" in printed
+    # the simulations come in steps (config.PLAN_STEPS: here 1 of the 2), the second only where
+    # a target's assurance is still undecided after the first (its Wilson interval holds 0.8)
+    # (one refit meeting the target: Wilson interval 0.21-1; one missing it: 0-0.79, decided)
+    f50 = plan.set_index("quantity").loc["F50_N"]
+    first_met = bool(half_widths(records[records["simulation"] == 0], "F50_N", 0.95).iloc[0] <= 3.0)
+    assert int(f50["n_sims"]) == len(records) == (2 if first_met else 1)
+    assert ("undecided after 1 simulations at [2] pairs" in printed) == first_met
 
     # --confirm: the recommended size refitted by NUTS (one campaign, short chains), beside its
     # Laplace refit of the same campaign
