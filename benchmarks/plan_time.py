@@ -4,7 +4,8 @@ fitted with ``fit`` and its defaults (hierarchical at 24 runs), then ``plan FIT_
 with every default (the sizes that locate each target by bisection among 9, 40 simulations
 per size at most, one worker per usable core), timed from before the process starts to its
 exit.  The record adds the refits per size, their mean time and the
-compile time from ``plan_records.csv``, and the recommendation.
+compile time from ``plan_records.csv``, the recommendation, and each target's assurance and
+simulations per size (``assurance``: quantity -> pairs -> [assurance, simulations]).
 
 Records: ``benchmarks/records/performance/plan_time.jsonl`` (one line per run);
 ``docs/planning.md`` section 7 quotes them.  ``--refits N --pairs P`` instead times N refits of
@@ -86,6 +87,8 @@ def summarise(plan_dir: Path, wall_s: float, args: str, note: str = "") -> dict:
         "recommendation": {r["quantity"]: _answer(r) for _, r in recommendation.iterrows()},
         **({"type_b_floors": {r["quantity"]: round(float(r["type_b_half_width"]), 3)
                               for _, r in recommendation.iterrows()}} if "type_b_half_width" in recommendation else {}),
+        "assurance": {q: {int(r["n_pairs"]): [round(float(r["assurance"]), 3), int(r["n_sims"])] for _, r in g.iterrows()}
+                      for q, g in pd.read_csv(plan_dir / "plan.csv").groupby("quantity")},
         "note": note}
 
 
