@@ -89,9 +89,14 @@ def main() -> None:
     p.add_argument("--seeds", type=int, nargs="+", required=True)
     p.add_argument("--records", type=Path, required=True, help="JSON lines, one per seed (appended)")
     a = p.parse_args()
+    import jax
+
     a.records.parent.mkdir(parents=True, exist_ok=True)
     for seed in a.seeds:
         rec = truth_likelihood(seed)
+        # each campaign has its own shapes: without this, one process reached the kernel's limit
+        # of memory mappings on the sixth seed (LLVM: "Cannot allocate memory")
+        jax.clear_caches()
         rec["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
         with a.records.open("a") as f:
             f.write(json.dumps(rec) + "\n")
