@@ -115,7 +115,7 @@ def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys):
     assert (confirm["campaigns"] == 1).all() and (confirm["median_ratio"] > 0).all()
     assert confirm["nuts_assurance"].isin([0.0, 1.0]).all()
     assert "Confirming with NUTS" in capsys.readouterr().out
-    # more NUTS refits than campaigns simulated at every size (half of --simulations 2): refused
+    # more NUTS refits than campaigns simulated at every size (the first step of --simulations 2): refused
     code = main(args + ["--confirm", "2", "--out", str(tmp_path / "too_many")])
     assert code == EXIT_REFUSED and "--confirm" in capsys.readouterr().err
     data_only = pd.read_csv(tmp_path / "data_only" / "plan.csv").set_index("quantity")
