@@ -14,7 +14,10 @@ best draw (a lower bound of that one) is about 9 nats on average, above 17 in 1 
 and above 21 in 0.1 %.  Also recorded: the speed log likelihood at the true coefficients with
 q scaled (its profile in q), and the posterior of q and C_D0 against their truths.
 
-    python benchmarks/sbc_truth_likelihood.py --seeds 124 46 3 6 \\
+The committed records: ``--seeds 124 46 0 1 2``, then ``--seeds 3 4`` (124 and 46: the
+arm's largest |z| of C_D0; 0-4: not chosen)::
+
+    python benchmarks/sbc_truth_likelihood.py --seeds 124 46 0 1 2 \\
         --records benchmarks/records/sbc/truth_likelihood.jsonl
 """
 
