@@ -729,10 +729,12 @@ def batch_map(fn: Callable[[Any], Any], items: Iterable[Any], client: Any | None
         if _is_dask_client(client):
             from distributed import as_completed
 
-            groups: dict[Hashable, list[int]] = {}
-            for i, item in enumerate(items):
-                groups.setdefault(lead(item) if lead is not None else None, []).append(i)
-            waiting = {g[0]: g[1:] for g in groups.values()} if lead is not None else {}
+            waiting: dict[int, list[int]] = {}  # a key's first item -> the key's other items
+            if lead is not None:
+                groups: dict[Hashable, list[int]] = {}
+                for i, item in enumerate(items):
+                    groups.setdefault(lead(item), []).append(i)
+                waiting = {g[0]: g[1:] for g in groups.values()}
             index: dict[Any, int] = {}
 
             def submit(indices: list[int]) -> list[Any]:
