@@ -1023,9 +1023,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     f = sub.add_parser("fit", help="fit a campaign (NUTS over all runs jointly, or classical least squares)")
     f.add_argument("campaign")
-    f.add_argument("--model", default=None, help="a name in models/ or a TOML path (see `models`); default "
-                                                "four_term (speed traces), split_f0_f2 (interval campaigns), "
-                                                "three_term (distance-time campaigns)")
+    f.add_argument("--model", default=None, help="a name in models/ or a TOML path (see `models`); default by data kind: "
+                                                "four_term_tyre_lag (speed traces; four_term with --method lsq), "
+                                                "split_f0_f2 (interval campaigns), three_term (distance-time campaigns), "
+                                                "undriven_spindown (spin-downs), four_term with a measured wind or else "
+                                                "three_term (steady state)")
     f.add_argument("--method", choices=("nuts", "lsq"), default="nuts")
     f.add_argument("--pooling", choices=("auto", "pooled", "hierarchical"), default="auto",
                    help="nuts: one set of coefficients, or run-level AD, BD, CD0 around population means; auto: "

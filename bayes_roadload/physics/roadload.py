@@ -26,6 +26,7 @@ PART_OF_TERM = {
     "aero_drag": "aero",
     "aero_drag_table": "aero",
     "aero_drag_saturating": "aero",
+    "aero_drag_levelling": "aero",
     "side_force_slip": "aero",
     "pitch_attitude": "aero",
     "driveline_polynomial": "driveline",
