@@ -794,71 +794,71 @@ def _cmd_plan(args) -> int:
                                  client, progress=progress, weight=refit_work)
                 new, done = pd.concat([new, more], ignore_index=True), upto
             records = pd.concat([records, new], ignore_index=True)
-    skipped = [n for n in pairs if n not in simulated]
-    if skipped and quantities:
-        echo(f"not simulated: {skipped} pairs (no target's smallest size can lie there, the assurance taken as "
-              "increasing with pairs; --all-sizes simulates them)")
-    records.to_csv(out / "plan_records.csv", index=False)
-    if records.empty:  # every target below its Type B floor: nothing to locate
-        pd.DataFrame(columns=["quantity", "n_pairs", "median_half_width", "assurance"]).to_csv(out / "plan.csv",
-                                                                                             index=False)
-        recommend(pd.DataFrame(), args.assurance, floors=floors).to_csv(out / "recommendation.csv", index=False)
-        echo(f"\nno target is reachable at any number of pairs: nothing simulated; wrote {out / 'plan.csv'} (empty), "
-             "recommendation.csv, type_b_floors.csv")
+        skipped = [n for n in pairs if n not in simulated]
+        if skipped and quantities:
+            echo(f"not simulated: {skipped} pairs (no target's smallest size can lie there, the assurance taken as "
+                  "increasing with pairs; --all-sizes simulates them)")
+        records.to_csv(out / "plan_records.csv", index=False)
+        if records.empty:  # every target below its Type B floor: nothing to locate
+            pd.DataFrame(columns=["quantity", "n_pairs", "median_half_width", "assurance"]).to_csv(out / "plan.csv",
+                                                                                                 index=False)
+            recommend(pd.DataFrame(), args.assurance, floors=floors).to_csv(out / "recommendation.csv", index=False)
+            echo(f"\nno target is reachable at any number of pairs: nothing simulated; wrote {out / 'plan.csv'} (empty), "
+                 "recommendation.csv, type_b_floors.csv")
+            return 0
+        failed = int(records["error"].notna().sum()) if "error" in records else 0
+        not_converged = int((~records["gate_pass"].fillna(False).astype(bool)).sum()) if "gate_pass" in records else 0
+        table = plan_table(records, targets, args.confidence)
+        table.to_csv(out / "plan.csv", index=False)
+        rec = recommend(table, args.assurance, floors=floors)
+        rec.to_csv(out / "recommendation.csv", index=False)
+        plot_plan(table, targets, out / "plan.png", assurance=args.assurance)
+        echo(f"\n{'quantity':<15}{'target':>10}  " + "".join(f"{n:>8}" for n in pairs) + "   pairs needed")
+        for t in targets:
+            rows = table[table["quantity"] == t.quantity].set_index("n_pairs")
+            if rows.empty:
+                echo(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  not a quantity of model {fit_model}")
+                continue
+            cells = "".join(f"{rows.loc[n, 'median_half_width']:>8.3g}" if n in rows.index else f"{'-':>8}" for n in pairs)
+            r = rec[rec["quantity"] == t.quantity].iloc[0]
+            below_floor = not bool(r.get("reachable", True))
+            need = f"{int(r['n_pairs'])}" if r["reached"] else \
+                ("none (Type B floor)" if below_floor else f"> {int(r['max_pairs_simulated'])}")
+            echo(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  {cells}   {need}")
+        echo(f"(median {100 * args.confidence:g} % half-width against pairs, in the target's units; pairs needed: "
+              f"smallest simulated n with P(half-width <= target) >= {args.assurance:g})")
+        caveat = small_size_caveat(rec, population.pooling)
+        if caveat:
+            echo(caveat)
+        if args.confirm:
+            _plan_confirm(args, population, fit_model, targets, records, rec, out, progress, client)
+        if failed or not_converged:
+            echo(f"!! {failed} refits raised (left out of the table), {not_converged} failed their gate (MAP not "
+                  "converged, or importance weights with Pareto k > 0.7: the Laplace approximation is poor there; kept, "
+                  "see gate_pass_frac in plan.csv)")
+        if "pair" in campaign.runs and campaign.runs["pair"].nunique() >= 2:
+            reg = regulation_checks(campaign, population.model if args.fit_model is None else fit_model)
+            reg.to_csv(out / "regulation.csv", index=False)
+            echo("\nRegulation precision on the measured campaign (regulation.csv):")
+            for _, r in reg.iterrows():
+                verdict = "pass" if r["pass"] else f"FAIL: {r['extra_pairs']} more pairs ({r['extra_pairs_assured']} for " \
+                                                   f"{100 * args.assurance:g} % assurance)"
+                echo(f"  {r['criterion']:<6} {r['speed_kph']:>6.1f} km/h  n={r['n_pairs']}  precision "
+                      f"{r['precision_pct']:.2f} % (limit {r['limit_pct']:g} %)  {verdict}")
+        echo(f"\nwrote {out / 'plan.csv'}, recommendation.csv, plan_records.csv, plan.png"
+              + (", regulation.csv" if (out / "regulation.csv").exists() else ""))
         return 0
-    failed = int(records["error"].notna().sum()) if "error" in records else 0
-    not_converged = int((~records["gate_pass"].fillna(False).astype(bool)).sum()) if "gate_pass" in records else 0
-    table = plan_table(records, targets, args.confidence)
-    table.to_csv(out / "plan.csv", index=False)
-    rec = recommend(table, args.assurance, floors=floors)
-    rec.to_csv(out / "recommendation.csv", index=False)
-    plot_plan(table, targets, out / "plan.png", assurance=args.assurance)
-    echo(f"\n{'quantity':<15}{'target':>10}  " + "".join(f"{n:>8}" for n in pairs) + "   pairs needed")
-    for t in targets:
-        rows = table[table["quantity"] == t.quantity].set_index("n_pairs")
-        if rows.empty:
-            echo(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  not a quantity of model {fit_model}")
-            continue
-        cells = "".join(f"{rows.loc[n, 'median_half_width']:>8.3g}" if n in rows.index else f"{'-':>8}" for n in pairs)
-        r = rec[rec["quantity"] == t.quantity].iloc[0]
-        below_floor = not bool(r.get("reachable", True))
-        need = f"{int(r['n_pairs'])}" if r["reached"] else \
-            ("none (Type B floor)" if below_floor else f"> {int(r['max_pairs_simulated'])}")
-        echo(f"{t.quantity:<15}{str(t).split('=')[1]:>10}  {cells}   {need}")
-    echo(f"(median {100 * args.confidence:g} % half-width against pairs, in the target's units; pairs needed: "
-          f"smallest simulated n with P(half-width <= target) >= {args.assurance:g})")
-    caveat = small_size_caveat(rec, population.pooling)
-    if caveat:
-        echo(caveat)
-    if args.confirm:
-        _plan_confirm(args, population, fit_model, targets, records, rec, out, progress)
-    if failed or not_converged:
-        echo(f"!! {failed} refits raised (left out of the table), {not_converged} failed their gate (MAP not "
-              "converged, or importance weights with Pareto k > 0.7: the Laplace approximation is poor there; kept, "
-              "see gate_pass_frac in plan.csv)")
-    if "pair" in campaign.runs and campaign.runs["pair"].nunique() >= 2:
-        reg = regulation_checks(campaign, population.model if args.fit_model is None else fit_model)
-        reg.to_csv(out / "regulation.csv", index=False)
-        echo("\nRegulation precision on the measured campaign (regulation.csv):")
-        for _, r in reg.iterrows():
-            verdict = "pass" if r["pass"] else f"FAIL: {r['extra_pairs']} more pairs ({r['extra_pairs_assured']} for " \
-                                               f"{100 * args.assurance:g} % assurance)"
-            echo(f"  {r['criterion']:<6} {r['speed_kph']:>6.1f} km/h  n={r['n_pairs']}  precision "
-                  f"{r['precision_pct']:.2f} % (limit {r['limit_pct']:g} %)  {verdict}")
-    echo(f"\nwrote {out / 'plan.csv'}, recommendation.csv, plan_records.csv, plan.png"
-          + (", regulation.csv" if (out / "regulation.csv").exists() else ""))
-    return 0
 
 
 
-def _plan_confirm(args, population, fit_model, targets, records, rec, out: Path, progress: bool) -> None:
+def _plan_confirm(args, population, fit_model, targets, records, rec, out: Path, progress: bool, client) -> None:
     """``plan --confirm N``: NUTS refits of the first N simulated campaigns at each recommended
     size, against their MAP + Laplace refits (:func:`~bayes_roadload.analysis.planning.
-    confirm_table`); writes confirm.csv and says where the posterior itself does not meet the
-    target."""
+    confirm_table`), on the plan's own batch ``client``; writes confirm.csv and says where the
+    posterior itself does not meet the target."""
     import dataclasses
 
-    from .analysis.batch import batch_client, run_batch
+    from .analysis.batch import run_batch
     from .analysis.planning import confirm_table, plan_jobs
 
     sizes = sorted({int(n) for n in rec.loc[rec["reached"].astype(bool), "n_pairs"]})
@@ -871,8 +871,7 @@ def _plan_confirm(args, population, fit_model, targets, records, rec, out: Path,
             for j in plan_jobs(population, sizes, simulations=args.confirm, model=fit_model,
                                confidence=args.confidence, seed=args.seed, method="nuts",
                                type_b=not args.no_type_b)]
-    with batch_client(args.workers, args.scheduler) as client:
-        nuts = run_batch(jobs, client, progress=progress)
+    nuts = run_batch(jobs, client, progress=progress)
     nuts.to_csv(out / "confirm_records.csv", index=False)
     table = confirm_table(records, nuts, targets, args.confidence, args.assurance)
     table.to_csv(out / "confirm.csv", index=False)

@@ -37,7 +37,7 @@ def test_demo_runs_and_prints_truth_beside_estimates(tmp_path, capsys):
     assert n >= len(names) and k <= n and (n - k) >= (len(names) - ok)
 
 
-def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys):
+def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys, monkeypatch):
     """``plan FIT_DIR --target ... --confidence 0.95 --out DIR`` writes plan.csv with the contract
     columns (quantity, n_pairs, median_half_width, assurance), recommendation.csv,
     regulation.csv, type_b_floors.csv and the plot; a fit directory without fit.json is refused.
@@ -105,10 +105,16 @@ def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys):
     assert ("undecided after 1 simulations at [2] pairs" in printed) == first_met
 
     # --confirm: the recommended size refitted by NUTS (one campaign, short chains), beside its
-    # Laplace refit of the same campaign
+    # Laplace refit of the same campaign, on the plan's own batch client (one cluster started)
+    from bayes_roadload.analysis import batch
+
+    opened = []
+    real_client = batch.batch_client
+    monkeypatch.setattr(batch, "batch_client", lambda *a, **k: opened.append(a) or real_client(*a, **k))
     code = main(args + ["--no-type-b", "--confirm", "1", "--warmup", "100", "--draws", "100",
                         "--out", str(tmp_path / "data_only")])
     assert code == 0 and not (tmp_path / "data_only" / "type_b_floors.csv").exists()
+    assert len(opened) == 1
     confirm = pd.read_csv(tmp_path / "data_only" / "confirm.csv")
     reached = pd.read_csv(tmp_path / "data_only" / "recommendation.csv").query("reached")
     assert len(reached) and set(confirm["n_pairs"]) == set(reached["n_pairs"].astype(int))
