@@ -46,7 +46,7 @@ def truth_likelihood(seed: int, pairs: int = 2, every: int = 10) -> dict:
 
     campaign = ModelDrawnCampaign(seed, pairs=pairs, model=MODEL)()
     # the initial speeds the draw started from: the template's first logged speeds (ModelDrawnCampaign)
-    first = np.asarray(build_problem(PriorDrawnCampaign(seed, pairs=pairs, model=MODEL)(), MODEL).batch.speed_mps)[:, 0]
+    first = np.asarray(PriorDrawnCampaign(seed, pairs=pairs, model=MODEL)().to_batch()[0].speed_mps)[:, 0]
     problem = dataclasses.replace(build_problem(campaign, MODEL), apparent=None)  # A_D, B_D, C_D0 directly
     t = campaign.truth
     truth = {k: jnp.asarray(t[k]) for k in problem.free}
