@@ -181,34 +181,52 @@ def _logdet_and_grad(time_s, mask, var_e, q2):
 def tridiagonal_solve(lower: Array, diag: Array, upper: Array, rhs: Array) -> Array:
     """Solve T x = rhs for symmetric positive-definite tridiagonal T, batched: ``lower``,
     ``diag``, ``upper`` [R, N] (``lower[:, 0]`` and ``upper[:, -1]`` unused), ``rhs``
-    [R, N, K].  The Thomas algorithm (no pivoting needed for a positive-definite T) as two
-    ``lax.scan`` passes over N, in pure XLA.  ``jax.lax.linalg.tridiagonal_solve`` (a LAPACK
-    custom call) is not used: called from the two chains' devices at once on campaigns of ~100
-    runs it deadlocked (0 % CPU, reproduced twice on 54 pairs; the same fit with this solver
-    or sequential chains completes)."""
+    [R, N, K].  The Thomas algorithm (no pivoting needed for a positive-definite T) in pure
+    XLA: one ``lax.scan`` over N for the pivots c_i = u_i / (m_i - l_i c_{i-1}) (they do not
+    depend on the right-hand sides), then the forward and back substitutions as two scans over
+    the K columns of every run flattened into one vector, so that each loop body is element-wise
+    on flat vectors (a body that broadcasts [R] pivots over [R, K] columns ran ~6 times slower
+    on the CPU backend); for K = 1 the pivots come in the forward substitution's pass.  ``jax.lax.linalg.tridiagonal_solve`` (a LAPACK custom call) is not
+    used: called from the two chains' devices at once on campaigns of ~100 runs it deadlocked
+    (0 % CPU, reproduced twice on 54 pairs; the same fit with this solver or sequential chains
+    completes)."""
+    r, n, k = rhs.shape
     lo, dg, up = (jnp.swapaxes(x, 0, 1) for x in (lower, diag, upper))     # [N, R]
-    b = jnp.swapaxes(rhs, 0, 1)                                            # [N, R, K]
-
-    def forward(carry, xs):
-        c_prev, d_prev = carry
-        l_i, m_i, u_i, b_i = xs
-        denom = m_i - l_i * c_prev
-        c_i = u_i / denom
-        d_i = (b_i - l_i[:, None] * d_prev) / denom[:, None]
-        return (c_i, d_i), (c_i, d_i)
-
-    zero_c = jnp.zeros_like(dg[0])
-    zero_d = jnp.zeros_like(b[0])
     lo = lo.at[0].set(0.0)
-    _, (c, d) = jax.lax.scan(forward, (zero_c, zero_d), (lo, dg, up, b))
+    b = jnp.swapaxes(rhs, 0, 1).reshape(n, r * k)                          # [N, R K]
+    if k == 1:  # pivots and forward substitution in one pass
+        def forward_one(carry, xs):
+            c_prev, d_prev = carry
+            l_i, m_i, u_i, b_i = xs
+            inv = 1.0 / (m_i - l_i * c_prev)
+            c_i, d_i = u_i * inv, (b_i - l_i * d_prev) * inv
+            return (c_i, d_i), (c_i, d_i)
+
+        _, (c, d) = jax.lax.scan(forward_one, (jnp.zeros_like(dg[0]), jnp.zeros_like(b[0])), (lo, dg, up, b))
+        flat = lambda x: x                                                 # noqa: E731
+    else:
+        def pivots(c_prev, xs):
+            l_i, m_i, u_i = xs
+            inv = 1.0 / (m_i - l_i * c_prev)
+            return u_i * inv, (u_i * inv, inv)
+
+        _, (c, inv) = jax.lax.scan(pivots, jnp.zeros_like(dg[0]), (lo, dg, up))
+        flat = lambda x: jnp.repeat(x, k, axis=1)                          # noqa: E731  [N, R] -> [N, R K]
+
+        def forward(d_prev, xs):
+            l_i, inv_i, b_i = xs
+            d_i = (b_i - l_i * d_prev) * inv_i
+            return d_i, d_i
+
+        _, d = jax.lax.scan(forward, jnp.zeros_like(b[0]), (flat(lo), flat(inv), b))
 
     def backward(x_next, xs):
         c_i, d_i = xs
-        x_i = d_i - c_i[:, None] * x_next
+        x_i = d_i - c_i * x_next
         return x_i, x_i
 
-    _, x = jax.lax.scan(backward, jnp.zeros_like(b[0]), (c, d), reverse=True)
-    return jnp.swapaxes(x, 0, 1)
+    _, x = jax.lax.scan(backward, jnp.zeros_like(b[0]), (flat(c), d), reverse=True)
+    return jnp.swapaxes(x.reshape(n, r, k), 0, 1)
 
 
 def _difference(x: Array, mask: Array, phi: Array | None = None) -> Array:
@@ -366,16 +384,72 @@ def local_level_loglik_batch(residual: Array, time_s: Array, mask: Array, sigma:
 def _effect_terms(residual, time_s, mask, sigma, q, design, phi=None):
     """G = J^T Sigma^-1 J ([R, k, k]) and b = J^T Sigma^-1 r ([R, k]) for the residual
     covariance Sigma of each run, through the same banded form (differentiable); ``phi`` as
-    in :func:`reverting_loglik_batch`."""
+    in :func:`reverting_loglik_batch`.  Without ``phi`` the reverse-mode gradient is closed
+    form (:func:`_effect_terms_walk`); with it JAX differentiates through the scans."""
     sigma = jnp.broadcast_to(jnp.asarray(sigma, residual.dtype), residual.shape[:1])
     time_s, mask = jnp.asarray(time_s, residual.dtype), jnp.asarray(mask, bool)
-    lower, diag, upper = _tridiagonal(time_s, mask, sigma**2, jnp.asarray(q, residual.dtype) ** 2, phi)
-
-    dj = _difference(jnp.asarray(design, residual.dtype), mask, phi)       # [R, N, k]
+    q2 = jnp.asarray(q, residual.dtype) ** 2
+    design = jnp.asarray(design, residual.dtype)
+    if phi is None:
+        return _effect_terms_walk(residual, time_s, mask, sigma**2, q2, design)
+    lower, diag, upper = _tridiagonal(time_s, mask, sigma**2, q2, phi)
+    dj = _difference(design, mask, phi)                                    # [R, N, k]
     w = tridiagonal_solve(lower, diag, upper, dj)                          # T^-1 D J
     g = jnp.einsum("rnk,rnl->rkl", dj, w)
     b = jnp.einsum("rnk,rn->rk", w, _difference(residual, mask, phi))
     return g, b
+
+
+def _difference_transpose(x: Array, mask: Array) -> Array:
+    """D^T x for the masked difference D of :func:`_difference` (no ``phi``):
+    (D^T x)_n = m_n x_n - m_{n+1} x_{n+1} along axis 1."""
+    m = mask.reshape(mask.shape + (1,) * (x.ndim - 2))
+    mx = jnp.where(m, x, 0.0)
+    return mx - jnp.concatenate([mx[:, 1:], jnp.zeros_like(mx[:, :1])], axis=1)
+
+
+def _effect_terms_walk(residual, time_s, mask, var_e, q2, design):
+    """G = (D J)^T T^-1 (D J) and b = (D J)^T T^-1 D r of the random-walk residual (T the
+    tridiagonal covariance of the differenced residual, :func:`_tridiagonal`), with a
+    closed-form reverse-mode gradient: one banded solve of k + 1 right-hand sides, W = T^-1 D J
+    and w = T^-1 D r, serves both passes.  T depends on var_e and q2 through
+    dT/dvar_e = D D^T and dT/dq2 = diag(dt) on the real samples, so with dT^-1 = -T^-1 dT T^-1
+    and cotangents (C_G, c_b):  d/dvar_e = -sum_n [P_n^T C_G P_n + (P_n . c_b) p_n] with
+    P = D^T W, p = D^T w;  d/dq2 = -sum_r sum_n dt_n [W_n^T C_G W_n + (W_n . c_b) w_n];
+    d/dr = D^T (W c_b);  d/dJ = D^T [W (C_G + C_G^T) + w c_b^T]."""
+
+    def solve(residual, var_e, q2, design):
+        dj = _difference(design, mask)                                     # [R, N, k]
+        y = _difference(residual, mask)                                    # [R, N]
+        lower, diag, upper = _tridiagonal(time_s, mask, var_e, q2)
+        both = tridiagonal_solve(lower, diag, upper, jnp.concatenate([dj, y[..., None]], axis=-1))
+        w_j, w_y = both[..., :-1], both[..., -1]
+        g = jnp.einsum("rnk,rnl->rkl", dj, w_j)
+        b = jnp.einsum("rnk,rn->rk", w_j, y)
+        return (g, b), (w_j, w_y)
+
+    def fwd(residual, var_e, q2, design):
+        out, res = solve(residual, var_e, q2, design)
+        return out, res
+
+    def bwd(res, ct):
+        w_j, w_y = res
+        c_g, c_b = ct
+        p_j = _difference_transpose(w_j, mask)                             # D^T W
+        p_y = _difference_transpose(w_y, mask)                             # D^T w
+        pj_cb = jnp.einsum("rnk,rk->rn", p_j, c_b)
+        d_ve = -(jnp.einsum("rnk,rkl,rnl->r", p_j, c_g, p_j) + jnp.sum(pj_cb * p_y, axis=1))
+        dt = jnp.where(mask, jnp.diff(time_s, axis=-1, prepend=time_s[..., :1]), 0.0)
+        wj_cb = jnp.einsum("rnk,rk->rn", w_j, c_b)
+        d_q2 = -jnp.sum(dt * (jnp.einsum("rnk,rkl,rnl->rn", w_j, c_g, w_j) + wj_cb * w_y))
+        d_r = _difference_transpose(wj_cb, mask)
+        d_j = _difference_transpose(jnp.einsum("rnk,rkl->rnl", w_j, c_g + jnp.swapaxes(c_g, 1, 2))
+                                    + w_y[..., None] * c_b[:, None, :], mask)
+        return d_r, d_ve, d_q2, d_j
+
+    f = jax.custom_vjp(lambda r, ve, qq, j: solve(r, ve, qq, j)[0])
+    f.defvjp(fwd, bwd)
+    return f(residual, var_e, q2, design)
 
 
 def _effect_posterior(g, b, effect_var):

@@ -221,3 +221,44 @@ def test_error_draws_have_the_covariance_the_likelihoods_score():
     np.testing.assert_allclose(walk @ walk.T, dense_covariance(t, 0.0, q), atol=1e-12)
     rev = np.asarray(integrated_error_draws(tt, q, eye, jnp.broadcast_to(jnp.asarray(phi), (n, n)))).T
     np.testing.assert_allclose(rev @ rev.T, _reverting_dense_covariance(t, phi, 0.0, q), atol=1e-12)
+
+
+def test_effect_terms_closed_form_gradient_equals_autodiff_and_dense_values():
+    """G = J^T Sigma^-1 J and b = J^T Sigma^-1 r of the random-walk residual equal the dense
+    covariance's, and their closed-form reverse-mode gradient (residual, sigma, q, design)
+    equals JAX's differentiation through the banded solve's scans (the reverting form at
+    phi = 1, the same covariance), on runs of different lengths (padding)."""
+    from bayes_roadload.physics.residuals import _effect_terms
+
+    rng = np.random.default_rng(5)
+    r_runs, n, k = 3, 30, 3
+    t = np.tile(np.arange(n) * 0.2, (r_runs, 1))
+    mask = np.ones((r_runs, n), bool)
+    mask[1, 22:] = False
+    mask[2, 27:] = False
+    for i in (1, 2):
+        t[i, ~mask[i]] = t[i, mask[i]][-1]
+    sigma, q = jnp.asarray([0.04, 0.02, 0.03]), jnp.asarray(0.2)
+    resid = jnp.asarray(np.where(mask, rng.normal(0, 0.1, (r_runs, n)), 0.0))
+    design = np.where(mask[..., None], rng.normal(size=(r_runs, n, k)), 0.0)
+    c_g, c_b = jnp.asarray(rng.normal(size=(r_runs, k, k))), jnp.asarray(rng.normal(size=(r_runs, k)))
+    tt, mm = jnp.asarray(t), jnp.asarray(mask)
+
+    def scalar(phi):
+        def f(res, s, qq, j):
+            g, b = _effect_terms(res, tt, mm, s, qq, j, phi)
+            return jnp.sum(c_g * g) + jnp.sum(c_b * b)
+        return jax.jit(jax.grad(f, argnums=(0, 1, 2, 3)))
+
+    closed = scalar(None)(resid, sigma, q, jnp.asarray(design))
+    through_scans = scalar(jnp.ones((r_runs, n)))(resid, sigma, q, jnp.asarray(design))
+    for a, b in zip(closed, through_scans):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-12)
+    g, b = _effect_terms(resid, tt, mm, sigma, q, jnp.asarray(design))
+    for i in range(r_runs):
+        m = mask[i]
+        ti = t[i, m] - t[i, 0]
+        cov = float(q) ** 2 * np.minimum.outer(ti, ti) + float(sigma[i]) ** 2 * np.eye(m.sum())
+        j = design[i, m]
+        np.testing.assert_allclose(np.asarray(g[i]), j.T @ np.linalg.solve(cov, j), rtol=1e-9)
+        np.testing.assert_allclose(np.asarray(b[i]), j.T @ np.linalg.solve(cov, np.asarray(resid[i, m])), rtol=1e-9)
