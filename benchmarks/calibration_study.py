@@ -132,9 +132,10 @@ def main(argv=None) -> int:
     table = calibration_table(records)
     text = calibration_markdown(records, table, wall)
     if args.from_records and args.records.name.endswith(".partial.csv"):
+        final = args.records.resolve().with_name(args.records.name.replace(".partial.csv", ".csv"))
+        shown = final.relative_to(ROOT) if final.is_relative_to(ROOT) else final
         text = (f"**Partial run: {len(records)} of the {args.n} campaigns** (stopped, resumable: `python "
-                f"benchmarks/calibration_study.py --n {args.n} --seed0 {args.seed0} --records "
-                f"{args.records.resolve().with_name(args.records.name.replace('.partial.csv', '.csv')).relative_to(ROOT)}` "
+                f"benchmarks/calibration_study.py --n {args.n} --seed0 {args.seed0} --records {shown}` "
                 "fits only the campaigns the partial file lacks); every verdict below is on these campaigns "
                 "alone.\n\n" + text)
     print(text, file=sys.stderr)
