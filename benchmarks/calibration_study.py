@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
 from doc_sections import replace_section  # noqa: E402
-from bayes_roadload.analysis.calibration import (CONFIRMATORY_SEED0, QUANTITIES,  # noqa: E402
+from bayes_roadload.analysis.calibration import (CONFIRMATORY_SEED0, DIAGNOSTIC_SPLIT, QUANTITIES,  # noqa: E402
                                                  calibration_jobs, calibration_markdown, calibration_table)
 
 RECORDS = ROOT / "docs" / "calibration" / "independent_records.csv"
@@ -130,7 +130,7 @@ def main(argv=None) -> int:
     if "error" not in records:
         records["error"] = np.nan
     table = calibration_table(records)
-    text = calibration_markdown(records, table, wall)
+    text = calibration_markdown(records, table, wall, split=DIAGNOSTIC_SPLIT)
     if args.from_records and args.records.name.endswith(".partial.csv"):
         final = args.records.resolve().with_name(args.records.name.replace(".partial.csv", ".csv"))
         shown = final.relative_to(ROOT) if final.is_relative_to(ROOT) else final

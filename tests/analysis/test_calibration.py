@@ -48,6 +48,30 @@ def test_the_rules_pass_calibrated_and_fail_overconfident_posteriors():
     assert "**fail**" in text and "400 campaigns" in text
 
 
+def test_the_truth_split_reads_coverage_on_either_side():
+    """The reading by a true value (``DIAGNOSTIC_SPLIT``): campaigns above the threshold whose
+    intervals all miss show coverage 0 there, those below keep theirs, and the section says it
+    is a reading."""
+    from bayes_roadload.analysis.calibration import DIAGNOSTIC_SPLIT, truth_split_table
+
+    rec = _records(1.0, n=200)
+    quantity, threshold = DIAGNOSTIC_SPLIT
+    above = np.arange(200) % 4 == 0
+    rec.loc[above, f"{quantity}_truth"] = threshold + 1.0
+    rec.loc[~above, f"{quantity}_truth"] = threshold - 1.0
+    for q in QUANTITIES:
+        rec.loc[above, f"{q}_in95"] = False
+    st = truth_split_table(rec, quantity, threshold)
+    hi = st[st["group"] == f"{quantity} > {threshold:g}"]
+    lo = st[st["group"] == f"{quantity} <= {threshold:g}"]
+    assert (hi["n"] == 50).all() and (hi["coverage95"] == 0.0).all()
+    assert (lo["n"] == 150).all()
+    for q in QUANTITIES:
+        assert lo.loc[lo["quantity"] == q, "coverage95"].item() == pytest.approx(rec.loc[~above, f"{q}_in95"].mean())
+    text = calibration_markdown(rec, calibration_table(rec), split=DIAGNOSTIC_SPLIT)
+    assert "A reading, not a rule" in text and f"| {quantity} > {threshold:g} | 50 | 0.00 |" in text
+
+
 def test_jobs_carry_the_model_asked_for():
     """The study fits fit's default model unless told otherwise (``--model``)."""
     from bayes_roadload.inference.kinds import KINDS, FitOptions
