@@ -186,10 +186,10 @@ def tridiagonal_solve(lower: Array, diag: Array, upper: Array, rhs: Array) -> Ar
     depend on the right-hand sides), then the forward and back substitutions as two scans over
     the K columns of every run flattened into one vector, so that each loop body is element-wise
     on flat vectors (a body that broadcasts [R] pivots over [R, K] columns ran ~6 times slower
-    on the CPU backend); for K = 1 the pivots come in the forward substitution's pass.  ``jax.lax.linalg.tridiagonal_solve`` (a LAPACK custom call) is not
-    used: called from the two chains' devices at once on campaigns of ~100 runs it deadlocked
-    (0 % CPU, reproduced twice on 54 pairs; the same fit with this solver or sequential chains
-    completes)."""
+    on the CPU backend); for K = 1 the pivots come in the forward substitution's pass.
+    ``jax.lax.linalg.tridiagonal_solve`` (a LAPACK custom call) is not used: called from the two
+    chains' devices at once on campaigns of ~100 runs it deadlocked (0 % CPU, reproduced twice
+    on 54 pairs; the same fit with this solver or sequential chains completes)."""
     r, n, k = rhs.shape
     lo, dg, up = (jnp.swapaxes(x, 0, 1) for x in (lower, diag, upper))     # [N, R]
     lo = lo.at[0].set(0.0)
@@ -428,10 +428,6 @@ def _effect_terms_walk(residual, time_s, mask, var_e, q2, design):
         b = jnp.einsum("rnk,rn->rk", w_j, y)
         return (g, b), (w_j, w_y)
 
-    def fwd(residual, var_e, q2, design):
-        out, res = solve(residual, var_e, q2, design)
-        return out, res
-
     def bwd(res, ct):
         w_j, w_y = res
         c_g, c_b = ct
@@ -448,7 +444,7 @@ def _effect_terms_walk(residual, time_s, mask, var_e, q2, design):
         return d_r, d_ve, d_q2, d_j
 
     f = jax.custom_vjp(lambda r, ve, qq, j: solve(r, ve, qq, j)[0])
-    f.defvjp(fwd, bwd)
+    f.defvjp(solve, bwd)
     return f(residual, var_e, q2, design)
 
 
