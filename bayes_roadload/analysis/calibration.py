@@ -88,14 +88,15 @@ def truth_split_table(records: pd.DataFrame, quantity: str, threshold: float) ->
     """95 % coverage of every quantity of :data:`QUANTITIES` over the fits whose true
     ``quantity`` is at most ``threshold`` and over those above it (columns ``group``,
     ``quantity``, ``n``, ``coverage95``); fits that failed are left out."""
-    ok = records[records["error"].isna()] if "error" in records else records
-    above = ok[f"{quantity}_truth"] > threshold
-    rows = []
-    for label, part in ((f"{quantity} <= {threshold:g}", ok[~above]), (f"{quantity} > {threshold:g}", ok[above])):
-        for q in QUANTITIES:
-            rows.append({"group": label, "quantity": q, "n": len(part),
-                         "coverage95": float(part[f"{q}_in95"].astype(bool).mean()) if len(part) else float("nan")})
-    return pd.DataFrame(rows, columns=["group", "quantity", "n", "coverage95"])
+    labels = [f"{quantity} <= {threshold:g}", f"{quantity} > {threshold:g}"]
+    rec = records.copy()
+    rec["group"] = np.where(rec[f"{quantity}_truth"] > threshold, labels[1], labels[0])
+    cov = coverage_summary(rec, by=("group",), quantities=list(QUANTITIES), levels=(0.95,))
+    cov = cov.rename(columns={"coverage": "coverage95"}).set_index(["group", "quantity"])
+    index = pd.MultiIndex.from_product([labels, QUANTITIES], names=["group", "quantity"])
+    out = cov.reindex(index)[["n", "coverage95"]].reset_index()
+    out["n"] = out["n"].fillna(0).astype(int)
+    return out
 
 
 def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: float | None = None,
