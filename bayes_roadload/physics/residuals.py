@@ -342,7 +342,7 @@ def _batch_loglik(residual, time_s, mask, var_e, q2, grid):
         y = _difference(residual, mask)
         lower, diag, upper = _tridiagonal(time_s, mask, var_e, q2)
         w = tridiagonal_solve(lower, diag, upper, y[..., None])[..., 0]   # T^-1 D r
-        alpha = jnp.where(mask, w - jnp.concatenate([w[:, 1:], jnp.zeros_like(w[:, :1])], axis=1), 0.0)  # D^T T^-1 D r
+        alpha = _difference_transpose(w, mask)                             # D^T T^-1 D r
         logdet, (dld_ve, dld_q2) = logdet_and_grad(var_e, q2)
         n = mask.sum(axis=1)
         ll = -0.5 * (n * _LOG_2PI + logdet + jnp.sum(y * w, axis=1))
