@@ -23,6 +23,11 @@ Array = jnp.ndarray
 _LOG_2PI = jnp.log(2.0 * jnp.pi)
 
 
+
+def _steps(time_s: Array) -> Array:
+    """The sample intervals along the last axis, 0 before the first sample: dt_k = t_k - t_{k-1}."""
+    return jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
+
 def local_level_loglik(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array,
                        df: Array | None = None) -> Array:
     """Log-likelihood of one run's residuals under white noise plus integrated noise.
@@ -42,7 +47,7 @@ def local_level_loglik(residual: Array, time_s: Array, mask: Array, sigma: Array
     -------
     Scalar log-likelihood.
     """
-    dt = jnp.diff(time_s, prepend=time_s[:1])
+    dt = _steps(time_s)
     var_e = sigma**2
 
     def step(carry, xs):
@@ -75,7 +80,7 @@ def local_level_smooth(residual: Array, time_s: Array, mask: Array, sigma: Array
     """Smoothed estimate (mean, variance) of the integrated error delta_k given all residuals
     (Rauch-Tung-Striebel).  Used to draw posterior-predictive speed traces and to separate the
     slow drift of a run from its measurement noise."""
-    dt = jnp.diff(time_s, prepend=time_s[:1])
+    dt = _steps(time_s)
     var_e = sigma**2
 
     def fwd(carry, xs):
@@ -155,7 +160,7 @@ def _logdet_and_grad(time_s, mask, var_e, q2):
     log innovation variances of the Kalman filter (they do not depend on the data; masked
     samples add nothing), with the two tangents carried forward by hand, all runs at once
     (one pass, no backward pass)."""
-    dt = jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
+    dt = _steps(time_s)
 
     def step(carry, xs):
         p, dp_ve, dp_q2, ld, dld_ve, dld_q2 = carry
@@ -244,7 +249,7 @@ def _tridiagonal(time_s, mask, var_e, q2, phi=None):
     the quasi-differenced residuals r_k - phi_k r_{k-1} = w_k + e_k - phi_k e_{k-1}: diagonal
     Var(w_k) + var_e (1 + phi_k^2), Var(w_k) = q2 dt_k (1 + phi_k^2) / 2 (the trapezoid of
     q2 int exp(2 int_s^t -kappa) ds over the step), below it -phi_k var_e."""
-    dt = jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
+    dt = _steps(time_s)
     ve = var_e[:, None]
     first = jnp.arange(time_s.shape[-1]) == 0
     if phi is None:
@@ -280,7 +285,7 @@ def reversion_factors(time_s: Array, mask: Array, kappa: Array) -> Array:
     integrated error survives the step to sample k when the error reverts at the rate
     ``kappa`` ([R, N], 1/s; :func:`bayes_roadload.physics.integrate.reversion_rate`); 1 at the
     first sample and on padding."""
-    dt = jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
+    dt = _steps(time_s)
     k_prev = jnp.concatenate([kappa[:, :1], kappa[:, :-1]], axis=1)
     return jnp.where(mask, jnp.exp(-0.5 * (k_prev + kappa) * dt), 1.0)
 
@@ -291,7 +296,7 @@ def integrated_error_draws(time_s: Array, q: Array, normals: Array, phi: Array |
     (:func:`reversion_factors`) the reverting delta_k = phi_k delta_{k-1} + w_k,
     Var(w_k) = q^2 dt_k (1 + phi_k^2) / 2 -- the processes the two likelihoods score
     (delta_0 = 0: dt_0 = 0)."""
-    dt = jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
+    dt = _steps(time_s)
     if phi is None:
         return jnp.cumsum(q * jnp.sqrt(dt) * normals, axis=-1)
     w = q * jnp.sqrt(0.5 * dt * (1.0 + phi**2)) * normals
@@ -346,7 +351,7 @@ def _batch_loglik(residual, time_s, mask, var_e, q2, grid):
         logdet, (dld_ve, dld_q2) = logdet_and_grad(var_e, q2)
         n = mask.sum(axis=1)
         ll = -0.5 * (n * _LOG_2PI + logdet + jnp.sum(y * w, axis=1))
-        dt = jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
+        dt = _steps(time_s)
         tail = jnp.cumsum(alpha[:, ::-1], axis=1)[:, ::-1]                 # sum_{j >= k} alpha_j
         g_ve = -0.5 * dld_ve + 0.5 * jnp.sum(alpha**2, axis=1)
         g_q2 = -0.5 * dld_q2 + 0.5 * jnp.sum(dt * tail**2, axis=1)
@@ -435,7 +440,7 @@ def _effect_terms_walk(residual, time_s, mask, var_e, q2, design):
         p_y = _difference_transpose(w_y, mask)                             # D^T w
         pj_cb = jnp.einsum("rnk,rk->rn", p_j, c_b)
         d_ve = -(jnp.einsum("rnk,rkl,rnl->r", p_j, c_g, p_j) + jnp.sum(pj_cb * p_y, axis=1))
-        dt = jnp.where(mask, jnp.diff(time_s, axis=-1, prepend=time_s[..., :1]), 0.0)
+        dt = jnp.where(mask, _steps(time_s), 0.0)
         wj_cb = jnp.einsum("rnk,rk->rn", w_j, c_b)
         d_q2 = -jnp.sum(dt * (jnp.einsum("rnk,rkl,rnl->rn", w_j, c_g, w_j) + wj_cb * w_y))
         d_r = _difference_transpose(wj_cb, mask)
