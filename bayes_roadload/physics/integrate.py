@@ -76,7 +76,8 @@ def _conditions(model: DragModel, p, run: RunBatch, v, s, t, u) -> Conditions:
         mass_kg=run.mass_kg,
         frontal_area_m2=run.frontal_area_m2,
         airspeed_rate_mps2=u[5],
-        speed_drop_lagged_mps=u[6] if len(u) > len(_CHANNELS) + 1 else 0.0,
+        speed_drop_lagged_mps=u[7] if len(u) > len(_CHANNELS) + 2 else 0.0,
+        speed_measured_mps=u[6],
     )
 
 
@@ -180,11 +181,12 @@ def reading_rate(time_s, reading, mask):
 
 
 def _inputs(run: RunBatch):
-    """The input channels stacked on a last axis ([..., N, C]): those of ``_CHANNELS`` and the
-    rate of the airspeed reading (:func:`reading_rate`); with numpy when they are concrete,
+    """The input channels stacked on a last axis ([..., N, C]): those of ``_CHANNELS``, the
+    rate of the airspeed reading (:func:`reading_rate`) and the measured speed; with numpy when they are concrete,
     so that data-only work on them is done once per trace."""
     channels = [getattr(run, ch) for ch in _CHANNELS]
     channels.append(reading_rate(run.time_s, run.airspeed_mps, run.mask))
+    channels.append(run.speed_mps)
     if any(isinstance(x, jax.core.Tracer) for x in channels):
         return jnp.stack([jnp.asarray(x) for x in channels], axis=-1)
     return np.stack([np.asarray(x) for x in channels], axis=-1)

@@ -22,6 +22,7 @@ Array = jnp.ndarray
 
 PART_OF_TERM = {
     "tyre_rolling": "tyre",
+    "tyre_speed_squared": "tyre",
     "lift_unloading": "tyre",
     "aero_drag": "aero",
     "aero_drag_table": "aero",

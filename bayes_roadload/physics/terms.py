@@ -46,6 +46,9 @@ class Conditions(NamedTuple):
         that a first-order lag of the model's time constant has not yet followed
         (:func:`~bayes_roadload.physics.integrate.lagged_speed_drop`); 0 unless a term of the
         model names a ``lag_time_constant``.
+    speed_measured_mps : the logged speed at the same time, where the model is integrated along a
+        speed trace (None elsewhere): a term whose force is not affine in the speed may be
+        linearised about it, so that the equation of motion stays affine in the state.
     """
 
     speed_mps: Array
@@ -63,6 +66,7 @@ class Conditions(NamedTuple):
     frontal_area_m2: Array
     airspeed_rate_mps2: Array = 0.0
     speed_drop_lagged_mps: Array = 0.0
+    speed_measured_mps: Array | None = None
 
     @property
     def dynamic_pressure_area_n(self) -> Array:
@@ -165,6 +169,52 @@ class TyreThermalLag(Term):
     def force_n(self, p: Params, c: Conditions) -> Array:
         tyre = c.weight_n * (p["AD"] + p["BD"] * c.speed_mps) * tyre_temperature_factor(p, c)
         return -tyre * p["tyre_lag_gain_per_mps"] * c.speed_drop_lagged_mps
+
+
+def _quadratic_line_on_grid(speeds_kph) -> tuple[float, float]:
+    """(a, b) of the least-squares line a + b v through v^2 on the road-load speeds (v in m/s)."""
+    v = [k * config.KPH_TO_MPS for k in speeds_kph]
+    n, sv, svv = len(v), sum(v), sum(x * x for x in v)
+    sv2, sv3 = svv, sum(x**3 for x in v)
+    b = (n * sv3 - sv * sv2) / (n * svv - sv * sv)
+    return (sv2 - b * sv) / n, b
+
+
+TYRE_QUADRATIC_LINE = _quadratic_line_on_grid(config.ROADLOAD_FIT_SPEEDS_KPH)
+"""(a, b) of :class:`TyreSpeedSquared`: the least-squares line a + b v through v^2 (m/s) on the
+road-load speeds :data:`~bayes_roadload.config.ROADLOAD_FIT_SPEEDS_KPH`."""
+
+
+@register_term
+@dataclass(frozen=True)
+class TyreSpeedSquared(Term):
+    """The speed-squared part of the rolling loss, orthogonal to A_D + B_D v on the road-load
+    speeds: M g C_R (v^2 - a - b v)[1 - K_T (T_0 - T_s)].
+
+    A tyre's rolling coefficient follows A + B v + C v^2 (the SAE J2452 speed law); eq. 2.38
+    keeps A_D + B_D v.  Here ``tyre_quadratic_s2_per_m2`` is C_R (s^2/m^2) and a + b v the
+    least-squares line through v^2 on the speeds of the F0 + F1 v + F2 v^2 fit
+    (:data:`TYRE_QUADRATIC_LINE`), so the term adds no line on those speeds: A_D and B_D keep
+    their meaning of the least-squares line through the rolling coefficient over 15-115 km/h,
+    whatever C_R.  The lift unloading (eq. 2.40) and the tyre lag act on A_D + B_D v only: on
+    a part of a few per cent of the rolling loss, their share of it is of second order.  Along
+    a speed trace v^2 is linearised about the logged speed (:attr:`Conditions.speed_measured_mps`),
+    which keeps the equation of motion affine in v (the integrator's parallel solution)."""
+
+    name: ClassVar[str] = "tyre_speed_squared"
+    defaults: ClassVar[Mapping[str, float]] = {"tyre_quadratic_s2_per_m2": 0.0,
+                                               "KT": config.TYRE_TEMPERATURE_COEFF_PER_K}
+    speed_affine: ClassVar[bool] = True
+    equation: ClassVar[str] = "2.38 with the SAE J2452 speed law"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        a, b = TYRE_QUADRATIC_LINE
+        v = c.speed_mps
+        vm = v if c.speed_measured_mps is None else c.speed_measured_mps
+        # v^2 about the logged speed vm: vm^2 + 2 vm (v - vm), off by (v - vm)^2 (1e-4 of v^2
+        # for 0.1 m/s between model and log at 10 m/s), affine in the state v
+        square = vm * (2.0 * v - vm)
+        return c.weight_n * p["tyre_quadratic_s2_per_m2"] * (square - a - b * v) * tyre_temperature_factor(p, c)
 
 
 @register_term

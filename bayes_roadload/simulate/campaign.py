@@ -522,8 +522,8 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
         distance_m, position_m (and driveline_force_n, and mass_kg with ``masses_kg``).
         ``truth`` holds the nominal true
         parameters (A_D, B_D, C_D0, K_D, C_L0, K_L, the "comp" extras, A_t, B_t, C_t when
-        simulated), ``tyre_lag_gain_per_mps`` 0 unless an extra term sets it (the cases' tyres
-        have no thermal lag), the case number and model, and ``per_run``: ``str(run id)`` -> the A_D,
+        simulated), ``tyre_lag_gain_per_mps`` and ``tyre_quadratic_s2_per_m2`` 0 unless an extra
+        term sets them (the cases' tyres have no thermal lag and a linear speed law), the case number and model, and ``per_run``: ``str(run id)`` -> the A_D,
         B_D, C_D0 of that run after system noise (string keys, as JSON stores them; for the
         band-limited system noise, their mean over the run).
         ``meta`` holds the case, seed and number of pairs and the case's settings.
@@ -619,6 +619,7 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
     truth.update({k: float(v) for k, v in nominal.items()})
     truth.update({"case": sc.number, "model": sc.model, "per_run": per_run})
     truth.setdefault("tyre_lag_gain_per_mps", 0.0)  # the case's tyres have no thermal lag unless a term adds one
+    truth.setdefault("tyre_quadratic_s2_per_m2", 0.0)  # nor a rolling coefficient curved in speed
     meta = {"case": sc.number, "seed": int(seed), "pairs": pairs, "description": sc.description,
             "model": sc.model, "head_wind_mps": sc.head_wind_mps, "cross_wind_mps": sc.cross_wind_mps,
             "spatial_beta": sc.spatial_beta, "dynamics": sc.dynamics,
