@@ -192,7 +192,9 @@ class FitJob:
         campaign itself.  A factory keeps the job small when it travels to a worker.
     model : str
         Model variant (``models/*.toml`` name) passed to
-        :func:`~bayes_roadload.inference.nuts.fit_nuts`.
+        :func:`~bayes_roadload.inference.nuts.fit_nuts`; ``"auto"``: ``fit``'s default for
+        each campaign (the speed-trace kind's ``default_model``, by the vehicle's test mass),
+        recorded as the model it resolved to.
     pooling : {"pooled", "hierarchical"}
     noise : {"integrated", "white"}
         Likelihood of the speed residuals (:mod:`bayes_roadload.inference.bayes`).
@@ -450,16 +452,19 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
                 if key in campaign.meta and key not in rec:
                     rec[key] = campaign.meta[key]
             t0 = time.perf_counter()
-            pooling = job.pooling
+            model, pooling = job.model, job.pooling
+            options = FitOptions(method="nuts", robust=job.robust)
+            if model == "auto":  # as `fit` without --model: the speed-trace kind's default for this campaign
+                model = KINDS["traces"].default_model(campaign, options)
+                rec["model"] = model
             if pooling == "auto":  # as `fit`: the speed-trace kind's default for this campaign and model
-                pooling = resolve_pooling(KINDS["traces"], campaign, load_model_spec(job.model),
-                                          FitOptions(method="nuts", robust=job.robust)).pooling
+                pooling = resolve_pooling(KINDS["traces"], campaign, load_model_spec(model), options).pooling
                 rec["pooling"] = pooling
             if job.method == "laplace":
-                fit = fit_laplace(campaign, job.model, pooling=pooling, noise=job.noise, robust=job.robust,
+                fit = fit_laplace(campaign, model, pooling=pooling, noise=job.noise, robust=job.robust,
                                   seed=job.sampler.seed, start=None if job.start is None else dict(job.start))
             else:
-                fit = fit_nuts(campaign, job.model, pooling=pooling, noise=job.noise, robust=job.robust,
+                fit = fit_nuts(campaign, model, pooling=pooling, noise=job.noise, robust=job.robust,
                                sampler=job.sampler)
             rec["time_fit_s"] = time.perf_counter() - t0
             t0 = time.perf_counter()

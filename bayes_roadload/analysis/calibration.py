@@ -23,7 +23,7 @@ from typing import Iterable
 import numpy as np
 import pandas as pd
 
-from ..inference.kinds import KINDS, FitOptions
+from ..inference.kinds import FitOptions
 from ..simulate.independent import simulate_independent
 from .batch import FitJob, coverage_summary
 
@@ -48,10 +48,11 @@ def pairs_of(seed: int, lo: int, hi: int) -> int:
 def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
                      options: FitOptions | None = None, model: str | None = None) -> list[FitJob]:
     """One fit job per seed, with the default fit options (or ``options``: method, pooling,
-    noise, robust, sampler and Type B budget pass through) and ``model`` (``fit``'s default for
-    speed traces, the registry's ``KINDS["traces"].default_model``, unless given)."""
+    noise, robust, sampler and Type B budget pass through) and ``model`` (unless given,
+    ``"auto"``: ``fit``'s default for each campaign's vehicle, the registry's
+    ``KINDS["traces"].default_model``, resolved in the batch job)."""
     o = options or FitOptions()
-    model = model or KINDS["traces"].default_model(None, o)
+    model = model or "auto"
     return [FitJob(f"ind-{s}", functools.partial(simulate_independent, s, pairs=pairs_of(s, lo, hi)), model=model,
                    method=o.method, pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler,
                    type_b=o.type_b, derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi)})

@@ -12,7 +12,7 @@ from bayes_roadload import config
 from bayes_roadload.analysis.batch import run_batch
 from bayes_roadload.analysis.calibration import (COVERAGE_TARGET, QUANTITIES, calibration_jobs,
                                                  calibration_markdown, calibration_table, pairs_of, size_bin)
-from bayes_roadload.inference.kinds import FitOptions
+from bayes_roadload.inference.kinds import KINDS, FitOptions
 
 
 def _records(scale: float, n: int = 400, seed: int = 0) -> pd.DataFrame:
@@ -73,11 +73,10 @@ def test_the_truth_split_reads_coverage_on_either_side():
 
 
 def test_jobs_carry_the_model_asked_for():
-    """The study fits fit's default model unless told otherwise (``--model``)."""
-    from bayes_roadload.inference.kinds import KINDS, FitOptions
-
-    fit_default = KINDS["traces"].default_model(None, FitOptions())
-    assert {j.model for j in calibration_jobs([1, 2], 1, 3)} == {fit_default}
+    """The study fits fit's default model for each campaign unless told otherwise (``--model``):
+    "auto", which the batch job resolves by the campaign's vehicle as ``fit`` does."""
+    assert {j.model for j in calibration_jobs([1, 2], 1, 3)} == {"auto"}
+    assert {j.model for j in calibration_jobs([1], 1, 3, options=FitOptions(method="laplace"))} == {"auto"}
     assert {j.model for j in calibration_jobs([1, 2], 1, 3, model="four_term")} == {"four_term"}
 
 
@@ -98,6 +97,8 @@ def test_smoke_one_independent_campaign_through_the_study():
     records = run_batch(jobs, progress=False)
     assert records["error"].isna().all(), records.get("traceback")
     campaign = jobs[0].campaign()
+    # "auto" is recorded as the model fit takes for this campaign's vehicle
+    assert records.loc[0, "model"] == KINDS["traces"].default_model(campaign, FitOptions())
     for q in QUANTITIES:
         assert records.loc[0, f"{q}_truth"] == pytest.approx(campaign.truth[q], rel=1e-12), q
     table = calibration_table(records)
