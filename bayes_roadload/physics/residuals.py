@@ -23,10 +23,10 @@ Array = jnp.ndarray
 _LOG_2PI = jnp.log(2.0 * jnp.pi)
 
 
-
 def _steps(time_s: Array) -> Array:
     """The sample intervals along the last axis, 0 before the first sample: dt_k = t_k - t_{k-1}."""
     return jnp.diff(time_s, axis=-1, prepend=time_s[..., :1])
+
 
 def local_level_loglik(residual: Array, time_s: Array, mask: Array, sigma: Array, q: Array,
                        df: Array | None = None) -> Array:
