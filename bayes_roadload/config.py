@@ -123,10 +123,6 @@ AREA_RANGE_M2 = (0.001, 15.0)
 MPH_TO_MPS = 0.44704
 KPH_TO_MPS = 1.0 / 3.6
 SPEED_50MPH_MPS = 50.0 * MPH_TO_MPS
-HEAVY_VEHICLE_MIN_TEST_MASS_KG = 3500.0
-"""Test mass (kg) above which ``fit`` takes a heavy vehicle's priors by default: the upper limit
-of GTR 15's light-duty scope (M1, N1 up to 3500 kg); above it the rigid trucks, buses and
-tractor-trailers of 40 CFR 1037."""
 ROADLOAD_FIT_SPEEDS_KPH = tuple(float(v) for v in range(15, 120, 5))
 """Speeds (km/h) at which F = F0 + F1 v + F2 v^2 is fitted through the still-air road load."""
 

