@@ -4,7 +4,7 @@ Each campaign is ``simulate_independent(seed, pairs=P)`` (``bayes_roadload.simul
 its own integrator, wind field, instruments and vehicles, every nuisance effect, the Type B
 errors drawn inside the standards' accuracies), P drawn uniformly in ``--pairs MIN MAX`` from the
 seed.  Every campaign is fitted with the options ``bayes-roadload fit`` uses by default (the
-speed-trace default model of the kind registry for the campaign's vehicle,
+speed-trace default model of the kind registry for each campaign,
 ``KINDS["traces"].default_model``, unless
 ``--model``; the default pooling and noise of :class:`bayes_roadload.inference.kinds.FitOptions`,
 the default sampler) through the batch door (:func:`bayes_roadload.analysis.batch.run_batch`).

@@ -193,8 +193,8 @@ class FitJob:
     model : str
         Model variant (``models/*.toml`` name) passed to
         :func:`~bayes_roadload.inference.nuts.fit_nuts`; ``"auto"``: ``fit``'s default for
-        each campaign (the speed-trace kind's ``default_model``, by the vehicle's test mass),
-        recorded as the model it resolved to.
+        each campaign (the speed-trace kind's ``default_model`` of that campaign), recorded as
+        the model it resolved to.
     pooling : {"pooled", "hierarchical"}
     noise : {"integrated", "white"}
         Likelihood of the speed residuals (:mod:`bayes_roadload.inference.bayes`).

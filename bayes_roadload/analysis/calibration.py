@@ -49,7 +49,7 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
                      options: FitOptions | None = None, model: str | None = None) -> list[FitJob]:
     """One fit job per seed, with the default fit options (or ``options``: method, pooling,
     noise, robust, sampler and Type B budget pass through) and ``model`` (unless given,
-    ``"auto"``: ``fit``'s default for each campaign's vehicle, the registry's
+    ``"auto"``: ``fit``'s default for each campaign, the registry's
     ``KINDS["traces"].default_model``, resolved in the batch job)."""
     o = options or FitOptions()
     model = model or "auto"
