@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import ClassVar, Mapping, NamedTuple
 
 import jax.numpy as jnp
+import numpy as np
 
 from .. import config
 
@@ -173,11 +174,9 @@ class TyreThermalLag(Term):
 
 def _quadratic_line_on_grid(speeds_kph) -> tuple[float, float]:
     """(a, b) of the least-squares line a + b v through v^2 on the road-load speeds (v in m/s)."""
-    v = [k * config.KPH_TO_MPS for k in speeds_kph]
-    n, sv, svv = len(v), sum(v), sum(x * x for x in v)
-    sv2, sv3 = svv, sum(x**3 for x in v)
-    b = (n * sv3 - sv * sv2) / (n * svv - sv * sv)
-    return (sv2 - b * sv) / n, b
+    v = np.asarray(speeds_kph, float) * config.KPH_TO_MPS
+    b, a = np.polyfit(v, v**2, 1)
+    return float(a), float(b)
 
 
 TYRE_QUADRATIC_LINE = _quadratic_line_on_grid(config.ROADLOAD_FIT_SPEEDS_KPH)

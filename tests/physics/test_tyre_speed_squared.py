@@ -19,9 +19,13 @@ MODEL = DragModel((TyreRolling(), TyreSpeedSquared(), AeroDrag()))
 
 
 def test_the_line_is_the_least_squares_line_of_v_squared_on_the_road_load_speeds():
+    """The normal equations: the residual v^2 - a - b v sums to zero and has no moment in v on
+    the road-load speeds (to rounding, relative to the sums of v^2 and v^3)."""
     v = np.asarray(config.ROADLOAD_FIT_SPEEDS_KPH) / 3.6
-    line = np.polyfit(v, v**2, 1)
-    np.testing.assert_allclose(TYRE_QUADRATIC_LINE, line[::-1], rtol=1e-12)
+    a, b = TYRE_QUADRATIC_LINE
+    residual = v**2 - a - b * v
+    assert abs(residual.sum()) < 1e-12 * (v**2).sum()
+    assert abs((residual * v).sum()) < 1e-12 * (v**3).sum()
 
 
 def test_the_term_adds_no_line_on_the_road_load_speeds():
@@ -86,18 +90,17 @@ def test_the_term_is_affine_in_the_state_along_a_trace():
     the motion in parallel), and equals the exact v^2 where the two speeds agree."""
     from bayes_roadload.physics.terms import Conditions
 
+    def conditions(v, vm=None):
+        return Conditions(speed_mps=v, airspeed_mps=0.0, yaw_rad=0.0, driveline_force_n=0.0, position_m=0.0,
+                          distance_m=0.0, time_s=0.0, accel_mps2=0.0, direction=1.0, air_density_kgpm3=RHO,
+                          temperature_k=config.REFERENCE_TEMPERATURE_K, mass_kg=M, frontal_area_m2=AREA,
+                          speed_measured_mps=vm)
+
     def force(v, vm):
-        c = Conditions(speed_mps=v, airspeed_mps=0.0, yaw_rad=0.0, driveline_force_n=0.0, position_m=0.0,
-                       distance_m=0.0, time_s=0.0, accel_mps2=0.0, direction=1.0, air_density_kgpm3=RHO,
-                       temperature_k=config.REFERENCE_TEMPERATURE_K, mass_kg=M, frontal_area_m2=AREA,
-                       speed_measured_mps=vm)
-        return float(TyreSpeedSquared().force_n(P, c))
+        return float(TyreSpeedSquared().force_n(P, conditions(v, vm)))
 
     second = force(21.0, 20.0) - 2 * force(20.0, 20.0) + force(19.0, 20.0)
     assert abs(second) < 1e-9 * abs(force(20.0, 20.0))
-    exact = DragModel((TyreSpeedSquared(),)).force_components_n(
-        dict(P), Conditions(speed_mps=20.0, airspeed_mps=0.0, yaw_rad=0.0, driveline_force_n=0.0, position_m=0.0,
-                            distance_m=0.0, time_s=0.0, accel_mps2=0.0, direction=1.0, air_density_kgpm3=RHO,
-                            temperature_k=config.REFERENCE_TEMPERATURE_K, mass_kg=M, frontal_area_m2=AREA))
+    exact = DragModel((TyreSpeedSquared(),)).force_components_n(dict(P), conditions(20.0))
     assert force(20.0, 20.0) == pytest.approx(float(exact["tyre_speed_squared"]), rel=1e-12)
     assert TyreSpeedSquared.speed_affine
