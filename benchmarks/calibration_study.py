@@ -90,7 +90,8 @@ def resume_from(partial: Path, jobs: list) -> tuple[pd.DataFrame, list]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=200, help="campaigns (default 200)")
-    ap.add_argument("--seed0", type=int, default=CONFIRMATORY_SEED0, help=f"first seed (confirmatory seeds start at {CONFIRMATORY_SEED0})")
+    ap.add_argument("--seed0", type=int, default=CONFIRMATORY_SEED0,
+                    help=f"first seed (confirmatory seeds start at {CONFIRMATORY_SEED0})")
     ap.add_argument("--pairs", type=int, nargs=2, default=(1, 12), metavar=("MIN", "MAX"))
     ap.add_argument("--workers", type=int, default=None, help="Dask workers (default: the usable cores)")
     ap.add_argument("--scheduler", default=None, metavar="ADDR", help="a running Dask scheduler")

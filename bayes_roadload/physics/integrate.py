@@ -182,8 +182,8 @@ def reading_rate(time_s, reading, mask):
 
 def _inputs(run: RunBatch):
     """The input channels stacked on a last axis ([..., N, C]): those of ``_CHANNELS``, the
-    rate of the airspeed reading (:func:`reading_rate`) and the measured speed; with numpy when they are concrete,
-    so that data-only work on them is done once per trace."""
+    rate of the airspeed reading (:func:`reading_rate`) and the measured speed; with numpy when
+    they are concrete, so that data-only work on them is done once per trace."""
     channels = [getattr(run, ch) for ch in _CHANNELS]
     channels.append(reading_rate(run.time_s, run.airspeed_mps, run.mask))
     channels.append(run.speed_mps)

@@ -523,9 +523,10 @@ def simulate_campaign(case: int | SimulationCase, pairs: int = 1, seed: int = 0,
         ``truth`` holds the nominal true
         parameters (A_D, B_D, C_D0, K_D, C_L0, K_L, the "comp" extras, A_t, B_t, C_t when
         simulated), ``tyre_lag_gain_per_mps`` and ``tyre_quadratic_s2_per_m2`` 0 unless an extra
-        term sets them (the cases' tyres have no thermal lag and a linear speed law), the case number and model, and ``per_run``: ``str(run id)`` -> the A_D,
-        B_D, C_D0 of that run after system noise (string keys, as JSON stores them; for the
-        band-limited system noise, their mean over the run).
+        term sets them (the cases' tyres have no thermal lag and a linear speed law), the case
+        number and model, and ``per_run``: ``str(run id)`` -> the A_D, B_D, C_D0 of that run
+        after system noise (string keys, as JSON stores them; for the band-limited system noise,
+        their mean over the run).
         ``meta`` holds the case, seed and number of pairs and the case's settings.
     """
     settings = DEFAULT_SETTINGS if settings is None else settings
