@@ -74,7 +74,7 @@ def test_the_truth_split_reads_coverage_on_either_side():
 
 def test_jobs_carry_the_model_asked_for():
     """The study fits fit's default model for each campaign unless told otherwise (``--model``):
-    "auto", which the batch job resolves by the campaign's vehicle as ``fit`` does."""
+    "auto", which the batch job resolves for each campaign as ``fit`` does."""
     assert {j.model for j in calibration_jobs([1, 2], 1, 3)} == {"auto"}
     assert {j.model for j in calibration_jobs([1], 1, 3, options=FitOptions(method="laplace"))} == {"auto"}
     assert {j.model for j in calibration_jobs([1, 2], 1, 3, model="four_term")} == {"four_term"}
@@ -97,7 +97,7 @@ def test_smoke_one_independent_campaign_through_the_study():
     records = run_batch(jobs, progress=False)
     assert records["error"].isna().all(), records.get("traceback")
     campaign = jobs[0].campaign()
-    # "auto" is recorded as the model fit takes for this campaign's vehicle
+    # "auto" is recorded as the model fit takes for this campaign
     assert records.loc[0, "model"] == KINDS["traces"].default_model(campaign, FitOptions())
     for q in QUANTITIES:
         assert records.loc[0, f"{q}_truth"] == pytest.approx(campaign.truth[q], rel=1e-12), q

@@ -96,7 +96,6 @@ def test_speed_traces_default_to_the_tyre_lag_for_nuts_only():
     assert gain not in lsq.free and "tyre_thermal_lag" not in lsq.terms
 
 
-
 def test_the_heavy_variant_differs_from_the_light_one_by_its_priors_only():
     """``four_term_tyre_lag_j2452_heavy`` has the light variant's terms and free parameters and
     a truck's C_D0 and K_D priors, each more than one light sd above the light centre."""
