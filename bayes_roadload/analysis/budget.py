@@ -34,7 +34,12 @@ fixed at their declared values.  They are marginalised to first order after the 
   ``c_{x,s}^2 u_s^2 / (var_data + sum_s c_{x,s}^2 u_s^2)``, and the share of the data (the
   posterior's own variance).  The shares sum to 1.
 
-A source the model samples itself (a free ``airspeed_factor`` or ``yaw_factor`` of a
+A model file may give a fixed constant a standard uncertainty (``[parameters.NAME]
+uncertainty``, :mod:`bayes_roadload.inference.spec`): that constant is a source too, shifted in
+the fitted problem itself (:class:`~bayes_roadload.inference.shift.FixedShift`,
+:meth:`~bayes_roadload.inference.problem.Problem.shift_constant`) and carried by the same
+steps, keyed by its parameter name; it needs the fit (planning's least-squares floor leaves it
+out).  A source the model samples itself (a free ``airspeed_factor`` or ``yaw_factor`` of a
 ``*_calibrated`` model) is left to the posterior; a source the campaign has nothing for (no
 temperature channel, no driveline channel) is not applicable.  First order and independent
 sources: a source whose effect is not linear over +-2 u, or two sources that share an error,
@@ -56,6 +61,7 @@ from ..data.uncertainty import SOURCES, standard_uncertainties
 from ..inference.kinds import FitOptions, kind_of
 from ..inference.lsq import fit_lsq
 from ..inference.results import SUMMARY_COLUMNS
+from ..inference.shift import FixedShift, fixed_shifts
 from ..inference.spec import ModelSpec, load_model_spec
 
 SAMPLED_BY_MODEL = {"airspeed_factor_rel": "airspeed_factor", "yaw_factor_rel": "yaw_factor"}
@@ -139,12 +145,22 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
     spec = load_model_spec(spec) if isinstance(spec, str) else spec
     t0 = time.perf_counter()
     u, shifts, notes = type_b_shifts(campaign, spec)
+    if spec.uncertainty:
+        u.update(spec.uncertainty)
+        if fit is not None and fit.map is not None:
+            constants, why = fixed_shifts(fit.problem, spec.uncertainty)
+            shifts, notes = {**shifts, **constants}, {**notes, **why}
+        else:
+            notes.update({p: "not propagated (a model constant is shifted in the fit's problem: no fit given)"
+                          for p in spec.uncertainty if p not in notes})
     sens: dict[str, dict[str, float]] = {}
     if shifts and (method == "linear" or not entry.lsq):
         rows = entry.type_b(campaign, spec, shifts, options, fit)
     else:
         rows = {}
         for key, (plus, minus, h) in shifts.items():
+            if isinstance(plus, FixedShift):
+                continue  # refitting least squares has no model constants to shift: noted below
             hi, lo = fit_lsq(plus, spec, grouping="all"), fit_lsq(minus, spec, grouping="all")
             rows[key] = {q: (hi.weighted_mean[q] - lo.weighted_mean[q]) / (2.0 * h)
                          for q in hi.weighted_mean if q in lo.weighted_mean}

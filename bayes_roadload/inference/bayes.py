@@ -125,7 +125,7 @@ from ..physics.residuals import (
     reversion_factors,
     reverting_loglik_batch,
 )
-from .problem import road_load_draws, road_load_truth
+from .problem import shifted_constant, road_load_draws, road_load_truth
 from .spec import ModelSpec, Prior, load_model_spec
 
 POOLINGS = ("pooled", "hierarchical")
@@ -247,6 +247,15 @@ class FitProblem:
         out: dict[str, Any] = {"pooling": self.pooling, "noise": self.noise, "robust": self.robust}
         if "undriven_wheels" in self.spec.terms:
             out["undriven"] = {k: self.fixed[k] for k in ("Au", "Bu")}
+        return out
+
+    def shift_constant(self, name: str, delta: float) -> "FitProblem | None":
+        """The problem with a fixed constant moved (:meth:`~.problem.Problem.shift_constant`);
+        a problem sampled in its apparent coefficients gets the line of its new lag time
+        constant (:func:`lag_line`), so that its coordinates stay those of :attr:`apparent`."""
+        out = shifted_constant(self, name, delta)
+        if out is not None and self.apparent is not None and name == self.model.lag_time_constant:
+            out = dataclasses.replace(out, apparent=lag_line(self.batch, out.fixed[name]))
         return out
 
     def alternative_coordinates(self, values: dict[str, Any]) -> tuple["FitProblem", dict[str, Any], str] | None:

@@ -60,6 +60,10 @@ class DrivelineProblem:
         """None: one set of coordinates (:class:`~.problem.Problem`)."""
         return None
 
+    def shift_constant(self, name: str, delta: float) -> None:
+        """None: no fixed drag-model constants (:meth:`~.problem.Problem.shift_constant`)."""
+        return None
+
     def settings(self) -> dict[str, Any]:
         return {"pooling": "pooled", "noise": "driveline", "robust": False}
 

@@ -15,6 +15,7 @@ Implementations: :class:`~.bayes.FitProblem` (speed traces), :class:`~.intervals
 
 from __future__ import annotations
 
+import dataclasses
 from functools import lru_cache, partial
 from typing import Any, Callable, Protocol, runtime_checkable
 
@@ -84,6 +85,13 @@ class Problem(Protocol):
         what changed, for ``diagnostics.json``; None when the problem has no other coordinates."""
         ...
 
+    def shift_constant(self, name: str, delta: float) -> "Problem | None":
+        """The same problem with its fixed model constant ``name`` moved by ``delta`` (SI),
+        everything else as it is: a model constant's Type B shift
+        (:mod:`bayes_roadload.analysis.budget`).  None when ``name`` is not among the problem's
+        fixed constants."""
+        ...
+
     def postprocess(self, samples: dict[str, np.ndarray], seed: int) -> dict[str, np.ndarray]:
         """Sites added to the NUTS draws ([chain, draw, ...] arrays) after sampling, e.g. the
         run-level coefficients integrated out while sampling; ``{}`` when there are none."""
@@ -98,6 +106,14 @@ class Problem(Protocol):
         """The truth of a simulated campaign keyed by summary row (scalar truths and the
         derived quantities at them); ``{}`` without a truth."""
         ...
+
+
+def shifted_constant(problem, name: str, delta: float):
+    """``problem`` (a data class with a ``fixed`` dict) with ``fixed[name]`` moved by
+    ``delta``, or None when ``name`` is not fixed there (:meth:`Problem.shift_constant`)."""
+    if name not in problem.fixed:
+        return None
+    return dataclasses.replace(problem, fixed={**problem.fixed, name: float(problem.fixed[name]) + float(delta)})
 
 
 class PooledRunProblem:
@@ -122,6 +138,9 @@ class PooledRunProblem:
 
     def alternative_coordinates(self, values: dict[str, Any]) -> None:
         return None
+
+    def shift_constant(self, name: str, delta: float):
+        return shifted_constant(self, name, delta)
 
     def postprocess(self, samples: dict[str, Any], seed: int) -> dict[str, Any]:
         return {}

@@ -45,7 +45,36 @@ from .spec import ModelSpec
 log = logging.getLogger(__name__)
 
 Shifts = Mapping[str, tuple[Any, Any, float]]
-"""Source key -> (campaign shifted by +h, campaign shifted by -h, h)."""
+"""Source key -> (campaign shifted by +h, campaign shifted by -h, h); for a model constant,
+:class:`FixedShift` in place of the two campaigns."""
+
+
+@dataclasses.dataclass(frozen=True)
+class FixedShift:
+    """A shift of a fixed model constant rather than of the campaign: the fitted problem with
+    that constant moved (:meth:`~bayes_roadload.inference.problem.Problem.shift_constant`), used as
+    it is where a shift's campaign would go through the kind's problem builder."""
+
+    problem: Problem
+
+
+def fixed_shifts(problem: Problem, uncertainty: Mapping[str, float]) -> tuple[dict, dict[str, str]]:
+    """The Type B shifts of the model constants ``uncertainty`` (name -> standard uncertainty
+    ``u``, a model file's ``[parameters.NAME] uncertainty``): ``name -> (FixedShift(+u),
+    FixedShift(-u), u)`` for each constant ``problem`` fixes, and a note for each it does not
+    (switched off by ``u = 0``, or not a constant of this problem)."""
+    shifts: dict[str, tuple[FixedShift, FixedShift, float]] = {}
+    notes: dict[str, str] = {}
+    for name, u in uncertainty.items():
+        if u <= 0.0:
+            notes[name] = "switched off (uncertainty = 0 in the model file)"
+            continue
+        plus, minus = problem.shift_constant(name, u), problem.shift_constant(name, -u)
+        if plus is None or minus is None:
+            notes[name] = "not applicable (not a fixed constant of the fitted problem)"
+            continue
+        shifts[name] = (FixedShift(plus), FixedShift(minus), float(u))
+    return shifts, notes
 
 NEWTON_STEP_AGREEMENT = 0.1
 """A Newton step of :meth:`SharedPotential.newton_step` is kept when the decrease of the
@@ -373,7 +402,7 @@ def _central_differences(build: Callable[[Any], Problem], shifts: Shifts, shared
     out: dict[str, dict[str, float]] = {}
     for key, (plus, minus, h) in shifts.items():
         try:
-            problems = [build(c) for c in (plus, minus)]
+            problems = [c.problem if isinstance(c, FixedShift) else build(c) for c in (plus, minus)]
             points = _shared_points(shared, problems, how, held)
             values = []
             for shifted, constrained in zip(problems, points):

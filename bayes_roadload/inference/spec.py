@@ -21,6 +21,14 @@ analysis treats specially (``NAME`` a contract name from :data:`bayes_roadload.c
     fixed = "tunnel"                         # or a number
     fallback = 0.614                         # used when the campaign has no [tunnel] KD
 
+    [parameters.tyre_quadratic_s2_per_m2]
+    fixed = 1.0e-6
+    uncertainty = 0.8e-6                     # standard uncertainty (SI) of a fixed number
+
+A fixed number with an ``uncertainty`` is a Type B source of the fit's uncertainty budget (a
+model constant known to +-u, GUM 4.3): the posterior holds it at its value, and
+:mod:`bayes_roadload.analysis.budget` carries its spread into every draw and ``budget.csv``.
+
 Meaning of the ``[model]`` switches (resolved against a campaign by :meth:`ModelSpec.build`):
 
 ``driveline``
@@ -88,7 +96,7 @@ _SWITCHED_TERMS = {
     "driveline_polynomial": "driveline",
 }
 _MODEL_KEYS = ("name", "description", "terms", "driveline", "lift", "air")
-_PARAMETER_KEYS = ("free", "fixed", "fallback", "initial", "prior")
+_PARAMETER_KEYS = ("free", "fixed", "fallback", "initial", "prior", "uncertainty")
 _AIR_PARAMETERS = tuple(
     sorted({k for air in AIR_MODELS.values() for k in air.defaults})
 )
@@ -271,6 +279,8 @@ class ModelSpec:
         default is used then).
     fallback : parameter -> value used when ``fixed = "tunnel"`` and the campaign's tunnel
         table lacks it.
+    uncertainty : fixed parameter -> its standard uncertainty (SI, >= 0; 0 switches it off):
+        a Type B source of the budget (module docstring); only for a fixed number.
     source : the file the spec was read from (None when built in code).
     """
 
@@ -285,6 +295,7 @@ class ModelSpec:
     priors: dict[str, Prior] = field(default_factory=dict)
     initial: dict[str, float] = field(default_factory=dict)
     fallback: dict[str, float] = field(default_factory=dict)
+    uncertainty: dict[str, float] = field(default_factory=dict)
     source: str | None = None
 
     def __post_init__(self):
@@ -439,6 +450,13 @@ def _validate(spec: ModelSpec, where: str) -> None:
         if spec.fixed.get(p) != TUNNEL:
             raise ModelSpecError(f"{where}: [parameters.{p}].fallback: only meaningful with "
                                  "fixed = \"tunnel\"")
+    for p, u in spec.uncertainty.items():
+        if p not in spec.fixed or spec.fixed[p] == TUNNEL:
+            raise ModelSpecError(f"{where}: [parameters.{p}].uncertainty: only for a parameter "
+                                 "fixed at a number (free ones have a prior)")
+        if isinstance(u, bool) or not isinstance(u, (int, float)) or not math.isfinite(u) or u < 0.0:
+            raise ModelSpecError(f"{where}: [parameters.{p}].uncertainty: {u!r} is not a finite "
+                                 "standard uncertainty >= 0")
 
 
 # ----------------------------------------------------------------------------- loading
@@ -471,6 +489,7 @@ def parse_model_spec(doc: Mapping[str, Any], where: str, default_name: str = "mo
     priors: dict[str, Prior] = {}
     initial: dict[str, float] = {}
     fallback: dict[str, float] = {}
+    uncertainty: dict[str, float] = {}
     params = doc.get("parameters", {})
     if not isinstance(params, Mapping):
         raise ModelSpecError(f"{where}: [parameters] must be a table of [parameters.NAME] tables")
@@ -500,6 +519,8 @@ def parse_model_spec(doc: Mapping[str, Any], where: str, default_name: str = "mo
             fixed[p] = v if v == TUNNEL else float(v)
         if "fallback" in table:
             fallback[p] = _number(table["fallback"], f"{where}: {key} fallback")
+        if "uncertainty" in table:
+            uncertainty[p] = _number(table["uncertainty"], f"{where}: {key} uncertainty")
         if "initial" in table:
             initial[p] = _number(table["initial"], f"{where}: {key} initial")
         if "prior" in table:
@@ -521,6 +542,7 @@ def parse_model_spec(doc: Mapping[str, Any], where: str, default_name: str = "mo
         priors=priors,
         initial=initial,
         fallback=fallback,
+        uncertainty=uncertainty,
         source=where,
     )
 

@@ -52,7 +52,7 @@ from ..physics.model import DragModel, StillAir, WindAir
 from ..physics.roadload import road_load_summary
 from ..physics.terms import Conditions
 from .nuts import sample_problem
-from .problem import road_load_truth
+from .problem import shifted_constant, road_load_truth
 from .results import FitReport, channel_report
 from .spec import ModelSpec, Prior, load_model_spec
 
@@ -99,6 +99,10 @@ class SteadyProblem:
     def alternative_coordinates(self, values: dict[str, Any]) -> None:
         """None: one set of coordinates (:class:`~.problem.Problem`)."""
         return None
+
+    def shift_constant(self, name: str, delta: float) -> "SteadyProblem | None":
+        """The problem with a fixed constant moved (:meth:`~.problem.Problem.shift_constant`)."""
+        return shifted_constant(self, name, delta)
 
     def settings(self) -> dict[str, Any]:
         return {"pooling": "pooled", "noise": "run_offset", "robust": False}

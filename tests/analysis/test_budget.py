@@ -431,3 +431,98 @@ def test_a_posterior_type_b_step_that_fails_falls_back_to_least_squares(clean, c
     assert set(got) == set(want) == set(shifts)
     for key in shifts:
         assert got[key]["F50_N"] == pytest.approx(want[key]["F50_N"], rel=1e-9)
+
+
+def test_a_model_constants_shift_is_the_model_file_with_its_value_moved():
+    """A constant the model file fixes with an ``uncertainty`` (the tyre's v^2 coefficient C_R
+    of ``four_term_tyre_lag_j2452_typeb``, 1.0e-6 +- 0.8e-6 s^2/m^2) is a Type B source shifted
+    in the fitted problem (``shift.FixedShift``): the shifted problem's potential equals, at
+    two points, that of the problem built from the file with the value moved by +-u.  A constant
+    the problem does not fix is not applicable, u = 0 switches one off, and without the fit the
+    budget notes the constant as not propagated instead of dropping it in silence."""
+    import warnings
+
+    import jax
+    from jax.flatten_util import ravel_pytree
+
+    from bayes_roadload.inference.bayes import build_problem
+    from bayes_roadload.inference.nuts import initial_values, unconstrained_posterior
+    from bayes_roadload.inference.shift import fixed_shifts
+    from bayes_roadload.inference.spec import load_model_spec
+
+    spec = load_model_spec("four_term_tyre_lag_j2452_typeb")
+    name, u = "tyre_quadratic_s2_per_m2", spec.uncertainty["tyre_quadratic_s2_per_m2"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        campaign = simulate_campaign(14, pairs=1, seed=1)
+        problem = build_problem(campaign, spec)
+        init = initial_values(problem, campaign)
+        shifts, notes = fixed_shifts(problem, {name: u, "tyre_lag_time_constant_s": 0.0, "At": 1.0})
+        assert set(shifts) == {name} and shifts[name][2] == u
+        assert "switched off" in notes["tyre_lag_time_constant_s"]
+        assert "not applicable" in notes["At"]   # the campaign logs no driveline: no such constant
+        base = unconstrained_posterior(problem, init)
+        flat, unravel = ravel_pytree(base.z0)
+        points = (base.z0, unravel(flat + 0.01))
+        unshifted = [float(jax.jit(base.potential_fn)(z)) for z in points]
+        for sign, shifted in ((1.0, shifts[name][0].problem), (-1.0, shifts[name][1].problem)):
+            assert shifted.fixed[name] == pytest.approx(spec.fixed[name] + sign * u, rel=1e-12)
+            moved = dataclasses.replace(spec, fixed=dict(spec.fixed, **{name: spec.fixed[name] + sign * u}))
+            ours, theirs = (jax.jit(unconstrained_posterior(p, init).potential_fn)
+                            for p in (shifted, build_problem(campaign, moved)))
+            for z, before in zip(points, unshifted):
+                a, b = float(ours(z)), float(theirs(z))
+                assert a == pytest.approx(b, rel=1e-12, abs=1e-9)
+                assert a != pytest.approx(before, rel=1e-9)   # the shift changes the posterior
+        quiet = dataclasses.replace(campaign, meta=dict(campaign.meta, uncertainty={k: 0.0 for k in SOURCES}))
+        without = type_b_sensitivities(quiet, spec, ["CD0", "F2_N_per_kph2"])   # the campaign's sources off
+    assert without.sources == [] and "no fit given" in without.notes[name]
+
+
+@pytest.mark.slow  # ~40 s: the fitted MAP, the budget's steps and two MAPs of rebuilt problems
+def test_a_model_constant_with_an_uncertainty_is_a_source_of_the_budget():
+    """The tyre's v^2 coefficient C_R of ``four_term_tyre_lag_j2452_typeb`` (above) in the
+    budget of a fit, stepped like a declared value.
+
+    * The step, with every site free to move, gives the central differences of the MAPs of the
+      problems built from the moved files: each contribution c u within 5 % of the quantity's
+      Type B uncertainty over every source (the campaign sources' tolerance above).  The
+      budget's own step holds the noise scales at the MAP, as for every speed-trace source; on
+      this one-pair campaign C_R's misfit moves q (0.0019 to 0.0033 m/s/sqrt(s) over +-u), and
+      the held step gives C_D0 about half the full one's sensitivity (-1.3e3 against -2.5e3).
+    * F2 takes most of it: C_R M g is the tyre's share of F2, which C_D0 takes back only in part."""
+    import math
+    import warnings
+    from types import SimpleNamespace
+
+    from bayes_roadload.inference.bayes import build_problem
+    from bayes_roadload.inference.nuts import find_map, prepare_problem
+    from bayes_roadload.inference.shift import fixed_shifts, newton_sensitivities, quantities_at
+    from bayes_roadload.inference.spec import load_model_spec
+
+    spec = load_model_spec("four_term_tyre_lag_j2452_typeb")
+    name, u = "tyre_quadratic_s2_per_m2", spec.uncertainty["tyre_quadratic_s2_per_m2"]
+    quantities = ["CD0", "F50_N", "F2_N_per_kph2"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        campaign = simulate_campaign(14, pairs=1, seed=1)
+        problem, init = prepare_problem(build_problem(campaign, spec), campaign)
+        fit = SimpleNamespace(problem=problem, map=find_map(problem, init))
+        typeb = type_b_sensitivities(campaign, spec, quantities, fit=fit)
+        shifts, _ = fixed_shifts(problem, {name: u})
+        full = newton_sensitivities(lambda c: c, shifts, (problem, fit.map))[name]
+        refit = {}
+        for sign in (1.0, -1.0):
+            moved = dataclasses.replace(spec, fixed=dict(spec.fixed, **{name: spec.fixed[name] + sign * u}))
+            rebuilt, start = prepare_problem(build_problem(campaign, moved), campaign)
+            mode = find_map(rebuilt, start)
+            assert mode.success
+            refit[sign] = quantities_at(rebuilt, mode.constrained)
+    assert name in typeb.sources and typeb.u[name] == u
+    for q in quantities:
+        c_refit = (refit[1.0][q] - refit[-1.0][q]) / (2.0 * u)
+        u_b = math.sqrt(sum(typeb.variances(q).values()) - (typeb.sensitivity[q][name] * u) ** 2 + (c_refit * u) ** 2)
+        assert abs(full[q] - c_refit) * u <= 0.05 * u_b, (q, full[q], c_refit)
+    weight = campaign.vehicle.mass_kg * 9.80665 / 3.6**2   # N per (km/h)^2 per unit C_R
+    for sensitivity in (typeb.sensitivity["F2_N_per_kph2"][name], full["F2_N_per_kph2"]):
+        assert 0.5 * weight < sensitivity <= 1.05 * weight

@@ -138,6 +138,10 @@ def test_a_good_file_loads(tmp_path):
     spec = load_model_spec(_write(tmp_path, GOOD, "mine.toml"))
     assert spec.name == "mine" and spec.free == ("AD",) and spec.fixed == {"KD": 0.614}
     assert spec.priors["AD"] == Prior("normal", 0.01, 0.01) and spec.initial == {"AD": 0.01}
+    assert spec.uncertainty == {}
+    with_u = load_model_spec(_write(tmp_path, GOOD.replace("fixed = 0.614", "fixed = 0.614\nuncertainty = 0.2"),
+                                    "mine_u.toml"))
+    assert with_u.uncertainty == {"KD": 0.2} and with_u.fixed == {"KD": 0.614}
 
 
 @pytest.mark.parametrize("edit, key, message", [
@@ -157,6 +161,12 @@ def test_a_good_file_loads(tmp_path):
     (("fixed = 0.614", "fixed = 0.614\nprior = { dist = \"half_normal\", scale = 1.0 }"), "[parameters.KD]", "needs free = true"),
     (("fixed = 0.614", "free = false"), "[parameters.KD]", "say free = true or fixed"),
     (("[model]", "[modle]\n[model]"), "[modle]", "unknown table"),
+    (("fixed = 0.614", "fixed = 0.614\nuncertainty = -0.1"), "[parameters.KD].uncertainty", "standard uncertainty >= 0"),
+    (("fixed = 0.614", 'fixed = "tunnel"\nfallback = 0.6\nuncertainty = 0.1'), "[parameters.KD].uncertainty",
+     "only for a parameter fixed at a number"),
+    (("free = true\nprior", "free = true\nuncertainty = 0.001\nprior"), "[parameters.AD].uncertainty",
+     "only for a parameter fixed at a number"),
+    (("fixed = 0.614", 'fixed = 0.614\nuncertainty = "0.1"'), "[parameters.KD] uncertainty", "not a finite number"),
 ])
 def test_bad_specs_are_refused_naming_file_and_key(tmp_path, edit, key, message):
     old, new = edit
