@@ -186,7 +186,11 @@ def _road_load_program(model) -> Callable[..., Any]:
 
 
 def road_load_truth(problem, truth: dict | None, *, driveline_curve=(0.0, 0.0, 0.0)) -> dict[str, float]:
-    """:data:`ROAD_LOAD_DERIVED` at the true coefficients (every free one must be in ``truth``).
+    """:data:`ROAD_LOAD_DERIVED` at the true coefficients (every free one must be in ``truth``),
+    with every other model constant the truth states at its true value too: a constant the
+    analysis holds at an assumed value (the tyre's v^2 coefficient of
+    ``four_term_tyre_lag_j2452_mean``) is the simulator's where the simulator says, so that
+    the analysis' assumption does not enter the truth it is scored against.
 
     A truth that states a road-load quantity itself (a simulator whose physics differs from
     the analysis model, e.g. :mod:`bayes_roadload.simulate.independent`, reports its own road
@@ -195,9 +199,9 @@ def road_load_truth(problem, truth: dict | None, *, driveline_curve=(0.0, 0.0, 0
     if not truth:
         return {}
     stated = {k: float(truth[k]) for k in ROAD_LOAD_DERIVED if isinstance(truth.get(k), (int, float))}
-    values = {k: float(truth[k]) for k in problem.free if isinstance(truth.get(k), (int, float))}
-    if len(values) != len(problem.free):
+    if not all(isinstance(truth.get(k), (int, float)) for k in problem.free):
         return stated
+    values = {k: float(truth[k]) for k in problem.model.parameter_names if isinstance(truth.get(k), (int, float))}
     out = road_load_summary(problem.model, dict(problem.fixed, **values), problem.mass_kg, problem.frontal_area_m2,
                             driveline_curve=driveline_curve)
     return {k: float(v) for k, v in out.items()} | stated

@@ -14,8 +14,8 @@ from bayes_roadload.inference.spindown import SpindownProblem
 from bayes_roadload.inference.steady import SteadyProblem
 
 PROBLEMS = (FitProblem, IntervalProblem, DistanceProblem, SpindownProblem, SteadyProblem, DrivelineProblem)
-MEMBERS = ("numpyro_model", "hessian_runs", "n_observations", "settings", "alternative_coordinates", "postprocess", "derived",
-           "truth_values", "kind")
+MEMBERS = ("numpyro_model", "hessian_runs", "n_observations", "settings", "alternative_coordinates", "shift_constant",
+           "postprocess", "derived", "truth_values", "kind")
 FIELDS = ("spec", "free", "initial", "run_ids", "priors")
 
 
@@ -54,3 +54,38 @@ def test_only_a_problem_sampled_in_apparent_coefficients_has_other_coordinates(s
     assert set(start) == set(values) - set(APPARENT_SITES.values()) and start["CD0"] == 0.35
     assert direct.alternative_coordinates(start) is None
     assert build_problem(small_campaign, "four_term").alternative_coordinates({}) is None
+
+
+def test_a_constant_shift_moves_that_constant_only(small_campaign):
+    """``shift_constant`` moves one fixed constant and keeps everything else; a name the problem
+    does not fix gives None; a problem sampled in its apparent coefficients whose lag time
+    constant moves gets that time constant's line (``bayes.lag_line``)."""
+    from bayes_roadload.inference.bayes import build_problem, lag_line
+
+    lag = build_problem(small_campaign, "four_term_tyre_lag")
+    moved = lag.shift_constant("tyre_lag_time_constant_s", 100.0)
+    assert moved.fixed == dict(lag.fixed, tyre_lag_time_constant_s=lag.fixed["tyre_lag_time_constant_s"] + 100.0)
+    assert moved.apparent == lag_line(lag.batch, 500.0) != lag.apparent
+    assert moved.batch is lag.batch and moved.free == lag.free
+    assert lag.shift_constant("AD", 0.001) is None   # free, not fixed
+    assert lag.shift_constant("At", 1.0) is None     # not a parameter of this problem
+
+
+def test_the_truth_keeps_the_simulators_constants_not_the_analysis_assumptions(small_campaign):
+    """A model that holds a constant at an assumed value (C_R = 1e-6 s^2/m^2 in
+    ``four_term_tyre_lag_j2452_mean``) is scored against the simulator's road load, whose truth
+    states C_R = 0: the truth's F0, F1, F2 are those of the model without the term, not the
+    assumption's (which would move F2 by C_R M g / 3.6^2)."""
+    from bayes_roadload.inference.bayes import build_problem
+
+    assert small_campaign.truth["tyre_quadratic_s2_per_m2"] == 0.0
+    plain = build_problem(small_campaign, "four_term_tyre_lag").truth_values(small_campaign.truth)
+    mean = build_problem(small_campaign, "four_term_tyre_lag_j2452_mean")
+    assert mean.fixed["tyre_quadratic_s2_per_m2"] == 1e-6
+    scored = mean.truth_values(small_campaign.truth)
+    for q in ("F0_N", "F1_N_per_kph", "F2_N_per_kph2", "F50_N"):
+        assert scored[q] == pytest.approx(plain[q], rel=1e-9), q
+    assumed = dict(small_campaign.truth, tyre_quadratic_s2_per_m2=1e-6)
+    shift = mean.truth_values(assumed)["F2_N_per_kph2"] - scored["F2_N_per_kph2"]
+    from bayes_roadload.config import GRAVITY_MPS2
+    assert shift == pytest.approx(1e-6 * mean.mass_kg * GRAVITY_MPS2 / 3.6**2, rel=1e-6)
