@@ -48,6 +48,15 @@ Shifts = Mapping[str, tuple[Any, Any, float]]
 """Source key -> (campaign shifted by +h, campaign shifted by -h, h); for a model constant,
 :class:`FixedShift` in place of the two campaigns."""
 
+NEWTON_STEP_AGREEMENT = 0.1
+"""A Newton step of :meth:`SharedPotential.newton_step` is kept when the decrease of the
+potential it achieves is within this fraction of the quadratic model's prediction.  The error of
+the step is of the relative size of the potential's cubic term over it, and so is this
+mismatch: 10 % keeps each Type B contribution to about the few per cent a budget is read to."""
+NEWTON_STEP_FLOOR = 1e-8
+"""Nats: a step whose predicted decrease is below this (a source that hardly moves the
+posterior) is kept whatever the ratio, which rounding decides at that size."""
+
 
 @dataclasses.dataclass(frozen=True)
 class FixedShift:
@@ -75,15 +84,6 @@ def fixed_shifts(problem: Problem, uncertainty: Mapping[str, float]) -> tuple[di
             continue
         shifts[name] = (FixedShift(plus), FixedShift(minus), float(u))
     return shifts, notes
-
-NEWTON_STEP_AGREEMENT = 0.1
-"""A Newton step of :meth:`SharedPotential.newton_step` is kept when the decrease of the
-potential it achieves is within this fraction of the quadratic model's prediction.  The error of
-the step is of the relative size of the potential's cubic term over it, and so is this
-mismatch: 10 % keeps each Type B contribution to about the few per cent a budget is read to."""
-NEWTON_STEP_FLOOR = 1e-8
-"""Nats: a step whose predicted decrease is below this (a source that hardly moves the
-posterior) is kept whatever the ratio, which rounding decides at that size."""
 
 
 def _scalars(values: Mapping[str, Any]) -> dict[str, float]:
