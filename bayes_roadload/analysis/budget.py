@@ -160,14 +160,15 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
         rows = {}
         for key, (plus, minus, h) in shifts.items():
             if isinstance(plus, FixedShift):
-                continue  # refitting least squares has no model constants to shift: noted below
+                notes[key] = "not propagated (the least-squares refits have no model constants to shift)"
+                continue
             hi, lo = fit_lsq(plus, spec, grouping="all"), fit_lsq(minus, spec, grouping="all")
             rows[key] = {q: (hi.weighted_mean[q] - lo.weighted_mean[q]) / (2.0 * h)
                          for q in hi.weighted_mean if q in lo.weighted_mean}
     for key in shifts:
         if key not in rows:
-            notes[key] = ("not propagated (the shifted campaign changes the model's structure, or its fit "
-                          "failed: the log says which)")
+            notes.setdefault(key, "not propagated (the shifted campaign changes the model's structure, or its fit "
+                                  "failed: the log says which)")
             continue
         for q in quantities:
             c = rows[key].get(q)

@@ -441,6 +441,7 @@ def test_a_model_constants_shift_is_the_model_file_with_its_value_moved():
     the problem does not fix is not applicable, u = 0 switches one off, and without the fit the
     budget notes the constant as not propagated instead of dropping it in silence."""
     import warnings
+    from types import SimpleNamespace
 
     import jax
     from jax.flatten_util import ravel_pytree
@@ -476,7 +477,11 @@ def test_a_model_constants_shift_is_the_model_file_with_its_value_moved():
                 assert a != pytest.approx(before, rel=1e-9)   # the shift changes the posterior
         quiet = dataclasses.replace(campaign, meta=dict(campaign.meta, uncertainty={k: 0.0 for k in SOURCES}))
         without = type_b_sensitivities(quiet, spec, ["CD0", "F2_N_per_kph2"])   # the campaign's sources off
+        # least-squares refits (method="refit") have no model constant to shift, even beside a fit
+        fitted = SimpleNamespace(problem=problem, map=object())
+        refit = type_b_sensitivities(quiet, spec, ["CD0", "F2_N_per_kph2"], method="refit", fit=fitted)
     assert without.sources == [] and "no fit given" in without.notes[name]
+    assert refit.sources == [] and "least-squares refits have no model constants" in refit.notes[name]
 
 
 @pytest.mark.slow  # ~40 s: the fitted MAP, the budget's steps and two MAPs of rebuilt problems
