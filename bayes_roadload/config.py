@@ -305,6 +305,10 @@ class SamplerConfig:
             raise ValueError("num_warmup, num_samples and num_chains must be positive")
 
 
+HEAVY_DUTY_MASS_KG = 3500.0
+"""Test mass (kg) above which ``fit``'s default speed-trace model takes a heavy vehicle's priors:
+the upper limit of GTR 15's light-duty scope (vehicles of 40 CFR 1037 and rigid trucks above it)."""
+
 AUTO_HIERARCHICAL_MIN_RUNS = 4
 """``--pooling auto`` is hierarchical from this many runs (two pairs) on: with one pair the
 run-to-run spreads are informed by two runs only (their posterior is their prior) and the

@@ -40,14 +40,15 @@ class Vehicle:
     the number of tyres on the road, for a standard whose effective mass counts them (40 CFR
     1037.528(h)(1): M + 56.7 kg per tyre).  ``mass_in_running_order_kg`` (optional, at most the
     test mass ``mass_kg``) is for GTR 15's estimate of the rotating mass, 3 % of (mass in running
-    order + 25 kg).
+    order + 25 kg).  ``length_m`` (optional) is the vehicle's overall length, for its aerodynamic
+    admittance (:mod:`bayes_roadload.physics.admittance`); None when not stated.
     """
 
     mass_kg: float
     effective_mass_kg: float
     frontal_area_m2: float
     rolling_radius_m: float = 0.28
-    length_m: float = 4.5
+    length_m: float | None = None
     tyres_in_contact: int | None = None
     mass_in_running_order_kg: float | None = None
 
@@ -82,6 +83,8 @@ def validate_vehicle(v: Vehicle, where: str = VEHICLE_FILE) -> None:
         refuse(where, "[vehicle] frontal_area_m2", None, f"{v.frontal_area_m2!r} is outside [{lo}, {hi}] m^2")
     if not (0.01 <= v.rolling_radius_m <= 2.0):
         refuse(where, "[vehicle] rolling_radius_m", None, f"{v.rolling_radius_m!r} is outside [0.01, 2] m")
+    if v.length_m is not None and not (math.isfinite(v.length_m) and 1.0 <= v.length_m <= 30.0):
+        refuse(where, "[vehicle] length_m", None, f"{v.length_m!r} is outside [1, 30] m")
 
 
 def vehicle_from_toml(doc: Mapping[str, Any], where: str) -> tuple[Vehicle, Anemometer, dict | None, dict]:
@@ -118,7 +121,7 @@ def vehicle_from_toml(doc: Mapping[str, Any], where: str) -> tuple[Vehicle, Anem
         refuse(where, "[vehicle] mass_in_running_order_kg", None,
                f"{mro!r} is not a mass in (0, mass_kg = {t['mass_kg']}]: the test mass includes the mass in running order")
     vehicle = Vehicle(float(t["mass_kg"]), me, float(t["frontal_area_m2"]), radius,
-                      float(t.get("length_m", 4.5)), tyres, None if mro is None else float(mro))
+                      None if t.get("length_m") is None else float(t["length_m"]), tyres, None if mro is None else float(mro))
     validate_vehicle(vehicle, where)
     a = dict(doc.get("anemometer", {}))
     for k in a:
@@ -193,7 +196,8 @@ def vehicle_toml(c) -> str:
     v = c.vehicle
     lines = ["[vehicle]"]
     for k in ("mass_kg", "effective_mass_kg", "frontal_area_m2", "rolling_radius_m", "length_m"):
-        lines.append(f"{k} = {toml_value(getattr(v, k))}")
+        if getattr(v, k) is not None:
+            lines.append(f"{k} = {toml_value(getattr(v, k))}")
     if v.tyres_in_contact is not None:
         lines.append(f"tyres_in_contact = {int(v.tyres_in_contact)}")
     if v.mass_in_running_order_kg is not None:

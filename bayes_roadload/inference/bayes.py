@@ -478,7 +478,7 @@ def build_problem(campaign: Campaign, spec: ModelSpec | str = "four_term", *, po
                          "airspeed_mps and yaw_rad (and the model file use air = \"auto\" or \"measured\")")
     model, fixed, free = spec.build(campaign)
     priors = {p: spec.priors.get(p) or default_prior(p, model) for p in free}
-    batch, run_ids = campaign.to_batch()
+    batch, run_ids = spec.to_batch(campaign)
     initial = {p: float(spec.initial.get(p, priors[p].center)) for p in free}
     pairs: tuple[tuple[int, int], ...] = ()
     if "airspeed_factor" in free:

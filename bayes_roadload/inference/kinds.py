@@ -143,18 +143,23 @@ def check_model(entry: KindEntry, spec: ModelSpec) -> None:
 
 
 def traces_default_model(campaign, o: FitOptions) -> str:
-    """``fit`` without ``--model`` on speed traces: the thesis' 4-term analysis with the tyre
-    temperature lagging the falling speed and the tyre's v^2 loss at its SAE J2452 mean, C_R's
-    spread carried in the Type B budget (``four_term_tyre_lag_j2452_typeb``) for the Bayesian
-    fit; the plain 4-term analysis for least squares (which has no prior to hold the lag's
-    weakly identified gain).  Chosen by measurement (docs/calibration.md, *C_R's spread in the
-    budget*): on the independent simulator's campaigns, whose tyres warm, cool and follow their
-    own speed law, it held 72 of 96 intervals on design seeds 100-111 against 59 for the lag
-    alone (``four_term_tyre_lag``, the previous default), with the same posterior geometry (C_R
-    is a constant, not a sampled direction) and so the same gates on thesis cases 1-19 at one
-    pair; the variants that sample C_R (``four_term_tyre_lag_j2452``, ``_heavy``) fail their
-    gates after the retry on 4 of those cases."""
-    return "four_term" if o.method == "lsq" else "four_term_tyre_lag_j2452_typeb"
+    """``fit`` without ``--model`` on speed traces: for the Bayesian fit, the thesis' 4-term
+    analysis with the tyre temperature lagging the falling speed, the tyre's v^2 loss at its
+    SAE J2452 mean (C_R's spread carried in the Type B budget) and the vehicle's aerodynamic
+    admittance when the campaign states the vehicle's length (``four_term_tyre_lag_admittance``),
+    with a heavy vehicle's priors above :data:`~bayes_roadload.config.HEAVY_DUTY_MASS_KG` test
+    mass (``four_term_tyre_lag_admittance_heavy``); the plain 4-term analysis for least squares
+    (which has no prior to hold the lag's weakly identified gain); without a campaign (None), the
+light-duty name.  Chosen by measurement
+    (docs/calibration.md, *The vehicle's aerodynamic admittance* and *C_R's spread in the
+    budget*): on the independent simulator's campaigns the anemometer's gusts read as the
+    body's attenuate K_D and C_D0, and the admittance takes most of that bias away; the
+    geometry of the posterior is that of ``four_term_tyre_lag_j2452_typeb`` (the admittance
+    changes the inputs, not the sampled directions)."""
+    if o.method == "lsq":
+        return "four_term"
+    heavy = campaign is not None and campaign.vehicle.mass_kg > config.HEAVY_DUTY_MASS_KG
+    return "four_term_tyre_lag_admittance_heavy" if heavy else "four_term_tyre_lag_admittance"
 
 
 def traces_default_pooling(campaign, spec: ModelSpec, o: FitOptions) -> str:

@@ -283,15 +283,15 @@ def _compiled_figures(model: DragModel, free: tuple[str, ...], settings: LsqSett
     return jax.jit(figures), jax.jit(jax.jacfwd(figures))
 
 
-def _lsq_batch(campaign) -> tuple[RunBatch, list]:
-    """The campaign's runs as a batch padded to the next of
+def _lsq_batch(campaign, spec: ModelSpec) -> tuple[RunBatch, list]:
+    """The campaign's runs as ``spec`` reads them (:meth:`ModelSpec.to_batch`) as a batch padded to the next of
     :data:`~bayes_roadload.config.LSQ_PAD_SIZES_PER_OCTAVE` lengths per doubling
     (:func:`~bayes_roadload.physics.integrate.bucket_length`), and the run ids.  The residual and
     its Jacobian take the batch as an argument (:func:`_compiled`), so campaigns of the same
     number of runs and nearly the same length share their compiled programs (within a process,
     and across processes through the persistent compilation cache); padded samples leave the
     fit unchanged (masked)."""
-    batch, run_ids = campaign.to_batch()
+    batch, run_ids = spec.to_batch(campaign)
     return pad_batch(batch, bucket_length(batch.time_s.shape[-1], config.LSQ_PAD_SIZES_PER_OCTAVE)), run_ids
 
 
@@ -423,7 +423,7 @@ def fit_lsq(campaign, spec: ModelSpec | str | os.PathLike = "four_term", groupin
     scales = np.asarray([config.PARAMETER_SCALES[p] for p in free])
     theta0 = np.asarray([start[p] for p in free]) / scales
 
-    batch, run_ids = _lsq_batch(campaign)
+    batch, run_ids = _lsq_batch(campaign, spec)
     index = {r: i for i, r in enumerate(run_ids)}
     fit_v0 = settings.initial_speed == "fitted"
     fun, jac = _compiled(model, free, settings.integrator, fit_v0)
@@ -529,7 +529,7 @@ def linear_sensitivities(campaign, spec: ModelSpec | str, shifts: Mapping[str, t
     theta = np.asarray([g0.estimate[q] for q in free])
     x = np.concatenate([theta / scales, np.asarray(g0.v0_offset_mps) / V0_OFFSET_SCALE_MPS]) if fit_v0 \
         else theta / scales
-    batch, run_ids = _lsq_batch(campaign)
+    batch, run_ids = _lsq_batch(campaign, spec)
     fixed_j = {k: jnp.asarray(v, float) for k, v in fixed.items()}
     jmat = np.asarray(jac(jnp.asarray(x), fixed_j, batch))
     gmat = np.asarray(figures_jac(jnp.asarray(theta), fixed_j, jnp.asarray(_driveline_curve(campaign, run_ids)),
@@ -546,7 +546,7 @@ def linear_sensitivities(campaign, spec: ModelSpec | str, shifts: Mapping[str, t
                     or tuple(fr) != tuple(free):
                 break
             fxj = {k: jnp.asarray(v, float) for k, v in fx.items()}
-            b, ids = _lsq_batch(c)
+            b, ids = _lsq_batch(c, spec)
             vehicle = jnp.asarray([c.vehicle.mass_kg, c.vehicle.frontal_area_m2])
             parts.append((np.asarray(fun(jnp.asarray(x), fxj, b)),
                           np.asarray(figures_j(jnp.asarray(theta), fxj, jnp.asarray(_driveline_curve(c, ids)), vehicle))))

@@ -11,6 +11,7 @@ analysis treats specially (``NAME`` a contract name from :data:`bayes_roadload.c
     driveline = "auto"   # auto | none | measured | polynomial
     lift = "tunnel"      # tunnel | none
     air = "auto"         # auto | measured | still | wind
+    admittance = "none"  # none | auto | first_order
 
     [parameters.AD]
     free = true
@@ -45,6 +46,12 @@ Meaning of the ``[model]`` switches (resolved against a campaign by :meth:`Model
     ``"auto"``: measured airspeed and yaw (with the campaign's anemometer calibration factors
     fixed) when the campaign logs both, else still air; ``"measured"``, ``"still"`` or
     ``"wind"`` (a steady wind as parameters ``head_wind_mps``, ``cross_wind_mps``) force one.
+``admittance``
+    The vehicle's aerodynamic admittance (thesis 6.2.3, :mod:`bayes_roadload.physics.admittance`):
+    ``"first_order"`` takes the anemometer's wind through a first-order lag of time constant
+    l / V_r before it acts on the body (l the vehicle's ``[vehicle] length_m``, required);
+    ``"auto"`` does so when the relative air is measured and the campaign states the length,
+    else reads the anemometer as the air the body feels, as ``"none"`` always does.
 
 The ``aero_drag_table`` term takes its C_D(yaw) table from the campaign's ``[tunnel]``
 ``yaw_deg`` / ``cd`` when present, else the thesis table (:data:`bayes_roadload.thesis.THESIS_TUNNEL_TABLE`).
@@ -64,8 +71,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
+
 from .. import config
 from .. import thesis
+from ..physics.admittance import felt_air_readings
 from ..physics.model import AIR_MODELS, DragModel, model_from_names
 from ..physics.terms import TERMS
 
@@ -86,6 +96,7 @@ MODELS_DIR = _models_dir()
 DRIVELINE_OPTIONS = ("auto", "none", "measured", "polynomial")
 LIFT_OPTIONS = ("tunnel", "none")
 AIR_OPTIONS = ("auto", "measured", "still", "wind")
+ADMITTANCE_OPTIONS = ("none", "auto", "first_order")
 TUNNEL = "tunnel"
 """The value of ``fixed`` that takes a parameter from the campaign's ``[tunnel]`` table."""
 
@@ -95,7 +106,7 @@ _SWITCHED_TERMS = {
     "driveline_measured": "driveline",
     "driveline_polynomial": "driveline",
 }
-_MODEL_KEYS = ("name", "description", "terms", "driveline", "lift", "air")
+_MODEL_KEYS = ("name", "description", "terms", "driveline", "lift", "air", "admittance")
 _PARAMETER_KEYS = ("free", "fixed", "fallback", "initial", "prior", "uncertainty")
 _AIR_PARAMETERS = tuple(
     sorted({k for air in AIR_MODELS.values() for k in air.defaults})
@@ -270,6 +281,7 @@ class ModelSpec:
     driveline : {"auto", "none", "measured", "polynomial"}
     lift : {"tunnel", "none"}
     air : {"auto", "measured", "still", "wind"}
+    admittance : {"none", "auto", "first_order"}
     free : the parameters estimated, in file order.
     fixed : parameter -> value (SI) or ``"tunnel"`` (taken from the campaign's ``[tunnel]``).
     priors : free parameter -> :class:`Prior` (SI units); free parameters without a prior are
@@ -290,6 +302,7 @@ class ModelSpec:
     driveline: str = "auto"
     lift: str = "none"
     air: str = "auto"
+    admittance: str = "none"
     free: tuple[str, ...] = ()
     fixed: dict[str, float | str] = field(default_factory=dict)
     priors: dict[str, Prior] = field(default_factory=dict)
@@ -319,6 +332,32 @@ class ModelSpec:
             raise ModelSpecError(f"{self._where}: [model] air = \"measured\" but the campaign logs no "
                                  "airspeed_mps / yaw_rad")
         return self.air
+
+    def resolve_admittance(self, campaign) -> float:
+        """The vehicle length (m) of the admittance filter after resolving ``admittance``
+        against ``campaign``; 0.0 when the anemometer is read as the air the body feels."""
+        if self.admittance == "none":
+            return 0.0
+        measured = self.resolve_air(campaign) == "measured"
+        length = getattr(campaign.vehicle, "length_m", None)
+        if self.admittance == "first_order" and (not measured or length is None):
+            raise ModelSpecError(f"{self._where}: [model] admittance = \"first_order\" needs the measured "
+                                 "relative air and the vehicle's [vehicle] length_m (use \"auto\")")
+        return float(length) if measured and length is not None else 0.0
+
+    def to_batch(self, campaign):
+        """The campaign's runs as this model reads them: :meth:`Campaign.to_batch`, with the
+        anemometer readings replaced by those of the air the body feels when the admittance
+        resolves on (:func:`~bayes_roadload.physics.admittance.felt_air_readings`, with the
+        campaign's calibration factors)."""
+        batch, run_ids = campaign.to_batch()
+        length = self.resolve_admittance(campaign)
+        if length > 0.0:
+            anem = campaign.anemometer
+            air, yaw = felt_air_readings(batch.time_s, batch.speed_mps, batch.airspeed_mps, batch.yaw_rad,
+                                         float(anem.airspeed_factor), float(anem.yaw_factor), length)
+            batch = batch._replace(airspeed_mps=np.asarray(air), yaw_rad=np.asarray(yaw))
+        return batch, run_ids
 
     def build(self, campaign) -> tuple[DragModel, dict[str, float], tuple[str, ...]]:
         """Resolve the spec against a campaign.
@@ -419,7 +458,8 @@ def _validate(spec: ModelSpec, where: str) -> None:
     if len(set(spec.terms)) != len(spec.terms):
         raise ModelSpecError(f"{where}: [model] terms: a term is listed twice")
     for key, value, options in (("driveline", spec.driveline, DRIVELINE_OPTIONS),
-                                ("lift", spec.lift, LIFT_OPTIONS), ("air", spec.air, AIR_OPTIONS)):
+                                ("lift", spec.lift, LIFT_OPTIONS), ("air", spec.air, AIR_OPTIONS),
+                                ("admittance", spec.admittance, ADMITTANCE_OPTIONS)):
         if value not in options:
             raise ModelSpecError(f"{where}: [model] {key} = {value!r}; choose one of "
                                  f"{', '.join(options)}")
@@ -537,6 +577,7 @@ def parse_model_spec(doc: Mapping[str, Any], where: str, default_name: str = "mo
         driveline=m.get("driveline", "auto"),
         lift=m.get("lift", "none"),
         air=m.get("air", "auto"),
+        admittance=m.get("admittance", "none"),
         free=tuple(free),
         fixed=fixed,
         priors=priors,

@@ -106,3 +106,27 @@ def test_the_heavy_variant_differs_from_the_light_one_by_its_priors_only():
     assert "tyre_speed_squared" in light.terms and "tyre_quadratic_s2_per_m2" in light.priors
     for name in ("CD0", "KD"):
         assert heavy.priors[name].loc > light.priors[name].loc + light.priors[name].scale
+
+
+def test_the_speed_trace_default_takes_a_heavy_vehicles_priors_above_3500_kg():
+    """``fit``'s Bayesian default for speed traces: the admittance model, its heavy variant for a
+    test mass above GTR 15's light-duty limit; the two differ in priors and C_R's value only."""
+    import dataclasses
+
+    from bayes_roadload import config
+    from bayes_roadload.inference.spec import load_model_spec
+    from bayes_roadload.simulate import simulate_campaign
+
+    traces = KINDS["traces"]
+    c = simulate_campaign(1, pairs=1, seed=0)
+    heavy_c = dataclasses.replace(c, vehicle=dataclasses.replace(
+        c.vehicle, mass_kg=config.HEAVY_DUTY_MASS_KG + 1.0, effective_mass_kg=config.HEAVY_DUTY_MASS_KG + 100.0))
+    light = load_model_spec(traces.default_model(c, FitOptions()))
+    heavy = load_model_spec(traces.default_model(heavy_c, FitOptions()))
+    assert light.name == "four_term_tyre_lag_admittance" and heavy.name == "four_term_tyre_lag_admittance_heavy"
+    assert traces.default_model(heavy_c, FitOptions(method="lsq")) == "four_term"
+    assert light.terms == heavy.terms and light.free == heavy.free
+    assert light.admittance == heavy.admittance == "auto"
+    for name in ("CD0", "KD"):
+        assert heavy.priors[name].loc > light.priors[name].loc + light.priors[name].scale
+    assert heavy.fixed["tyre_quadratic_s2_per_m2"] < light.fixed["tyre_quadratic_s2_per_m2"]
