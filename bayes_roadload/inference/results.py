@@ -7,7 +7,8 @@ Outputs of ``bayes-roadload fit --method nuts --out DIR``:
     coordinate, derived road-load quantities), ``posterior_predictive`` (replicated speed
     traces: integrated speed + integrated noise + measurement noise, for a thinned subset of
     draws), ``log_likelihood`` (summed per run), ``observed_data`` and ``constant_data``
-    (padded samples are NaN), ``sample_stats`` (divergences, tree depth, energy, ...).
+    (padded samples are NaN; the inputs as the model read them, so with the vehicle's admittance
+    the airspeed and yaw of the air the body feels), ``sample_stats`` (divergences, tree depth, energy, ...).
 ``summary.csv``
     ``parameter, mean, sd, q2.5, q50, q97.5, r_hat, ess_bulk, ess_tail``: the free
     parameters, the noise parameters, ``tau_*`` (hierarchical), and ``F50_N`` with its tyre /

@@ -339,7 +339,7 @@ class ModelSpec:
         if self.admittance == "none":
             return 0.0
         measured = self.resolve_air(campaign) == "measured"
-        length = getattr(campaign.vehicle, "length_m", None)
+        length = campaign.vehicle.length_m
         if self.admittance == "first_order" and (not measured or length is None):
             raise ModelSpecError(f"{self._where}: [model] admittance = \"first_order\" needs the measured "
                                  "relative air and the vehicle's [vehicle] length_m (use \"auto\")")
