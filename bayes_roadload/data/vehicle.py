@@ -196,8 +196,9 @@ def vehicle_toml(c) -> str:
     v = c.vehicle
     lines = ["[vehicle]"]
     for k in ("mass_kg", "effective_mass_kg", "frontal_area_m2", "rolling_radius_m", "length_m"):
-        if getattr(v, k) is not None:
-            lines.append(f"{k} = {toml_value(getattr(v, k))}")
+        value = getattr(v, k)
+        if value is not None:
+            lines.append(f"{k} = {toml_value(value)}")
     if v.tyres_in_contact is not None:
         lines.append(f"tyres_in_contact = {int(v.tyres_in_contact)}")
     if v.mass_in_running_order_kg is not None:

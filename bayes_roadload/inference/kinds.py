@@ -150,9 +150,8 @@ def traces_default_model(campaign, o: FitOptions) -> str:
     with a heavy vehicle's priors above :data:`~bayes_roadload.config.HEAVY_DUTY_MASS_KG` test
     mass (``four_term_tyre_lag_admittance_heavy``); the plain 4-term analysis for least squares
     (which has no prior to hold the lag's weakly identified gain); without a campaign (None), the
-light-duty name.  Chosen by measurement
-    (docs/calibration.md, *The vehicle's aerodynamic admittance* and *C_R's spread in the
-    budget*): on the independent simulator's campaigns the anemometer's gusts read as the
+    light-duty name.  Chosen by measurement (docs/calibration.md, *The vehicle's aerodynamic
+    admittance* and *C_R's spread in the budget*): on the independent simulator's campaigns the anemometer's gusts read as the
     body's attenuate K_D and C_D0, and the admittance takes most of that bias away; the
     geometry of the posterior is that of ``four_term_tyre_lag_j2452_typeb`` (the admittance
     changes the inputs, not the sampled directions)."""

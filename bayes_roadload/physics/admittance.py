@@ -25,6 +25,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from .integrate import affine_scan
+
 Array = jnp.ndarray
 
 MIN_AIRSPEED_MPS = 1.0
@@ -41,7 +43,7 @@ def first_order_lag(time_s: Array, target: Array, time_constant_s: Array) -> Arr
         a_k = exp(-h_k / tau_k).
 
     Zero-length steps (padding) leave y unchanged.  Composed as affine maps by
-    ``jax.lax.associative_scan`` (as :func:`~bayes_roadload.physics.integrate.lagged_speed_drop`)."""
+    :func:`~bayes_roadload.physics.integrate.affine_scan` (as :func:`~bayes_roadload.physics.integrate.lagged_speed_drop`)."""
     t = jnp.asarray(time_s, float)
     x = jnp.asarray(target, float)
     tau_s = jnp.asarray(time_constant_s, float)
@@ -52,11 +54,7 @@ def first_order_lag(time_s: Array, target: Array, time_constant_s: Array) -> Arr
     ratio = jnp.where(ok, -jnp.expm1(-h / tau) * tau / jnp.where(ok, h, 1.0), 1.0)
     dx = jnp.diff(x)
     b = jnp.where(ok, x[1:] - a * x[:-1] - dx * ratio, 0.0)
-
-    def compose(first, second):
-        return second[0] * first[0], second[0] * first[1] + second[1]
-
-    gain, offset = jax.lax.associative_scan(compose, (a, b))
+    gain, offset = affine_scan(a, b)
     return jnp.concatenate([x[:1], gain * x[0] + offset])
 
 

@@ -100,12 +100,18 @@ def lagged_speed_drop(time_s: Array, speed_mps: Array, time_constant_s: Array) -
     # tau (1 - a) / h, -> 1 as h -> 0
     ratio = jnp.where(ok, -jnp.expm1(-h / tau) * tau / jnp.where(ok, h, 1.0), 1.0)
     b = -jnp.diff(v) * ratio
+    _, lag = affine_scan(a, b)
+    return jnp.concatenate([jnp.zeros_like(v[:1]), lag])
 
+
+def affine_scan(a: Array, b: Array) -> tuple[Array, Array]:
+    """The recurrence y_{k+1} = a_k y_k + b_k composed by ``jax.lax.associative_scan``: the
+    cumulative maps (gain_k, offset_k) with y_{k+1} = gain_k y_0 + offset_k, no sequential loop
+    to differentiate."""
     def compose(first, second):
         return second[0] * first[0], second[0] * first[1] + second[1]
 
-    _, lag = jax.lax.associative_scan(compose, (a, b))
-    return jnp.concatenate([jnp.zeros_like(v[:1]), lag])
+    return jax.lax.associative_scan(compose, (a, b))
 
 
 def _with_model_channel(model: DragModel, p, run: RunBatch, u, schedule):
