@@ -332,7 +332,7 @@ def test_campaigns_padded_alike_share_the_compiled_residual(monkeypatch):
     fit_lsq(two, spec, "all")
     assert (fun._cache_size(), jac._cache_size()) == traced
     monkeypatch.setattr(config, "LSQ_PAD_SIZES_PER_OCTAVE", 0)
-    assert lsq._lsq_batch(one)[0].time_s.shape[-1] == lengths[0]
+    assert lsq._lsq_batch(one, spec)[0].time_s.shape[-1] == lengths[0]
     plain = fit_lsq(one, spec, "all")
     g, h = padded.groups[0], plain.groups[0]
     assert g.n_samples == h.n_samples
