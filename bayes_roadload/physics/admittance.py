@@ -43,7 +43,9 @@ def first_order_lag(time_s: Array, target: Array, time_constant_s: Array) -> Arr
         a_k = exp(-h_k / tau_k).
 
     Zero-length steps (padding) leave y unchanged.  Composed as affine maps by
-    :func:`~bayes_roadload.physics.integrate.affine_scan` (as :func:`~bayes_roadload.physics.integrate.lagged_speed_drop`)."""
+    :func:`~bayes_roadload.physics.integrate.affine_scan` (as :func:`~bayes_roadload.physics.integrate.lagged_speed_drop`),
+    in its sequential form: the filter transforms the data once and is not differentiated, so
+    the program that compiles fastest is the one to take."""
     t = jnp.asarray(time_s, float)
     x = jnp.asarray(target, float)
     tau_s = jnp.asarray(time_constant_s, float)
@@ -54,7 +56,7 @@ def first_order_lag(time_s: Array, target: Array, time_constant_s: Array) -> Arr
     ratio = jnp.where(ok, -jnp.expm1(-h / tau) * tau / jnp.where(ok, h, 1.0), 1.0)
     dx = jnp.diff(x)
     b = jnp.where(ok, x[1:] - a * x[:-1] - dx * ratio, 0.0)
-    gain, offset = affine_scan(a, b)
+    gain, offset = affine_scan(a, b, sequential=True)
     return jnp.concatenate([x[:1], gain * x[0] + offset])
 
 
@@ -79,13 +81,18 @@ def felt_air_readings(time_s: Array, speed_mps: Array, airspeed_reading: Array, 
                       airspeed_factor: float, yaw_factor: float, vehicle_length_m: float) -> tuple[Array, Array]:
     """:func:`felt_air` of calibrated readings, returned as readings (divided by the factors):
     [N] or [R, N] arrays (runs on the first axis; padded samples, whose time step is zero,
-    hold the last value)."""
-    def one(t, v, a, y):
-        va, psi = felt_air(t, v, airspeed_factor * a, yaw_factor * y, vehicle_length_m)
-        return va / airspeed_factor, psi / yaw_factor
-
+    hold the last value).  One compiled program per array shape: the factors and the length
+    are its arguments, so a Type B shift of a factor reuses it."""
     t = jnp.asarray(time_s, float)
-    if t.ndim == 1:
-        return one(t, speed_mps, airspeed_reading, yaw_reading)
-    return jax.vmap(one)(t, jnp.asarray(speed_mps, float), jnp.asarray(airspeed_reading, float),
-                         jnp.asarray(yaw_reading, float))
+    args = (t, jnp.asarray(speed_mps, float), jnp.asarray(airspeed_reading, float), jnp.asarray(yaw_reading, float),
+            jnp.asarray(airspeed_factor, float), jnp.asarray(yaw_factor, float), jnp.asarray(vehicle_length_m, float))
+    return _felt_air_readings(*args) if t.ndim == 1 else _felt_air_readings_runs(*args)
+
+
+def _felt_air_reading(t, v, a, y, airspeed_factor, yaw_factor, length):
+    va, psi = felt_air(t, v, airspeed_factor * a, yaw_factor * y, length)
+    return va / airspeed_factor, psi / yaw_factor
+
+
+_felt_air_readings = jax.jit(_felt_air_reading)
+_felt_air_readings_runs = jax.jit(jax.vmap(_felt_air_reading, in_axes=(0, 0, 0, 0, None, None, None)))

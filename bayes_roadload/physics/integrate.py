@@ -104,14 +104,28 @@ def lagged_speed_drop(time_s: Array, speed_mps: Array, time_constant_s: Array) -
     return jnp.concatenate([jnp.zeros_like(v[:1]), lag])
 
 
-def affine_scan(a: Array, b: Array) -> tuple[Array, Array]:
-    """The recurrence y_{k+1} = a_k y_k + b_k composed by ``jax.lax.associative_scan``: the
-    cumulative maps (gain_k, offset_k) with y_{k+1} = gain_k y_0 + offset_k, no sequential loop
-    to differentiate."""
+def affine_scan(a: Array, b: Array, sequential: bool = False) -> tuple[Array, Array]:
+    """The recurrence y_{k+1} = a_k y_k + b_k over the last axis of ``a`` and ``b`` as the
+    cumulative maps (gain_k, offset_k) with y_{k+1} = gain_k y_0 + offset_k.
+
+    By default composed by ``jax.lax.associative_scan`` (log depth, no sequential loop to
+    differentiate: the likelihood's lagged speed drop).  ``sequential=True`` runs the same
+    recurrence as one ``jax.lax.scan`` loop: the same numbers to rounding, a program that
+    compiles in about a third of the time, for transforms of the data that are computed once
+    and not differentiated (the admittance filter of :mod:`~bayes_roadload.physics.admittance`)."""
     def compose(first, second):
         return second[0] * first[0], second[0] * first[1] + second[1]
 
-    return jax.lax.associative_scan(compose, (a, b))
+    if not sequential:
+        return jax.lax.associative_scan(compose, (a, b), axis=-1)
+
+    def step(carry, ab):
+        carry = compose(carry, ab)
+        return carry, carry
+
+    first = (jnp.ones(jnp.shape(a)[:-1], jnp.result_type(a)), jnp.zeros(jnp.shape(b)[:-1], jnp.result_type(b)))
+    _, (gain, offset) = jax.lax.scan(step, first, (jnp.moveaxis(a, -1, 0), jnp.moveaxis(b, -1, 0)))
+    return jnp.moveaxis(gain, 0, -1), jnp.moveaxis(offset, 0, -1)
 
 
 def _with_model_channel(model: DragModel, p, run: RunBatch, u, schedule):
