@@ -15,6 +15,7 @@ largest in magnitude, with the approximate two-sided 5 % bound for no correlatio
 
     python benchmarks/coverage_attribution.py docs/calibration/independent_records.partial.csv \\
         docs/calibration/design_seeds3000_3015_admittance.csv --out docs/calibration/attribution.csv
+    python benchmarks/coverage_attribution.py --from-table docs/calibration/attribution.csv
 """
 
 from __future__ import annotations
@@ -80,26 +81,49 @@ def correlations(table: pd.DataFrame, quantities: list[str], top: int) -> pd.Dat
     return pd.DataFrame(rows)
 
 
+def halves(table: pd.DataFrame, quantities: list[str], props: list[str]) -> pd.DataFrame:
+    """Mean z of each quantity in the campaigns above and at or below the median of each
+    property (a reading less sensitive to one extreme campaign than Pearson's r)."""
+    rows = []
+    for q in quantities:
+        for p in props:
+            above = table[p] > table[p].median()
+            rows.append({"quantity": q, "property": p, "n_above": int(above.sum()),
+                         "mean_z_above": round(float(table.loc[above, q].mean()), 2),
+                         "mean_z_below": round(float(table.loc[~above, q].mean()), 2)})
+    return pd.DataFrame(rows)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("records", nargs="+", type=Path, help="calibration records (CSV) of the independent simulator")
-    ap.add_argument("--out", type=Path, required=True, help="CSV of z-scores beside the drawn properties")
+    ap.add_argument("records", nargs="*", type=Path, help="calibration records (CSV) of the independent simulator")
+    ap.add_argument("--out", type=Path, help="CSV of z-scores beside the drawn properties")
+    ap.add_argument("--from-table", type=Path, help="read a table --out wrote instead of simulating again")
     ap.add_argument("--top", type=int, default=5, help="properties printed per quantity")
     args = ap.parse_args(argv)
-    records = pd.concat([pd.read_csv(p) for p in args.records], ignore_index=True).drop_duplicates("seed")
-    records = records[records["error"].isna()] if "error" in records else records
-    z = z_scores(records)
-    drawn = pd.DataFrame([drawn_properties(int(r["seed"]), int(r["pairs"]), {q: float(r[f"{q}_truth"]) for q in
-                                                                              ("AD", "BD", "CD0", "KD")})
-                          for _, r in records.iterrows()])
-    table = pd.concat([records[["seed", "pairs", "mean_abs_yaw_rad"]].reset_index(drop=True),
-                       z.reset_index(drop=True), drawn], axis=1)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    table.to_csv(args.out, index=False)
+    if args.from_table:
+        table = pd.read_csv(args.from_table)
+    else:
+        if not args.records or not args.out:
+            ap.error("records and --out are needed unless --from-table is given")
+        records = pd.concat([pd.read_csv(p) for p in args.records], ignore_index=True).drop_duplicates("seed")
+        records = records[records["error"].isna()] if "error" in records else records
+        drawn = pd.DataFrame([drawn_properties(int(r["seed"]), int(r["pairs"]), {q: float(r[f"{q}_truth"]) for q in
+                                                                                  ("AD", "BD", "CD0", "KD")})
+                              for _, r in records.iterrows()])
+        table = pd.concat([records[["seed", "pairs", "mean_abs_yaw_rad"]].reset_index(drop=True),
+                           z_scores(records).reset_index(drop=True), drawn], axis=1)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        table.to_csv(args.out, index=False)
+    z = table[[q for q in QUANTITIES if q in table]]
     n = len(table)
     print(f"{n} campaigns; |r| above {2 / math.sqrt(n):.2f} is outside the 5 % band of no correlation")
     print("mean z: " + ", ".join(f"{q} {table[q].mean():+.2f}" for q in z.columns))
-    print(correlations(table, list(z.columns), args.top).to_string(index=False))
+    top = correlations(table, list(z.columns), args.top)
+    print(top.to_string(index=False))
+    print("\nmean z above / at or below each property's median:")
+    print(halves(table, list(z.columns), ["veh_k4_over_kd", "veh_k4_per_rad4", "mean_abs_yaw_rad",
+                                          "wind_turbulence_sigma_mps"]).to_string(index=False))
     return 0
 
 
