@@ -41,6 +41,13 @@ def test_the_property_that_drives_z_ranks_first_and_constants_are_skipped(attrib
     assert set(top["property"]) == {"veh_k4_over_kd", "err_mass_rel"}
 
 
+def test_halves_split_at_the_median(attribution):
+    table = pd.DataFrame({"KD": [-3.0, -1.0, 0.0, 2.0], "veh_k4_per_rad4": [-4.0, -3.0, -1.0, -0.5]})
+    row = attribution.halves(table, ["KD"], ["veh_k4_per_rad4"]).iloc[0]
+    # median -2: the two campaigns above it (-1, -0.5) have z 0 and 2, the two below -3 and -1
+    assert (row["n_above"], row["mean_z_above"], row["mean_z_below"]) == (2, 1.0, -2.0)
+
+
 @pytest.mark.slow  # simulates a campaign (~10-40 s); the script's own runs take this path for every record
 def test_a_replay_that_is_not_the_records_campaign_is_refused(attribution):
     with pytest.raises(RuntimeError, match="seed 5: the simulated AD"):
