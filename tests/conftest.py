@@ -8,9 +8,12 @@ half of its time.  XLA's CPU backend does not enable fast-math, so the arithmeti
 machine code is less optimised.  Set ``XLA_FLAGS`` yourself to run the suite otherwise.
 """
 
+import contextlib
 import dataclasses
+import importlib.util
 import os
 import shutil
+import sys
 import tempfile
 import warnings
 from pathlib import Path
@@ -192,3 +195,18 @@ def pooled_fit(small_campaign, request, tmp_path_factory):
 
     return computed_once(request, tmp_path_factory, "pooled_fit",
                          lambda: fit_nuts(small_campaign, "four_term", sampler=SMALL_SAMPLER))
+
+
+@contextlib.contextmanager
+def benchmark_script(name: str):
+    """``benchmarks/<name>.py`` imported as a module, registered in ``sys.modules`` while in use
+    (its dataclasses look their module up) and removed after."""
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"{name}_benchmark", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    try:
+        spec.loader.exec_module(module)
+        yield module
+    finally:
+        sys.modules.pop(spec.name, None)

@@ -1,25 +1,17 @@
 """benchmarks/coverage_attribution.py: the z-scores of the records, the ranking of the drawn
 properties by correlation, and the check that a replayed campaign is the record's."""
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "coverage_attribution.py"
+from .conftest import benchmark_script
 
 
 @pytest.fixture(scope="module")
 def attribution():
-    spec = importlib.util.spec_from_file_location("coverage_attribution_benchmark", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    yield module
-    sys.modules.pop(spec.name, None)
+    with benchmark_script("coverage_attribution") as module:
+        yield module
 
 
 def test_z_is_the_error_over_the_posterior_sd(attribution):

@@ -1,23 +1,15 @@
 """The peers table of docs/performance.md (benchmarks/peers.py ``render``): ESS per second
 against ours, and the bound for a sampler stopped at the time limit."""
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
 
-PEERS = Path(__file__).resolve().parents[1] / "benchmarks" / "peers.py"
+from .conftest import benchmark_script
 
 
 @pytest.fixture(scope="module")
 def peers():
-    spec = importlib.util.spec_from_file_location("peers_benchmark", PEERS)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    yield module
-    sys.modules.pop(spec.name, None)
+    with benchmark_script("peers") as module:
+        yield module
 
 
 def _finished(name, ess_per_s, load):

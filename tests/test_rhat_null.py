@@ -1,24 +1,16 @@
 """benchmarks/rhat_null.py: its vectorised R-hat is ArviZ's, and it tells converged chains from
 chains that sample different distributions."""
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "rhat_null.py"
+from .conftest import benchmark_script
 
 
 @pytest.fixture(scope="module")
 def rhat_null():
-    spec = importlib.util.spec_from_file_location("rhat_null_benchmark", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    yield module
-    sys.modules.pop(spec.name, None)
+    with benchmark_script("rhat_null") as module:
+        yield module
 
 
 def test_the_vectorised_rhat_is_arviz(rhat_null):
