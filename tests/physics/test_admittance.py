@@ -28,6 +28,23 @@ def test_first_order_lag_is_exact_for_a_ramp_and_holds_on_padding():
     assert np.all(yp[-5:] == yp[-5])   # zero-length steps leave the output unchanged
 
 
+def test_the_sequential_affine_scan_is_the_associative_one():
+    """The filter's sequential form of the recurrence y_{k+1} = a_k y_k + b_k gives the
+    likelihood's associative one on [runs, samples] arrays, and the loop written out by hand."""
+    from bayes_roadload.physics.integrate import affine_scan
+
+    rng = np.random.default_rng(4)
+    a, b = rng.uniform(0.5, 1.0, (3, 40)), rng.normal(size=(3, 40))
+    seq, par = affine_scan(a, b, sequential=True), affine_scan(a, b)
+    y = np.zeros(3)
+    for k in range(40):  # y_0 = 0: the offsets are the recurrence itself
+        y = a[:, k] * y + b[:, k]
+    # 40 products of factors below one: rounding of a few ulp in either order
+    np.testing.assert_allclose(np.asarray(seq[1])[:, -1], y, rtol=1e-12, atol=1e-12)
+    for s, p in zip(seq, par):
+        np.testing.assert_allclose(np.asarray(s), np.asarray(p), rtol=1e-12, atol=1e-12)
+
+
 def test_admittance_step_matches_the_simulators_block():
     """A step of wind (along and across) at constant airspeed: the felt wind against the
     thesis simulator's admittance block (simulate.sensors, RK4 on a fine grid), within that
