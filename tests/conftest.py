@@ -197,11 +197,15 @@ def pooled_fit(small_campaign, request, tmp_path_factory):
                          lambda: fit_nuts(small_campaign, "four_term", sampler=SMALL_SAMPLER))
 
 
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+"""The benchmark scripts' folder."""
+
+
 @contextlib.contextmanager
 def benchmark_script(name: str):
     """``benchmarks/<name>.py`` imported as a module, registered in ``sys.modules`` while in use
     (its dataclasses look their module up) and removed after."""
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    path = BENCHMARKS / f"{name}.py"
     spec = importlib.util.spec_from_file_location(f"{name}_benchmark", path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module

@@ -108,17 +108,10 @@ def test_smoke_one_independent_campaign_through_the_study():
 def test_the_study_resumes_from_its_partial_records(tmp_path, monkeypatch):
     """An interrupted study (``benchmarks/calibration_study.py``) keeps the records it wrote and
     fits only the campaigns they do not hold."""
-    import importlib.util
-    import sys
-    from pathlib import Path
+    from ..conftest import BENCHMARKS, benchmark_script
 
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "calibration_study.py"
-    monkeypatch.syspath_prepend(str(path.parent))   # its sibling doc_sections, as when run as a script
-    spec = importlib.util.spec_from_file_location("calibration_study_benchmark", path)
-    study = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = study
-    try:
-        spec.loader.exec_module(study)
+    monkeypatch.syspath_prepend(str(BENCHMARKS))   # its sibling doc_sections, as when run as a script
+    with benchmark_script("calibration_study") as study:
         jobs = calibration_jobs([1000, 1001, 1002], 1, 3)
         partial = tmp_path / "records.partial.csv"
         before, pending = study.resume_from(partial, jobs)
@@ -126,5 +119,3 @@ def test_the_study_resumes_from_its_partial_records(tmp_path, monkeypatch):
         pd.DataFrame({"name": ["ind-1001"], "AD_mean": [0.01]}).to_csv(partial, index=False)
         before, pending = study.resume_from(partial, jobs)
         assert list(before["name"]) == ["ind-1001"] and [j.name for j in pending] == ["ind-1000", "ind-1002"]
-    finally:
-        sys.modules.pop(spec.name, None)
