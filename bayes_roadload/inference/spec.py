@@ -63,10 +63,12 @@ with :meth:`Prior.to_numpyro`.  Parameters the file does not mention keep the mo
 
 from __future__ import annotations
 
+import hashlib
 import importlib.resources
 import math
 import os
 import tomllib
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -128,6 +130,42 @@ _PRIOR_KEYS = {
 }
 PRIOR_DISTRIBUTIONS = tuple(_PRIOR_KEYS)
 """Distribution names a prior may use."""
+
+
+
+FELT_AIR_CACHE_SIZE = 16
+"""How many campaigns' felt-air readings :func:`_cached_felt_air` keeps (least recently used
+dropped first)."""
+
+_FELT_AIR: OrderedDict[bytes, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+
+
+def _cached_felt_air(batch, airspeed_factor: float, yaw_factor: float, length_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~bayes_roadload.physics.admittance.felt_air_readings` of a batch's readings,
+    remembered by content: a fit reads its campaign through :meth:`ModelSpec.to_batch` many times
+    (least-squares start, problem, posterior predictive, Type B shifts), and the filter is the
+    same each time.  The key is a digest of the time, speed, airspeed and yaw arrays with the
+    factors and the length, so a changed campaign, factor or length is filtered anew.  Returned
+    arrays are read-only copies shared between callers."""
+    digest = hashlib.blake2b(digest_size=20)
+    for x in (batch.time_s, batch.speed_mps, batch.airspeed_mps, batch.yaw_rad):
+        a = np.ascontiguousarray(x, dtype=float)
+        digest.update(repr(a.shape).encode())
+        digest.update(a.tobytes())
+    digest.update(np.asarray([airspeed_factor, yaw_factor, length_m], float).tobytes())
+    key = digest.digest()
+    if key in _FELT_AIR:
+        _FELT_AIR.move_to_end(key)
+        return _FELT_AIR[key]
+    air, yaw = felt_air_readings(batch.time_s, batch.speed_mps, batch.airspeed_mps, batch.yaw_rad,
+                                 airspeed_factor, yaw_factor, length_m)
+    air, yaw = np.array(air, float), np.array(yaw, float)
+    air.flags.writeable = False
+    yaw.flags.writeable = False
+    _FELT_AIR[key] = (air, yaw)
+    while len(_FELT_AIR) > FELT_AIR_CACHE_SIZE:
+        _FELT_AIR.popitem(last=False)
+    return air, yaw
 
 
 @dataclass(frozen=True)
@@ -354,9 +392,8 @@ class ModelSpec:
         length = self.resolve_admittance(campaign)
         if length > 0.0:
             anem = campaign.anemometer
-            air, yaw = felt_air_readings(batch.time_s, batch.speed_mps, batch.airspeed_mps, batch.yaw_rad,
-                                         float(anem.airspeed_factor), float(anem.yaw_factor), length)
-            batch = batch._replace(airspeed_mps=np.asarray(air), yaw_rad=np.asarray(yaw))
+            air, yaw = _cached_felt_air(batch, float(anem.airspeed_factor), float(anem.yaw_factor), length)
+            batch = batch._replace(airspeed_mps=air, yaw_rad=yaw)
         return batch, run_ids
 
     def build(self, campaign) -> tuple[DragModel, dict[str, float], tuple[str, ...]]:

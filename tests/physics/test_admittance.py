@@ -123,6 +123,53 @@ def test_the_admittance_option_resolves_against_the_campaign():
     assert not np.allclose(np.asarray(b_none.yaw_rad), np.asarray(b_auto.yaw_rad))
 
 
+
+def test_a_campaigns_felt_air_is_filtered_once_and_anew_when_it_changes(monkeypatch):
+    """ModelSpec.to_batch remembers the filtered readings by content: the same campaign read
+    again (a fit reads it for its start, its problem, its predictive and each Type B shift) runs
+    the filter once and gives the same arrays; another factor, another length or another
+    reading runs it again, with the result of an uncached call."""
+    import bayes_roadload.inference.spec as spec_module
+
+    calls = []
+    real = spec_module.felt_air_readings
+
+    def counted(*args):
+        calls.append(args[4:])
+        return real(*args)
+
+    monkeypatch.setattr(spec_module, "felt_air_readings", counted)
+    monkeypatch.setattr(spec_module, "_FELT_AIR", type(spec_module._FELT_AIR)())
+    c = simulate_campaign(7, pairs=1, seed=3)
+    auto = dataclasses.replace(load_model_spec("four_term"), admittance="auto")
+    first, _ = auto.to_batch(c)
+    again, _ = auto.to_batch(c)
+    assert len(calls) == 1
+    assert np.array_equal(first.yaw_rad, again.yaw_rad) and np.array_equal(first.airspeed_mps, again.airspeed_mps)
+    with pytest.raises(ValueError):
+        again.yaw_rad[0, 0] = 0.0  # shared between callers: read-only
+
+    def uncached(campaign, length):
+        raw, _ = campaign.to_batch()
+        a = campaign.anemometer
+        return [np.asarray(x) for x in real(raw.time_s, raw.speed_mps, raw.airspeed_mps, raw.yaw_rad,
+                                              float(a.airspeed_factor), float(a.yaw_factor), length)]
+
+    shifted = dataclasses.replace(c, anemometer=dataclasses.replace(c.anemometer, yaw_factor=1.05))
+    longer = dataclasses.replace(c, vehicle=dataclasses.replace(c.vehicle, length_m=6.0))
+    runs = c.runs.copy()
+    runs["yaw_rad"] = runs["yaw_rad"] + 0.01
+    gustier = dataclasses.replace(c, runs=runs)
+    for changed, length in ((shifted, 4.5), (longer, 6.0), (gustier, 4.5)):
+        before = len(calls)
+        batch, _ = auto.to_batch(changed)
+        assert len(calls) == before + 1
+        air, yaw = uncached(changed, length)
+        assert np.array_equal(batch.airspeed_mps, air) and np.array_equal(batch.yaw_rad, yaw)
+        assert not np.array_equal(batch.yaw_rad, first.yaw_rad)
+    auto.to_batch(c)
+    assert len(calls) == 4  # the first campaign is still remembered
+
 @pytest.mark.parametrize("case", [7, 8])
 def test_the_admittance_removes_the_bias_of_the_thesis_simulators_dynamics(case):
     """Thesis cases 7 and 8 (instrument and vehicle dynamics, no noise): the simulator's body
