@@ -100,6 +100,8 @@ def main(argv=None) -> int:
     ap.add_argument("--records", type=Path, default=RECORDS)
     ap.add_argument("--docs", action="store_true", help="regenerate the section of docs/calibration.md")
     ap.add_argument("--model", default=None, help="model variant (default: fit's for speed traces)")
+    ap.add_argument("--withhold", nargs="+", default=(), metavar="EFFECT",
+                    help="an ablation: these effects of the independent simulator left out of every campaign")
     ap.add_argument("--compare", type=Path, default=None, metavar="RECORDS",
                     help="with --from-records: a table of --records beside these records on the seeds both hold")
     ap.add_argument("--from-records", action="store_true", help="summarise --records without fitting")
@@ -109,7 +111,8 @@ def main(argv=None) -> int:
     if args.from_records:
         records = pd.read_csv(args.records)
     else:
-        jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs, model=args.model)
+        jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs, model=args.model,
+                                withhold=args.withhold)
         args.records.parent.mkdir(parents=True, exist_ok=True)
         partial = args.records.with_suffix(".partial.csv")
         before, jobs = resume_from(partial, jobs)

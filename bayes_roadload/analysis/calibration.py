@@ -25,6 +25,7 @@ import pandas as pd
 
 from ..inference.kinds import FitOptions
 from ..simulate.independent import simulate_independent
+from ..simulate.independent.effects import EFFECTS
 from .batch import FitJob, coverage_summary
 
 QUANTITIES = ("AD", "BD", "CD0", "KD", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
@@ -50,16 +51,27 @@ def pairs_of(seed: int, lo: int, hi: int) -> int:
 
 
 def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
-                     options: FitOptions | None = None, model: str | None = None) -> list[FitJob]:
+                     options: FitOptions | None = None, model: str | None = None,
+                     withhold: Iterable[str] = ()) -> list[FitJob]:
     """One fit job per seed, with the default fit options (or ``options``: method, pooling,
     noise, robust, sampler and Type B budget pass through) and ``model`` (unless given,
     ``"auto"``: ``fit``'s default for each campaign, the registry's
-    ``KINDS["traces"].default_model``, resolved in the batch job)."""
+    ``KINDS["traces"].default_model``, resolved in the batch job).  ``withhold``: effects of the independent simulator
+    (:data:`~bayes_roadload.simulate.independent.effects.EFFECTS`) left out of every campaign, an
+    ablation: a seed draws the same vehicle, campaign size and Type B errors with the named physics
+    off (a run's length shifts the random stream, so the later runs' own draws differ); a
+    campaign keeps its name ``ind-SEED``, so its records compare seed by seed."""
     o = options or FitOptions()
     model = model or "auto"
-    return [FitJob(f"ind-{s}", functools.partial(simulate_independent, s, pairs=pairs_of(s, lo, hi)), model=model,
+    withhold = tuple(withhold)
+    unknown = sorted(set(withhold) - set(EFFECTS))
+    if unknown:
+        raise ValueError(f"unknown effect(s) {', '.join(unknown)}: the independent simulator's are {', '.join(EFFECTS)}")
+    extra = {"withhold": withhold} if withhold else {}
+    tags = {"withheld": " ".join(withhold)} if withhold else {}
+    return [FitJob(f"ind-{s}", functools.partial(simulate_independent, s, pairs=pairs_of(s, lo, hi), **extra), model=model,
                    method=o.method, pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler,
-                   type_b=o.type_b, derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi)})
+                   type_b=o.type_b, derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi), **tags})
             for s in seeds]
 
 

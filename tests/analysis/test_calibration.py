@@ -80,6 +80,24 @@ def test_jobs_carry_the_model_asked_for():
     assert {j.model for j in calibration_jobs([1, 2], 1, 3, model="four_term")} == {"four_term"}
 
 
+
+def test_an_ablation_withholds_the_effect_from_every_campaign_and_keeps_the_names():
+    """``--withhold``: each job's campaign is the simulator's with that physics off (here the
+    quartic of C_D(psi)), of the same vehicle and size, under the same name, tagged with what was
+    withheld; an effect the simulator does not have is refused with the list of those it has."""
+    plain = calibration_jobs([3001], 1, 1)
+    ablated = calibration_jobs([3001], 1, 1, withhold=["cd_yaw_shape"])
+    assert ablated[0].name == plain[0].name == "ind-3001" and ablated[0].tags["withheld"] == "cd_yaw_shape"
+    assert "withheld" not in plain[0].tags
+    on, off = plain[0].campaign(), ablated[0].campaign()
+    shape_on = on.truth["meta"]["vehicle_simulated"]
+    shape_off = off.truth["meta"]["vehicle_simulated"]
+    assert shape_on["k4_per_rad4"] != 0.0 and shape_off["k4_per_rad4"] == 0.0
+    assert {k: v for k, v in shape_on.items() if k != "k4_per_rad4"} == {k: v for k, v in shape_off.items() if k != "k4_per_rad4"}
+    assert "cd_yaw_shape" in on.truth["meta"]["effects"] and "cd_yaw_shape" not in off.truth["meta"]["effects"]
+    with pytest.raises(ValueError, match="cd_yaw_shape"):
+        calibration_jobs([1], 1, 1, withhold=["cd_yaw_shap"])
+
 def test_campaign_sizes_come_from_the_seed():
     assert [pairs_of(s, 1, 12) for s in range(50)] == [pairs_of(s, 1, 12) for s in range(50)]
     assert {pairs_of(s, 1, 12) for s in range(200)} == set(range(1, 13))
