@@ -1,5 +1,5 @@
 """Where a fit's divergent draws sit: thesis case C at ``--pairs`` pairs (one by default), the
-default model and likelihood, no retry, at a given target acceptance; per coordinate the mean
+model ``--model`` (``four_term`` unless given) and the default likelihood, no retry, at a given target acceptance; per coordinate the mean
 percentile of the divergent draws among all draws and the share below the 10th percentile.  For
 every positive site sampled through numpyro's log transform (noise scales, run-to-run spreads)
 the record also holds the skewness of its log draws and their sd over the Laplace sd
@@ -39,14 +39,14 @@ RECORDS = ROOT / "benchmarks" / "records" / "gates" / "divergence_probe.jsonl"
 
 
 def probe(case: int, target_accept: float, seed: int = 0, noise: str = "integrated", pairs: int = 1,
-          pooling: str = "pooled", sampler_seed: int = 0, profile: bool = False) -> dict:
+          pooling: str = "pooled", sampler_seed: int = 0, profile: bool = False, model: str = "four_term") -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         campaign = simulate_campaign(case, pairs=pairs, seed=seed)
         sampler = dataclasses.replace(config.DEFAULT_SAMPLER, retry=False, target_accept=target_accept,
                                       small_campaign_target_accept=None, quiet_trace_target_accept=None,
                                       seed=sampler_seed)
-        fit = fit_nuts(campaign, "four_term", sampler=sampler, noise=noise, pooling=pooling)
+        fit = fit_nuts(campaign, model, sampler=sampler, noise=noise, pooling=pooling)
     div = np.asarray(fit.stats["diverging"]).reshape(-1)
     where = {}
     for name, value in fit.samples.items():
@@ -58,7 +58,7 @@ def probe(case: int, target_accept: float, seed: int = 0, noise: str = "integrat
                                      "below_p10": float(np.mean(pct[div] < 0.1)) if div.any() else None}
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                             text=True).stdout.strip()
-    rec = {"case": case, "seed": seed, "pairs": pairs, "pooling": pooling, "sampler_seed": sampler_seed,
+    rec = {"case": case, "seed": seed, "pairs": pairs, "pooling": pooling, "sampler_seed": sampler_seed, "model": model,
            "noise": noise, "target_accept": target_accept, "commit": commit,
            "divergences": int(div.sum()), "steps_per_draw": float(np.mean(fit.stats["num_steps"])),
            "divergent_draws": where, "log_shape": log_shape(fit)}
@@ -126,6 +126,7 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", type=int, default=1)
     ap.add_argument("--pooling", default="pooled", choices=("pooled", "hierarchical"))
     ap.add_argument("--sampler-seeds", type=int, nargs="+", default=[0])
+    ap.add_argument("--model", default="four_term", help="model variant (default four_term, as the records before the option)")
     ap.add_argument("--profile", action="store_true", help="the potential along each positive site's log coordinate")
     a = ap.parse_args(argv)
     RECORDS.parent.mkdir(parents=True, exist_ok=True)
@@ -133,7 +134,7 @@ def main(argv=None) -> int:
     for ta in a.target_accept:
         for sampler_seed in a.sampler_seeds:
             rec = probe(a.case, ta, noise=a.noise, pairs=a.pairs, pooling=a.pooling, sampler_seed=sampler_seed,
-                        profile=a.profile and first)
+                        profile=a.profile and first, model=a.model)
             first = False
             with RECORDS.open("a") as f:
                 f.write(json.dumps(rec) + "\n")
