@@ -146,4 +146,31 @@ def enable_compilation_cache(path: str | None = None) -> str | None:
     return path
 
 
+COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration",
+                  "/jax/core/compile/jaxpr_to_mlir_module_duration",
+                  "/jax/core/compile/backend_compile_duration")
+"""JAX's monitoring events whose durations :func:`compile_seconds` sums: tracing a function to
+a jaxpr, lowering it to MLIR and XLA compiling it (a program the persistent cache serves is
+traced and lowered, not compiled)."""
+_compile_total = [0.0]
+_compile_listening = [False]
+
+
+def _on_compile_event(event: str, duration_s: float, **_) -> None:
+    if event in COMPILE_EVENTS:
+        _compile_total[0] += duration_s
+
+
+def compile_seconds() -> float:
+    """Seconds this process has spent tracing, lowering and compiling JAX code since the first
+    call (which starts listening to :data:`COMPILE_EVENTS`); the difference of two calls is the
+    compilation inside a stage."""
+    if not _compile_listening[0]:
+        import jax.monitoring
+
+        jax.monitoring.register_event_duration_secs_listener(_on_compile_event)
+        _compile_listening[0] = True
+    return _compile_total[0]
+
+
 configure_jax()

@@ -56,7 +56,11 @@ class Stages:
     def __init__(self):
         import time
 
+        from ._jax import compile_seconds
+
         self._clock = time.perf_counter
+        self._compile = compile_seconds
+        self._compiled_before = compile_seconds()
         self.started = self._clock()
         self.seconds: dict[str, float] = {}
 
@@ -74,15 +78,25 @@ class Stages:
 
     def record(self, diagnostics_file: Path, fit_timings: dict[str, float] | None = None) -> dict[str, float]:
         """Add ``stages_s`` to ``diagnostics_file`` (when it exists): ``imports`` (from the
-        package's import to the command's start), the timed stages, the fit's setup (LSQ start,
-        linearisation: the fit's wall time less MAP, warm-up and sampling; compilation is inside
-        the stage that first runs a program) and ``total`` (import to now)."""
+        package's import to the command's start), the timed stages, from the fit's own timings
+        its ``start`` (the problem built and its start values: the least-squares start, and for a
+        hierarchical fit the run effects' linearisation), ``map``, ``warmup`` and ``sampling`` (the kept run's; a retried
+        fit's first attempt is ``first_attempt``), ``fit_setup`` (the rest of the fit: the
+        problem's construction, a retry's new MAP), ``compile`` (the seconds JAX spent tracing,
+        lowering and compiling in the whole command, :func:`~bayes_roadload._jax.compile_seconds`:
+        they are also inside the stage that first ran each program) and ``total`` (import to now)."""
         from . import IMPORT_STARTED
 
         stages = {"imports": self.started - IMPORT_STARTED, **self.seconds}
         if fit_timings is not None and "fit" in self.seconds:
-            sampled = sum(fit_timings.get(k, 0.0) for k in ("map_s", "warmup_s", "sampling_s", "first_attempt_s"))
+            parts = {"start": "start_s", "map": "map_s", "first_attempt": "first_attempt_s", "warmup": "warmup_s",
+                     "sampling": "sampling_s"}
+            for stage, key in parts.items():
+                if key in fit_timings:
+                    stages[stage] = fit_timings[key]
+            sampled = sum(fit_timings.get(k, 0.0) for k in parts.values())
             stages["fit_setup"] = max(self.seconds["fit"] - sampled, 0.0)
+        stages["compile"] = self._compile() - self._compiled_before
         stages["total"] = self._clock() - IMPORT_STARTED
         stages = {k: round(v, 3) for k, v in stages.items()}
         if diagnostics_file.is_file():

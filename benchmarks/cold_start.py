@@ -2,8 +2,8 @@
 first with an empty persistent compilation cache (cold), then again with the cache the first run
 filled (warm), then on another campaign of the same shapes (another seed of the simulator, its
 runs padded to the same length) with that cache (warm, other campaign), timed from before the process starts to its exit, with the stages the fit records
-in ``diagnostics.json`` (``stages_s``: imports, load, fit setup, MAP, warm-up, sampling,
-summaries and predictive, Type B, writing, report, total).
+in ``diagnostics.json`` (``stages_s``: imports, load, start values, fit setup, MAP, warm-up,
+sampling, summaries and predictive, Type B, writing, report, compile, total).
 
 The reference campaign is the issue's: 18 pairs (36 runs) from the independent simulator
 (``bayes_roadload.simulate.independent``, calm wind, one vehicle category, fixed logging rate),
@@ -107,13 +107,16 @@ def markdown(rec: dict) -> str:
                 "that cache (its programs are shared only with `BAYES_ROADLOAD_SHARE_PROGRAMS=1`, "
                 "`bayes_roadload/_jax.py`)" if any(r["start"] == "warm, other campaign" for r in rec["rows"]) else "")
              + ". Stages from "
-             "`diagnostics.json` `stages_s` (compilation is inside the stage that first runs a program: "
-             "`fit_setup` holds the least-squares start, `warmup` the sampler's; after an R-hat or ESS miss "
+             "`diagnostics.json` `stages_s` (compilation is inside the stage that first runs a program, "
+             "`warmup` holding the sampler's, and `compile` sums it over the whole command; start values (`start`) are the "
+             "problem built and its least-squares start, which records without that column hold in "
+             "`fit_setup`; after an R-hat or ESS miss "
              "the chains continue, and sampling includes the further draws (`extension_s`); after another "
              "failed gate, warm-up and sampling are the new run's and the first attempt's time is its own "
              "column).", "",
-             "| pooling | start | seed (padded samples per run) | wall (s) | target | imports | load | fit setup | MAP | first NUTS attempt "
-             "| warm-up | sampling | summaries + predictive | Type B | writing | gates |", "|" + "---|" * 16]
+             "| pooling | start | seed (padded samples per run) | wall (s) | target | imports | load | start values | fit setup | MAP "
+             "| first NUTS attempt | warm-up | sampling | summaries + predictive | Type B | writing | compile | gates |",
+             "|" + "---|" * 18]
     for r in rec["rows"]:
         s, t = r["stages_s"], r["timings_s"]
         gates = "pass" if r["pass"] else f"FAIL ({', '.join(r['failed'] or [])})"
@@ -123,13 +126,19 @@ def markdown(rec: dict) -> str:
                 gates += f" (chains continued, {t['extension_s']:.1f} s)"
         seed = f"{r['seed']} ({r['padded_samples']})" if "seed" in r else "-"
         lines.append(f"| {r['pooling']} | {r['start']} | {seed} | {r['wall_s']:.1f} | <= {TARGETS_S[r['start']]:.0f} | "
-                     f"{s.get('imports', 0):.1f} | {s.get('load', 0):.1f} | {s.get('fit_setup', 0):.1f} | "
+                     f"{s.get('imports', 0):.1f} | {s.get('load', 0):.1f} | {_stage(s, 'start')} | "
+                     f"{s.get('fit_setup', 0):.1f} | "
                      f"{t.get('map_s', 0):.1f} | "
                      f"{'%.1f' % t['first_attempt_s'] if 'first_attempt_s' in t else '-'} | "
                      f"{t.get('warmup_s', 0):.1f} | {t.get('sampling_s', 0):.1f} | "
                      f"{s.get('summaries_and_predictive', 0):.1f} | {s.get('type_b', 0):.1f} | "
-                     f"{s.get('writing', 0):.1f} | {gates} |")
+                     f"{s.get('writing', 0):.1f} | {_stage(s, 'compile')} | {gates} |")
     return "\n".join(lines + ["", ""])
+
+
+def _stage(stages: dict, name: str) -> str:
+    """A stage's seconds, or '-' in a record written before the stage was timed."""
+    return f"{stages[name]:.1f}" if name in stages else "-"
 
 
 def write_doc(rec: dict) -> None:

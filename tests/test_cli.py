@@ -102,6 +102,27 @@ def test_fit_nuts_writes_outputs_and_flags_gates(cli_nuts_fit):
     assert "Uncertainty budget" in printed and json.loads((out / "fit.json").read_text())["type_b"] is True
 
 
+
+def test_every_stage_of_a_fit_is_timed(cli_nuts_fit):
+    """``diagnostics.json`` ``stages_s`` names every stage of a speed-trace fit: the command's
+    (imports, load, fit, summaries and predictive, Type B, writing, report), the fit's own
+    (start, MAP, warm-up, sampling and the rest, fit_setup), the compilation and the total.  The
+    fit's parts add up to the fit stage, every timed stage lies inside the total, and the stages the
+    command runs one after another add up to no more than the total."""
+    diag = json.loads((cli_nuts_fit.fit_dir / "diagnostics.json").read_text())
+    stages, timings = diag["stages_s"], diag["timings_s"]
+    named = {"imports", "load", "fit", "start", "map", "warmup", "sampling", "fit_setup", "summaries_and_predictive",
+             "type_b", "writing", "report", "compile", "total"}
+    assert named <= set(stages), named - set(stages)
+    assert all(v >= 0.0 for v in stages.values())
+    assert stages["start"] == pytest.approx(timings["start_s"], abs=1e-3) and stages["map"] == pytest.approx(timings["map_s"], abs=1e-3)
+    parts = sum(stages[k] for k in ("start", "map", "warmup", "sampling", "first_attempt", "fit_setup") if k in stages)
+    assert parts == pytest.approx(stages["fit"], abs=5e-3)  # rounding of six parts to 1 ms
+    # compile sums JAX's events, which may overlap when threads compile side by side
+    assert max(v for k, v in stages.items() if k not in ("total", "compile")) <= stages["total"]
+    in_turn = ("imports", "load", "fit", "summaries_and_predictive", "type_b", "writing", "report")
+    assert sum(stages[k] for k in in_turn) <= stages["total"] + 5e-3
+
 def test_sampler_options_reach_the_sampler():
     from bayes_roadload.cli import _sampler, build_parser
 

@@ -61,6 +61,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from .. import config
+from .._jax import compile_seconds
 from ..data.campaign import Campaign
 
 COVERAGE_LEVELS = (0.5, 0.9, 0.95)
@@ -72,27 +73,6 @@ job.  Clearing after every job would bound the memory at ~1.2 GB but costs 5-8 s
 (the shared pieces are recompiled); never clearing grows by 85-165 MB per fit."""
 
 
-_COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration",
-                   "/jax/core/compile/jaxpr_to_mlir_module_duration",
-                   "/jax/core/compile/backend_compile_duration")
-_compile_seconds = [0.0]
-_listening = [False]
-
-
-def _on_jax_event(event: str, duration_s: float, **_: Any) -> None:
-    if event in _COMPILE_EVENTS:
-        _compile_seconds[0] += duration_s
-
-
-def _compile_clock() -> float:
-    """Seconds this process has spent tracing, lowering and compiling JAX code (since the
-    first call)."""
-    if not _listening[0]:
-        import jax.monitoring
-
-        jax.monitoring.register_event_duration_secs_listener(_on_jax_event)
-        _listening[0] = True
-    return _compile_seconds[0]
 
 
 CLEAR_JAX_CACHES_ABOVE_MAP_SHARE = 0.5
@@ -435,7 +415,7 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
 
     rec = _job_fields(job)
     rec["error"] = None
-    compile_start = _compile_clock()
+    compile_start = compile_seconds()
     t_start = time.perf_counter()
     caught: list[warnings.WarningMessage] = []
     try:
@@ -477,7 +457,7 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
         f"{w.category.__name__}: {w.message}" for w in caught
         if not issubclass(w.category, DeprecationWarning)))[:2000]
     rec["time_total_s"] = time.perf_counter() - t_start
-    rec["time_compile_s"] = _compile_clock() - compile_start
+    rec["time_compile_s"] = compile_seconds() - compile_start
     rss, maps = _rss_mb(), _map_count()
     rec["rss_mb"] = math.nan if rss is None else rss
     rec["memory_maps"] = math.nan if maps is None else maps[0]

@@ -905,8 +905,12 @@ def fit_nuts(campaign: Campaign, spec: ModelSpec | str = "four_term", *, pooling
              noise: str = "integrated", robust: bool = False,
              sampler: config.SamplerConfig = config.DEFAULT_SAMPLER) -> NutsFit:
     """Fit every run of a campaign jointly with NUTS (see the module docstring)."""
+    t0 = time.perf_counter()
     problem, init = prepare_problem(build_problem(campaign, spec, pooling=pooling, noise=noise, robust=robust), campaign)
-    return sample_problem(problem, init, sampler, campaign.truth)
+    start_s = time.perf_counter() - t0
+    fit = sample_problem(problem, init, sampler, campaign.truth)
+    fit.timings["start_s"] = start_s
+    return fit
 
 
 def campaign_sampler(sampler: config.SamplerConfig, problem: Problem) -> config.SamplerConfig:
