@@ -78,13 +78,15 @@ class Stages:
 
     def record(self, diagnostics_file: Path, fit_timings: dict[str, float] | None = None) -> dict[str, float]:
         """Add ``stages_s`` to ``diagnostics_file`` (when it exists): ``imports`` (from the
-        package's import to the command's start), the timed stages, from the fit's own timings
-        its ``start`` (the problem built and its start values: the least-squares start, and for a
-        hierarchical fit the run effects' linearisation), ``map``, ``warmup`` and ``sampling`` (the kept run's; a retried
-        fit's first attempt is ``first_attempt``), ``fit_setup`` (the rest of the fit: the
-        problem's construction, a retry's new MAP), ``compile`` (the seconds JAX spent tracing,
-        lowering and compiling in the whole command, :func:`~bayes_roadload._jax.compile_seconds`:
-        they are also inside the stage that first ran each program) and ``total`` (import to now)."""
+        package's import to the command's start), the timed stages, the fit's own parts from its
+        timings -- ``start`` (the problem built and its start values: the least-squares start,
+        and for a hierarchical fit the run effects' linearisation), ``map``, ``warmup`` and
+        ``sampling`` (the kept run's; a retried fit's first attempt is ``first_attempt``) and
+        ``fit_setup``, the rest of the fit (the posterior's set-up, the draws turned into
+        parameters, the gate checks; for a kind without a least-squares start, the problem's
+        construction too) -- then ``compile``, the seconds JAX spent tracing, lowering and
+        compiling in the whole command (:func:`~bayes_roadload._jax.compile_seconds`; they are
+        also inside the stage that first ran each program), and ``total`` (import to now)."""
         from . import IMPORT_STARTED
 
         stages = {"imports": self.started - IMPORT_STARTED, **self.seconds}

@@ -73,8 +73,6 @@ job.  Clearing after every job would bound the memory at ~1.2 GB but costs 5-8 s
 (the shared pieces are recompiled); never clearing grows by 85-165 MB per fit."""
 
 
-
-
 CLEAR_JAX_CACHES_ABOVE_MAP_SHARE = 0.5
 """Share of the kernel's limit on a process's memory mappings (``vm.max_map_count``, 65530 by
 default) above which :func:`run_fit_job` clears JAX's compilation caches after a job.  Every

@@ -132,7 +132,6 @@ PRIOR_DISTRIBUTIONS = tuple(_PRIOR_KEYS)
 """Distribution names a prior may use."""
 
 
-
 FELT_AIR_CACHE_SIZE = 16
 """How many campaigns' felt-air readings :func:`_cached_felt_air` keeps (least recently used
 dropped first)."""
