@@ -279,6 +279,14 @@ class SamplerConfig:
         ``diagnostics.json`` (``retries``); the gates are then those of all the draws kept.  Only
         fits with at least the default warm-up and draws retry: fewer is a quick look whose
         ESS gates are expected to fail, and a retry would spend the time it was meant to save.
+    noise_scaled_metric : with the Laplace preconditioning, let the whitened coordinates other
+        than the integrated noise's intensity q shrink as q falls and widen as it rises
+        (:func:`bayes_roadload.inference.nuts.noise_scaled_coordinates`): where one or two pairs
+        barely bound q from below, the coefficients' conditional posterior narrows as q falls
+        (the funnel above), and a step size adapted to the bulk diverges in that tail.  The
+        change of coordinates is exact (its Jacobian is in the potential): the posterior is the
+        same.  Off by default until its gate rate is measured on the thesis cases and the
+        calibration campaigns.
     """
 
     num_warmup: int = 300
@@ -295,6 +303,7 @@ class SamplerConfig:
     progress_bar: bool = False
     retry: bool = True
     posterior_predictive_draws: int = 200
+    noise_scaled_metric: bool = False
 
     def __post_init__(self):
         if self.precondition not in ("laplace", "none"):

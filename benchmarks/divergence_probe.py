@@ -39,13 +39,14 @@ RECORDS = ROOT / "benchmarks" / "records" / "gates" / "divergence_probe.jsonl"
 
 
 def probe(case: int, target_accept: float, seed: int = 0, noise: str = "integrated", pairs: int = 1,
-          pooling: str = "pooled", sampler_seed: int = 0, profile: bool = False, model: str = "four_term") -> dict:
+          pooling: str = "pooled", sampler_seed: int = 0, profile: bool = False, model: str = "four_term",
+          noise_scaled_metric: bool = False) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         campaign = simulate_campaign(case, pairs=pairs, seed=seed)
         sampler = dataclasses.replace(config.DEFAULT_SAMPLER, retry=False, target_accept=target_accept,
                                       small_campaign_target_accept=None, quiet_trace_target_accept=None,
-                                      seed=sampler_seed)
+                                      seed=sampler_seed, noise_scaled_metric=noise_scaled_metric)
         fit = fit_nuts(campaign, model, sampler=sampler, noise=noise, pooling=pooling)
     div = np.asarray(fit.stats["diverging"]).reshape(-1)
     where = {}
@@ -59,6 +60,7 @@ def probe(case: int, target_accept: float, seed: int = 0, noise: str = "integrat
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                             text=True).stdout.strip()
     rec = {"case": case, "seed": seed, "pairs": pairs, "pooling": pooling, "sampler_seed": sampler_seed, "model": model,
+           "noise_scaled_metric": noise_scaled_metric,
            "noise": noise, "target_accept": target_accept, "commit": commit,
            "divergences": int(div.sum()), "steps_per_draw": float(np.mean(fit.stats["num_steps"])),
            "divergent_draws": where, "log_shape": log_shape(fit)}
@@ -127,6 +129,7 @@ def main(argv=None) -> int:
     ap.add_argument("--pooling", default="pooled", choices=("pooled", "hierarchical"))
     ap.add_argument("--sampler-seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--model", default="four_term", help="model variant (default four_term, as the records before the option)")
+    ap.add_argument("--noise-scaled-metric", action="store_true", help="SamplerConfig.noise_scaled_metric on")
     ap.add_argument("--profile", action="store_true", help="the potential along each positive site's log coordinate")
     a = ap.parse_args(argv)
     RECORDS.parent.mkdir(parents=True, exist_ok=True)
@@ -134,7 +137,8 @@ def main(argv=None) -> int:
     for ta in a.target_accept:
         for sampler_seed in a.sampler_seeds:
             rec = probe(a.case, ta, noise=a.noise, pairs=a.pairs, pooling=a.pooling, sampler_seed=sampler_seed,
-                        profile=a.profile and first, model=a.model)
+                        profile=a.profile and first, model=a.model,
+                        noise_scaled_metric=a.noise_scaled_metric)
             first = False
             with RECORDS.open("a") as f:
                 f.write(json.dumps(rec) + "\n")

@@ -771,6 +771,87 @@ def collect_warmup(mcmc: MCMC) -> None:
     mcmc._set_collection_params(0, total, total)
 
 
+NOISE_METRIC_SHIFT = 2.0
+"""Whitened units below the MAP at which :func:`noise_scaled_coordinates` measures how the
+other coordinates' curvature grows as the integrated noise's intensity falls."""
+
+
+def noise_scaled_coordinates(flat_map, cov: np.ndarray, j: int, grad_y: Callable, scale: np.ndarray,
+                             run_index: np.ndarray, shift: float = NOISE_METRIC_SHIFT, max_rate: float = 1.0):
+    """Whitened coordinates u of the unconstrained vector x in which the other coordinates'
+    scale follows coordinate ``j`` (the log of the integrated noise's intensity q).
+
+    With ``j`` ordered first (permutation P) and L L^T = P cov P^T::
+
+        x = x_MAP + P^T L [u_0, exp(a_1 u_0) u_1, ..., exp(a_{n-1} u_0) u_{n-1}],
+
+    whose Jacobian determinant is det L exp(u_0 sum(a)): the potential in u is the potential in
+    x less u_0 sum(a), so the posterior is the same whatever the rates a.  The rates make the
+    coordinates' conditional scale follow the posterior's: the Hessian's diagonal in u is
+    measured (central differences of the exact gradient, :func:`fd_hessian`) at the MAP and
+    ``shift`` whitened units below it in u_0, and a_i = log(h_i(-shift) / h_i(0)) / (2 shift)
+    (a conditional sd that falls as exp(a_i u_0)), clipped to [0, ``max_rate``].
+
+    ``grad_y``: gradient of the potential in the O(1)-scaled coordinates y = x / ``scale``.
+    Returns (u -> x, u -> log Jacobian less log det L, the rates a)."""
+    flat_map = jnp.asarray(flat_map)
+    n = flat_map.size
+    perm = np.r_[j, np.delete(np.arange(n), j)]
+    inverse = np.argsort(perm)
+    cov_p = cov[np.ix_(perm, perm)]
+    chol = np.linalg.cholesky(cov_p + 1e-14 * np.abs(np.diag(cov_p)).max() * np.eye(n))
+    basis = chol[inverse, :]  # x - x_MAP = basis @ (scaled u)
+
+    def diagonal_at(u0: float) -> np.ndarray:
+        x = np.asarray(flat_map) + basis[:, 0] * u0
+        h_y = fd_hessian(grad_y, x / scale, run_index)
+        h_x = h_y / np.outer(scale, scale)
+        return np.einsum("ij,ik,kj->j", basis, h_x, basis)
+
+    with np.errstate(all="ignore"):
+        ratio = diagonal_at(-shift)[1:] / diagonal_at(0.0)[1:]
+    rates = np.clip(np.where(np.isfinite(ratio) & (ratio > 0), np.log(ratio) / (2.0 * shift), 0.0), 0.0, max_rate)
+    a = jnp.asarray(rates)
+    total = float(rates.sum())
+    basis_j = jnp.asarray(basis)
+
+    def to_x(u):
+        s = jnp.concatenate([jnp.ones(1), jnp.exp(a * u[0])])
+        return flat_map + basis_j @ (s * u)
+
+    def log_jacobian(u):
+        return u[0] * total
+
+    return to_x, log_jacobian, rates
+
+
+def whitening(problem: Problem, post: Posterior, map_result: MapResult, sampler: config.SamplerConfig):
+    """The map from NUTS' whitened coordinates u to the unconstrained vector x, and its log
+    Jacobian (less a constant): x = x_MAP + L u with L L^T the Laplace covariance, or, with
+    ``sampler.noise_scaled_metric`` on a problem with one integrated noise intensity
+    ``q_mps_per_sqrt_s``, :func:`noise_scaled_coordinates`."""
+    flat_map, _ = ravel_pytree(map_result.z)
+    n = flat_map.size
+    names = _coordinate_names(map_result.z)
+    q_at = [i for i, name in enumerate(names) if name.split("[")[0] == "q_mps_per_sqrt_s"]
+    if sampler.noise_scaled_metric and len(q_at) == 1:
+        j = q_at[0]
+        fg, _ = _map_functions(problem, post)
+        to_x, log_jacobian, rates = noise_scaled_coordinates(
+            flat_map, map_result.cov, j, lambda y: fg(jnp.asarray(y))[1], np.asarray(post.scale), post.run_index)
+        log.info("NUTS: coordinates scaled with log q, rates %s", np.array2string(rates, precision=2))
+        return to_x, log_jacobian
+    chol = jnp.asarray(np.linalg.cholesky(map_result.cov + 1e-14 * np.abs(np.diag(map_result.cov)).max() * np.eye(n)))
+
+    def to_x(u):
+        return flat_map + chol @ u
+
+    def log_jacobian(u):
+        return 0.0
+
+    return to_x, log_jacobian
+
+
 def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
              map_result: MapResult | None = None, posterior: Posterior | None = None,
              more_draws: Callable[[NutsFit], int] | None = None) -> NutsFit:
@@ -799,14 +880,14 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
         potential_fn, postprocess_fn = post.potential_fn, post.postprocess_fn
         flat_map, unravel = ravel_pytree(map_result.z)
         n = flat_map.size
-        chol = jnp.asarray(np.linalg.cholesky(map_result.cov + 1e-14 * np.abs(np.diag(map_result.cov)).max() * np.eye(n)))
+        to_x, log_jacobian = whitening(problem, post, map_result, sampler)
 
         # jitted: numpyro evaluates the potential and its gradient once at the start of a chain
         # outside its compiled loop (one chain, or chains one after the other), which op by op
         # took ~5 s per chain on one pair
         @jax.jit
         def whitened_potential(u):
-            return potential_fn(unravel(flat_map + chol @ u))
+            return potential_fn(unravel(to_x(u))) - log_jacobian(u)
 
         mass = sampler.mass_matrix
         if mass == "auto":
@@ -850,7 +931,7 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
     def finished(raw, extra, sampler) -> NutsFit:
         if sampler.precondition == "laplace":
             u = jnp.asarray(raw).reshape(sampler.num_chains, sampler.num_samples, -1)
-            x = flat_map + jnp.einsum("cdj,ij->cdi", u, chol)
+            x = jax.jit(jax.vmap(jax.vmap(to_x)))(u)
             constrained = jax.jit(jax.vmap(jax.vmap(lambda xi: postprocess_fn(unravel(xi)))))(x)
             samples = {k: np.asarray(v) for k, v in constrained.items()}
         else:
