@@ -5,7 +5,8 @@ Campaigns: the thesis' simulation cases 1-19 (``--cases``) at ``--pairs`` pairs 
 1-``--max-pairs`` pairs).  Each is fitted with the default options of ``bayes-roadload fit``
 (:class:`bayes_roadload.inference.kinds.FitOptions`: the registry's default model for speed
 traces unless ``--model`` names another, default sampler with its retry,
-:data:`bayes_roadload.config.DEFAULT_SAMPLER`) through the batch door.  A fit passes
+:data:`bayes_roadload.config.DEFAULT_SAMPLER`, or with ``--noise-scaled-metric`` its coordinates
+scaled with the integrated noise) through the batch door.  A fit passes
 *first time* when it needed no retry; the records say which gate failed first
 (``retry_failed``) and the time of the first attempt (``time_first_attempt_s``).
 
@@ -15,6 +16,7 @@ traces unless ``--model`` names another, default sampler with its retry,
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import json
 import sys
@@ -54,8 +56,12 @@ def main(argv=None) -> int:
     ap.add_argument("--pooling", choices=("auto", "pooled", "hierarchical"), default="auto",
                     help="pooling of every fit (default: the default of `fit`)")
     ap.add_argument("--model", default=None, help="model variant of every fit (default: fit's for speed traces)")
+    ap.add_argument("--noise-scaled-metric", action="store_true",
+                    help="the sampler's coordinates scaled with the integrated noise (SamplerConfig.noise_scaled_metric)")
     args = ap.parse_args(argv)
     o = FitOptions(pooling=args.pooling)
+    if args.noise_scaled_metric:
+        o = dataclasses.replace(o, sampler=dataclasses.replace(o.sampler, noise_scaled_metric=True))
     common = dict(model=args.model or KINDS["traces"].default_model(None, o), pooling=o.pooling, noise=o.noise,
                   robust=o.robust, sampler=o.sampler)
     jobs = [FitJob(f"case{c}-p{args.pairs}-s{args.seed}", SimulatedCampaign(c, args.pairs, args.seed),
