@@ -931,7 +931,7 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
     def finished(raw, extra, sampler) -> NutsFit:
         if sampler.precondition == "laplace":
             u = jnp.asarray(raw).reshape(sampler.num_chains, sampler.num_samples, -1)
-            x = jax.jit(jax.vmap(jax.vmap(to_x)))(u)
+            x = jax.vmap(jax.vmap(to_x))(u)
             constrained = jax.jit(jax.vmap(jax.vmap(lambda xi: postprocess_fn(unravel(xi)))))(x)
             samples = {k: np.asarray(v) for k, v in constrained.items()}
         else:
