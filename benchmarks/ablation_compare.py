@@ -21,12 +21,8 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bayes_roadload.analysis.batch import record_z  # noqa: E402
 from bayes_roadload.analysis.calibration import QUANTITIES  # noqa: E402
-
-
-def z_scores(records: pd.DataFrame, quantity: str) -> pd.Series:
-    """(posterior mean - truth) / posterior sd of ``quantity``, one per record."""
-    return (records[f"{quantity}_mean"] - records[f"{quantity}_truth"]) / records[f"{quantity}_sd"]
 
 
 def compare(full: pd.DataFrame, ablated: pd.DataFrame) -> tuple[pd.DataFrame, list[str]]:
@@ -42,7 +38,7 @@ def compare(full: pd.DataFrame, ablated: pd.DataFrame) -> tuple[pd.DataFrame, li
     for q in QUANTITIES:
         row = {"quantity": q}
         for label, rec in (("all effects", f), ("ablated", a)):
-            z = z_scores(rec, q)
+            z = record_z(rec, q)
             row[f"{label}: held"] = int(rec[f"{q}_in95"].sum())
             row[f"{label}: mean z"] = float(z.mean())
             row[f"{label}: mean z gusty"] = float(z[gusty].mean())

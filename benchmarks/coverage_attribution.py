@@ -32,6 +32,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bayes_roadload.analysis.batch import record_z  # noqa: E402
 from bayes_roadload.analysis.calibration import QUANTITIES  # noqa: E402
 from bayes_roadload.simulate.independent import simulate_independent  # noqa: E402
 
@@ -65,8 +66,7 @@ def drawn_properties(seed: int, pairs: int, truth: dict[str, float]) -> dict[str
 
 def z_scores(records: pd.DataFrame) -> pd.DataFrame:
     """(mean - truth) / sd of each quantity of :data:`QUANTITIES` the records hold."""
-    return pd.DataFrame({q: (records[f"{q}_mean"] - records[f"{q}_truth"]) / records[f"{q}_sd"]
-                         for q in QUANTITIES if f"{q}_mean" in records})
+    return pd.DataFrame({q: record_z(records, q) for q in QUANTITIES if f"{q}_mean" in records})
 
 
 def correlations(table: pd.DataFrame, quantities: list[str], top: int) -> pd.DataFrame:

@@ -832,6 +832,13 @@ def _wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
     return centre - half, centre + half
 
 
+def record_z(records: pd.DataFrame, quantity: str) -> pd.Series:
+    """z = (posterior mean - truth) / posterior sd of ``quantity`` in each fit record (its
+    ``{quantity}_mean``, ``_truth`` and ``_sd`` columns)."""
+    return ((records[f"{quantity}_mean"].astype(float) - records[f"{quantity}_truth"].astype(float))
+            / records[f"{quantity}_sd"].astype(float))
+
+
 def coverage_summary(records: pd.DataFrame, by: Sequence[str] = ("model", "noise"),
                      quantities: Sequence[str] | None = None,
                      levels: Sequence[float] = COVERAGE_LEVELS) -> pd.DataFrame:
@@ -871,7 +878,7 @@ def coverage_summary(records: pd.DataFrame, by: Sequence[str] = ("model", "noise
             known = g[truth.notna()]
             if known.empty:
                 continue
-            z = (known[f"{q}_mean"].astype(float) - known[f"{q}_truth"].astype(float)) / known[f"{q}_sd"].astype(float)
+            z = record_z(known, q)
             for lv in levels:
                 flags = known[f"{q}_{interval_key(lv)}"].astype(bool)
                 n, k = int(flags.size), int(flags.sum())
