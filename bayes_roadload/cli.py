@@ -215,7 +215,8 @@ def _sampler(args):
                                                     "quiet_trace_target_accept": None}
     return config.SamplerConfig(num_warmup=args.warmup, num_samples=args.draws, num_chains=args.chains,
                                 seed=args.seed, progress_bar=console.progress_bars(not args.no_progress),
-                                precondition="none" if args.no_precondition else "laplace", **stated)
+                                precondition="none" if args.no_precondition else "laplace",
+                                noise_scaled_metric=bool(args.noise_scaled_metric), **stated)
 
 
 def _fit_options(args, runs=None):
@@ -972,6 +973,9 @@ def _add_nuts_options(p: argparse.ArgumentParser, seed: int) -> None:
                         f"fit reports divergences (default: {d.target_accept}, and "
                         f"{d.small_campaign_target_accept} for campaigns of at most {d.small_campaign_runs} runs "
                         f"and for speed traces logged with less noise than the likelihood's floor)")
+    p.add_argument("--noise-scaled-metric", action="store_true",
+                   help="nuts: sample in coordinates whose scale follows the integrated noise's intensity q (the "
+                        "same posterior); try it when a fit of one or two pairs reports divergences")
     p.add_argument("--no-progress", action="store_true", help="nuts: no progress bar")
     p.add_argument("--no-precondition", action="store_true",
                    help="nuts: numpyro's default NUTS without the MAP/Laplace start (slow; for comparison)")

@@ -314,6 +314,7 @@ def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
         "retries": list(fit.retries),
         "chain_method": dict(fit.chain_method),
         "precondition": fit.sampler.precondition,
+        "noise_scaled_metric": bool(fit.sampler.noise_scaled_metric),
         "map": None if fit.map is None else {
             "success": fit.map.success, "iterations": fit.map.n_iter, "message": fit.map.message,
             "grad_max_scaled": fit.map.grad_max,
@@ -338,8 +339,9 @@ def truth_derived(problem, truth: dict | None) -> dict[str, float]:
 
 
 REMEDIES = {
-    "divergences": "raise --target-accept (e.g. 0.95): the sampler met curvature its step size "
-                   "cannot follow (with few runs, at small integrated-noise levels q)",
+    "divergences": "raise --target-accept (e.g. 0.95), or --noise-scaled-metric (coordinates that narrow with "
+                   "q): the sampler met curvature its step size cannot follow (with few runs, at small "
+                   "integrated-noise levels q)",
     "r_hat": "more draws (--draws) or warm-up (--warmup); if it persists the chains found different modes",
     "ess_bulk": "more draws (--draws)",
     "ess_tail": "more draws (--draws)",

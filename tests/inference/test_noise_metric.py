@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from bayes_roadload.inference.nuts import fit_nuts, noise_scaled_coordinates
+from bayes_roadload.inference.results import trace_report
 
 from ..conftest import SMALL_SAMPLER
 
@@ -76,6 +77,7 @@ def test_a_fit_in_the_scaled_coordinates_has_the_same_posterior(small_campaign, 
     sampler = dataclasses.replace(SMALL_SAMPLER, num_warmup=200, num_samples=300, noise_scaled_metric=True)
     fit = fit_nuts(small_campaign, "four_term", sampler=sampler)
     assert int(np.sum(fit.stats["diverging"])) == 0
+    assert trace_report(fit, small_campaign).diagnostics["noise_scaled_metric"] is True  # diagnostics.json says so
     for k in ("AD", "BD", "CD0", "q_mps_per_sqrt_s"):
         ref = np.asarray(pooled_fit.samples[k]).reshape(-1)
         new = np.asarray(fit.samples[k]).reshape(-1)
