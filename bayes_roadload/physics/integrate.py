@@ -57,27 +57,38 @@ class RunBatch(NamedTuple):
 
 
 _CHANNELS = ("airspeed_mps", "yaw_rad", "driveline_force_n", "air_density_kgpm3", "temperature_k")
+"""The logged channels of a run the forces read, in the order of the inputs' last axis."""
+
+_INPUTS = _CHANNELS + ("airspeed_rate_mps2", "speed_measured_mps", "speed_drop_lagged_mps")
+"""Every column of the inputs' last axis: the logged channels, then what :func:`_inputs`
+derives from them (the reading's rate, the measured speed), then the lagged speed drop that
+:func:`_with_model_channel` appends only for a model whose terms read it."""
+
+_AT = {name: i for i, name in enumerate(_INPUTS)}
 
 
 def _conditions(model: DragModel, p, run: RunBatch, v, s, t, u) -> Conditions:
-    airspeed, yaw = model.air.relative_air(p, v, u[0], u[1])
+    """The conditions at speed ``v``, distance ``s`` and time ``t`` with the inputs ``u``
+    (the columns of :data:`_INPUTS`, the last only when the model appended it)."""
+    airspeed, yaw = model.air.relative_air(p, v, u[_AT["airspeed_mps"]], u[_AT["yaw_rad"]])
+    lagged = _AT["speed_drop_lagged_mps"]
     return Conditions(
         speed_mps=v,
         airspeed_mps=airspeed,
         yaw_rad=yaw,
-        driveline_force_n=u[2],
+        driveline_force_n=u[_AT["driveline_force_n"]],
         position_m=run.start_position_m + run.direction * s,
         distance_m=s,
         time_s=t,
         accel_mps2=jnp.zeros_like(v),
         direction=run.direction,
-        air_density_kgpm3=u[3],
-        temperature_k=u[4],
+        air_density_kgpm3=u[_AT["air_density_kgpm3"]],
+        temperature_k=u[_AT["temperature_k"]],
         mass_kg=run.mass_kg,
         frontal_area_m2=run.frontal_area_m2,
-        airspeed_rate_mps2=u[5],
-        speed_drop_lagged_mps=u[7] if len(u) > len(_CHANNELS) + 2 else 0.0,
-        speed_measured_mps=u[6],
+        airspeed_rate_mps2=u[_AT["airspeed_rate_mps2"]],
+        speed_drop_lagged_mps=u[lagged] if len(u) > lagged else 0.0,
+        speed_measured_mps=u[_AT["speed_measured_mps"]],
     )
 
 
@@ -146,7 +157,7 @@ def _with_model_channel(model: DragModel, p, run: RunBatch, u, schedule):
 def stride2_schedule(time_s, inputs) -> tuple:
     """The data-only part of RK4 steps spanning two sample intervals (``stride = 2``).
 
-    ``time_s`` [..., N], ``inputs`` [..., N, C] (the channels of ``_CHANNELS``).  Returns
+    ``time_s`` [..., N], ``inputs`` [..., N, C] (the columns of :data:`_INPUTS`).  Returns
     ``(t0, h, u0, u_mid, u1, dense)`` per step ([..., G] and [..., G, C], ``dense``
     [..., G, 2, 3]): the step's start time and length, the inputs at its start and end, the
     inputs its half-step stages see, and the weights of RK4's continuous extension at the
@@ -201,12 +212,14 @@ def reading_rate(time_s, reading, mask):
 
 
 def _inputs(run: RunBatch):
-    """The input channels stacked on a last axis ([..., N, C]): those of ``_CHANNELS``, the
-    rate of the airspeed reading (:func:`reading_rate`) and the measured speed; with numpy when
-    they are concrete, so that data-only work on them is done once per trace."""
+    """The input channels stacked on a last axis ([..., N, C]): the columns of :data:`_INPUTS`
+    but the lagged speed drop: those of ``_CHANNELS``, the rate of the airspeed reading
+    (:func:`reading_rate`) and the measured speed; with numpy when they are concrete, so that
+    data-only work on them is done once per trace."""
     channels = [getattr(run, ch) for ch in _CHANNELS]
     channels.append(reading_rate(run.time_s, run.airspeed_mps, run.mask))
     channels.append(run.speed_mps)
+    assert len(channels) == _AT["speed_drop_lagged_mps"]
     if any(isinstance(x, jax.core.Tracer) for x in channels):
         return jnp.stack([jnp.asarray(x) for x in channels], axis=-1)
     return np.stack([np.asarray(x) for x in channels], axis=-1)
