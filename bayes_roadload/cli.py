@@ -973,9 +973,10 @@ def _add_nuts_options(p: argparse.ArgumentParser, seed: int) -> None:
                         f"fit reports divergences (default: {d.target_accept}, and "
                         f"{d.small_campaign_target_accept} for campaigns of at most {d.small_campaign_runs} runs "
                         f"and for speed traces logged with less noise than the likelihood's floor)")
-    p.add_argument("--noise-scaled-metric", action="store_true",
-                   help="nuts: sample in coordinates whose scale follows the integrated noise's intensity q (the "
-                        "same posterior); try it when a fit of one or two pairs reports divergences")
+    p.add_argument("--noise-scaled-metric", action=argparse.BooleanOptionalAction, default=d.noise_scaled_metric,
+                   help="nuts: sample in coordinates whose scale follows the integrated noise's intensity q, the "
+                        "same posterior without the funnel one or two pairs leave at small q (default: on; "
+                        "--no-noise-scaled-metric samples in the Laplace coordinates alone)")
     p.add_argument("--no-progress", action="store_true", help="nuts: no progress bar")
     p.add_argument("--no-precondition", action="store_true",
                    help="nuts: numpyro's default NUTS without the MAP/Laplace start (slow; for comparison)")

@@ -80,6 +80,11 @@ def comparison_markdown(first: pd.DataFrame, second: pd.DataFrame) -> str:
             cells.append(cell)
         lines.append(f"| {q} | {cells[0]} | {cells[1]} |")
     lines.append(f"| all | {held[0]} / {n * len(QUANTITIES)} | {held[1]} / {n * len(QUANTITIES)} |")
+    first_time = [int((rec["gate_pass"].astype(bool) & (rec["retries"] == 0)).sum()) for rec in (a, b)]
+    lines.append(f"| every gate first time | {first_time[0]} / {n} | {first_time[1]} / {n} |")
+    retried = [", ".join(f"{r['name']} ({r['retry_failed']})" for _, r in rec[rec["retries"] > 0].iterrows()) or "none"
+               for rec in (a, b)]
+    lines.append(f"| retried (first attempt failed) | {retried[0]} | {retried[1]} |")
     return "\n".join(lines)
 
 

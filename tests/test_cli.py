@@ -127,9 +127,9 @@ def test_sampler_options_reach_the_sampler():
     from bayes_roadload.cli import _sampler, build_parser
 
     args = build_parser().parse_args(["fit", "campaign", "--out", "o", "--target-accept", "0.95", "--draws", "50",
-                                      "--no-precondition", "--noise-scaled-metric"])
+                                      "--no-precondition", "--no-noise-scaled-metric"])
     s = _sampler(args)
-    assert (s.target_accept, s.num_samples, s.precondition, s.noise_scaled_metric) == (0.95, 50, "none", True)
+    assert (s.target_accept, s.num_samples, s.precondition, s.noise_scaled_metric) == (0.95, 50, "none", False)
     default = _sampler(build_parser().parse_args(["fit", "campaign", "--out", "o"]))
     assert default.target_accept == config.DEFAULT_SAMPLER.target_accept
     assert default.noise_scaled_metric == config.DEFAULT_SAMPLER.noise_scaled_metric

@@ -317,6 +317,9 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
         # the acceptance of the reported run: the job's, or the small-campaign / quiet-trace
         # value (nuts.campaign_sampler, nuts.quiet_trace_sampler), or the retry's
         "target_accept_sampled": float(fit.sampler.target_accept),
+        # the largest rate of the noise-scaled coordinates (NaN: sampled in the Laplace ones)
+        "noise_scaled_max_rate": max(fit.noise_scaled_rates.values(), default=0.0)
+        if fit.noise_scaled_rates is not None else math.nan,
     })
     rec.update({f"time_{k}": float(v) for k, v in fit.timings.items()})
     return rec
@@ -390,7 +393,9 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
         * noise: ``sigma_mps_mean`` and, when sampled, ``q_mps_per_sqrt_s_mean`` / ``_q50``
           (NUTS: and ``q_mps_per_sqrt_s_truth`` when the campaign's truth states it);
         * gates: ``gate_pass, gates_failed, divergences, max_r_hat, min_ess_bulk,
-          min_ess_tail, mean_tree_depth, map_converged``; for ``method="laplace"`` only
+          min_ess_tail, mean_tree_depth, map_converged``, ``noise_scaled_max_rate`` (the
+          largest rate of the noise-scaled coordinates, NaN when not sampled in them); for
+          ``method="laplace"`` only
           ``gate_pass`` (the MAP converged, its Hessian is positive definite and the
           importance weights' Pareto k is at most ``config.LAPLACE_MAX_PARETO_K``),
           ``gates_failed`` ("map", "pareto_k"), ``map_converged, map_min_eigenvalue,

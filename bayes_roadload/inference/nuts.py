@@ -145,6 +145,9 @@ class NutsFit:
     truth: dict | None = None
     retries: list[dict[str, Any]] = field(default_factory=list)
     chain_method: dict[str, str] = field(default_factory=dict)
+    noise_scaled_rates: dict[str, float] | None = None
+    """The rates of :func:`noise_scaled_coordinates` by coordinate name when the fit was sampled
+    in those coordinates, else None."""
 
 
 def _site_scales(problem: Problem, z: dict[str, Any]) -> dict[str, Any]:
@@ -829,7 +832,8 @@ def whitening(problem: Problem, post: Posterior, map_result: MapResult, sampler:
     """The map from NUTS' whitened coordinates u to the unconstrained vector x, and its log
     Jacobian (less a constant): x = x_MAP + L u with L L^T the Laplace covariance, or, with
     ``sampler.noise_scaled_metric`` on a problem with one integrated noise intensity
-    ``q_mps_per_sqrt_s``, :func:`noise_scaled_coordinates`."""
+    ``q_mps_per_sqrt_s``, :func:`noise_scaled_coordinates`.  Returns (u -> x, u -> log Jacobian,
+    the rates by coordinate name or None in the Laplace coordinates alone)."""
     flat_map, _ = ravel_pytree(map_result.z)
     n = flat_map.size
     names = _coordinate_names(map_result.z)
@@ -840,7 +844,8 @@ def whitening(problem: Problem, post: Posterior, map_result: MapResult, sampler:
         to_x, log_jacobian, rates = noise_scaled_coordinates(
             flat_map, map_result.cov, j, lambda y: fg(jnp.asarray(y))[1], np.asarray(post.scale), post.run_index)
         log.info("NUTS: coordinates scaled with log q, rates %s", np.array2string(rates, precision=2))
-        return to_x, log_jacobian
+        others = [name for i, name in enumerate(names) if i != j]
+        return to_x, log_jacobian, {name: float(r) for name, r in zip(others, rates)}
     chol = jnp.asarray(np.linalg.cholesky(map_result.cov + 1e-14 * np.abs(np.diag(map_result.cov)).max() * np.eye(n)))
 
     def to_x(u):
@@ -849,7 +854,7 @@ def whitening(problem: Problem, post: Posterior, map_result: MapResult, sampler:
     def log_jacobian(u):
         return 0.0
 
-    return to_x, log_jacobian
+    return to_x, log_jacobian, None
 
 
 def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
@@ -880,7 +885,7 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
         potential_fn, postprocess_fn = post.potential_fn, post.postprocess_fn
         flat_map, unravel = ravel_pytree(map_result.z)
         n = flat_map.size
-        to_x, log_jacobian = whitening(problem, post, map_result, sampler)
+        to_x, log_jacobian, rates = whitening(problem, post, map_result, sampler)
 
         # jitted: numpyro evaluates the potential and its gradient once at the start of a chain
         # outside its compiled loop (one chain, or chains one after the other), which op by op
@@ -901,6 +906,7 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
     else:
         kernel = NUTS(problem.numpyro_model, target_accept_prob=sampler.target_accept, max_tree_depth=sampler.max_tree_depth)
         init_params = None
+        rates = None
     args = () if sampler.precondition == "laplace" else (problem,)
     # Warm-up and sampling in one compiled program (``mcmc.warmup`` then ``mcmc.run`` compiles
     # the sampler twice); the warm-up draws are collected only to split the time between the
@@ -944,7 +950,8 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
                      float(stats["num_steps"][c].mean()), int(np.sum(stats["diverging"][c])),
                      int(stats["tree_depth"][c].max()))
         return NutsFit(problem=problem, samples=samples, stats=stats, map=map_result, sampler=sampler,
-                       timings=dict(timings), chain_method={"method": method, "reason": why})
+                       timings=dict(timings), chain_method={"method": method, "reason": why},
+                       noise_scaled_rates=rates)
 
     fit = finished(raw, extra, sampler)
     more = more_draws(fit) if more_draws is not None else 0

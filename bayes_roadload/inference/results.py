@@ -314,7 +314,9 @@ def diagnostics(fit: NutsFit, idata: az.InferenceData, summary: pd.DataFrame,
         "retries": list(fit.retries),
         "chain_method": dict(fit.chain_method),
         "precondition": fit.sampler.precondition,
-        "noise_scaled_metric": bool(fit.sampler.noise_scaled_metric),
+        "noise_scaled_metric": fit.noise_scaled_rates is not None,
+        "noise_scaled_rates": None if fit.noise_scaled_rates is None else {
+            k: round(v, 4) for k, v in fit.noise_scaled_rates.items()},
         "map": None if fit.map is None else {
             "success": fit.map.success, "iterations": fit.map.n_iter, "message": fit.map.message,
             "grad_max_scaled": fit.map.grad_max,
@@ -339,9 +341,8 @@ def truth_derived(problem, truth: dict | None) -> dict[str, float]:
 
 
 REMEDIES = {
-    "divergences": "raise --target-accept (e.g. 0.95), or --noise-scaled-metric (coordinates that narrow with "
-                   "q): the sampler met curvature its step size cannot follow (with few runs, at small "
-                   "integrated-noise levels q)",
+    "divergences": "raise --target-accept (e.g. 0.95), and drop --no-noise-scaled-metric if given: the sampler "
+                   "met curvature its step size cannot follow (with few runs, at small integrated-noise levels q)",
     "r_hat": "more draws (--draws) or warm-up (--warmup); if it persists the chains found different modes",
     "ess_bulk": "more draws (--draws)",
     "ess_tail": "more draws (--draws)",

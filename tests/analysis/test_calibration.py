@@ -137,3 +137,26 @@ def test_the_study_resumes_from_its_partial_records(tmp_path, monkeypatch):
         pd.DataFrame({"name": ["ind-1001"], "AD_mean": [0.01]}).to_csv(partial, index=False)
         before, pending = study.resume_from(partial, jobs)
         assert list(before["name"]) == ["ind-1001"] and [j.name for j in pending] == ["ind-1000", "ind-1002"]
+
+
+def test_the_comparison_counts_held_intervals_and_first_time_gates(monkeypatch):
+    """``calibration_study.py --compare``: on the campaigns both record sets hold, the held
+    intervals of each and which fits passed every gate first time (a retried fit did not)."""
+    from ..conftest import BENCHMARKS, benchmark_script
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    first = _records(1.0, n=4, seed=1).assign(retries=[0, 1, 0, 0], retry_failed=[None, "divergences", None, None])
+    second = _records(1.0, n=3, seed=2).assign(retries=0, retry_failed=None)
+    for rec in (first, second):
+        rec["name"] = [f"ind-{s}" for s in rec["seed"]]
+        for q in QUANTITIES:  # truths away from zero: the table states relative errors
+            rec[[f"{q}_truth", f"{q}_mean"]] += 1.0
+    with benchmark_script("calibration_study") as study:
+        text = study.comparison_markdown(first, second)
+    rows = {line.split(" | ")[0].strip("| "): line.split(" | ")[1:] for line in text.splitlines() if line.startswith("| ")}
+    held = [int(first.loc[:2, [f"{q}_in95" for q in QUANTITIES]].to_numpy().sum()),
+            int(second[[f"{q}_in95" for q in QUANTITIES]].to_numpy().sum())]
+    assert rows["all"][0].strip() == f"{held[0]} / {3 * len(QUANTITIES)}"
+    assert rows["all"][1].strip(" |") == f"{held[1]} / {3 * len(QUANTITIES)}"
+    assert [c.strip(" |") for c in rows["every gate first time"]] == ["2 / 3", "3 / 3"]
+    assert [c.strip(" |") for c in rows["retried (first attempt failed)"]] == ["ind-1 (divergences)", "none"]
