@@ -45,6 +45,7 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
 from bayes_roadload.inference.kinds import FitOptions  # noqa: E402
+from bayes_roadload.config import DEFAULT_SAMPLER  # noqa: E402
 from doc_sections import replace_section  # noqa: E402
 from bayes_roadload.analysis.calibration import (CONFIRMATORY_SEED0, DIAGNOSTIC_SPLIT, QUANTITIES,  # noqa: E402
                                                  calibration_jobs, calibration_markdown, calibration_table)
@@ -109,8 +110,10 @@ def main(argv=None) -> int:
     ap.add_argument("--model", default=None, help="model variant (default: fit's for speed traces)")
     ap.add_argument("--withhold", nargs="+", default=(), metavar="EFFECT",
                     help="an ablation: these effects of the independent simulator left out of every campaign")
-    ap.add_argument("--noise-scaled-metric", action="store_true",
-                    help="the sampler's coordinates scaled with the integrated noise (SamplerConfig.noise_scaled_metric)")
+    ap.add_argument("--noise-scaled-metric", action=argparse.BooleanOptionalAction,
+                    default=DEFAULT_SAMPLER.noise_scaled_metric,
+                    help="the sampler's coordinates scaled with the integrated noise (SamplerConfig.noise_scaled_metric; "
+                         "default: the sampler's, on)")
     ap.add_argument("--compare", type=Path, default=None, metavar="RECORDS",
                     help="with --from-records: a table of --records beside these records on the seeds both hold")
     ap.add_argument("--from-records", action="store_true", help="summarise --records without fitting")
@@ -121,8 +124,8 @@ def main(argv=None) -> int:
         records = pd.read_csv(args.records)
     else:
         options = FitOptions()
-        if args.noise_scaled_metric:
-            options = dataclasses.replace(options, sampler=dataclasses.replace(options.sampler, noise_scaled_metric=True))
+        options = dataclasses.replace(options, sampler=dataclasses.replace(options.sampler,
+                                                                           noise_scaled_metric=args.noise_scaled_metric))
         jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs, options=options,
                                 model=args.model, withhold=args.withhold)
         args.records.parent.mkdir(parents=True, exist_ok=True)

@@ -5,8 +5,8 @@ Campaigns: the thesis' simulation cases 1-19 (``--cases``) at ``--pairs`` pairs 
 1-``--max-pairs`` pairs).  Each is fitted with the default options of ``bayes-roadload fit``
 (:class:`bayes_roadload.inference.kinds.FitOptions`: the registry's default model for speed
 traces unless ``--model`` names another, default sampler with its retry,
-:data:`bayes_roadload.config.DEFAULT_SAMPLER`, or with ``--noise-scaled-metric`` its coordinates
-scaled with the integrated noise) through the batch door.  A fit passes
+:data:`bayes_roadload.config.DEFAULT_SAMPLER`, in its coordinates scaled with the integrated
+noise unless ``--no-noise-scaled-metric``) through the batch door.  A fit passes
 *first time* when it needed no retry; the records say which gate failed first
 (``retry_failed``) and the time of the first attempt (``time_first_attempt_s``).
 
@@ -30,6 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bayes_roadload.analysis.batch import FitJob, SimulatedCampaign, batch_client, run_batch  # noqa: E402
+from bayes_roadload.config import DEFAULT_SAMPLER  # noqa: E402
 from bayes_roadload.inference.kinds import KINDS, FitOptions  # noqa: E402
 from bayes_roadload.simulate.independent import simulate_independent  # noqa: E402
 
@@ -56,12 +57,13 @@ def main(argv=None) -> int:
     ap.add_argument("--pooling", choices=("auto", "pooled", "hierarchical"), default="auto",
                     help="pooling of every fit (default: the default of `fit`)")
     ap.add_argument("--model", default=None, help="model variant of every fit (default: fit's for speed traces)")
-    ap.add_argument("--noise-scaled-metric", action="store_true",
-                    help="the sampler's coordinates scaled with the integrated noise (SamplerConfig.noise_scaled_metric)")
+    ap.add_argument("--noise-scaled-metric", action=argparse.BooleanOptionalAction,
+                    default=DEFAULT_SAMPLER.noise_scaled_metric,
+                    help="the sampler's coordinates scaled with the integrated noise (SamplerConfig.noise_scaled_metric; "
+                         "default: the sampler's, on)")
     args = ap.parse_args(argv)
     o = FitOptions(pooling=args.pooling)
-    if args.noise_scaled_metric:
-        o = dataclasses.replace(o, sampler=dataclasses.replace(o.sampler, noise_scaled_metric=True))
+    o = dataclasses.replace(o, sampler=dataclasses.replace(o.sampler, noise_scaled_metric=args.noise_scaled_metric))
     common = dict(model=args.model or KINDS["traces"].default_model(None, o), pooling=o.pooling, noise=o.noise,
                   robust=o.robust, sampler=o.sampler)
     jobs = [FitJob(f"case{c}-p{args.pairs}-s{args.seed}", SimulatedCampaign(c, args.pairs, args.seed),
