@@ -287,8 +287,9 @@ class SamplerConfig:
         change of coordinates is exact (its Jacobian is in the potential): the posterior is the
         same.  On by default: thesis cases 1-19 at one pair passed every gate first time in
         19 of 19 fits against 14 of 19 without (docs/calibration.md, "The vehicle's
-        aerodynamic admittance and a heavy vehicle's priors"); a problem without exactly one q (interval times, steady states, a noise
-        intensity per run) is sampled in the Laplace coordinates.
+        aerodynamic admittance and a heavy vehicle's priors"); a problem without exactly one
+        q (interval times, steady states, a noise intensity per run) is sampled in the
+        Laplace coordinates.
     """
 
     num_warmup: int = 300
