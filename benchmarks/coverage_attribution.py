@@ -4,7 +4,8 @@ For every record of a calibration run (``benchmarks/calibration_study.py``), the
 simulated again from its seed and size (``simulate_independent(seed, pairs=P)``: the same draws,
 so the same vehicle, Type B errors and wind), and its z-scores (posterior mean minus truth, over
 the posterior sd) are set beside what the simulator drew: the vehicle (``meta.vehicle_true``),
-the declared values' errors (``meta.type_b_errors``), the wind and the logging rate.  No fit is
+the declared values' errors (``meta.type_b_errors``), the air's humidity, the wind and the
+logging rate.  No fit is
 run: the records' posteriors are read as they are.
 
 Writes one row per campaign (``--out``, CSV: seed, pairs, the z of each quantity, the drawn
@@ -34,7 +35,9 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_roadload.analysis.batch import record_z  # noqa: E402
 from bayes_roadload.analysis.calibration import QUANTITIES  # noqa: E402
+from bayes_roadload.physics.atmosphere import air_density_kgpm3  # noqa: E402
 from bayes_roadload.simulate.independent import simulate_independent  # noqa: E402
+from bayes_roadload.simulate.independent.dynamics import moist_air_density  # noqa: E402
 
 TYPE_B = ("mass_kg", "rotating_inertia_rel", "airspeed_factor_rel", "yaw_factor_rel", "yaw_offset_rad",
           "speed_scale_rel", "temperature_bias_k", "pressure_bias_pa", "track_mean_grade")
@@ -59,7 +62,11 @@ def drawn_properties(seed: int, pairs: int, truth: dict[str, float]) -> dict[str
     err = {f"err_{k}": float(meta["type_b_errors"][k]) for k in TYPE_B}
     err["err_mass_rel"] = err.pop("err_mass_kg") / veh["veh_mass_kg"]
     wind = meta["wind"]
-    return {**veh, **err, "wind_mean_speed_mps": float(wind["mean_speed_mps"]),
+    t0, p0, rh = float(meta["temperature0_k"]), float(meta["pressure0_pa"]), float(meta["relative_humidity"])
+    air = {"air_relative_humidity": rh,
+           # the analysis takes dry air at the logged temperature and pressure: its density's error
+           "air_density_dry_over_moist_rel": float(air_density_kgpm3(p0, t0) / moist_air_density(p0, t0, rh)) - 1.0}
+    return {**veh, **err, **air, "wind_mean_speed_mps": float(wind["mean_speed_mps"]),
             "wind_turbulence_sigma_mps": float(wind["turbulence_sigma_mps"]),
             "sample_rate_hz": float(meta["sample_rate_hz"])}
 
@@ -69,9 +76,27 @@ def z_scores(records: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({q: record_z(records, q) for q in QUANTITIES if f"{q}_mean" in records})
 
 
+DRY_AIR_QUANTITIES = ("CD0", "KD")
+"""Coefficients proportional to the dynamic pressure, which the dry-air density overstates."""
+
+
+def dry_air_z(table: pd.DataFrame, records: pd.DataFrame) -> pd.DataFrame:
+    """The z each campaign's C_D0 and K_D would have from the dry-air density's error alone
+    (``{q}_z_dry_air``): with the density too large by the factor 1 + e
+    (``air_density_dry_over_moist_rel``), a coefficient of the dynamic pressure reads low by
+    e / (1 + e) of its truth, i.e. z = -(e / (1 + e)) truth / sd with the record's sd."""
+    cols = [f"{q}_{k}" for q in DRY_AIR_QUANTITIES for k in ("truth", "sd")]
+    m = table[["seed"]].merge(records[["seed", *cols]], on="seed", how="left")
+    e = table["air_density_dry_over_moist_rel"].to_numpy()
+    out = table.copy()
+    for q in DRY_AIR_QUANTITIES:
+        out[f"{q}_z_dry_air"] = -(e / (1.0 + e)) * (m[f"{q}_truth"] / m[f"{q}_sd"]).to_numpy()
+    return out
+
+
 def correlations(table: pd.DataFrame, quantities: list[str], top: int) -> pd.DataFrame:
     """The ``top`` properties by |Pearson r| with each quantity's z (constant columns skipped)."""
-    props = [c for c in table.columns if c.startswith(("veh_", "err_", "wind_", "sample_rate", "mean_abs_yaw"))
+    props = [c for c in table.columns if c.startswith(("veh_", "err_", "air_", "wind_", "sample_rate", "mean_abs_yaw"))
              and table[c].nunique() > 1]
     rows = []
     for q in quantities:
@@ -98,21 +123,27 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("records", nargs="*", type=Path, help="calibration records (CSV) of the independent simulator")
     ap.add_argument("--out", type=Path, help="CSV of z-scores beside the drawn properties")
-    ap.add_argument("--from-table", type=Path, help="read a table --out wrote instead of simulating again")
+    ap.add_argument("--from-table", type=Path, help="read a table --out wrote instead of simulating again "
+                                                     "(with records: the dry-air columns added from them)")
     ap.add_argument("--top", type=int, default=5, help="properties printed per quantity")
     args = ap.parse_args(argv)
+    records = None
+    if args.records:
+        records = pd.concat([pd.read_csv(p) for p in args.records], ignore_index=True).drop_duplicates("seed")
+        records = records[records["error"].isna()] if "error" in records else records
     if args.from_table:
         table = pd.read_csv(args.from_table)
     else:
-        if not args.records or not args.out:
+        if records is None or not args.out:
             ap.error("records and --out are needed unless --from-table is given")
-        records = pd.concat([pd.read_csv(p) for p in args.records], ignore_index=True).drop_duplicates("seed")
-        records = records[records["error"].isna()] if "error" in records else records
         drawn = pd.DataFrame([drawn_properties(int(r["seed"]), int(r["pairs"]), {q: float(r[f"{q}_truth"]) for q in
                                                                                   ("AD", "BD", "CD0", "KD")})
                               for _, r in records.iterrows()])
         table = pd.concat([records[["seed", "pairs", "mean_abs_yaw_rad"]].reset_index(drop=True),
                            z_scores(records).reset_index(drop=True), drawn], axis=1)
+    if records is not None and "air_density_dry_over_moist_rel" in table:
+        table = dry_air_z(table, records)
+    if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         table.to_csv(args.out, index=False)
     z = table[[q for q in QUANTITIES if q in table]]
@@ -121,6 +152,12 @@ def main(argv=None) -> int:
     print("mean z: " + ", ".join(f"{q} {table[q].mean():+.2f}" for q in z.columns))
     top = correlations(table, list(z.columns), args.top)
     print(top.to_string(index=False))
+    for q in DRY_AIR_QUANTITIES:
+        if f"{q}_z_dry_air" in table:
+            dry = table[f"{q}_z_dry_air"]
+            print(f"{q}: mean z {table[q].mean():+.2f}, of which the dry-air density's error (the air's humidity) "
+                  f"{dry.mean():+.2f} (r with z {np.corrcoef(dry, table[q])[0, 1]:+.2f}); mean z without it "
+                  f"{(table[q] - dry).mean():+.2f}")
     print("\nmean z above / at or below each property's median:")
     print(halves(table, list(z.columns), ["veh_k4_over_kd", "veh_k4_per_rad4", "mean_abs_yaw_rad",
                                           "wind_turbulence_sigma_mps"]).to_string(index=False))
