@@ -123,9 +123,7 @@ def main(argv=None) -> int:
     if args.from_records:
         records = pd.read_csv(args.records)
     else:
-        options = FitOptions()
-        options = dataclasses.replace(options, sampler=dataclasses.replace(options.sampler,
-                                                                           noise_scaled_metric=args.noise_scaled_metric))
+        options = FitOptions(sampler=dataclasses.replace(DEFAULT_SAMPLER, noise_scaled_metric=args.noise_scaled_metric))
         jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs, options=options,
                                 model=args.model, withhold=args.withhold)
         args.records.parent.mkdir(parents=True, exist_ok=True)

@@ -62,8 +62,8 @@ def main(argv=None) -> int:
                     help="the sampler's coordinates scaled with the integrated noise (SamplerConfig.noise_scaled_metric; "
                          "default: the sampler's, on)")
     args = ap.parse_args(argv)
-    o = FitOptions(pooling=args.pooling)
-    o = dataclasses.replace(o, sampler=dataclasses.replace(o.sampler, noise_scaled_metric=args.noise_scaled_metric))
+    o = FitOptions(pooling=args.pooling,
+                   sampler=dataclasses.replace(DEFAULT_SAMPLER, noise_scaled_metric=args.noise_scaled_metric))
     common = dict(model=args.model or KINDS["traces"].default_model(None, o), pooling=o.pooling, noise=o.noise,
                   robust=o.robust, sampler=o.sampler)
     jobs = [FitJob(f"case{c}-p{args.pairs}-s{args.seed}", SimulatedCampaign(c, args.pairs, args.seed),
