@@ -108,6 +108,8 @@ def main(argv=None) -> int:
     ap.add_argument("--records", type=Path, default=RECORDS)
     ap.add_argument("--docs", action="store_true", help="regenerate the section of docs/calibration.md")
     ap.add_argument("--model", default=None, help="model variant (default: fit's for speed traces)")
+    ap.add_argument("--model-heavy", default=None, metavar="MODEL",
+                    help="with --model: the variant for campaigns above the heavy-duty test mass (3500 kg)")
     ap.add_argument("--withhold", nargs="+", default=(), metavar="EFFECT",
                     help="an ablation: these effects of the independent simulator left out of every campaign")
     ap.add_argument("--noise-scaled-metric", action=argparse.BooleanOptionalAction,
@@ -125,7 +127,7 @@ def main(argv=None) -> int:
     else:
         options = FitOptions(sampler=dataclasses.replace(DEFAULT_SAMPLER, noise_scaled_metric=args.noise_scaled_metric))
         jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs, options=options,
-                                model=args.model, withhold=args.withhold)
+                                model=args.model, withhold=args.withhold, model_heavy=args.model_heavy)
         args.records.parent.mkdir(parents=True, exist_ok=True)
         partial = args.records.with_suffix(".partial.csv")
         before, jobs = resume_from(partial, jobs)

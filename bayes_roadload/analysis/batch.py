@@ -173,6 +173,10 @@ class FitJob:
         :func:`~bayes_roadload.inference.nuts.fit_nuts`; ``"auto"``: ``fit``'s default for
         each campaign (the speed-trace kind's ``default_model`` of that campaign), recorded as
         the model it resolved to.
+    model_heavy : str, optional
+        The model for a campaign whose test mass is above
+        :data:`~bayes_roadload.config.HEAVY_DUTY_MASS_KG` (a candidate default's heavy-vehicle
+        file beside ``model``, as ``fit`` routes its own default), recorded as the model used.
     pooling : {"pooled", "hierarchical"}
     noise : {"integrated", "white"}
         Likelihood of the speed residuals (:mod:`bayes_roadload.inference.bayes`).
@@ -213,6 +217,7 @@ class FitJob:
     derived: tuple[str, ...] = DERIVED_QUANTITIES
     start: Mapping[str, float] | None = None
     type_b: bool = True
+    model_heavy: str | None = None
 
     def __post_init__(self):
         if not all(0.0 < lv < 1.0 for lv in self.levels):
@@ -439,6 +444,9 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
             options = FitOptions(method="nuts", robust=job.robust)
             if model == "auto":  # as `fit` without --model: the speed-trace kind's default for this campaign
                 model = KINDS["traces"].default_model(campaign, options)
+                rec["model"] = model
+            elif job.model_heavy and campaign.vehicle.mass_kg > config.HEAVY_DUTY_MASS_KG:
+                model = job.model_heavy
                 rec["model"] = model
             if pooling == "auto":  # as `fit`: the speed-trace kind's default for this campaign and model
                 pooling = resolve_pooling(KINDS["traces"], campaign, load_model_spec(model), options).pooling

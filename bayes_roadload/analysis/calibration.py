@@ -52,7 +52,7 @@ def pairs_of(seed: int, lo: int, hi: int) -> int:
 
 def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
                      options: FitOptions | None = None, model: str | None = None,
-                     withhold: Iterable[str] = ()) -> list[FitJob]:
+                     withhold: Iterable[str] = (), model_heavy: str | None = None) -> list[FitJob]:
     """One fit job per seed, with the default fit options (or ``options``: method, pooling,
     noise, robust, sampler and Type B budget pass through) and ``model`` (unless given,
     ``"auto"``: ``fit``'s default for each campaign, the registry's
@@ -60,7 +60,9 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
     (:data:`~bayes_roadload.simulate.independent.effects.EFFECTS`) left out of every campaign, an
     ablation: a seed draws the same vehicle, campaign size and Type B errors with the named physics
     off (a run's length shifts the random stream, so the later runs' own draws differ); a
-    campaign keeps its name ``ind-SEED``, so its records compare seed by seed."""
+    campaign keeps its name ``ind-SEED``, so its records compare seed by seed.  ``model_heavy``:
+    with ``model``, the model of the campaigns above the heavy-duty test mass
+    (:attr:`~bayes_roadload.analysis.batch.FitJob.model_heavy`), as ``fit`` routes its default."""
     o = options or FitOptions()
     model = model or "auto"
     withhold = tuple(withhold)
@@ -71,7 +73,8 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
     tags = {"withheld": " ".join(withhold)} if withhold else {}
     return [FitJob(f"ind-{s}", functools.partial(simulate_independent, s, pairs=pairs_of(s, lo, hi), **extra), model=model,
                    method=o.method, pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler,
-                   type_b=o.type_b, derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi), **tags})
+                   type_b=o.type_b, derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi), **tags},
+                   model_heavy=model_heavy)
             for s in seeds]
 
 

@@ -253,3 +253,39 @@ def test_softplus_keeps_a_linear_ridge_straight_where_exp_bends_it():
 
     assert rise_at_3_sd(soft, float(soft.inv(0.6))) == pytest.approx(4.5, rel=0.05)
     assert rise_at_3_sd(jnp.exp, float(np.log(0.6))) > 45.0
+
+
+def test_the_pitch_variant_slows_the_coast_and_leaves_the_steady_road_load():
+    """``four_term_tyre_lag_admittance_pitch`` is the default's model with the pitch term
+    (eq. 2.33-2.35): the same free parameters, K_alpha held at 0.9 with its 0.5 a Type B
+    source beside C_R's; decelerating, its drag changes by q_r A K_alpha pitch_gain dv/dt, so
+    dv/dt = -F_0 / (M_e + q_r A K_alpha pitch_gain) (eq. 5.4 solved for the implicit term); at
+    constant speed (the figures F0/F1/F2, F50) nothing changes."""
+    import jax.numpy as jnp
+
+    from bayes_roadload import config
+    from bayes_roadload.inference.lsq import roadload_figures
+    from bayes_roadload.physics.terms import Conditions
+
+    base, pitch = load_model_spec("four_term_tyre_lag_admittance"), load_model_spec("four_term_tyre_lag_admittance_pitch")
+    campaign = make_campaign(tunnel={"CL0": 0.273, "KL": 3.64})
+    (mb, fb, free_b), (mp, fp, free_p) = base.build(campaign), pitch.build(campaign)
+    assert free_p == free_b and set(mp.term_names) - set(mb.term_names) == {"pitch_attitude"}
+    assert fp["Kalpha"] == 0.9 and fp["pitch_gain"] == 0.0103
+    assert pitch.uncertainty == {**base.uncertainty, "Kalpha": 0.5}
+    coef = {**fb, "AD": 0.012, "BD": 1.5e-4, "CD0": 0.38, "KD": 0.6, "tyre_lag_gain_per_mps": 0.005}
+    vehicle = {"mass_kg": 1100.0, "frontal_area_m2": 1.85}
+    steady_b = np.asarray(roadload_figures(mb, coef, **vehicle))
+    steady_p = np.asarray(roadload_figures(mp, {**coef, **fp, **coef}, **vehicle))
+    np.testing.assert_allclose(steady_p, steady_b, rtol=1e-12)
+
+    c = Conditions(**{k: jnp.asarray(v, float) for k, v in dict(
+        speed_mps=30.0, airspeed_mps=31.0, yaw_rad=0.05, driveline_force_n=0.0, position_m=0.0, distance_m=0.0,
+        time_s=5.0, accel_mps2=0.0, direction=1.0, air_density_kgpm3=1.2,
+        temperature_k=config.REFERENCE_TEMPERATURE_K, mass_kg=1100.0, frontal_area_m2=1.85).items()})
+    m_e = 1130.0
+    a_b = float(mb.acceleration_mps2(coef, c, m_e))
+    a_p = float(mp.acceleration_mps2({**coef, **fp, **coef}, c, m_e))
+    q_area = 0.5 * 1.2 * 31.0**2 * 1.85
+    assert a_p == pytest.approx(a_b * m_e / (m_e + q_area * 0.9 * 0.0103), rel=1e-12)
+    assert a_b < a_p < 0.0  # the dip under deceleration lowers the drag: a slower coast
