@@ -232,6 +232,19 @@ class FitJob:
         return self.campaign_factory()
 
 
+def job_model(job: FitJob, campaign: Campaign, options: FitOptions) -> str:
+    """The model ``job`` fits ``campaign`` with: ``"auto"`` resolved as ``fit`` without
+    ``--model`` (the speed-trace kind's ``default_model``), ``job.model_heavy`` for a test mass
+    above :data:`~bayes_roadload.config.HEAVY_DUTY_MASS_KG`, else ``job.model``."""
+    from ..inference.kinds import KINDS
+
+    if job.model == "auto":
+        return KINDS["traces"].default_model(campaign, options)
+    if job.model_heavy and campaign.vehicle.mass_kg > config.HEAVY_DUTY_MASS_KG:
+        return job.model_heavy
+    return job.model
+
+
 def _job_fields(job: FitJob) -> dict[str, Any]:
     out = {"name": job.name, "method": job.method, "model": job.model, "pooling": job.pooling, "noise": job.noise,
            "robust": bool(job.robust), "num_warmup": job.sampler.num_warmup,
@@ -440,14 +453,9 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
                 if key in campaign.meta and key not in rec:
                     rec[key] = campaign.meta[key]
             t0 = time.perf_counter()
-            model, pooling = job.model, job.pooling
             options = FitOptions(method="nuts", robust=job.robust)
-            if model == "auto":  # as `fit` without --model: the speed-trace kind's default for this campaign
-                model = KINDS["traces"].default_model(campaign, options)
-                rec["model"] = model
-            elif job.model_heavy and campaign.vehicle.mass_kg > config.HEAVY_DUTY_MASS_KG:
-                model = job.model_heavy
-                rec["model"] = model
+            model, pooling = job_model(job, campaign, options), job.pooling
+            rec["model"] = model  # "auto" or a heavy vehicle's file: the model the fit took
             if pooling == "auto":  # as `fit`: the speed-trace kind's default for this campaign and model
                 pooling = resolve_pooling(KINDS["traces"], campaign, load_model_spec(model), options).pooling
                 rec["pooling"] = pooling

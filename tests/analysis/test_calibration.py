@@ -160,3 +160,30 @@ def test_the_comparison_counts_held_intervals_and_first_time_gates(monkeypatch):
     assert rows["all"][1].strip(" |") == f"{held[1]} / {3 * len(QUANTITIES)}"
     assert [c.strip(" |") for c in rows["every gate first time"]] == ["2 / 3", "3 / 3"]
     assert [c.strip(" |") for c in rows["retried (first attempt failed)"]] == ["ind-1 (divergences)", "none"]
+
+
+def test_a_candidate_defaults_heavy_file_takes_the_campaigns_above_the_heavy_duty_mass():
+    """``model_heavy`` routes a campaign by its test mass as ``fit`` routes its default
+    (``config.HEAVY_DUTY_MASS_KG``); ``"auto"`` is ``fit``'s own choice; without it the job's
+    model fits every campaign."""
+    import dataclasses
+
+    from bayes_roadload import config
+    from bayes_roadload.analysis.batch import job_model
+    from bayes_roadload.data import Campaign, Vehicle
+
+    def campaign(mass_kg):
+        t = np.arange(12.0)
+        runs = pd.DataFrame({"run": 1, "direction": 1.0, "time_s": t, "speed_mps": 30.0 - 0.5 * t})
+        return Campaign(runs, Vehicle(mass_kg, mass_kg * 1.03, 2.0))
+
+    light, heavy = campaign(config.HEAVY_DUTY_MASS_KG), campaign(config.HEAVY_DUTY_MASS_KG + 1.0)
+    (job,) = calibration_jobs([1], 1, 1, model="four_term_tyre_lag_admittance_pitch",
+                              model_heavy="four_term_tyre_lag_admittance_heavy_pitch")
+    options = FitOptions()
+    assert job_model(job, light, options) == "four_term_tyre_lag_admittance_pitch"
+    assert job_model(job, heavy, options) == "four_term_tyre_lag_admittance_heavy_pitch"
+    assert job_model(dataclasses.replace(job, model_heavy=None), heavy, options) == "four_term_tyre_lag_admittance_pitch"
+    auto = dataclasses.replace(job, model="auto")
+    for c in (light, heavy):
+        assert job_model(auto, c, options) == KINDS["traces"].default_model(c, options)
