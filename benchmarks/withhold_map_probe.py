@@ -1,20 +1,23 @@
 """What one physics effect of the independent simulator does to the estimates, by MAP and Laplace.
 
 For each seed, the independent simulator's campaign (``simulate.independent``, every effect on,
-as the calibration study draws it) and the same seed with ``--withhold`` effects switched off
-(``analysis.calibration.calibration_jobs(withhold=...)``: the same vehicle, size and Type B
-errors), each fitted by MAP and Laplace with the default model.  Prints, per quantity, the mean
-relative error against the truth with every effect and without the withheld ones, and their
-paired difference with its standard error: the part of the estimates' error that the withheld
-physics causes.  With ``--model`` the second arm fits that model instead (and ``--withhold``
-with no names keeps every effect): what a model variant removes of the error.  MAP, not NUTS: a quick probe of a bias (the NUTS study that
-confirms it is ``calibration_study.py --withhold``).
+as the calibration study draws it) and a second arm: the same seed with the ``--withhold``
+effects switched off (``analysis.calibration.calibration_jobs(withhold=...)``: the same vehicle,
+size and Type B errors), or with ``--model`` (``--model-heavy`` above 3500 kg) fitted instead of
+the default (``--withhold`` with no names keeps every effect).  Each campaign is fitted by MAP and
+Laplace.  Prints, per quantity, the mean relative error against the truth of both arms and their
+paired difference with its standard error: the part of the error the withheld physics causes, or
+what the model variant removes of it.  A quick probe of a bias; the NUTS study that confirms it is
+``calibration_study.py --withhold`` or ``--model``.
 
     python benchmarks/withhold_map_probe.py --withhold pitch --seeds 3000 3015 \
-        --records benchmarks/records/withhold_map_pitch_seeds3000_3015.csv
+        --records benchmarks/records/withhold_map/pitch_withheld_seeds3000_3015.csv
     python benchmarks/withhold_map_probe.py --withhold --model four_term_tyre_lag_admittance_pitch \
-        --seeds 3000 3015 --records benchmarks/records/withhold_map_pitch_model_seeds3000_3015.csv
-    python benchmarks/withhold_map_probe.py --from-records benchmarks/records/withhold_map_pitch_seeds3000_3015.csv
+        --model-heavy four_term_tyre_lag_admittance_heavy_pitch --seeds 3000 3015 --second-only \
+        --records benchmarks/records/withhold_map/pitch_model_seeds3000_3015.csv
+    python benchmarks/withhold_map_probe.py --from-records \
+        benchmarks/records/withhold_map/pitch_withheld_seeds3000_3015.csv \
+        benchmarks/records/withhold_map/pitch_model_seeds3000_3015.csv
 """
 
 from __future__ import annotations
@@ -30,9 +33,10 @@ QUANTITIES = ("AD", "BD", "CD0", "KD", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_pe
 
 
 def run(seeds, withhold, lo, hi, model=None, reuse: pd.DataFrame | None = None,
-        arms=("all", "withheld")) -> pd.DataFrame:
+        arms=("all", "withheld"), model_heavy=None) -> pd.DataFrame:
     """Records of both arms (column ``arm``: ``all``, every effect and the default model, or
-    ``withheld``, the named effects off and ``model``), one row per seed and arm.  ``reuse``:
+    ``withheld``, the named effects off and ``model``, ``model_heavy`` above the heavy-duty test
+    mass), one row per seed and arm.  ``reuse``:
     records of an earlier run whose ``all`` arm holds these seeds (that arm is not fitted again);
     ``arms``: the arms to fit (the others' records come from another run, :func:`summary` reads
     them together)."""
@@ -49,37 +53,44 @@ def run(seeds, withhold, lo, hi, model=None, reuse: pd.DataFrame | None = None,
         if arm == "all" and reuse is not None and names <= set(reuse.loc[reuse["arm"] == "all", "name"]):
             frames.append(reuse[(reuse["arm"] == "all") & reuse["name"].isin(names)])
             continue
-        df = run_batch(calibration_jobs(seeds, lo, hi, options=options, model=name, withhold=off), progress=False)
+        heavy = model_heavy if arm == "withheld" else None
+        df = run_batch(calibration_jobs(seeds, lo, hi, options=options, model=name, withhold=off, model_heavy=heavy),
+                       progress=False)
         frames.append(df.assign(arm=arm, withheld=" ".join(withhold), arm_model=name or "default"))
     return pd.concat(frames, ignore_index=True)
 
 
 def summary(records: pd.DataFrame) -> str:
-    """Mean relative error (%) per arm, and the paired difference (withheld - all) with its SE."""
-    rows = records[records["arm"] == "withheld"]
-    withheld = str(rows["withheld"].fillna("").iloc[0]) or "none"
-    second = str(rows["arm_model"].iloc[0]) if "arm_model" in rows else "default"
-    arms = {arm: r.set_index("name") for arm, r in records.groupby("arm")}
-    common = arms["all"].index.intersection(arms["withheld"].index)
-    lines = [f"{len(common)} campaigns ({', '.join(common)}); second arm: withheld {withheld}, model {second}", "",
-             "| quantity | mean rel. error %, every effect, default model | second arm | paired difference (SE) |",
-             "| --- | --- | --- | --- |"]
-    for q in QUANTITIES:
-        if f"{q}_mean" not in arms["all"]:
-            continue
-        err = {a: ((arms[a].loc[common, f"{q}_mean"] - arms[a].loc[common, f"{q}_truth"])
-                   / arms[a].loc[common, f"{q}_truth"].abs() * 100.0) for a in arms}
-        diff = err["withheld"] - err["all"]
-        se = diff.std(ddof=1) / np.sqrt(len(diff)) if len(diff) > 1 else float("nan")
-        lines.append(f"| {q} | {err['all'].mean():+.2f} | {err['withheld'].mean():+.2f} | "
-                     f"{diff.mean():+.2f} ({se:.2f}) |")
-    return "\n".join(lines)
+    """Mean relative error (%) per arm, and the paired difference (second arm - all) with its SE:
+    one table per second arm (its withheld effects and model) the records hold."""
+    records = records.assign(withheld=records["withheld"].fillna("") if "withheld" in records else "",
+                             arm_model=records["arm_model"].fillna("default") if "arm_model" in records else "default")
+    first = records[records["arm"] == "all"].drop_duplicates("name").set_index("name")
+    tables = []
+    for (withheld, model), rows in records[records["arm"] == "withheld"].groupby(["withheld", "arm_model"]):
+        second = rows.set_index("name")
+        common = first.index.intersection(second.index)
+        lines = [f"{len(common)} campaigns ({', '.join(common)}); second arm: withheld {withheld or 'none'}, "
+                 f"model {model}", "",
+                 "| quantity | mean rel. error %, every effect, default model | second arm | paired difference (SE) |",
+                 "| --- | --- | --- | --- |"]
+        for q in QUANTITIES:
+            if f"{q}_mean" not in first:
+                continue
+            err = [((arm.loc[common, f"{q}_mean"] - arm.loc[common, f"{q}_truth"])
+                    / arm.loc[common, f"{q}_truth"].abs() * 100.0) for arm in (first, second)]
+            diff = err[1] - err[0]
+            se = diff.std(ddof=1) / np.sqrt(len(diff)) if len(diff) > 1 else float("nan")
+            lines.append(f"| {q} | {err[0].mean():+.2f} | {err[1].mean():+.2f} | {diff.mean():+.2f} ({se:.2f}) |")
+        tables.append("\n".join(lines))
+    return "\n\n".join(tables)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--withhold", nargs="*", default=["pitch"], help="independent-simulator effects to switch off in the second arm")
     ap.add_argument("--model", default=None, help="the second arm's analysis model (default: fit's default)")
+    ap.add_argument("--model-heavy", default=None, help="with --model: the second arm's model above 3500 kg test mass")
     ap.add_argument("--seeds", type=int, nargs=2, default=(3000, 3015), metavar=("FIRST", "LAST"))
     ap.add_argument("--pairs", type=int, nargs=2, default=(1, 12), metavar=("MIN", "MAX"))
     ap.add_argument("--records", type=Path, help="write the records here (CSV)")
@@ -93,7 +104,8 @@ def main(argv=None) -> int:
     else:
         reuse = pd.concat([pd.read_csv(f) for f in args.reuse_all], ignore_index=True) if args.reuse_all else None
         records = run(range(args.seeds[0], args.seeds[1] + 1), args.withhold, *args.pairs, model=args.model, reuse=reuse,
-                      arms=("withheld",) if args.second_only else ("all", "withheld"))
+                      arms=("withheld",) if args.second_only else ("all", "withheld"),
+                      model_heavy=args.model_heavy)
         if args.records:
             args.records.parent.mkdir(parents=True, exist_ok=True)
             records.to_csv(args.records, index=False)
