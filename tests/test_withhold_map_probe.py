@@ -1,0 +1,47 @@
+"""benchmarks/withhold_map_probe.py: the paired table of a probe's records (one per second arm)."""
+
+import re
+
+import pandas as pd
+import pytest
+
+from .conftest import benchmark_script
+
+
+@pytest.fixture(scope="module")
+def probe():
+    with benchmark_script("withhold_map_probe") as module:
+        yield module
+
+
+def _records(arm, errors_pct, withheld="", arm_model="default", names=("ind-1", "ind-2")):
+    truth = [{"ind-1": 0.4, "ind-2": 0.5}[n] for n in names]
+    return pd.DataFrame({"name": list(names), "arm": arm, "withheld": withheld, "arm_model": arm_model,
+                         "CD0_truth": truth, "CD0_mean": [t * (1 + e / 100) for t, e in zip(truth, errors_pct)]})
+
+
+def _row(table, quantity):
+    line = next(x for x in table.splitlines() if x.startswith(f"| {quantity} |"))
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+def test_each_second_arm_is_paired_with_the_first_seed_by_seed(probe):
+    """Errors -4 and -2 % with every effect; -1 and -2 % with pitch withheld (changes +3, 0:
+    mean +1.5, SE sd / sqrt 2 = 1.5); -3 and +1 % with a variant (changes +1, +3: +2.0, SE 1.0)."""
+    records = pd.concat([_records("all", [-4.0, -2.0]), _records("withheld", [-1.0, -2.0], withheld="pitch"),
+                         _records("withheld", [-3.0, 1.0], arm_model="variant")], ignore_index=True)
+    tables = re.split(r"\n\n(?=\d+ campaigns)", probe.summary(records))
+    assert len(tables) == 2
+    withheld = next(t for t in tables if "withheld pitch, model default" in t)
+    variant = next(t for t in tables if "withheld none, model variant" in t)
+    assert _row(withheld, "CD0") == ["CD0", "-3.00", "-1.50", "+1.50 (1.50)"]
+    assert _row(variant, "CD0") == ["CD0", "-3.00", "-1.00", "+2.00 (1.00)"]
+    assert "2 campaigns (ind-1, ind-2)" in withheld
+
+
+def test_a_seed_missing_from_one_arm_is_left_out_of_the_pairs(probe):
+    records = pd.concat([_records("all", [-4.0, -2.0]),
+                         _records("withheld", [0.0], withheld="pitch", names=("ind-2",))], ignore_index=True)
+    table = probe.summary(records)
+    assert "1 campaigns (ind-2)" in table
+    assert _row(table, "CD0")[1:3] == ["-2.00", "+0.00"]
