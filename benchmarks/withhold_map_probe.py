@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-QUANTITIES = ("AD", "BD", "CD0", "KD", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
+from bayes_roadload.analysis.calibration import QUANTITIES
 
 
 def run(seeds, withhold, lo, hi, model=None, reuse: pd.DataFrame | None = None,
