@@ -32,31 +32,22 @@ import pandas as pd
 from bayes_roadload.analysis.calibration import QUANTITIES
 
 
-def run(seeds, withhold, lo, hi, model=None, reuse: pd.DataFrame | None = None,
-        arms=("all", "withheld"), model_heavy=None) -> pd.DataFrame:
-    """Records of both arms (column ``arm``: ``all``, every effect and the default model, or
+def run(seeds, withhold, lo, hi, model=None, model_heavy=None, arms=("all", "withheld")) -> pd.DataFrame:
+    """Records of the ``arms`` (column ``arm``: ``all``, every effect and the default model, or
     ``withheld``, the named effects off and ``model``, ``model_heavy`` above the heavy-duty test
-    mass), one row per seed and arm.  ``reuse``:
-    records of an earlier run whose ``all`` arm holds these seeds (that arm is not fitted again);
-    ``arms``: the arms to fit (the others' records come from another run, :func:`summary` reads
-    them together)."""
+    mass), one row per seed and arm; an arm left out comes from another run's records, which
+    :func:`summary` reads together with these."""
     from bayes_roadload.analysis.batch import run_batch
     from bayes_roadload.analysis.calibration import calibration_jobs
     from bayes_roadload.inference.kinds import FitOptions
 
     options = FitOptions(method="laplace")
     frames = []
-    names = {f"ind-{s}" for s in seeds}
-    for arm, off, name in (("all", (), None), ("withheld", tuple(withhold), model)):
-        if arm not in arms:
-            continue
-        if arm == "all" and reuse is not None and names <= set(reuse.loc[reuse["arm"] == "all", "name"]):
-            frames.append(reuse[(reuse["arm"] == "all") & reuse["name"].isin(names)])
-            continue
-        heavy = model_heavy if arm == "withheld" else None
-        df = run_batch(calibration_jobs(seeds, lo, hi, options=options, model=name, withhold=off, model_heavy=heavy),
-                       progress=False)
-        frames.append(df.assign(arm=arm, withheld=" ".join(withhold), arm_model=name or "default"))
+    for arm, off, name, heavy in (("all", (), None, None), ("withheld", tuple(withhold), model, model_heavy)):
+        if arm in arms:
+            df = run_batch(calibration_jobs(seeds, lo, hi, options=options, model=name, withhold=off,
+                                            model_heavy=heavy), progress=False)
+            frames.append(df.assign(arm=arm, withheld=" ".join(off), arm_model=name or "default"))
     return pd.concat(frames, ignore_index=True)
 
 
@@ -94,18 +85,14 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, nargs=2, default=(3000, 3015), metavar=("FIRST", "LAST"))
     ap.add_argument("--pairs", type=int, nargs=2, default=(1, 12), metavar=("MIN", "MAX"))
     ap.add_argument("--records", type=Path, help="write the records here (CSV)")
-    ap.add_argument("--reuse-all", type=Path, nargs="+", default=(),
-                    help="records of earlier runs whose 'all' arm (every effect, default model) is taken, not refitted")
-    ap.add_argument("--second-only", action="store_true", help="fit the second arm alone (the first from --reuse-all or another run)")
+    ap.add_argument("--second-only", action="store_true", help="fit the second arm alone (the first from another run's records)")
     ap.add_argument("--from-records", type=Path, nargs="+", help="only summarise written records (read together)")
     args = ap.parse_args(argv)
     if args.from_records:
         records = pd.concat([pd.read_csv(f) for f in args.from_records], ignore_index=True)
     else:
-        reuse = pd.concat([pd.read_csv(f) for f in args.reuse_all], ignore_index=True) if args.reuse_all else None
-        records = run(range(args.seeds[0], args.seeds[1] + 1), args.withhold, *args.pairs, model=args.model, reuse=reuse,
-                      arms=("withheld",) if args.second_only else ("all", "withheld"),
-                      model_heavy=args.model_heavy)
+        records = run(range(args.seeds[0], args.seeds[1] + 1), args.withhold, *args.pairs, model=args.model,
+                      model_heavy=args.model_heavy, arms=("withheld",) if args.second_only else ("all", "withheld"))
         if args.records:
             args.records.parent.mkdir(parents=True, exist_ok=True)
             records.to_csv(args.records, index=False)
