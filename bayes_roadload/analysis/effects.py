@@ -294,7 +294,14 @@ def super_model(base: DragModel, library: Mapping[str, Effect]) -> tuple[DragMod
     return DragModel(tuple(terms), air), available
 
 
-def _null_value(effect: Effect, param: str, model_values: Mapping[str, float], base_has_term: bool) -> float:
+def _null_value(effect: Effect, param: str, model_values: Mapping[str, float], base_has_term: bool,
+                model_fixed: Mapping[str, float] | None = None) -> float:
+    """The value of ``param`` meaning "no effect": the user's model's own value when the model
+    has the effect's terms and holds the parameter fixed (the candidate is then a change of that
+    value, e.g. a stated cup lag or K_alpha of a model with the pitch term), else the library's
+    null (0, or ``"model"``: the model's value where it has the term)."""
+    if base_has_term and model_fixed is not None and param in model_fixed:
+        return float(model_fixed[param])
     null = effect.null.get(param, 0.0)
     if null == "model":
         return float(model_values.get(param, 0.0)) if base_has_term else 0.0
@@ -320,7 +327,9 @@ def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effe
     for e in library.values():
         if available[e.name] is not None:
             continue
-        values.update(e.fixed)
+        has = all(t in base_terms for t in e.terms) if e.terms else True
+        # the terms of the user's model keep its values: the linearisation point is its fit
+        values.update({k: v for k, v in e.fixed.items() if not (has and k in problem.fixed)})
         if e.run_coefficients:
             cols = tuple(p for p in e.parameters if p in problem.free)
             if not cols:
@@ -328,12 +337,11 @@ def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effe
                 continue
             effects[e.name] = cols
             continue
-        has = all(t in base_terms for t in e.terms) if e.terms else True
         cols = []
         for p in e.parameters:
             if p in problem.free:
                 continue  # already estimated by the user's model
-            values[p] = _null_value(e, p, values, has)
+            values[p] = _null_value(e, p, values, has, problem.fixed)
             if p not in columns:
                 columns.append(p)
             cols.append(p)

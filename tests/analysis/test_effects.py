@@ -272,3 +272,36 @@ def test_the_rules_fingerprint_sees_a_family_but_not_the_unused_option():
 
     frozen = Path(__file__).resolve().parents[2] / "docs" / "sim_to_real" / "frozen_rules.json"
     assert json.loads(frozen.read_text())["library_sha256"] == base
+
+
+def test_the_linearisation_keeps_the_values_the_users_model_holds_for_a_candidates_terms():
+    """A model with the pitch term holds K_alpha and the pitch gain fixed; the pitch candidate
+    is then a change of those values, so the linearisation point (every candidate at its null)
+    is the user's fit: its speeds are the model's own, not those of a model without pitch."""
+    import dataclasses
+    import jax.numpy as jnp
+
+    from bayes_roadload.analysis.batch import SimulatedCampaign
+    from bayes_roadload.inference.bayes import build_problem
+    from bayes_roadload.inference.nuts import initial_values
+    from bayes_roadload.physics.integrate import integrate_batch
+    from bayes_roadload.simulate.cases import get_case
+
+    campaign = SimulatedCampaign(get_case(1), pairs=1, seed=0)()
+    problem = build_problem(campaign, "four_term_tyre_lag_admittance_pitch")
+    assert problem.fixed["Kalpha"] == 0.9 and problem.fixed["pitch_gain"] == 0.0103
+    init = initial_values(problem, campaign)
+    fit_values = dict(init, sigma_mps=np.full(len(problem.run_ids), 0.05))
+    lib = fx.load_library()
+    lin = fx.linearise(problem, fit_values, lib)
+    assert lin.values["Kalpha"] == 0.9 and lin.values["pitch_gain"] == 0.0103
+    assert "Kalpha" in lin.effects["pitch_attitude"]
+    params = {k: jnp.asarray(v) for k, v in {**problem.fixed, **{p: fit_values[p] for p in problem.free}}.items()}
+    own = np.asarray(integrate_batch(problem.model, params, problem.batch, jnp.asarray(init["v0_mps"]))[0])
+    mask = np.asarray(problem.batch.mask)
+    expected = np.where(mask, np.asarray(problem.batch.speed_mps) - own, 0.0)
+    np.testing.assert_allclose(lin.residual, expected, atol=1e-9)
+    # without the model's value the point would be a model without pitch: a different trace
+    no_pitch = {**params, "Kalpha": jnp.asarray(0.0)}
+    other = np.asarray(integrate_batch(problem.model, no_pitch, problem.batch, jnp.asarray(init["v0_mps"]))[0])
+    assert np.max(np.abs(np.where(mask, other - own, 0.0))) > 1e3 * 1e-9
