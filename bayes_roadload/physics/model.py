@@ -157,13 +157,22 @@ class DragModel:
         """dv/dt = -F / M_e (eq. 5.4), solved exactly when a term depends on dv/dt.
 
         ``F`` is affine in dv/dt (pitch attitude, eq. 2.33), so with F(a) = F_0 + s a the
-        solution of M_e a = -F(a) is a = -F_0 / (M_e + s).
+        solution of M_e a = -F(a) is a = -F_0 / (M_e + s); the slope s is that of the terms
+        which read dv/dt (``uses_accel``), the others are evaluated once.
         """
         zero = jnp.zeros_like(c.speed_mps)
-        f0 = self.force_n(params, c._replace(accel_mps2=zero))
-        if not any(t.uses_accel for t in self.terms):
+        p = self.complete(params)
+        at_rest = c._replace(accel_mps2=zero)
+        f0 = zero
+        for t in self.terms:
+            f0 = f0 + t.force_n(p, at_rest)
+        inertial = [t for t in self.terms if t.uses_accel]
+        if not inertial:
             return -f0 / effective_mass_kg
-        slope = self.force_n(params, c._replace(accel_mps2=zero + 1.0)) - f0
+        unit = c._replace(accel_mps2=zero + 1.0)
+        slope = zero
+        for t in inertial:
+            slope = slope + (t.force_n(p, unit) - t.force_n(p, at_rest))
         return -f0 / (effective_mass_kg + slope)
 
 
