@@ -15,9 +15,9 @@ The rules are frozen before the confirmatory seeds run (``docs/calibration.md``)
 * pass: the 95 % intervals cover the truth in 92-98 % of the fits that ran, and the sd over
   fits of z = (mean - truth) / sd lies in [0.85, 1.15]; reported by quantity and by campaign
   size (1-2, 3-5, 6-12 pairs);
-* design seeds (used while choosing the default analysis): 100-199, and 1000-1059, 2000-2013 and
-  3000-3032 (earlier defaults' and a variant's confirmatory runs, which informed the current
-  choice); confirmatory seeds: from 4000 on (``--seed0 4000``,
+* design seeds (used while choosing the default analysis): 100-199, and 1000-1059, 2000-2013,
+  3000-3032 and 4000-4052 (earlier defaults' and a variant's confirmatory runs, which informed the
+  current choice); confirmatory seeds: from 5000 on (``--seed0 5000``,
   :data:`~bayes_roadload.analysis.calibration.CONFIRMATORY_SEED0`).
 
 Writes every record to ``--records`` (CSV; a ``.partial.csv`` while running, from which an
@@ -25,7 +25,7 @@ interrupted run resumes: its campaigns are not fitted again), prints the
 summary as JSON and, with ``--docs``, regenerates the section of ``docs/calibration.md`` between
 its markers.
 
-    python benchmarks/calibration_study.py --n 200 --seed0 4000 --workers 2 --docs
+    python benchmarks/calibration_study.py --n 200 --seed0 5000 --workers 2 --docs
 """
 
 from __future__ import annotations

@@ -145,20 +145,23 @@ def check_model(entry: KindEntry, spec: ModelSpec) -> None:
 def traces_default_model(campaign, o: FitOptions) -> str:
     """``fit`` without ``--model`` on speed traces: for the Bayesian fit, the thesis' 4-term
     analysis with the tyre temperature lagging the falling speed, the tyre's v^2 loss at its
-    SAE J2452 mean (C_R's spread carried in the Type B budget) and the vehicle's aerodynamic
-    admittance when the campaign states the vehicle's length (``four_term_tyre_lag_admittance``),
-    with a heavy vehicle's priors above :data:`~bayes_roadload.config.HEAVY_DUTY_MASS_KG` test
-    mass (``four_term_tyre_lag_admittance_heavy``); the plain 4-term analysis for least squares
+    SAE J2452 mean (C_R's spread carried in the Type B budget), the vehicle's aerodynamic
+    admittance when the campaign states the vehicle's length, and the drag change of the body's
+    pitch under deceleration (thesis eq. 2.33-2.35; K_alpha's spread in the budget)
+    (``four_term_tyre_lag_admittance_pitch``), with a heavy vehicle's priors above
+    :data:`~bayes_roadload.config.HEAVY_DUTY_MASS_KG` test mass
+    (``four_term_tyre_lag_admittance_heavy_pitch``); the plain 4-term analysis for least squares
     (which has no prior to hold the lag's weakly identified gain); without a campaign (None), the
-    light-duty name.  Chosen by measurement (docs/calibration.md, *The vehicle's aerodynamic
-    admittance* and *C_R's spread in the budget*): on the independent simulator's campaigns the anemometer's gusts read as the
-    body's attenuate K_D and C_D0, and the admittance takes most of that bias away; the
-    geometry of the posterior is that of ``four_term_tyre_lag_j2452_typeb`` (the admittance
-    changes the inputs, not the sampled directions)."""
+    light-duty name.  Chosen by measurement (docs/calibration.md, *The pitch under
+    deceleration*, *The vehicle's aerodynamic admittance* and *C_R's spread in the budget*): on
+    the independent simulator's campaigns the anemometer's gusts read as the body's attenuate
+    K_D and C_D0, and the admittance takes most of that bias away; a coast decelerates hardest
+    at its highest speeds, where the nose dips most, and a model without the pitch reads that
+    drag change as C_D0 too low and B_D too high."""
     if o.method == "lsq":
         return "four_term"
     heavy = campaign is not None and campaign.vehicle.mass_kg > config.HEAVY_DUTY_MASS_KG
-    return "four_term_tyre_lag_admittance_heavy" if heavy else "four_term_tyre_lag_admittance"
+    return "four_term_tyre_lag_admittance_heavy_pitch" if heavy else "four_term_tyre_lag_admittance_pitch"
 
 
 def traces_default_pooling(campaign, spec: ModelSpec, o: FitOptions) -> str:

@@ -123,7 +123,7 @@ def test_the_speed_trace_default_takes_a_heavy_vehicles_priors_above_3500_kg():
         c.vehicle, mass_kg=config.HEAVY_DUTY_MASS_KG + 1.0, effective_mass_kg=config.HEAVY_DUTY_MASS_KG + 100.0))
     light = load_model_spec(traces.default_model(c, FitOptions()))
     heavy = load_model_spec(traces.default_model(heavy_c, FitOptions()))
-    assert light.name == "four_term_tyre_lag_admittance" and heavy.name == "four_term_tyre_lag_admittance_heavy"
+    assert light.name == "four_term_tyre_lag_admittance_pitch" and heavy.name == "four_term_tyre_lag_admittance_heavy_pitch"
     assert traces.default_model(heavy_c, FitOptions(method="lsq")) == "four_term"
     assert light.terms == heavy.terms and light.free == heavy.free
     assert light.admittance == heavy.admittance == "auto"
