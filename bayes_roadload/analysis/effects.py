@@ -308,16 +308,14 @@ def _null_value(effect: Effect, param: str, model_values: Mapping[str, float], b
     return float(null)
 
 
-def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effect]) -> Linearisation:
-    """Differentiate the super-model's speed traces at the user's fit.
-
-    Parameters
-    ----------
-    problem : :class:`~bayes_roadload.inference.bayes.FitProblem` of the user's model (pooled).
-    fit_values : constrained values at the fit (the MAP): the free coefficients, ``v0_mps``,
-        ``sigma_mps`` and, with integrated noise, ``q_mps_per_sqrt_s``.
-    library : the candidates (:func:`load_library`).
-    """
+def linearisation_point(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effect]
+                        ) -> tuple[DragModel, dict[str, str | None], dict[str, float], dict[str, tuple[str, ...]],
+                                   list[str]]:
+    """Where :func:`linearise` differentiates: the super-model (:func:`super_model`), each
+    effect's availability, every parameter's value (the user's fit, each candidate at its null:
+    :func:`_null_value`), effect name -> its parameter columns, and the columns (the user's free
+    coefficients, then the candidates' parameters and shapes; ``v0_mps`` is appended by
+    :func:`linearise`)."""
     model, available = super_model(problem.model, library)
     values = {k: float(v) for k, v in problem.fixed.items()}
     values.update({k: float(np.asarray(fit_values[k])) for k in problem.free})
@@ -352,9 +350,24 @@ def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effe
     # shape parameters are columns too (never solved for: at the null their signature is
     # zero), so that fit_shapes can move them without a new compilation
     columns += [p for name in effects for p in library[name].shape if p not in columns]
-    columns.append("v0_mps")
     for p, v in model.defaults.items():
         values.setdefault(p, float(v))
+    return model, available, values, effects, columns
+
+
+def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effect]) -> Linearisation:
+    """Differentiate the super-model's speed traces at the user's fit
+    (:func:`linearisation_point`).
+
+    Parameters
+    ----------
+    problem : :class:`~bayes_roadload.inference.bayes.FitProblem` of the user's model (pooled).
+    fit_values : constrained values at the fit (the MAP): the free coefficients, ``v0_mps``,
+        ``sigma_mps`` and, with integrated noise, ``q_mps_per_sqrt_s``.
+    library : the candidates (:func:`load_library`).
+    """
+    model, available, values, effects, columns = linearisation_point(problem, fit_values, library)
+    columns.append("v0_mps")
     batch = problem.batch
     r = batch.n_runs
     names = tuple(columns[:-1])

@@ -277,8 +277,8 @@ def test_the_rules_fingerprint_sees_a_family_but_not_the_unused_option():
 def test_the_linearisation_keeps_the_values_the_users_model_holds_for_a_candidates_terms():
     """A model with the pitch term holds K_alpha and the pitch gain fixed; the pitch candidate
     is then a change of those values, so the linearisation point (every candidate at its null)
-    is the user's fit: its speeds are the model's own, not those of a model without pitch."""
-    import dataclasses
+    is the user's fit: the super-model's speeds there are the model's own, not those of a model
+    without pitch."""
     import jax.numpy as jnp
 
     from bayes_roadload.analysis.batch import SimulatedCampaign
@@ -291,17 +291,15 @@ def test_the_linearisation_keeps_the_values_the_users_model_holds_for_a_candidat
     problem = build_problem(campaign, "four_term_tyre_lag_admittance_pitch")
     assert problem.fixed["Kalpha"] == 0.9 and problem.fixed["pitch_gain"] == 0.0103
     init = initial_values(problem, campaign)
-    fit_values = dict(init, sigma_mps=np.full(len(problem.run_ids), 0.05))
-    lib = fx.load_library()
-    lin = fx.linearise(problem, fit_values, lib)
-    assert lin.values["Kalpha"] == 0.9 and lin.values["pitch_gain"] == 0.0103
-    assert "Kalpha" in lin.effects["pitch_attitude"]
-    params = {k: jnp.asarray(v) for k, v in {**problem.fixed, **{p: fit_values[p] for p in problem.free}}.items()}
-    own = np.asarray(integrate_batch(problem.model, params, problem.batch, jnp.asarray(init["v0_mps"]))[0])
+    model, available, values, effects, _ = fx.linearisation_point(problem, init, fx.load_library())
+    assert available["pitch_attitude"] is None and effects["pitch_attitude"] == ("Kalpha",)
+    assert values["Kalpha"] == 0.9 and values["pitch_gain"] == 0.0103
+    v0 = jnp.asarray(init["v0_mps"])
+    own = {k: jnp.asarray(v) for k, v in {**problem.fixed, **{p: init[p] for p in problem.free}}.items()}
+    base = np.asarray(integrate_batch(problem.model, own, problem.batch, v0)[0])
+    at_null = np.asarray(integrate_batch(model, {k: jnp.asarray(v) for k, v in values.items()}, problem.batch, v0)[0])
     mask = np.asarray(problem.batch.mask)
-    expected = np.where(mask, np.asarray(problem.batch.speed_mps) - own, 0.0)
-    np.testing.assert_allclose(lin.residual, expected, atol=1e-9)
-    # without the model's value the point would be a model without pitch: a different trace
-    no_pitch = {**params, "Kalpha": jnp.asarray(0.0)}
-    other = np.asarray(integrate_batch(problem.model, no_pitch, problem.batch, jnp.asarray(init["v0_mps"]))[0])
-    assert np.max(np.abs(np.where(mask, other - own, 0.0))) > 1e3 * 1e-9
+    np.testing.assert_allclose(np.where(mask, at_null, 0.0), np.where(mask, base, 0.0), rtol=0, atol=1e-9)
+    # the library's null (K_alpha 0) is a model without pitch: a different trace
+    no_pitch = np.asarray(integrate_batch(problem.model, {**own, "Kalpha": jnp.asarray(0.0)}, problem.batch, v0)[0])
+    assert np.max(np.abs(np.where(mask, no_pitch - base, 0.0))) > 1e-3
