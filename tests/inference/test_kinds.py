@@ -109,8 +109,9 @@ def test_the_heavy_variant_differs_from_the_light_one_by_its_priors_only():
 
 
 def test_the_speed_trace_default_takes_a_heavy_vehicles_priors_above_3500_kg():
-    """``fit``'s Bayesian default for speed traces: the admittance model, its heavy variant for a
-    test mass above GTR 15's light-duty limit; the two differ in priors and C_R's value only."""
+    """``fit``'s Bayesian default for speed traces: the admittance model with the pitch term, its
+    heavy variant for a test mass above GTR 15's light-duty limit; the two differ in priors and
+    C_R's value only."""
     import dataclasses
 
     from bayes_roadload import config
