@@ -61,7 +61,7 @@ from ..data.uncertainty import SOURCES, standard_uncertainties
 from ..inference.kinds import FitOptions, kind_of
 from ..inference.lsq import fit_lsq
 from ..inference.results import SUMMARY_COLUMNS
-from ..inference.shift import FixedShift, fixed_shifts
+from ..inference.shift import campaign_shifts, fixed_shifts
 from ..inference.spec import ModelSpec, load_model_spec
 
 SAMPLED_BY_MODEL = {"airspeed_factor_rel": "airspeed_factor", "yaw_factor_rel": "yaw_factor"}
@@ -158,10 +158,10 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
         rows = entry.type_b(campaign, spec, shifts, options, fit)
     else:
         rows = {}
-        for key, (plus, minus, h) in shifts.items():
-            if isinstance(plus, FixedShift):
-                notes[key] = "not propagated (the least-squares refits have no model constants to shift)"
-                continue
+        refitted = campaign_shifts(shifts)
+        notes.update({key: "not propagated (the least-squares refits have no model constants to shift)"
+                      for key in shifts if key not in refitted})
+        for key, (plus, minus, h) in refitted.items():
             hi, lo = fit_lsq(plus, spec, grouping="all"), fit_lsq(minus, spec, grouping="all")
             rows[key] = {q: (hi.weighted_mean[q] - lo.weighted_mean[q]) / (2.0 * h)
                          for q in hi.weighted_mean if q in lo.weighted_mean}

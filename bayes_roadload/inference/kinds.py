@@ -34,7 +34,7 @@ from .nuts import NutsFit, fit_nuts, sample_problem
 from .problem import Problem
 from .results import FitReport, trace_report
 from .spec import ModelSpec
-from .shift import FixedShift, SharedData, Shifts, map_sensitivities, newton_sensitivities
+from .shift import SharedData, Shifts, campaign_shifts, map_sensitivities, newton_sensitivities
 from .spindown import build_spindown_problem, spindown_extras, spindown_report
 from .steady import build_steady_problem, compare_with_coastdown, resolve_wind, steady_extras, steady_report
 
@@ -278,8 +278,7 @@ def _traces_type_b(campaign, spec, shifts: Shifts, o: FitOptions, fit: NutsFit |
     (:func:`~bayes_roadload.inference.lsq.linear_sensitivities`), which has no model constants."""
     if o.runs is not None and list(o.runs) != list(campaign.run_ids):
         campaign = campaign.subset(o.runs)
-        shifts = {k: (p, m, h) if isinstance(p, FixedShift) else (p.subset(o.runs), m.subset(o.runs), h)
-                  for k, (p, m, h) in shifts.items()}
+        shifts = {k: (p.subset(o.runs), m.subset(o.runs), h) for k, (p, m, h) in shifts.items()}
     if fit is not None and fit.map is not None:
         try:
             return newton_sensitivities(_shifted_trace_problems(fit.problem, fit.map, campaign), shifts,
@@ -287,8 +286,7 @@ def _traces_type_b(campaign, spec, shifts: Shifts, o: FitOptions, fit: NutsFit |
         except Exception as e:  # noqa: BLE001 - the budget falls back, the fit does not stop here
             log.warning("Type B from the posterior failed (%s: %s); the least-squares step instead",
                         type(e).__name__, e)
-    return linear_sensitivities(campaign, spec, {k: v for k, v in shifts.items()
-                                                 if not isinstance(v[0], FixedShift)})[1]
+    return linear_sensitivities(campaign, spec, campaign_shifts(shifts))[1]
 
 
 def _shifted_trace_problems(problem, mode, campaign) -> Callable[[Any], Any]:

@@ -66,6 +66,23 @@ class FixedShift:
 
     problem: Problem
 
+    def subset(self, runs) -> "FixedShift":
+        """Itself: the fitted problem holds the fitted runs already (a campaign shift is cut to
+        them by :meth:`~bayes_roadload.data.Campaign.subset`)."""
+        return self
+
+
+def shifted_problem(shifted, build: Callable[[Any], Problem]) -> Problem:
+    """The problem of one side of a Type B shift: a :class:`FixedShift`'s own, else the shifted
+    campaign through the kind's problem builder ``build``."""
+    return shifted.problem if isinstance(shifted, FixedShift) else build(shifted)
+
+
+def campaign_shifts(shifts: Mapping[str, tuple]) -> dict[str, tuple]:
+    """The shifts of the campaign in ``shifts`` (the least-squares refits take those; they have
+    no model constants to shift), without the :class:`FixedShift` ones."""
+    return {k: v for k, v in shifts.items() if not isinstance(v[0], FixedShift)}
+
 
 def fixed_shifts(problem: Problem, uncertainty: Mapping[str, float]) -> tuple[dict, dict[str, str]]:
     """The Type B shifts of the model constants ``uncertainty`` (name -> standard uncertainty
@@ -402,7 +419,7 @@ def _central_differences(build: Callable[[Any], Problem], shifts: Shifts, shared
     out: dict[str, dict[str, float]] = {}
     for key, (plus, minus, h) in shifts.items():
         try:
-            problems = [c.problem if isinstance(c, FixedShift) else build(c) for c in (plus, minus)]
+            problems = [shifted_problem(c, build) for c in (plus, minus)]
             points = _shared_points(shared, problems, how, held)
             values = []
             for shifted, constrained in zip(problems, points):
