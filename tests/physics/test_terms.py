@@ -174,6 +174,31 @@ def test_pitch_implicit_solve_is_exact():
     assert float(plain.acceleration_mps2(P, c, 1130.0)) == pytest.approx(-float(plain.force_n(P, c)) / 1130.0)
 
 
+def test_the_pitch_solve_evaluates_the_terms_that_do_not_read_dv_dt_once():
+    """The slope of F in dv/dt is taken from the terms that read it; every other term is
+    evaluated once per acceleration (the integrator calls it at each RK4 stage)."""
+    import dataclasses
+    from typing import ClassVar
+
+    calls = []
+
+    @dataclasses.dataclass(frozen=True)
+    class Counted(T.Term):
+        name: ClassVar[str] = "counted"
+        defaults: ClassVar[dict] = {}
+
+        def force_n(self, p, c):
+            calls.append(1)
+            return 50.0 + 0.0 * c.speed_mps
+
+    model = DragModel((Counted(), T.PitchAttitude()), full_model().air)
+    c = conditions()
+    a = model.acceleration_mps2(P, c, 1130.0)
+    assert len(calls) == 1
+    residual = 1130.0 * a + model.force_n(P, c._replace(accel_mps2=a))
+    assert abs(float(residual)) < 1e-9
+
+
 def test_model_composition():
     m = simplified_model(driveline="polynomial", undriven=True, lift=True)
     assert m.term_names == ("tyre_rolling", "lift_unloading", "driveline_polynomial", "undriven_wheels", "aero_drag")
