@@ -883,7 +883,8 @@ def coverage_summary(records: pd.DataFrame, by: Sequence[str] = ("model", "noise
         the level is evidence against calibration), ``wilson_low``, ``wilson_high`` (95 % score
         interval of the observed proportion), and ``z_sd``: the standard deviation over fits of
         ``(mean - truth) / sd``, ~1 for calibrated posteriors (its own standard error is about
-        1 / sqrt(2 n) for normal errors) and > 1 when the posterior sd is too small.
+        1 / sqrt(2 n) for normal errors) and > 1 when the posterior sd is too small; ``z_mean``
+        its mean, ~0 (standard error 1 / sqrt(n)) unless the estimates are biased.
     """
     ok = successful(records)
     if quantities is None:
@@ -907,5 +908,5 @@ def coverage_summary(records: pd.DataFrame, by: Sequence[str] = ("model", "noise
                 rows.append({**dict(zip(by, key)), "quantity": q, "level": lv, "n": n, "covered": k,
                              "coverage": k / n, "se_nominal": math.sqrt(lv * (1 - lv) / n),
                              "wilson_low": lo, "wilson_high": hi,
-                             "z_sd": float(z.std(ddof=1)) if n > 1 else math.nan})
+                             "z_sd": float(z.std(ddof=1)) if n > 1 else math.nan, "z_mean": float(z.mean())})
     return pd.DataFrame(rows)

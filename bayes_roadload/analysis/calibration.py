@@ -89,7 +89,8 @@ def size_bin(pairs: int) -> str:
 
 def calibration_table(records: pd.DataFrame) -> pd.DataFrame:
     """95 % coverage and sd(z) by quantity, over every campaign and by campaign size, with the
-    verdicts ``coverage_ok``, ``z_sd_ok`` of the frozen rules."""
+    verdicts ``coverage_ok``, ``z_sd_ok`` of the frozen rules, and the mean z (``z_mean``: a
+    bias, which sd(z) does not see; shown, not judged)."""
     rec = records.copy()
     rec["size"] = rec["pairs"].map(size_bin)
     rec["all"] = "all"
@@ -98,8 +99,8 @@ def calibration_table(records: pd.DataFrame) -> pd.DataFrame:
         cov = coverage_summary(rec, by=(by,), quantities=list(QUANTITIES), levels=(0.95,))
         for _, c in cov.iterrows():
             rows.append({"group": c[by], "quantity": c["quantity"], "n": int(c["n"]),
-                         "coverage95": float(c["coverage"]), "z_sd": float(c["z_sd"])})
-    out = pd.DataFrame(rows, columns=["group", "quantity", "n", "coverage95", "z_sd"])
+                         "coverage95": float(c["coverage"]), "z_mean": float(c["z_mean"]), "z_sd": float(c["z_sd"])})
+    out = pd.DataFrame(rows, columns=["group", "quantity", "n", "coverage95", "z_mean", "z_sd"])
     out["coverage_ok"] = out["coverage95"].between(*COVERAGE_TARGET)
     out["z_sd_ok"] = out["z_sd"].between(*Z_SD_TARGET)
     return out
@@ -131,11 +132,11 @@ def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: flo
              f"{len(records) - len(ok)} errors, {int(gate.sum())} of {len(ok)} fits passed every gate; "
              f"targets: 95 % coverage in [{COVERAGE_TARGET[0]:.2f}, {COVERAGE_TARGET[1]:.2f}], "
              f"sd(z) in [{Z_SD_TARGET[0]}, {Z_SD_TARGET[1]}].", "",
-             "| campaigns | quantity | n | 95 % coverage | sd(z) | verdict |", "|---|---|---|---|---|---|"]
+             "| campaigns | quantity | n | 95 % coverage | mean z | sd(z) | verdict |", "|---|---|---|---|---|---|---|"]
     for _, r in table.iterrows():
         verdict = "pass" if r["coverage_ok"] and r["z_sd_ok"] else "**fail**"
-        lines.append(f"| {r['group']} | {r['quantity']} | {r['n']} | {r['coverage95']:.2f} | {r['z_sd']:.2f} | "
-                     f"{verdict} |")
+        lines.append(f"| {r['group']} | {r['quantity']} | {r['n']} | {r['coverage95']:.2f} | {r['z_mean']:+.2f} | "
+                     f"{r['z_sd']:.2f} | {verdict} |")
     if split is not None:
         quantity, threshold = split
         st = truth_split_table(records, quantity, threshold)

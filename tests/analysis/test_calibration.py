@@ -48,6 +48,24 @@ def test_the_rules_pass_calibrated_and_fail_overconfident_posteriors():
     assert "**fail**" in text and "400 campaigns" in text
 
 
+def test_a_bias_shows_in_the_mean_z_and_the_coverage_not_in_sd_z():
+    """Estimates one posterior sd too high everywhere: sd(z) stays ~1 (it passes), the mean z
+    is ~1 and the coverage P(|e + 1| < 1.96) = 0.83 fails; the section shows the mean z."""
+    rec = _records(1.0)
+    for q in QUANTITIES:
+        rec[f"{q}_mean"] += 1.0
+        rec[f"{q}_in95"] = (rec[f"{q}_mean"] - rec[f"{q}_truth"]).abs() <= norm.ppf(0.975)
+    table = calibration_table(rec)
+    overall = table[table["group"] == "all"]
+    # 400 fits: the mean z's standard error is 0.05, sd(z)'s 0.035, the coverage's 0.019
+    assert overall["z_mean"].between(0.85, 1.15).all() and overall["z_sd_ok"].all()
+    assert not overall["coverage_ok"].any() and overall["coverage95"].mean() == pytest.approx(0.83, abs=0.05)
+    text = calibration_markdown(rec, table)
+    assert "| mean z |" in text and f"| all | {QUANTITIES[0]} | 400 |" in text
+    row = next(line for line in text.splitlines() if line.startswith(f"| all | {QUANTITIES[0]} |"))
+    assert float(row.split("|")[5]) == pytest.approx(overall["z_mean"].iloc[0], abs=0.005)
+
+
 def test_the_truth_split_reads_coverage_on_either_side():
     """The reading by a true value (``DIAGNOSTIC_SPLIT``): campaigns above the threshold whose
     intervals all miss show coverage 0 there, those below keep theirs, and the section says it
