@@ -157,7 +157,7 @@ def main(argv=None) -> int:
         final = args.records.resolve().with_name(args.records.name.replace(".partial.csv", ".csv"))
         shown = final.relative_to(ROOT) if final.is_relative_to(ROOT) else final
         text = (f"**Partial run: {len(records)} of the {args.n} campaigns** (stopped, resumable: `python "
-                f"benchmarks/calibration_study.py --n {args.n} --seed0 {args.seed0} --records {shown}` "
+                f"benchmarks/calibration_study.py --n {args.n} --seed0 {int(records['seed'].min())} --records {shown}` "
                 "fits only the campaigns the partial file lacks); every verdict below is on these campaigns "
                 "alone.\n\n" + text)
     print(text, file=sys.stderr)

@@ -205,3 +205,20 @@ def test_a_candidate_defaults_heavy_file_takes_the_campaigns_above_the_heavy_dut
     auto = dataclasses.replace(job, model="auto")
     for c in (light, heavy):
         assert job_model(auto, c, options) == KINDS["traces"].default_model(c, options)
+
+
+def test_a_partial_records_summary_names_the_command_that_resumes_it(tmp_path, monkeypatch, capsys):
+    """``--from-records`` on a ``.partial.csv``: the header's resume command starts at the
+    records' first seed (an earlier run's records, not the current confirmatory seed)."""
+    from ..conftest import BENCHMARKS, benchmark_script
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    rec = _records(1.0, n=20)
+    rec["seed"] += 4000
+    partial = tmp_path / "records.partial.csv"
+    rec.to_csv(partial, index=False)
+    with benchmark_script("calibration_study") as study:
+        assert study.main(["--from-records", "--records", str(partial)]) == 0
+    err = capsys.readouterr().err
+    assert "**Partial run: 20 of the 200 campaigns**" in err and "--seed0 4000 " in err
+    assert "20 campaigns (seeds 4000-4019)" in err and "| mean z |" in err
