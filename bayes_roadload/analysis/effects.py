@@ -295,12 +295,12 @@ def super_model(base: DragModel, library: Mapping[str, Effect]) -> tuple[DragMod
 
 
 def _null_value(effect: Effect, param: str, model_values: Mapping[str, float], base_has_term: bool,
-                model_fixed: Mapping[str, float] | None = None) -> float:
+                model_fixed: Mapping[str, float]) -> float:
     """The value of ``param`` meaning "no effect": the user's model's own value when the model
     has the effect's terms and holds the parameter fixed (the candidate is then a change of that
     value, e.g. a stated cup lag or K_alpha of a model with the pitch term), else the library's
     null (0, or ``"model"``: the model's value where it has the term)."""
-    if base_has_term and model_fixed is not None and param in model_fixed:
+    if base_has_term and param in model_fixed:
         return float(model_fixed[param])
     null = effect.null.get(param, 0.0)
     if null == "model":

@@ -161,14 +161,12 @@ class DragModel:
         which read dv/dt (``uses_accel``), the others are evaluated once.
         """
         zero = jnp.zeros_like(c.speed_mps)
-        p = self.complete(params)
         at_rest = c._replace(accel_mps2=zero)
-        f0 = zero
-        for t in self.terms:
-            f0 = f0 + t.force_n(p, at_rest)
+        f0 = self.force_n(params, at_rest)
         inertial = [t for t in self.terms if t.uses_accel]
         if not inertial:
             return -f0 / effective_mass_kg
+        p = self.complete(params)
         unit = c._replace(accel_mps2=zero + 1.0)
         slope = zero
         for t in inertial:
