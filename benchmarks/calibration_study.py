@@ -48,7 +48,8 @@ from bayes_roadload.inference.kinds import FitOptions  # noqa: E402
 from bayes_roadload.config import DEFAULT_SAMPLER  # noqa: E402
 from doc_sections import replace_section  # noqa: E402
 from bayes_roadload.analysis.calibration import (CONFIRMATORY_SEED0, DIAGNOSTIC_SPLIT, QUANTITIES,  # noqa: E402
-                                                 calibration_jobs, calibration_markdown, calibration_table)
+                                                 calibration_jobs, calibration_markdown, calibration_table,
+                                                 with_test_mass)
 
 RECORDS = ROOT / "docs" / "calibration" / "independent_records.csv"
 DOC = ROOT / "docs" / "calibration.md"
@@ -119,11 +120,17 @@ def main(argv=None) -> int:
     ap.add_argument("--compare", type=Path, default=None, metavar="RECORDS",
                     help="with --from-records: a table of --records beside these records on the seeds both hold")
     ap.add_argument("--from-records", action="store_true", help="summarise --records without fitting")
+    ap.add_argument("--fill-test-mass", action="store_true",
+                    help="with --from-records: add the declared test mass (test_mass_kg) to the records that lack it, "
+                         "by simulating those campaigns again, and write it back to --records")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     wall = None
     if args.from_records:
         records = pd.read_csv(args.records)
+        if args.fill_test_mass:
+            records = with_test_mass(records)
+            records.to_csv(args.records, index=False)
     else:
         options = FitOptions(sampler=dataclasses.replace(DEFAULT_SAMPLER, noise_scaled_metric=args.noise_scaled_metric))
         jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs, options=options,

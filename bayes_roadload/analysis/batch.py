@@ -399,7 +399,8 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
 
         * job fields: ``name, model, pooling, noise, robust, num_warmup, num_samples,
           num_chains, target_accept`` and the ``tags``;
-        * campaign: ``n_runs, n_samples`` (real samples), and ``case, seed, pairs,
+        * campaign: ``n_runs, n_samples`` (real samples), ``test_mass_kg`` (the declared
+          test mass), and ``case, seed, pairs,
           prior_draws, effective_mass_factor`` from the campaign's meta when it has them; ``parameters`` (the free ones, comma-separated);
         * ``mean_abs_yaw_rad``: mean |logged yaw| over all samples (when logged);
         * for every free parameter ``P`` and for ``F50_N``: ``P_mean, P_sd``, quantiles
@@ -447,6 +448,7 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
             rec["time_simulate_s"] = time.perf_counter() - t0
             rec["n_runs"] = len(campaign.run_ids)
             rec["n_samples"] = int(len(campaign.runs))
+            rec["test_mass_kg"] = float(campaign.vehicle.mass_kg)
             if "yaw_rad" in campaign.runs:
                 rec["mean_abs_yaw_rad"] = float(np.abs(campaign.runs["yaw_rad"].to_numpy(float)).mean())
             for key in ("case", "seed", "pairs", "prior_draws", "effective_mass_factor"):

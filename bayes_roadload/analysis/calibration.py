@@ -23,6 +23,7 @@ from typing import Iterable
 import numpy as np
 import pandas as pd
 
+from .. import config
 from ..inference.kinds import FitOptions
 from ..simulate.independent import simulate_independent
 from ..simulate.independent.effects import EFFECTS
@@ -106,13 +107,10 @@ def calibration_table(records: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def truth_split_table(records: pd.DataFrame, quantity: str, threshold: float) -> pd.DataFrame:
-    """95 % coverage of every quantity of :data:`QUANTITIES` over the fits whose true
-    ``quantity`` is at most ``threshold`` and over those above it (columns ``group``,
-    ``quantity``, ``n``, ``coverage95``); fits that failed are left out."""
-    labels = [f"{quantity} <= {threshold:g}", f"{quantity} > {threshold:g}"]
-    rec = records.copy()
-    rec["group"] = np.where(rec[f"{quantity}_truth"] > threshold, labels[1], labels[0])
+def _group_coverage(rec: pd.DataFrame, labels: list[str]) -> pd.DataFrame:
+    """95 % coverage of every quantity of :data:`QUANTITIES` by ``rec["group"]``, in the order
+    of ``labels`` (columns ``group``, ``quantity``, ``n``, ``coverage95``; n = 0 where a group
+    has no fit)."""
     cov = coverage_summary(rec, by=("group",), quantities=list(QUANTITIES), levels=(0.95,))
     cov = cov.rename(columns={"coverage": "coverage95"}).set_index(["group", "quantity"])
     index = pd.MultiIndex.from_product([labels, QUANTITIES], names=["group", "quantity"])
@@ -121,15 +119,66 @@ def truth_split_table(records: pd.DataFrame, quantity: str, threshold: float) ->
     return out
 
 
+def mass_class(test_mass_kg: float) -> str:
+    """The test-mass class of a campaign: light duty up to
+    :data:`~bayes_roadload.config.HEAVY_DUTY_MASS_KG` (the mass above which ``fit`` takes the
+    heavy-vehicle variant of its default model), heavy duty above."""
+    limit = config.HEAVY_DUTY_MASS_KG
+    return f"heavy (> {limit:g} kg)" if test_mass_kg > limit else f"light (<= {limit:g} kg)"
+
+
+def mass_class_table(records: pd.DataFrame) -> pd.DataFrame:
+    """95 % coverage of every quantity of :data:`QUANTITIES` by :func:`mass_class` of the
+    records' declared test mass (``test_mass_kg``); fits that failed are left out."""
+    limit = config.HEAVY_DUTY_MASS_KG
+    rec = records.copy()
+    rec["group"] = rec["test_mass_kg"].astype(float).map(mass_class)
+    return _group_coverage(rec, [mass_class(limit), mass_class(limit + 1.0)])
+
+
+def campaign_test_mass(seed: int, pairs: int) -> float:
+    """The declared test mass (kg) of calibration campaign ``seed`` of ``pairs`` pairs, from
+    the campaign itself (for records written before :func:`~.batch.run_job` recorded it)."""
+    return float(simulate_independent(int(seed), pairs=int(pairs)).vehicle.mass_kg)
+
+
+def with_test_mass(records: pd.DataFrame) -> pd.DataFrame:
+    """``records`` with ``test_mass_kg`` filled where it is missing, by simulating those
+    campaigns again (:func:`campaign_test_mass`; the simulation is a function of seed and pairs)."""
+    rec = records.copy()
+    if "test_mass_kg" not in rec:
+        rec["test_mass_kg"] = np.nan
+    missing = rec["test_mass_kg"].isna()
+    rec.loc[missing, "test_mass_kg"] = [campaign_test_mass(s, p) for s, p in zip(rec.loc[missing, "seed"],
+                                                                            rec.loc[missing, "pairs"])]
+    return rec
+
+
+def truth_split_table(records: pd.DataFrame, quantity: str, threshold: float) -> pd.DataFrame:
+    """95 % coverage of every quantity of :data:`QUANTITIES` over the fits whose true
+    ``quantity`` is at most ``threshold`` and over those above it (columns ``group``,
+    ``quantity``, ``n``, ``coverage95``); fits that failed are left out."""
+    labels = [f"{quantity} <= {threshold:g}", f"{quantity} > {threshold:g}"]
+    rec = records.copy()
+    rec["group"] = np.where(rec[f"{quantity}_truth"] > threshold, labels[1], labels[0])
+    return _group_coverage(rec, labels)
+
+
 def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: float | None = None,
                          split: tuple[str, float] | None = None) -> str:
-    """The study's section of ``docs/calibration.md``: counts, gates, the table with verdicts
-    and, with ``split`` (e.g. :data:`DIAGNOSTIC_SPLIT`), the coverage on either side of a true
-    value (:func:`truth_split_table`), marked as a reading."""
+    """The study's section of ``docs/calibration.md``: counts, gates (and those passed without a
+    retry), the intervals that hold, the table with verdicts, the coverage by test mass
+    (:func:`mass_class_table`, when every record has ``test_mass_kg``) and, with ``split`` (e.g.
+    :data:`DIAGNOSTIC_SPLIT`), the coverage on either side of a true value
+    (:func:`truth_split_table`); the last two marked as readings."""
     ok = records[records["error"].isna()] if "error" in records else records
     gate = ok["gate_pass"].astype(bool)
+    first = f" ({int((gate & (ok['retries'] == 0)).sum())} first time, without a retry)" if "retries" in ok else ""
+    inside = ok[[f"{q}_in95" for q in QUANTITIES]]
+    held, known = int((inside == True).sum().sum()), int(inside.notna().sum().sum())  # noqa: E712
     lines = [f"{len(records)} campaigns (seeds {int(records['seed'].min())}-{int(records['seed'].max())}), "
-             f"{len(records) - len(ok)} errors, {int(gate.sum())} of {len(ok)} fits passed every gate; "
+             f"{len(records) - len(ok)} errors, {int(gate.sum())} of {len(ok)} fits passed every gate{first}; "
+             f"{held} of {known} 95 % intervals hold the truth ({held / max(known, 1):.0%}); "
              f"targets: 95 % coverage in [{COVERAGE_TARGET[0]:.2f}, {COVERAGE_TARGET[1]:.2f}], "
              f"sd(z) in [{Z_SD_TARGET[0]}, {Z_SD_TARGET[1]}].", "",
              "| campaigns | quantity | n | 95 % coverage | mean z | sd(z) | verdict |", "|---|---|---|---|---|---|---|"]
@@ -137,14 +186,18 @@ def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: flo
         verdict = "pass" if r["coverage_ok"] and r["z_sd_ok"] else "**fail**"
         lines.append(f"| {r['group']} | {r['quantity']} | {r['n']} | {r['coverage95']:.2f} | {r['z_mean']:+.2f} | "
                      f"{r['z_sd']:.2f} | {verdict} |")
+    readings = []
+    if "test_mass_kg" in records and records["test_mass_kg"].notna().all():
+        readings.append(("A reading, not a rule: 95 % coverage by the declared test mass (the heavy-duty variant "
+                         "of the default model fits the heavy campaigns).", "test mass", mass_class_table(records)))
     if split is not None:
         quantity, threshold = split
-        st = truth_split_table(records, quantity, threshold)
-        groups = list(dict.fromkeys(st["group"]))
-        lines += ["", f"A reading, not a rule (chosen after campaigns of this run were seen): 95 % coverage by the "
-                      f"true {quantity}.", "",
-                  "| true value | n | " + " | ".join(QUANTITIES) + " |", "|---|---|" + "---|" * len(QUANTITIES)]
-        for g in groups:
+        readings.append((f"A reading, not a rule (chosen after campaigns of this run were seen): 95 % coverage by "
+                         f"the true {quantity}.", "true value", truth_split_table(records, quantity, threshold)))
+    for caption, head, st in readings:
+        lines += ["", caption, "", f"| {head} | n | " + " | ".join(QUANTITIES) + " |",
+                  "|---|---|" + "---|" * len(QUANTITIES)]
+        for g in dict.fromkeys(st["group"]):
             part = st[st["group"] == g]
             lines.append(f"| {g} | {int(part['n'].iloc[0])} | "
                          + " | ".join(f"{c:.2f}" for c in part["coverage95"]) + " |")

@@ -11,7 +11,8 @@ from scipy.stats import norm
 from bayes_roadload import config
 from bayes_roadload.analysis.batch import run_batch
 from bayes_roadload.analysis.calibration import (COVERAGE_TARGET, QUANTITIES, calibration_jobs,
-                                                 calibration_markdown, calibration_table, pairs_of, size_bin)
+                                                 calibration_markdown, calibration_table, mass_class, mass_class_table,
+                                                 pairs_of, size_bin, with_test_mass)
 from bayes_roadload.inference.kinds import KINDS, FitOptions
 
 
@@ -90,6 +91,32 @@ def test_the_truth_split_reads_coverage_on_either_side():
     assert "A reading, not a rule" in text and f"| {quantity} > {threshold:g} | 50 | 0.00 |" in text
 
 
+def test_the_header_counts_held_intervals_and_first_time_gates_and_the_mass_classes_read_apart():
+    """The section's first line counts the 95 % intervals that hold over all quantities and the
+    fits that passed every gate without a retry; with a declared test mass per record it reads
+    the coverage of light and heavy campaigns apart (the heavy-duty limit itself is light, as
+    ``fit`` routes its default)."""
+    rec = _records(1.0, n=40)
+    rec["retries"] = np.where(np.arange(40) % 10 == 0, 1, 0)
+    heavy = np.arange(40) % 4 == 0
+    rec["test_mass_kg"] = np.where(heavy, config.HEAVY_DUTY_MASS_KG + 500.0, config.HEAVY_DUTY_MASS_KG)
+    for q in QUANTITIES:
+        rec.loc[heavy, f"{q}_in95"] = False
+    text = calibration_markdown(rec, calibration_table(rec))
+    held = int(rec[[f"{q}_in95" for q in QUANTITIES]].to_numpy().sum())
+    assert f"40 of 40 fits passed every gate (36 first time, without a retry); {held} of 320 95 % intervals" in text
+    light_label, heavy_label = mass_class(config.HEAVY_DUTY_MASS_KG), mass_class(config.HEAVY_DUTY_MASS_KG + 1.0)
+    assert light_label != heavy_label
+    table = mass_class_table(rec)
+    hi, lo = table[table["group"] == heavy_label], table[table["group"] == light_label]
+    assert (hi["n"] == 10).all() and (hi["coverage95"] == 0.0).all() and (lo["n"] == 30).all()
+    for q in QUANTITIES:
+        assert lo.loc[lo["quantity"] == q, "coverage95"].item() == pytest.approx(rec.loc[~heavy, f"{q}_in95"].mean())
+    assert f"| {heavy_label} | 10 | 0.00 |" in text and "by the declared test mass" in text
+    # records without the mass (written before it was recorded) show no such reading
+    assert "by the declared test mass" not in calibration_markdown(rec.drop(columns="test_mass_kg"), calibration_table(rec))
+
+
 def test_jobs_carry_the_model_asked_for():
     """The study fits fit's default model for each campaign unless told otherwise (``--model``):
     "auto", which the batch job resolves for each campaign as ``fit`` does."""
@@ -137,6 +164,9 @@ def test_smoke_one_independent_campaign_through_the_study():
     assert records.loc[0, "model"] == KINDS["traces"].default_model(campaign, FitOptions())
     for q in QUANTITIES:
         assert records.loc[0, f"{q}_truth"] == pytest.approx(campaign.truth[q], rel=1e-12), q
+    # the declared test mass, which the reading by test mass groups on, as filled for old records
+    assert records.loc[0, "test_mass_kg"] == campaign.vehicle.mass_kg
+    assert with_test_mass(records.drop(columns="test_mass_kg"))["test_mass_kg"].tolist() == [campaign.vehicle.mass_kg]
     table = calibration_table(records)
     assert set(table.loc[table["group"] == "all", "quantity"]) == set(QUANTITIES)
 
