@@ -954,9 +954,16 @@ def _cmd_cases(args) -> int:
 def _cmd_models(args) -> int:
     from .inference.spec import available_models, load_model_spec
 
-    for name in available_models():
-        spec = load_model_spec(name)
-        echo(f"{name:<22} free: {', '.join(spec.free):<28} {spec.description}")
+    from .inference.kinds import KINDS
+
+    specs = [load_model_spec(name) for name in available_models()]
+    width = max(len(s.name) for s in specs)
+    for spec in specs:
+        echo(f"{spec.name:<{width}}  free: {', '.join(spec.free)}")
+        echo(f"{'':<{width}}  {spec.description}")
+        for entry in KINDS.values():
+            if spec.name in entry.default_models:
+                echo(f"{'':<{width}}  default of `fit` for {entry.label} campaigns: {entry.default_models[spec.name]}")
     return 0
 
 

@@ -10,6 +10,7 @@ import pytest
 from bayes_roadload import config
 from bayes_roadload.cli import EXIT_FIT_FAILED, EXIT_GATES_FAILED, EXIT_REFUSED, build_parser, main
 from bayes_roadload.data import load_campaign
+from bayes_roadload.inference.kinds import KINDS
 
 SUMMARY_COLUMNS = ["parameter", "mean", "sd", "q2.5", "q50", "q97.5", "r_hat", "ess_bulk", "ess_tail"]
 
@@ -68,6 +69,12 @@ def test_sensitivity_cases_models(tmp_path, capsys):
     assert main(["models"]) == 0
     out = capsys.readouterr().out
     assert "combined" in out and "three_term" in out and "four_term_driveline" in out
+    # the speed-trace defaults are marked, each on its model's entry
+    lines = out.splitlines()
+    for model, when in KINDS["traces"].default_models.items():
+        start = next(i for i, line in enumerate(lines) if line.startswith(model + " "))
+        following = next((i for i in range(start + 1, len(lines)) if not lines[i].startswith(" ")), len(lines))
+        assert any(f"default of `fit` for speed-trace campaigns: {when}" in line for line in lines[start:following]), model
 
 
 def test_fit_nuts_writes_outputs_and_flags_gates(cli_nuts_fit):

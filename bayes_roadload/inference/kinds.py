@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import pandas as pd
 
@@ -73,6 +73,8 @@ class KindEntry:
     label : how messages name a campaign of the kind ("spin-down").
     campaign_type : the campaign class (:func:`kind_of`).
     default_model : (campaign, options) -> model variant name of ``fit`` without ``--model``.
+    default_models : every variant ``default_model`` returns -> when it does (shown by
+        ``bayes-roadload models``).
     check_options : raises ValueError naming the options that do not apply to the kind.
     fit : (campaign, spec, options) -> :class:`~bayes_roadload.inference.nuts.NutsFit`.
     report : (fit, campaign) -> :class:`~bayes_roadload.inference.results.FitReport`.
@@ -128,6 +130,7 @@ class KindEntry:
     problem: Callable[[Any, ModelSpec, FitOptions], Problem] | None = None
     default_pooling: Callable[[Any, ModelSpec, FitOptions], str] = lambda campaign, spec, options: "pooled"
     lagged_speed_drop: bool = False
+    default_models: Mapping[str, str] = field(default_factory=dict)
 
 
 def check_model(entry: KindEntry, spec: ModelSpec) -> None:
@@ -366,18 +369,26 @@ KINDS: dict[str, KindEntry] = {e.name: e for e in (
     KindEntry("traces", "speed-trace", Campaign, traces_default_model, _check_traces, _fit_traces,
               trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
               diagnosis_model="three_term", type_b=_traces_type_b, default_pooling=traces_default_pooling,
-              lagged_speed_drop=True),
+              lagged_speed_drop=True,
+              default_models={"four_term_tyre_lag_admittance_pitch":
+                                  f"Bayesian fit up to {config.HEAVY_DUTY_MASS_KG:g} kg test mass",
+                              "four_term_tyre_lag_admittance_heavy_pitch":
+                                  f"Bayesian fit above {config.HEAVY_DUTY_MASS_KG:g} kg test mass",
+                              "four_term": "least squares (--method lsq)"}),
     KindEntry("intervals", "interval", IntervalCampaign, lambda c, o: "split_f0_f2", _check_intervals,
               report=interval_report, validity_default="reject", diagnosis="band_times",
-              diagnosis_model="split_f0_f2", **_through_problem(_intervals_problem)),
+              diagnosis_model="split_f0_f2", default_models={"split_f0_f2": "always"},
+              **_through_problem(_intervals_problem)),
     KindEntry("distances", "distance-time", DistanceCampaign, lambda c, o: DISTANCE_DEFAULT_MODEL,
               _nuts_only("distance-time"), report=distance_report, preamble=_distance_preamble,
-              diagnosis="band_times", diagnosis_model=DISTANCE_DEFAULT_MODEL, **_through_problem(_distances_problem)),
+              diagnosis="band_times", diagnosis_model=DISTANCE_DEFAULT_MODEL, default_models={DISTANCE_DEFAULT_MODEL: "always"},
+              **_through_problem(_distances_problem)),
     KindEntry("spindown", "spin-down", SpindownCampaign, lambda c, o: "undriven_spindown", _check_spindown,
               report=spindown_report, extras=lambda f, c, s, o: spindown_extras(f, c, s), notes=_spindown_notes,
-              **_through_problem(_spindown_problem)),
+              default_models={"undriven_spindown": "always"}, **_through_problem(_spindown_problem)),
     KindEntry("steady", "steady-state", SteadyCampaign, _steady_default_model, _check_steady,
               report=steady_report, extras=_steady_extras, notes=_steady_notes, driveline_channel=on_load_channel,
+              default_models={"four_term": "measured wind", "three_term": "no measured wind"},
               **_through_problem(_steady_problem)),
 )}
 """kind name -> :class:`KindEntry`, one line per data kind."""

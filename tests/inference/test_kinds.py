@@ -27,6 +27,10 @@ def test_default_models_are_model_files():
             assert entry.default_model(None, FitOptions()) in models, name
         if entry.diagnosis is not None:
             assert entry.diagnosis_model in models, name
+        # the defaults `bayes-roadload models` lists are model files, the campaign-free default among them
+        assert entry.default_models and set(entry.default_models) <= models, name
+        if name != "steady":
+            assert entry.default_model(None, FitOptions()) in entry.default_models, name
 
 
 @pytest.mark.parametrize("name", ["intervals", "distances", "spindown", "steady"])
@@ -126,6 +130,8 @@ def test_the_speed_trace_default_takes_a_heavy_vehicles_priors_above_3500_kg():
     heavy = load_model_spec(traces.default_model(heavy_c, FitOptions()))
     assert light.name == "four_term_tyre_lag_admittance_pitch" and heavy.name == "four_term_tyre_lag_admittance_heavy_pitch"
     assert traces.default_model(heavy_c, FitOptions(method="lsq")) == "four_term"
+    # every variant the default takes is one `bayes-roadload models` marks as a default
+    assert {light.name, heavy.name, "four_term"} == set(traces.default_models)
     assert light.terms == heavy.terms and light.free == heavy.free
     assert light.admittance == heavy.admittance == "auto"
     for name in ("CD0", "KD"):
