@@ -178,7 +178,7 @@ def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: flo
     held, known = int((inside == True).sum().sum()), int(inside.notna().sum().sum())  # noqa: E712
     lines = [f"{len(records)} campaigns (seeds {int(records['seed'].min())}-{int(records['seed'].max())}), "
              f"{len(records) - len(ok)} errors, {int(gate.sum())} of {len(ok)} fits passed every gate{first}; "
-             f"{held} of {known} 95 % intervals hold the truth ({held / max(known, 1):.0%}); "
+             f"{held} of {known} 95 % intervals hold the truth ({100 * held / max(known, 1):.0f} %); "
              f"targets: 95 % coverage in [{COVERAGE_TARGET[0]:.2f}, {COVERAGE_TARGET[1]:.2f}], "
              f"sd(z) in [{Z_SD_TARGET[0]}, {Z_SD_TARGET[1]}].", "",
              "| campaigns | quantity | n | 95 % coverage | mean z | sd(z) | verdict |", "|---|---|---|---|---|---|---|"]

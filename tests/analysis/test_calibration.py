@@ -252,3 +252,23 @@ def test_a_partial_records_summary_names_the_command_that_resumes_it(tmp_path, m
     err = capsys.readouterr().err
     assert "**Partial run: 20 of the 200 campaigns**" in err and "--seed0 4000 " in err
     assert "20 campaigns (seeds 4000-4019)" in err and "| mean z |" in err
+
+
+def test_fill_test_mass_writes_the_campaigns_masses_back_and_the_section_reads_them(tmp_path, monkeypatch, capsys):
+    """``--from-records --fill-test-mass``: records written before the mass was recorded get each
+    campaign's declared test mass (the campaign simulated again from its seed and size), written
+    back to the file, and the section shows the reading by test mass."""
+    from bayes_roadload.simulate.independent import simulate_independent
+
+    from ..conftest import BENCHMARKS, benchmark_script
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    rec = _records(1.0, n=2)
+    rec["seed"], rec["pairs"] = [8, 9], [1, 1]
+    records = tmp_path / "records.csv"
+    rec.to_csv(records, index=False)
+    with benchmark_script("calibration_study") as study:
+        assert study.main(["--from-records", "--fill-test-mass", "--records", str(records)]) == 0
+    filled = pd.read_csv(records)
+    assert filled["test_mass_kg"].tolist() == [simulate_independent(s, pairs=1).vehicle.mass_kg for s in (8, 9)]
+    assert "by the declared test mass" in capsys.readouterr().err
