@@ -354,7 +354,7 @@ def _laplace_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
     if job.type_b:  # as the NUTS record (_fit_record) and `fit`: the intervals carry the Type B uncertainty
         from .budget import BUDGET_QUANTITIES, add_type_b, type_b_sensitivities
 
-        typeb = type_b_sensitivities(campaign, problem.spec, [q for q in BUDGET_QUANTITIES if q in draws])
+        typeb = type_b_sensitivities(campaign, problem.spec, [q for q in BUDGET_QUANTITIES if q in draws], fit=fit)
         draws = {**draws, **add_type_b({q: draws[q] for q in typeb.sensitivity}, typeb, seed=job.sampler.seed)}
         rec["time_type_b_s"] = typeb.time_s
     for name in problem.free:

@@ -241,3 +241,28 @@ def test_caches_are_cleared_when_the_process_nears_its_mapping_limit(monkeypatch
     assert rec["memory_maps"] == maps[0]
     assert rec["jax_caches_cleared"] is cleared and len(calls) == int(cleared)
     assert (maps[0] > batch.CLEAR_JAX_CACHES_ABOVE_MAP_SHARE * maps[1]) is cleared
+
+
+def test_a_laplace_record_carries_the_model_constants_type_b(tmp_path):
+    """A MAP + Laplace job's intervals carry the Type B uncertainty of the model's constants, as
+    the NUTS record and ``fit`` do: the pitch default's K_alpha (0.9 rad^-1) with a standard
+    uncertainty of 5 against 0, the same campaign and seed otherwise.  On the thesis car a unit
+    of K_alpha moves F50_N by ~3 N against a posterior sd of ~4 N, so u = 5 must widen F50_N's
+    interval several-fold; the Type B draws' Monte Carlo error on an sd is ~2 %, so a ratio above
+    1.2 is the source, and a record that leaves the constant out (ratio 1) fails."""
+    from pathlib import Path
+
+    from bayes_roadload.inference.spec import MODELS_DIR
+
+    text = Path(MODELS_DIR, "four_term_tyre_lag_admittance_pitch.toml").read_text()
+    stated = "[parameters.Kalpha]\nfixed = 0.9\nuncertainty = 0.5\n"
+    assert stated in text
+    models = []
+    for u in (5.0, 0.0):
+        path = tmp_path / f"pitch_kalpha_u{u:g}.toml"
+        path.write_text(text.replace(stated, f"[parameters.Kalpha]\nfixed = 0.9\nuncertainty = {u}\n"))
+        models.append(str(path))
+    on_rec, off_rec = (run_fit_job(FitJob(f"laplace-{i}", SimulatedCampaign(3, 1, 0), model=m, method="laplace",
+                                          pooling="pooled")) for i, m in enumerate(models))
+    assert on_rec["error"] is None and off_rec["error"] is None, (on_rec.get("traceback"), off_rec.get("traceback"))
+    assert on_rec["F50_N_sd"] > 1.2 * off_rec["F50_N_sd"]
