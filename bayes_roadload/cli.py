@@ -952,9 +952,8 @@ def _cmd_cases(args) -> int:
 
 
 def _cmd_models(args) -> int:
-    from .inference.spec import available_models, load_model_spec
-
     from .inference.kinds import KINDS
+    from .inference.spec import available_models, load_model_spec
 
     specs = [load_model_spec(name) for name in available_models()]
     width = max(len(s.name) for s in specs)

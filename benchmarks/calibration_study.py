@@ -43,7 +43,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
+from bayes_roadload.analysis.batch import batch_client, passed_first_time, run_batch  # noqa: E402
 from bayes_roadload.inference.kinds import FitOptions  # noqa: E402
 from bayes_roadload.config import DEFAULT_SAMPLER  # noqa: E402
 from doc_sections import replace_section  # noqa: E402
@@ -82,7 +82,7 @@ def comparison_markdown(first: pd.DataFrame, second: pd.DataFrame) -> str:
             cells.append(cell)
         lines.append(f"| {q} | {cells[0]} | {cells[1]} |")
     lines.append(f"| all | {held[0]} / {n * len(QUANTITIES)} | {held[1]} / {n * len(QUANTITIES)} |")
-    first_time = [int((rec["gate_pass"].astype(bool) & (rec["retries"] == 0)).sum()) for rec in (a, b)]
+    first_time = [int(passed_first_time(rec).sum()) for rec in (a, b)]
     lines.append(f"| every gate first time | {first_time[0]} / {n} | {first_time[1]} / {n} |")
     retried = [", ".join(f"{r['name']} ({r['retry_failed']})" for _, r in rec[rec["retries"] > 0].iterrows()) or "none"
                for rec in (a, b)]

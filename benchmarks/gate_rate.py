@@ -29,7 +29,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_roadload.analysis.batch import FitJob, SimulatedCampaign, batch_client, run_batch  # noqa: E402
+from bayes_roadload.analysis.batch import FitJob, SimulatedCampaign, batch_client, passed_first_time, run_batch  # noqa: E402
 from bayes_roadload.config import DEFAULT_SAMPLER  # noqa: E402
 from bayes_roadload.inference.kinds import KINDS, FitOptions  # noqa: E402
 from bayes_roadload.simulate.independent import simulate_independent  # noqa: E402
@@ -88,7 +88,7 @@ def main(argv=None) -> int:
     wall = time.perf_counter() - t0
     records.to_csv(args.records, index=False)
     ok = records[records["error"].isna()] if "error" in records else records
-    first = ok["retries"].fillna(0).eq(0) & ok["gate_pass"].astype(bool)
+    first = passed_first_time(ok)
     out = {"benchmark": "gate_rate", "fits": len(records), "errors": len(records) - len(ok),
            "pass_first_time": int(first.sum()), "pass_after_retry": int(ok["gate_pass"].astype(bool).sum()),
            "retried": int(ok["retries"].fillna(0).gt(0).sum()),

@@ -843,6 +843,12 @@ def successful(records: pd.DataFrame) -> pd.DataFrame:
     return records[records["error"].isna()] if "error" in records else records
 
 
+def passed_first_time(records: pd.DataFrame) -> pd.Series:
+    """Per record: every gate passed without a retry (``gate_pass`` and ``retries`` 0; a record
+    without a retry count had none)."""
+    return records["gate_pass"].astype(bool) & records["retries"].fillna(0).eq(0)
+
+
 # --------------------------------------------------------------------------- coverage
 
 def _wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:

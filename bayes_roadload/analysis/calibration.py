@@ -27,7 +27,7 @@ from .. import config
 from ..inference.kinds import FitOptions
 from ..simulate.independent import simulate_independent
 from ..simulate.independent.effects import EFFECTS
-from .batch import FitJob, coverage_summary
+from .batch import FitJob, coverage_summary, passed_first_time, successful
 
 QUANTITIES = ("AD", "BD", "CD0", "KD", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
 DERIVED = ("F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
@@ -171,9 +171,9 @@ def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: flo
     (:func:`mass_class_table`, when every record has ``test_mass_kg``) and, with ``split`` (e.g.
     :data:`DIAGNOSTIC_SPLIT`), the coverage on either side of a true value
     (:func:`truth_split_table`); the last two marked as readings."""
-    ok = records[records["error"].isna()] if "error" in records else records
+    ok = successful(records)
     gate = ok["gate_pass"].astype(bool)
-    first = f" ({int((gate & (ok['retries'] == 0)).sum())} first time, without a retry)" if "retries" in ok else ""
+    first = f" ({int(passed_first_time(ok).sum())} first time, without a retry)" if "retries" in ok else ""
     inside = ok[[f"{q}_in95" for q in QUANTITIES]]
     held, known = int((inside == True).sum().sum()), int(inside.notna().sum().sum())  # noqa: E712
     lines = [f"{len(records)} campaigns (seeds {int(records['seed'].min())}-{int(records['seed'].max())}), "
