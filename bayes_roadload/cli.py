@@ -1050,7 +1050,7 @@ def build_parser() -> argparse.ArgumentParser:
     f = sub.add_parser("fit", help="fit a campaign (NUTS over all runs jointly, or classical least squares)")
     f.add_argument("campaign")
     f.add_argument("--model", default=None, help="a name in models/ or a TOML path (see `models`); default by data kind: "
-                                                "four_term_tyre_lag_admittance_pitch (speed traces; _heavy_pitch above 3500 kg; four_term "
+                                                "four_term_tyre_lag_admittance_pitch_shapes (speed traces; _heavy_pitch_shapes above 3500 kg; four_term "
                                                 "with --method lsq), "
                                                 "split_f0_f2 (interval campaigns), three_term (distance-time campaigns), "
                                                 "undriven_spindown (spin-downs), four_term with a measured wind or else "

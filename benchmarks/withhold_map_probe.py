@@ -52,8 +52,10 @@ def run(seeds, withhold, lo, hi, model=None, model_heavy=None, arms=("all", "wit
 
 
 def summary(records: pd.DataFrame) -> str:
-    """Mean relative error (%) per arm, and the paired difference (second arm - all) with its SE:
-    one table per second arm (its withheld effects and model) the records hold."""
+    """Mean relative error (%) per arm, and the paired difference (second arm - all) with its SE;
+    where the records carry intervals, the 95 % intervals of each arm that hold the truth and the
+    median ratio of the arms' posterior sd (the Type B budget included): one table per second
+    arm (its withheld effects and model) the records hold."""
     records = records.assign(withheld=records["withheld"].fillna("") if "withheld" in records else "",
                              arm_model=records["arm_model"].fillna("default") if "arm_model" in records else "default")
     first = records[records["arm"] == "all"].drop_duplicates("name").set_index("name")
@@ -73,6 +75,18 @@ def summary(records: pd.DataFrame) -> str:
             diff = err[1] - err[0]
             se = diff.std(ddof=1) / np.sqrt(len(diff)) if len(diff) > 1 else float("nan")
             lines.append(f"| {q} | {err[0].mean():+.2f} | {err[1].mean():+.2f} | {diff.mean():+.2f} ({se:.2f}) |")
+        held = [q for q in QUANTITIES if all(f"{q}_{c}" in arm for arm in (first, second) for c in ("in95", "sd"))]
+        if held:
+            lines += ["", "| quantity | 95 % intervals holding the truth, every effect, default model | second arm "
+                      "| median sd ratio (second arm / first) |", "| --- | --- | --- | --- |"]
+            totals = [0, 0]
+            for q in held:
+                counts = [int(arm.loc[common, f"{q}_in95"].astype(bool).sum()) for arm in (first, second)]
+                totals = [a + b for a, b in zip(totals, counts)]
+                ratio = float(np.median(second.loc[common, f"{q}_sd"] / first.loc[common, f"{q}_sd"]))
+                lines.append(f"| {q} | {counts[0]} of {len(common)} | {counts[1]} of {len(common)} | {ratio:.3f} |")
+            n = len(common) * len(held)
+            lines.append(f"| all | {totals[0]} of {n} | {totals[1]} of {n} | |")
         tables.append("\n".join(lines))
     return "\n\n".join(tables)
 

@@ -45,3 +45,17 @@ def test_a_seed_missing_from_one_arm_is_left_out_of_the_pairs(probe):
     table = probe.summary(records)
     assert "1 campaigns (ind-2)" in table
     assert _row(table, "CD0")[1:3] == ["-2.00", "+0.00"]
+
+
+def test_the_held_intervals_and_the_sd_ratio_are_counted_per_arm_on_the_paired_seeds(probe):
+    """Both arms' intervals over the seeds they share: the first holds the truth on ind-1 only, the
+    second on both; the second's sd is 1.5x and 2.5x the first's (median 2.0); ind-3, fitted in
+    the second arm alone, is left out."""
+    first = _records("all", [-4.0, -2.0]).assign(CD0_in95=[True, False], CD0_sd=[0.01, 0.02])
+    second = _records("withheld", [-4.0, -2.0, 0.0], arm_model="variant", names=("ind-1", "ind-2", "ind-1")
+                      ).assign(name=["ind-1", "ind-2", "ind-3"], CD0_in95=[True, True, False],
+                               CD0_sd=[0.015, 0.05, 1.0])
+    table = probe.summary(pd.concat([first, second], ignore_index=True))
+    rows = [line for line in table.splitlines() if line.startswith("| CD0 |")]
+    assert [c.strip() for c in rows[1].strip("|").split("|")] == ["CD0", "1 of 2", "2 of 2", "2.000"]
+    assert "| all | 1 of 2 | 2 of 2 | |" in table

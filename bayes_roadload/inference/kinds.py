@@ -149,22 +149,26 @@ def traces_default_model(campaign, o: FitOptions) -> str:
     """``fit`` without ``--model`` on speed traces: for the Bayesian fit, the thesis' 4-term
     analysis with the tyre temperature lagging the falling speed, the tyre's v^2 loss at its
     SAE J2452 mean (C_R's spread carried in the Type B budget), the vehicle's aerodynamic
-    admittance when the campaign states the vehicle's length, and the drag change of the body's
-    pitch under deceleration (thesis eq. 2.33-2.35; K_alpha's spread in the budget)
-    (``four_term_tyre_lag_admittance_pitch``), with a heavy vehicle's priors above
-    :data:`~bayes_roadload.config.HEAVY_DUTY_MASS_KG` test mass
-    (``four_term_tyre_lag_admittance_heavy_pitch``); the plain 4-term analysis for least squares
-    (which has no prior to hold the lag's weakly identified gain); without a campaign (None), the
-    light-duty name.  Chosen by measurement (docs/calibration.md, *The pitch under
-    deceleration*, *The vehicle's aerodynamic admittance* and *C_R's spread in the budget*): on
-    the independent simulator's campaigns the anemometer's gusts read as the body's attenuate
-    K_D and C_D0, and the admittance takes most of that bias away; a coast decelerates hardest
-    at its highest speeds, where the nose dips most, and a model without the pitch reads that
-    drag change as C_D0 too low and B_D too high."""
+    admittance when the campaign states the vehicle's length, the drag change of the body's
+    pitch under deceleration (thesis eq. 2.33-2.35; K_alpha's spread in the budget), and the
+    yaw drag's levelling and the tyre lag's time constant held at their centres with their
+    spreads in the budget (``four_term_tyre_lag_admittance_pitch_shapes``), with a heavy
+    vehicle's priors above :data:`~bayes_roadload.config.HEAVY_DUTY_MASS_KG` test mass
+    (``four_term_tyre_lag_admittance_heavy_pitch_shapes``); the plain 4-term analysis for least
+    squares (which has no prior to hold the lag's weakly identified gain); without a campaign
+    (None), the light-duty name.  Chosen by measurement (docs/calibration.md, *The shapes in the
+    budget*, *The pitch under deceleration*, *The vehicle's aerodynamic admittance* and *C_R's
+    spread in the budget*): on the independent simulator's campaigns the anemometer's gusts read
+    as the body's attenuate K_D and C_D0, and the admittance takes most of that bias away; a
+    coast decelerates hardest at its highest speeds, where the nose dips most, and a model
+    without the pitch reads that drag change as C_D0 too low and B_D too high; a quadratic yaw
+    drag read off a drag that levels off gives a K_D below its zero-yaw curvature, which the
+    levelling's spread in the budget covers."""
     if o.method == "lsq":
         return "four_term"
     heavy = campaign is not None and campaign.vehicle.mass_kg > config.HEAVY_DUTY_MASS_KG
-    return "four_term_tyre_lag_admittance_heavy_pitch" if heavy else "four_term_tyre_lag_admittance_pitch"
+    return ("four_term_tyre_lag_admittance_heavy_pitch_shapes" if heavy
+            else "four_term_tyre_lag_admittance_pitch_shapes")
 
 
 def traces_default_pooling(campaign, spec: ModelSpec, o: FitOptions) -> str:
@@ -370,9 +374,9 @@ KINDS: dict[str, KindEntry] = {e.name: e for e in (
               trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
               diagnosis_model="three_term", type_b=_traces_type_b, default_pooling=traces_default_pooling,
               lagged_speed_drop=True,
-              default_models={"four_term_tyre_lag_admittance_pitch":
+              default_models={"four_term_tyre_lag_admittance_pitch_shapes":
                                   f"Bayesian fit up to {config.HEAVY_DUTY_MASS_KG:g} kg test mass",
-                              "four_term_tyre_lag_admittance_heavy_pitch":
+                              "four_term_tyre_lag_admittance_heavy_pitch_shapes":
                                   f"Bayesian fit above {config.HEAVY_DUTY_MASS_KG:g} kg test mass",
                               "four_term": "least squares (--method lsq)"}),
     KindEntry("intervals", "interval", IntervalCampaign, lambda c, o: "split_f0_f2", _check_intervals,

@@ -128,7 +128,8 @@ def test_the_speed_trace_default_takes_a_heavy_vehicles_priors_above_3500_kg():
         c.vehicle, mass_kg=config.HEAVY_DUTY_MASS_KG + 1.0, effective_mass_kg=config.HEAVY_DUTY_MASS_KG + 100.0))
     light = load_model_spec(traces.default_model(c, FitOptions()))
     heavy = load_model_spec(traces.default_model(heavy_c, FitOptions()))
-    assert light.name == "four_term_tyre_lag_admittance_pitch" and heavy.name == "four_term_tyre_lag_admittance_heavy_pitch"
+    assert light.name == "four_term_tyre_lag_admittance_pitch_shapes"
+    assert heavy.name == "four_term_tyre_lag_admittance_heavy_pitch_shapes"
     assert traces.default_model(heavy_c, FitOptions(method="lsq")) == "four_term"
     # every variant the default takes is one `bayes-roadload models` marks as a default
     assert {light.name, heavy.name, "four_term"} == set(traces.default_models)

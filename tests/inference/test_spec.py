@@ -289,3 +289,39 @@ def test_the_pitch_variant_slows_the_coast_and_leaves_the_steady_road_load():
     q_area = 0.5 * 1.2 * 31.0**2 * 1.85
     assert a_p == pytest.approx(a_b * m_e / (m_e + q_area * 0.9 * 0.0103), rel=1e-12)
     assert a_b < a_p < 0.0  # the dip under deceleration lowers the drag: a slower coast
+
+
+@pytest.mark.parametrize("parent", ["four_term_tyre_lag_admittance_pitch", "four_term_tyre_lag_admittance_heavy_pitch"])
+def test_the_shapes_variant_samples_its_parents_posterior_and_budgets_the_shapes(parent):
+    """``<parent>_shapes`` holds the yaw drag's levelling at none (L_psi = 0, knee 20 deg) and
+    the tyre lag's time constant at 400 s, and carries both spreads as model constants' Type B
+    sources: the same free parameters and priors as its parent, the same acceleration at every
+    yaw (the levelling term vanishes at L_psi = 0), and the parent's sources plus the two; a
+    levelling L_psi > 0 lowers the drag at yaw (eq. 2.31 with the levelling term), so the
+    budget's shift of that constant moves the fit."""
+    import jax.numpy as jnp
+
+    from bayes_roadload import config
+    from bayes_roadload.physics.terms import Conditions
+
+    base, shapes = load_model_spec(parent), load_model_spec(parent + "_shapes")
+    campaign = make_campaign(tunnel={"CL0": 0.273, "KL": 3.64})
+    (mb, fb, free_b), (ms, fs, free_s) = base.build(campaign), shapes.build(campaign)
+    assert free_s == free_b and shapes.priors == base.priors
+    assert set(ms.term_names) ^ set(mb.term_names) == {"aero_drag", "aero_drag_levelling"}
+    assert fs == {**fb, "yaw_levelling_per_rad2": 0.0, "yaw_knee_rad": 0.349}
+    heavy = "heavy" in parent
+    assert shapes.uncertainty == {**base.uncertainty, "tyre_lag_time_constant_s": 200.0,
+                                  "yaw_levelling_per_rad2": 3.0 if heavy else 1.0}
+    coef = {**fb, "AD": 0.012, "BD": 1.5e-4, "CD0": 0.38, "KD": 0.6, "tyre_lag_gain_per_mps": 0.005}
+    m_e = 1130.0
+    for yaw in (0.0, 0.1, 0.3):
+        c = Conditions(**{k: jnp.asarray(v, float) for k, v in dict(
+            speed_mps=30.0, airspeed_mps=31.0, yaw_rad=yaw, driveline_force_n=0.0, position_m=0.0,
+            distance_m=0.0, time_s=5.0, accel_mps2=0.0, direction=1.0, air_density_kgpm3=1.2,
+            temperature_k=config.REFERENCE_TEMPERATURE_K, mass_kg=1100.0, frontal_area_m2=1.85).items()})
+        a_b = float(mb.acceleration_mps2(coef, c, m_e))
+        assert float(ms.acceleration_mps2({**coef, **fs, **coef}, c, m_e)) == pytest.approx(a_b, rel=1e-12)
+        levelled = float(ms.acceleration_mps2({**coef, **fs, **coef, "yaw_levelling_per_rad2": 1.0}, c, m_e))
+        if yaw > 0.0:
+            assert a_b < levelled < 0.0
