@@ -6,7 +6,8 @@ Every command that writes a directory validates its input first and writes nothi
 input is refused; errors are printed as one line naming the file, column and row.  Exit codes:
 0 success, 2 input refused, 3 a NUTS fit that failed its diagnostic gates (outputs written and
 flagged), 4 a valid campaign whose fit failed in a numerical stage (the stage, the run or
-parameter and the remedy printed; the traceback in ``error.log`` in ``--out``).
+parameter and the remedy printed; the traceback in ``error.log`` in ``--out``), 141 the reader of
+the output closed its pipe (as a shell reports a process ended by SIGPIPE).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from . import __version__, console
 EXIT_REFUSED = 2
 EXIT_GATES_FAILED = 3
 EXIT_FIT_FAILED = 4
+EXIT_BROKEN_PIPE = 141
 COMMON_HELP = {
     "campaign": "campaign directory: runs.csv (or .parquet), intervals.csv, distances.csv, spindown.csv or "
                 "steady.csv, with vehicle.toml (docs/data-format.md)",
@@ -1297,6 +1299,17 @@ def _mark_out(claim: tuple[Path, set[str]] | None, command_line: str) -> None:
                                                   "written": written}, indent=2) + "\n")
 
 
+def _silence_stdout() -> None:
+    """Point standard output at the null device, so that the interpreter's flush at exit does not
+    fail again on the closed pipe (the Python docs' note on SIGPIPE)."""
+    import os
+
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError):  # a replaced stdout without a descriptor (tests): nothing to flush
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; exit codes as in the module docstring.  A refused input prints one line
     and writes nothing; a failed fit stage or an unexpected error prints one line with the
@@ -1321,6 +1334,9 @@ def main(argv: list[str] | None = None) -> int:
                 return int(args.func(args) or 0)
             finally:
                 _mark_out(claim, args.command_line)
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
     except (CampaignError, ValueError, FileNotFoundError) as e:
         print(f"bayes-roadload {args.command}: error: {e}", file=sys.stderr)
         return EXIT_REFUSED

@@ -42,6 +42,14 @@ class _LiveStreamHandler(logging.StreamHandler):
     def stream(self, value):  # logging.StreamHandler.__init__ assigns it
         pass
 
+    def handleError(self, record: logging.LogRecord) -> None:
+        """A reader that closed the pipe (``bayes-roadload models | head``) ends the command:
+        the error goes to the caller (``cli.main`` exits quietly), not a traceback per line."""
+        error = sys.exc_info()[1]
+        if isinstance(error, BrokenPipeError):
+            raise error
+        super().handleError(record)
+
 
 class _OnlyOutput(logging.Filter):
     def __init__(self, output: bool):

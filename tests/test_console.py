@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from bayes_roadload import console
-from bayes_roadload.cli import EXIT_REFUSED, OUT_MARKER, main
+from bayes_roadload.cli import EXIT_BROKEN_PIPE, EXIT_REFUSED, OUT_MARKER, main
 
 
 @pytest.fixture(scope="module")
@@ -130,3 +130,21 @@ def test_the_command_line_fills_and_reuses_the_compilation_cache(campaign_dir, t
     first = run("a")
     assert first, "no compiled program was cached"
     assert run("b") == first
+
+
+def test_a_reader_that_closes_the_pipe_ends_the_command_quietly(monkeypatch, capsys):
+    """``bayes-roadload models | head -1``: the first line that finds the pipe closed ends the
+    command with 141 (a shell's SIGPIPE code), with no "Logging error" per line on stderr."""
+    import io
+
+    class ClosedPipe(io.StringIO):
+        lines = 0
+
+        def write(self, text):
+            ClosedPipe.lines += 1
+            raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr("sys.stdout", ClosedPipe())
+    assert main(["models"]) == EXIT_BROKEN_PIPE
+    assert ClosedPipe.lines == 1
+    assert capsys.readouterr().err == ""
