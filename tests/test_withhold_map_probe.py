@@ -15,7 +15,7 @@ def probe():
 
 
 def _records(arm, errors_pct, withheld="", arm_model="default", names=("ind-1", "ind-2")):
-    truth = [{"ind-1": 0.4, "ind-2": 0.5}[n] for n in names]
+    truth = [{"ind-1": 0.4, "ind-2": 0.5, "ind-3": 0.6}[n] for n in names]
     return pd.DataFrame({"name": list(names), "arm": arm, "withheld": withheld, "arm_model": arm_model,
                          "CD0_truth": truth, "CD0_mean": [t * (1 + e / 100) for t, e in zip(truth, errors_pct)]})
 
@@ -52,9 +52,8 @@ def test_the_held_intervals_and_the_sd_ratio_are_counted_per_arm_on_the_paired_s
     second on both; the second's sd is 1.5x and 2.5x the first's (median 2.0); ind-3, fitted in
     the second arm alone, is left out."""
     first = _records("all", [-4.0, -2.0]).assign(CD0_in95=[True, False], CD0_sd=[0.01, 0.02])
-    second = _records("withheld", [-4.0, -2.0, 0.0], arm_model="variant", names=("ind-1", "ind-2", "ind-1")
-                      ).assign(name=["ind-1", "ind-2", "ind-3"], CD0_in95=[True, True, False],
-                               CD0_sd=[0.015, 0.05, 1.0])
+    second = _records("withheld", [-4.0, -2.0, 0.0], arm_model="variant", names=("ind-1", "ind-2", "ind-3")
+                      ).assign(CD0_in95=[True, True, False], CD0_sd=[0.015, 0.05, 1.0])
     table = probe.summary(pd.concat([first, second], ignore_index=True))
     rows = [line for line in table.splitlines() if line.startswith("| CD0 |")]
     assert [c.strip() for c in rows[1].strip("|").split("|")] == ["CD0", "1 of 2", "2 of 2", "2.000"]

@@ -298,7 +298,7 @@ def test_the_shapes_variant_samples_its_parents_posterior_and_budgets_the_shapes
     sources: the same free parameters and priors as its parent, the same acceleration at every
     yaw (the levelling term vanishes at L_psi = 0), and the parent's sources plus the two; a
     levelling L_psi > 0 lowers the drag at yaw (eq. 2.31 with the levelling term), so the
-    budget's shift of that constant moves the fit."""
+    budget's shift of that constant moves the modelled coast."""
     import jax.numpy as jnp
 
     from bayes_roadload import config
