@@ -18,6 +18,10 @@ what the model variant removes of it.  A quick probe of a bias; the NUTS study t
     python benchmarks/withhold_map_probe.py --from-records \
         benchmarks/records/withhold_map/pitch_withheld_seeds3000_3015.csv \
         benchmarks/records/withhold_map/pitch_model_seeds3000_3015.csv
+    python benchmarks/withhold_map_probe.py --withhold --base-model four_term_tyre_lag_admittance_pitch \
+        --base-model-heavy four_term_tyre_lag_admittance_heavy_pitch \
+        --model four_term_tyre_lag_admittance_pitch_shapes \
+        --model-heavy four_term_tyre_lag_admittance_heavy_pitch_shapes --seeds 3000 3015
 """
 
 from __future__ import annotations
@@ -32,18 +36,21 @@ import pandas as pd
 from bayes_roadload.analysis.calibration import QUANTITIES
 
 
-def run(seeds, withhold, lo, hi, model=None, model_heavy=None, arms=("all", "withheld")) -> pd.DataFrame:
-    """Records of the ``arms`` (column ``arm``: ``all``, every effect and the default model, or
-    ``withheld``, the named effects off and ``model``, ``model_heavy`` above the heavy-duty test
-    mass), one row per seed and arm; an arm left out comes from another run's records, which
-    :func:`summary` reads together with these."""
+def run(seeds, withhold, lo, hi, model=None, model_heavy=None, arms=("all", "withheld"),
+        base_model=None, base_model_heavy=None) -> pd.DataFrame:
+    """Records of the ``arms`` (column ``arm``: ``all``, every effect and ``base_model``
+    (``base_model_heavy`` above the heavy-duty test mass; default: fit's default), or
+    ``withheld``, the named effects off and ``model``, ``model_heavy``), one row per seed and
+    arm; an arm left out comes from another run's records, which :func:`summary` reads together
+    with these."""
     from bayes_roadload.analysis.batch import run_batch
     from bayes_roadload.analysis.calibration import calibration_jobs
     from bayes_roadload.inference.kinds import FitOptions
 
     options = FitOptions(method="laplace")
     frames = []
-    for arm, off, name, heavy in (("all", (), None, None), ("withheld", tuple(withhold), model, model_heavy)):
+    for arm, off, name, heavy in (("all", (), base_model, base_model_heavy),
+                                  ("withheld", tuple(withhold), model, model_heavy)):
         if arm in arms:
             df = run_batch(calibration_jobs(seeds, lo, hi, options=options, model=name, withhold=off,
                                             model_heavy=heavy), progress=False)
@@ -65,7 +72,7 @@ def summary(records: pd.DataFrame) -> str:
         common = first.index.intersection(second.index)
         lines = [f"{len(common)} campaigns ({', '.join(common)}); second arm: withheld {withheld or 'none'}, "
                  f"model {model}", "",
-                 "| quantity | mean rel. error %, every effect, default model | second arm | paired difference (SE) |",
+                 "| quantity | mean rel. error %, first arm (every effect) | second arm | paired difference (SE) |",
                  "| --- | --- | --- | --- |"]
         for q in QUANTITIES:
             if f"{q}_mean" not in first:
@@ -77,7 +84,7 @@ def summary(records: pd.DataFrame) -> str:
             lines.append(f"| {q} | {err[0].mean():+.2f} | {err[1].mean():+.2f} | {diff.mean():+.2f} ({se:.2f}) |")
         held = [q for q in QUANTITIES if all(f"{q}_{c}" in arm for arm in (first, second) for c in ("in95", "sd"))]
         if held:
-            lines += ["", "| quantity | 95 % intervals holding the truth, every effect, default model | second arm "
+            lines += ["", "| quantity | 95 % intervals holding the truth, first arm (every effect) | second arm "
                       "| median sd ratio (second arm / first) |", "| --- | --- | --- | --- |"]
             totals = [0, 0]
             for q in held:
@@ -96,6 +103,9 @@ def main(argv=None) -> int:
     ap.add_argument("--withhold", nargs="*", default=["pitch"], help="independent-simulator effects to switch off in the second arm")
     ap.add_argument("--model", default=None, help="the second arm's analysis model (default: fit's default)")
     ap.add_argument("--model-heavy", default=None, help="with --model: the second arm's model above 3500 kg test mass")
+    ap.add_argument("--base-model", default=None, help="the first arm's analysis model (default: fit's default)")
+    ap.add_argument("--base-model-heavy", default=None,
+                    help="with --base-model: the first arm's model above 3500 kg test mass")
     ap.add_argument("--seeds", type=int, nargs=2, default=(3000, 3015), metavar=("FIRST", "LAST"))
     ap.add_argument("--pairs", type=int, nargs=2, default=(1, 12), metavar=("MIN", "MAX"))
     ap.add_argument("--records", type=Path, help="write the records here (CSV)")
@@ -106,7 +116,8 @@ def main(argv=None) -> int:
         records = pd.concat([pd.read_csv(f) for f in args.from_records], ignore_index=True)
     else:
         records = run(range(args.seeds[0], args.seeds[1] + 1), args.withhold, *args.pairs, model=args.model,
-                      model_heavy=args.model_heavy, arms=("withheld",) if args.second_only else ("all", "withheld"))
+                      model_heavy=args.model_heavy, arms=("withheld",) if args.second_only else ("all", "withheld"),
+                      base_model=args.base_model, base_model_heavy=args.base_model_heavy)
         if args.records:
             args.records.parent.mkdir(parents=True, exist_ok=True)
             records.to_csv(args.records, index=False)

@@ -58,3 +58,22 @@ def test_the_held_intervals_and_the_sd_ratio_are_counted_per_arm_on_the_paired_s
     rows = [line for line in table.splitlines() if line.startswith("| CD0 |")]
     assert [c.strip() for c in rows[1].strip("|").split("|")] == ["CD0", "1 of 2", "2 of 2", "2.000"]
     assert "| all | 1 of 2 | 2 of 2 | |" in table
+
+
+def test_each_arm_is_fitted_with_its_own_models(probe, monkeypatch):
+    """The first arm takes --base-model (--base-model-heavy), every effect on; the second
+    --model (--model-heavy) with the withheld effects off; the records name each arm's model."""
+    import bayes_roadload.analysis.batch as batch
+    import bayes_roadload.analysis.calibration as calibration
+
+    calls = []
+
+    def jobs(seeds, lo, hi, options=None, model=None, withhold=(), model_heavy=None):
+        calls.append((model, model_heavy, tuple(withhold)))
+        return [model]
+
+    monkeypatch.setattr(calibration, "calibration_jobs", jobs)
+    monkeypatch.setattr(batch, "run_batch", lambda jobs, progress=True: pd.DataFrame({"name": ["ind-1"]}))
+    records = probe.run([1], ["pitch"], 1, 2, model="m", model_heavy="mh", base_model="b", base_model_heavy="bh")
+    assert calls == [("b", "bh", ()), ("m", "mh", ("pitch",))]
+    assert records["arm_model"].tolist() == ["b", "m"] and records["arm"].tolist() == ["all", "withheld"]
