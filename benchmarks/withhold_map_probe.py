@@ -65,6 +65,9 @@ def summary(records: pd.DataFrame) -> str:
     arm (its withheld effects and model) the records hold."""
     records = records.assign(withheld=records["withheld"].fillna("") if "withheld" in records else "",
                              arm_model=records["arm_model"].fillna("default") if "arm_model" in records else "default")
+    from bayes_roadload.analysis.batch import successful
+
+    records = successful(records)  # a failed fit has no interval: it is left out of the pairs
     first = records[records["arm"] == "all"].drop_duplicates("name").set_index("name")
     tables = []
     for (withheld, model), rows in records[records["arm"] == "withheld"].groupby(["withheld", "arm_model"]):

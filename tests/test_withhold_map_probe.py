@@ -77,3 +77,13 @@ def test_each_arm_is_fitted_with_its_own_models(probe, monkeypatch):
     records = probe.run([1], ["pitch"], 1, 2, model="m", model_heavy="mh", base_model="b", base_model_heavy="bh")
     assert calls == [("b", "bh", ()), ("m", "mh", ("pitch",))]
     assert records["arm_model"].tolist() == ["b", "m"] and records["arm"].tolist() == ["all", "withheld"]
+
+
+def test_a_failed_fit_is_left_out_of_the_pairs_not_counted_as_held(probe):
+    """A record with an error has no interval (in95 empty): its seed leaves both arms' counts."""
+    first = _records("all", [-4.0, -2.0]).assign(CD0_in95=[True, float("nan")], CD0_sd=[0.01, float("nan")],
+                                                  error=[None, "MAP failed"])
+    second = _records("withheld", [-4.0, -2.0], arm_model="variant").assign(
+        CD0_in95=[True, False], CD0_sd=[0.02, 0.05], error=[None, None])
+    table = probe.summary(pd.concat([first, second], ignore_index=True))
+    assert "| all | 1 of 1 | 1 of 1 | |" in table and "1 campaigns (ind-1)" in table
