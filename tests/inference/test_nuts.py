@@ -261,6 +261,27 @@ def test_laplace_covariance_clips_non_positive_eigenvalues():
     np.testing.assert_allclose(np.diag(cov), [0.25, 1.0, 1.0 / (1e-8 * 4.0)])
 
 
+def test_laplace_cholesky_whitens_coordinates_of_very_different_scales():
+    """Variances from 1e-10 (B_D) to 4e2 (a softplus coordinate), two of them correlated
+    0.9999: the whitened covariance L^-1 C L^-T must be the identity.  A jitter of 1e-14 x the
+    largest variance on every diagonal element (4e-12 here) is 4 % of B_D's variance and more
+    than half the conditional variance of the correlated pair's difference, so it fails this."""
+    from bayes_roadload.inference.nuts import laplace_cholesky
+
+    sd = np.array([1.5e-1, 1e-5, 3.8e-1, 2.0e1, 1.8e-2])
+    corr = np.eye(5)
+    corr[1, 2] = corr[2, 1] = 0.9999
+    cov = corr * np.outer(sd, sd)
+    chol = laplace_cholesky(cov)
+    assert np.allclose(np.triu(chol, 1), 0.0)
+    inv = np.linalg.inv(chol)
+    eig = np.linalg.eigvalsh(inv @ cov @ inv.T)
+    np.testing.assert_allclose(eig, 1.0, atol=1e-8)
+    # a correlation matrix that is singular to rounding is still factorised (with the jitter)
+    singular = np.outer(sd, sd)
+    assert np.all(np.isfinite(laplace_cholesky(singular)))
+
+
 def test_coordinate_names_follow_the_ravel_order():
     import jax.numpy as jnp
     from jax.flatten_util import ravel_pytree
