@@ -56,7 +56,7 @@ from .bayes import (
 )
 from .problem import Problem
 from .lsq import DEFAULT_LSQ, LsqSettings, fit_lsq
-from .spec import ModelSpec
+from .spec import SOFTPLUS_FRACTION_AT_BOUND, ModelSpec
 
 log = logging.getLogger(__name__)
 
@@ -262,14 +262,77 @@ def start_lsq_settings(problem: FitProblem) -> LsqSettings:
     return dataclasses.replace(DEFAULT_LSQ, initial_speed="measured")
 
 
-def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, float] | None = None) -> dict[str, Any]:
+def least_squares_start(problem: FitProblem, campaign: Campaign):
+    """The classical joint least-squares fit that starts a problem: ``(group, centres)``, the
+    fit of every run together (:class:`~bayes_roadload.inference.lsq.LsqGroup`) and the free
+    parameters held at their prior's centre because their estimate lay far outside the prior
+    (:func:`most_implausible_estimate`: the worst first, the others refitted with it there,
+    until none is left); None when the fit fails (the prior centres are a valid start)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            settings = start_lsq_settings(problem)
+            g = fit_lsq(campaign, problem.spec, grouping="all", settings=settings).groups[0]
+            centres: dict[str, float] = {}
+            free = {k: v for k, v in problem.priors.items() if k in problem.free}
+            while (worst := most_implausible_estimate({k: v for k, v in free.items() if k not in centres},
+                                                      g.estimate)) is not None:
+                centres[worst] = free[worst].center  # the others refitted with it there
+                g = fit_lsq(campaign, with_fixed(problem.spec, centres), grouping="all",
+                            settings=settings).groups[0]
+        return g, centres
+    except Exception:  # noqa: BLE001 - the prior centres are a valid fallback start
+        return None
+
+
+BOUND_REACH_SD = 3.0
+"""A least-squares estimate within this many of its standard errors of its prior's lower bound
+(or without a finite standard error) marks a posterior that reaches the bound
+(:func:`soften_bounds`)."""
+
+
+def soften_bounds(problem: FitProblem, start_fit) -> FitProblem:
+    """``problem`` with the softplus coordinate of every free parameter whose posterior reaches
+    its prior's lower bound set to :data:`~bayes_roadload.inference.spec.SOFTPLUS_FRACTION_AT_BOUND`
+    of the prior's scale (``Prior.softness``), judged from the least-squares start
+    ``start_fit`` (:func:`least_squares_start`): an estimate within :data:`BOUND_REACH_SD`
+    standard errors of the bound, one without a finite standard error (not identified), or one
+    held at its prior's centre.  The others keep
+    :data:`~bayes_roadload.inference.spec.SOFTPLUS_FRACTION`, whose coordinate keeps ridges
+    straight away from the bound.  Only the coordinates change, not the posterior; without a
+    least-squares start (None) the problem is returned as it is."""
+    if start_fit is None:
+        return problem
+    g, centres = start_fit
+    softened = {}
+    for k in problem.free:
+        prior = problem.priors.get(k)
+        if prior is None or prior.dist != "normal" or prior.low is None or prior.high is not None:
+            continue
+        est, se = g.estimate.get(k, math.nan), g.se.get(k, math.nan)
+        reaches = (k in centres or not (math.isfinite(est) and math.isfinite(se))
+                   or est - prior.low < BOUND_REACH_SD * se)
+        if reaches:
+            softened[k] = dataclasses.replace(prior, softness=SOFTPLUS_FRACTION_AT_BOUND)
+    if not softened:
+        return problem
+    log.info("softplus coordinate widened next to the bound for %s", ", ".join(sorted(softened)))
+    return dataclasses.replace(problem, priors={**problem.priors, **softened})
+
+
+_NOT_RUN = object()
+
+
+def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, float] | None = None,
+                   lsq=_NOT_RUN) -> dict[str, Any]:
     """Constrained starting values from the classical joint least-squares fit, or, with
     ``start`` (free parameter -> value, e.g. a known population mean), from those values, the
     first measured speeds and sigma 0.05 m/s without the least-squares fit; ``start`` may also
     give the integrated noise's intensity ``q_mps_per_sqrt_s`` and the spreads ``tau_*``
     (positive values; otherwise they start at 0.002 and at their prior's mode).  An estimate its
     prior all but excludes (:func:`most_implausible_estimate`) starts at the prior's centre and
-    the others are refitted with it there, the worst first, until none is left.
+    the others are refitted with it there, the worst first, until none is left
+    (:func:`least_squares_start`; ``lsq``: its result, None for a failed fit, when already computed).
     Latent-wind problems start from per-run still-air fits (:func:`_latent_wind_start`)."""
     init: dict[str, Any] = dict(problem.initial)
     r = problem.n_runs
@@ -280,19 +343,10 @@ def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, flo
     elif problem.latent_wind:
         return with_apparent(problem, _latent_wind_start(problem, campaign, init, first))
     else:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                settings = start_lsq_settings(problem)
-                g = fit_lsq(campaign, problem.spec, grouping="all", settings=settings).groups[0]
-                centres: dict[str, float] = {}
-                free = {k: v for k, v in problem.priors.items() if k in problem.free}
-                while (worst := most_implausible_estimate({k: v for k, v in free.items() if k not in centres},
-                                                          g.estimate)) is not None:
-                    centres[worst] = free[worst].center  # the others refitted with it there
-                    g = fit_lsq(campaign, with_fixed(problem.spec, centres), grouping="all",
-                                settings=settings).groups[0]
-                init.update(centres)
+        start_fit = least_squares_start(problem, campaign) if lsq is _NOT_RUN else lsq
+        if start_fit is not None:
+            g, centres = start_fit
+            init.update(centres)
             for k in problem.free:
                 val = g.estimate.get(k, math.nan)
                 if math.isfinite(val) and math.isfinite(g.se.get(k, math.nan)):
@@ -301,8 +355,6 @@ def initial_values(problem: FitProblem, campaign: Campaign, start: dict[str, flo
                 v0 = first + np.asarray(g.v0_offset_mps)
             if math.isfinite(g.rms_residual_mps):
                 sigma = np.full(r, max(g.rms_residual_mps, 1e-3))
-        except Exception:  # noqa: BLE001 - the prior centres are a valid fallback start
-            pass
     for k in problem.free:
         prior = problem.priors[k]
         if prior.low is not None:
@@ -878,6 +930,16 @@ def whitening(problem: Problem, post: Posterior, map_result: MapResult, sampler:
     return to_x, log_jacobian, None
 
 
+def mass_matrix(sampler: config.SamplerConfig, n: int) -> str:
+    """The metric warm-up adapts in the Laplace-whitened coordinates of ``n`` dimensions:
+    ``sampler.mass_matrix``, where "auto" is "dense" up to
+    :data:`~bayes_roadload.config.DENSE_MASS_MAX_DIM` dimensions and "identity" (the Laplace
+    whitening kept, only the step size adapted) above (:class:`~bayes_roadload.config.SamplerConfig`)."""
+    if sampler.mass_matrix != "auto":
+        return sampler.mass_matrix
+    return "dense" if n <= config.DENSE_MASS_MAX_DIM else "identity"
+
+
 def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
              map_result: MapResult | None = None, posterior: Posterior | None = None,
              more_draws: Callable[[NutsFit], int] | None = None) -> NutsFit:
@@ -915,9 +977,7 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
         def whitened_potential(u):
             return potential_fn(unravel(to_x(u))) - log_jacobian(u)
 
-        mass = sampler.mass_matrix
-        if mass == "auto":
-            mass = "dense" if n <= config.DENSE_MASS_MAX_DIM else "diag"
+        mass = mass_matrix(sampler, n)
         kernel = NUTS(potential_fn=whitened_potential, dense_mass=mass == "dense",
                       adapt_mass_matrix=mass != "identity",
                       target_accept_prob=sampler.target_accept, max_tree_depth=sampler.max_tree_depth)
@@ -1001,7 +1061,9 @@ def prepare_problem(problem: FitProblem, campaign: Campaign) -> tuple[FitProblem
     (:func:`~bayes_roadload.inference.bayes.linearise_run_effects`, hierarchical problems):
     re-linearised once, at each run's conditional-mean effects at a first MAP.  Returns the
     problem ready to sample and the constrained starting values."""
-    init = initial_values(problem, campaign)
+    start_fit = None if problem.latent_wind else least_squares_start(problem, campaign)
+    problem = soften_bounds(problem, start_fit)
+    init = initial_values(problem, campaign, lsq=start_fit)
     problem = linearise_run_effects(problem, init)
     if problem.varying:  # re-linearise each run at its own coefficients (bayes module docstring)
         first = find_map(problem, {}, posterior=unconstrained_posterior(problem, init))

@@ -117,6 +117,16 @@ def test_mass_matrix_option_is_validated():
         config.SamplerConfig(mass_matrix="full")
 
 
+def test_auto_metric_is_dense_for_few_dimensions_and_the_laplace_whitening_above():
+    from bayes_roadload.inference.nuts import mass_matrix
+
+    auto = config.SamplerConfig()
+    assert mass_matrix(auto, config.DENSE_MASS_MAX_DIM) == "dense"
+    assert mass_matrix(auto, config.DENSE_MASS_MAX_DIM + 1) == "identity"
+    for chosen in ("dense", "diag", "identity"):
+        assert mass_matrix(config.SamplerConfig(mass_matrix=chosen), 77) == chosen
+
+
 def test_nuts_and_least_squares_agree(pooled_fit, small_campaign):
     """On a clean campaign the joint least-squares estimate and the posterior mean differ by
     less than two posterior sd for every coefficient (priors are weak against 4 runs)."""
@@ -280,6 +290,34 @@ def test_laplace_cholesky_whitens_coordinates_of_very_different_scales():
     # a correlation matrix that is singular to rounding is still factorised (with the jitter)
     singular = np.outer(sd, sd)
     assert np.all(np.isfinite(laplace_cholesky(singular)))
+
+
+def test_soften_bounds_widens_the_coordinate_only_where_the_posterior_reaches_the_bound(small_campaign):
+    """The least-squares start decides: K_D within 3 standard errors of its bound 0, without a
+    finite standard error, or held at its prior's centre gets the softness for a posterior at
+    its bound; estimates far from their bounds, B_D (no bound) and a failed start change
+    nothing.  The priors' densities are untouched (only ``softness``)."""
+    import dataclasses as dc
+    from types import SimpleNamespace
+
+    from bayes_roadload.inference.nuts import build_problem, soften_bounds
+    from bayes_roadload.inference.spec import SOFTPLUS_FRACTION_AT_BOUND
+
+    problem = build_problem(small_campaign, "four_term")
+    far = {"AD": (0.01, 1e-4), "BD": (2e-4, float("nan")), "CD0": (0.35, 0.01), "KD": (0.6, 0.05)}
+
+    def start(values, centres=()):
+        g = SimpleNamespace(estimate={k: v[0] for k, v in values.items()}, se={k: v[1] for k, v in values.items()})
+        return g, {k: 0.6 for k in centres}
+
+    assert soften_bounds(problem, start(far)) is problem
+    assert soften_bounds(problem, None) is problem
+    for values, centres in (({**far, "KD": (0.2, 0.1)}, ()), ({**far, "KD": (0.6, float("nan"))}, ()),
+                            (far, ("KD",))):
+        softened = soften_bounds(problem, start(values, centres))
+        assert softened.priors["KD"] == dc.replace(problem.priors["KD"], softness=SOFTPLUS_FRACTION_AT_BOUND)
+        assert {k: v for k, v in softened.priors.items() if k != "KD"} == \
+            {k: v for k, v in problem.priors.items() if k != "KD"}
 
 
 def test_coordinate_names_follow_the_ravel_order():

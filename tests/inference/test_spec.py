@@ -226,6 +226,42 @@ def test_lower_truncated_normal_keeps_its_density_and_samples_through_a_scaled_s
     assert np.all(slope[above] >= 0.95 * s) and np.all(slope <= s * (1 + 1e-12))
 
 
+def test_a_posterior_piled_against_its_bound_is_no_wall_at_the_softness_for_it():
+    """K_D's prior N(0.6, 1) cut at 0 alone (its posterior in calm air), in its softplus
+    coordinate: the largest curvature of the potential over the central 99.9 % of the mass,
+    times the coordinate's variance, is 1 for a Gaussian; a leapfrog step of one standard
+    deviation is stable while it is below 4 (step^2 x curvature < 4).  The softness for a
+    posterior that reaches its bound stays below; the default softness, which keeps ridges
+    straight away from the bound, does not (the reason for the two)."""
+    import jax
+    import jax.numpy as jnp
+    from numpyro.distributions.transforms import biject_to
+
+    from bayes_roadload.inference.spec import SOFTPLUS_FRACTION, SOFTPLUS_FRACTION_AT_BOUND
+
+    def wall(softness):
+        d = Prior("normal", 0.6, 1.0, 0.0, softness=softness).to_numpyro()
+        t = biject_to(d.support)
+        assert float(t(jnp.asarray(0.0))) == pytest.approx(np.log(2.0) * (softness or SOFTPLUS_FRACTION))
+
+        def potential(x):
+            y = t(x)
+            return -(d.log_prob(y) + t.log_abs_det_jacobian(x, y))
+
+        x = jnp.linspace(-80.0, 80.0, 32001)
+        p = np.exp(-np.asarray(jax.vmap(potential)(x)))
+        p /= p.sum()
+        mean = float((np.asarray(x) * p).sum())
+        var = float(((np.asarray(x) - mean) ** 2 * p).sum())
+        cdf = np.cumsum(p)
+        inside = slice(int(np.searchsorted(cdf, 0.0005)), int(np.searchsorted(cdf, 0.9995)))
+        curvature = np.asarray(jax.vmap(jax.grad(jax.grad(potential)))(x[inside]))
+        return float(curvature.max() * var)
+
+    assert wall(SOFTPLUS_FRACTION_AT_BOUND) < 4.0
+    assert wall(None) > 4.0
+
+
 def test_softplus_keeps_a_linear_ridge_straight_where_exp_bends_it():
     """The geometry the softplus is for: a tight ridge a + k = 1 (a trades linearly with k, like
     A_D with K_D on one pair) and k ~ N(0.6, 0.12), 3 sd inside 5 s of the bound.  The sampler's whitened coordinates are
