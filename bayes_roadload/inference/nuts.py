@@ -930,14 +930,18 @@ def whitening(problem: Problem, post: Posterior, map_result: MapResult, sampler:
     return to_x, log_jacobian, None
 
 
-def mass_matrix(sampler: config.SamplerConfig, n: int) -> str:
+def mass_matrix(sampler: config.SamplerConfig, n: int, hierarchical: bool = False) -> str:
     """The metric warm-up adapts in the Laplace-whitened coordinates of ``n`` dimensions:
     ``sampler.mass_matrix``, where "auto" is "dense" up to
-    :data:`~bayes_roadload.config.DENSE_MASS_MAX_DIM` dimensions and "identity" (the Laplace
-    whitening kept, only the step size adapted) above (:class:`~bayes_roadload.config.SamplerConfig`)."""
+    :data:`~bayes_roadload.config.DENSE_MASS_MAX_DIM` dimensions; above, "diag" for a
+    ``hierarchical`` posterior (run-to-run spreads, whose Laplace fit at the joint mode is
+    poorest) and "identity" (the Laplace whitening kept, only the step size adapted) for the
+    others (:class:`~bayes_roadload.config.SamplerConfig`)."""
     if sampler.mass_matrix != "auto":
         return sampler.mass_matrix
-    return "dense" if n <= config.DENSE_MASS_MAX_DIM else "identity"
+    if n <= config.DENSE_MASS_MAX_DIM:
+        return "dense"
+    return "diag" if hierarchical else "identity"
 
 
 def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT_SAMPLER,
@@ -977,7 +981,7 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
         def whitened_potential(u):
             return potential_fn(unravel(to_x(u))) - log_jacobian(u)
 
-        mass = mass_matrix(sampler, n)
+        mass = mass_matrix(sampler, n, hierarchical=problem.settings().get("pooling") == "hierarchical")
         kernel = NUTS(potential_fn=whitened_potential, dense_mass=mass == "dense",
                       adapt_mass_matrix=mass != "identity",
                       target_accept_prob=sampler.target_accept, max_tree_depth=sampler.max_tree_depth)

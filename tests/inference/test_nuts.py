@@ -117,14 +117,16 @@ def test_mass_matrix_option_is_validated():
         config.SamplerConfig(mass_matrix="full")
 
 
-def test_auto_metric_is_dense_for_few_dimensions_and_the_laplace_whitening_above():
+def test_auto_metric_is_dense_for_few_dimensions_and_above_the_laplace_whitening_or_diagonal():
     from bayes_roadload.inference.nuts import mass_matrix
 
     auto = config.SamplerConfig()
     assert mass_matrix(auto, config.DENSE_MASS_MAX_DIM) == "dense"
+    assert mass_matrix(auto, config.DENSE_MASS_MAX_DIM, hierarchical=True) == "dense"
     assert mass_matrix(auto, config.DENSE_MASS_MAX_DIM + 1) == "identity"
+    assert mass_matrix(auto, config.DENSE_MASS_MAX_DIM + 1, hierarchical=True) == "diag"
     for chosen in ("dense", "diag", "identity"):
-        assert mass_matrix(config.SamplerConfig(mass_matrix=chosen), 77) == chosen
+        assert mass_matrix(config.SamplerConfig(mass_matrix=chosen), 77, hierarchical=True) == chosen
 
 
 def test_nuts_and_least_squares_agree(pooled_fit, small_campaign):
