@@ -677,12 +677,15 @@ def problem_like(problem: FitProblem, campaign: Campaign, reference: dict[str, A
     """``campaign``'s problem built as ``problem`` was: the same model variant, pooling, noise,
     likelihood, gradients and sampled coordinates (the same apparent coefficients, or A_D, B_D,
     C_D0 directly: :attr:`FitProblem.apparent`, the line of ``problem`` kept whatever
-    ``campaign``'s own would be), a hierarchical problem's run effects linearised at
+    ``campaign``'s own would be; the softplus coordinates of its truncated priors,
+    ``Prior.softness``), a hierarchical problem's run effects linearised at
     ``reference`` and ``offsets`` when given (:func:`linearise_run_effects`, ``sensitivities``
     as there).  A shifted campaign's problem then differs from ``problem`` in its data only (the
     Type B steps of :mod:`~bayes_roadload.inference.shift`)."""
     out = build_problem(campaign, problem.spec, pooling=problem.pooling, noise=problem.noise, robust=problem.robust)
-    out = dataclasses.replace(out, gradients=problem.gradients, apparent=problem.apparent)
+    priors = {k: dataclasses.replace(v, softness=problem.priors[k].softness) if k in problem.priors else v
+              for k, v in out.priors.items()}
+    out = dataclasses.replace(out, gradients=problem.gradients, apparent=problem.apparent, priors=priors)
     if not out.varying or reference is None:
         return out
     return linearise_run_effects(out, reference, offsets, sensitivities)

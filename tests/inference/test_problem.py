@@ -71,6 +71,31 @@ def test_a_constant_shift_moves_that_constant_only(small_campaign):
     assert lag.shift_constant("At", 1.0) is None     # not a parameter of this problem
 
 
+def test_a_shifted_campaigns_problem_keeps_the_fitted_problems_coordinates(small_campaign):
+    """The Type B step compiles the fitted problem's potential once and evaluates the shifted
+    campaigns' problems with it (``shift.SharedData``): ``problem_like`` must build them in the
+    same coordinates, a softplus widened at its bound (``nuts.soften_bounds``) included, or
+    every shifted campaign is "another structure" and fitted on its own."""
+    import numpy as np
+
+    from bayes_roadload.inference.bayes import build_problem, problem_like
+    from bayes_roadload.inference.nuts import find_map, initial_values
+    from bayes_roadload.inference.shift import potential_program
+
+    problem = build_problem(small_campaign, "four_term")
+    problem = dataclasses.replace(problem, priors={**problem.priors,
+                                                   "KD": dataclasses.replace(problem.priors["KD"], softness=0.3)})
+    heavier = dataclasses.replace(small_campaign, vehicle=dataclasses.replace(
+        small_campaign.vehicle, mass_kg=small_campaign.vehicle.mass_kg + 10.0))
+    shifted = problem_like(problem, heavier)
+    assert shifted.priors == problem.priors
+    m = find_map(problem, initial_values(problem, small_campaign))
+    program = potential_program(problem, m.z)
+    assert program.data_of(shifted) is not None
+    assert program.data_of(build_problem(heavier, "four_term")) is None   # the default coordinates differ
+    assert np.isfinite(program.fg(program.data_of(shifted), np.zeros(program.scale.size))[0])
+
+
 def test_the_truth_keeps_the_simulators_constants_not_the_analysis_assumptions(small_campaign):
     """A model that holds a constant at an assumed value (C_R = 1e-6 s^2/m^2 in
     ``four_term_tyre_lag_j2452_mean``) is scored against the simulator's road load, whose truth
