@@ -242,9 +242,8 @@ bound (:func:`bayes_roadload.inference.nuts.soften_bounds`): the coordinate is l
 strip of width ~s next to the bound, and a strip much narrower than the posterior is a wall for
 the sampler.  For K_D's prior N(0.6, 1) cut at 0 alone (K_D in calm air), the largest curvature
 of the potential in the coordinate over the central 99.9 % of its mass, times the coordinate's
-variance (1 for a Gaussian), is 45 at 0.05, 12.7 at 0.1, 3.5 at 0.2, 1.8 at 0.3 and 2.1 at 1.0;
-leapfrog steps of about one standard deviation stay stable below 4
-(``tests/inference/test_spec.py``)."""
+variance (1 for a Gaussian), is about 45 at 0.05 and 1.8 at 0.3; leapfrog steps of about one
+standard deviation stay stable below 4 (``tests/inference/test_spec.py`` computes it)."""
 
 _SOFT_CLASSES: dict = {}
 
