@@ -66,13 +66,10 @@ def run_variant(camp, softness: float, mass: str) -> dict:
     original_softness, nuts.SOFTPLUS_FRACTION_AT_BOUND = nuts.SOFTPLUS_FRACTION_AT_BOUND, softness
     try:
         t0 = time.perf_counter()
-        problem, init = nuts.prepare_problem(nuts.build_problem(camp, "four_term", pooling="pooled"), camp)
-        post = nuts.unconstrained_posterior(problem, init)
-        m = nuts.find_map(problem, {}, posterior=post)
-        sampler = dataclasses.replace(config.DEFAULT_SAMPLER, mass_matrix=mass)
-        sampler = nuts.quiet_trace_sampler(nuts.campaign_sampler(sampler, problem), m)
-        fit = nuts.run_nuts(problem, sampler=sampler, map_result=m, posterior=post)
+        fit = nuts.fit_nuts(camp, "four_term", pooling="pooled",
+                            sampler=dataclasses.replace(config.DEFAULT_SAMPLER, mass_matrix=mass, retry=False))
         wall = time.perf_counter() - t0
+        problem = fit.problem
     finally:
         nuts.MCMC = original
         nuts.SOFTPLUS_FRACTION_AT_BOUND = original_softness

@@ -907,7 +907,6 @@ def whitening(problem: Problem, post: Posterior, map_result: MapResult, sampler:
     ``q_mps_per_sqrt_s``, :func:`noise_scaled_coordinates`.  Returns (u -> x, u -> log Jacobian,
     the rates by coordinate name or None in the Laplace coordinates alone)."""
     flat_map, _ = ravel_pytree(map_result.z)
-    n = flat_map.size
     names = _coordinate_names(map_result.z)
     q_at = [i for i, name in enumerate(names) if name.split("[")[0] == "q_mps_per_sqrt_s"]
     if sampler.noise_scaled_metric and len(q_at) == 1:
