@@ -20,7 +20,7 @@ The rules are frozen before the confirmatory seeds run (``docs/calibration.md``)
   current choice); confirmatory seeds: from 5000 on (``--seed0 5000``,
   :data:`~bayes_roadload.analysis.calibration.CONFIRMATORY_SEED0`).
 
-Writes every record to ``--records`` (CSV; a ``.partial.csv`` while running, from which an
+Writes every record, with the commit of the code that fitted it (``code``), to ``--records`` (CSV; a ``.partial.csv`` while running, from which an
 interrupted run resumes: its campaigns are not fitted again), prints the
 summary as JSON and, with ``--docs``, regenerates the section of ``docs/calibration.md`` between
 its markers.
@@ -47,6 +47,7 @@ from bayes_roadload.analysis.batch import batch_client, passed_first_time, run_b
 from bayes_roadload.inference.kinds import FitOptions  # noqa: E402
 from bayes_roadload.config import DEFAULT_SAMPLER  # noqa: E402
 from doc_sections import replace_section  # noqa: E402
+from gradient_cost import commit_of  # noqa: E402
 from bayes_roadload.analysis.calibration import (CONFIRMATORY_SEED0, DIAGNOSTIC_SPLIT, QUANTITIES,  # noqa: E402
                                                  calibration_jobs, calibration_markdown, calibration_table,
                                                  with_test_mass)
@@ -143,13 +144,16 @@ def main(argv=None) -> int:
         if finished:
             print(f"resuming: {len(before)} campaigns from {partial}, {len(jobs)} to fit", file=sys.stderr)
 
+        code = commit_of(ROOT)
+
         def progress(rec):
-            done.append(rec)
+            done.append({**rec, "code": code})
             pd.DataFrame.from_records(done).to_csv(partial, index=False)
 
         with batch_client(args.workers, args.scheduler) as client:
             new = run_batch(jobs, client, on_record=progress)
         wall = time.perf_counter() - t0
+        new["code"] = code
         records = pd.concat([before, new], ignore_index=True) if finished else new
         records.to_csv(args.records, index=False)
         partial.unlink(missing_ok=True)

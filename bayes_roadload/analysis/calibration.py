@@ -168,7 +168,8 @@ def truth_split_table(records: pd.DataFrame, quantity: str, threshold: float) ->
 def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: float | None = None,
                          split: tuple[str, float] | None = None) -> str:
     """The study's section of ``docs/calibration.md``: counts, gates (and those passed without a
-    retry), the intervals that hold, the table with verdicts, the coverage by test mass
+    retry), the intervals that hold, the table with verdicts, the gates by ``code`` (the commit
+    that fitted the campaigns, when the records hold more than one), the coverage by test mass
     (:func:`mass_class_table`, when every record has ``test_mass_kg``) and, with ``split`` (e.g.
     :data:`DIAGNOSTIC_SPLIT`), the coverage on either side of a true value
     (:func:`truth_split_table`); the last two marked as readings."""
@@ -187,6 +188,12 @@ def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: flo
         verdict = "pass" if r["coverage_ok"] and r["z_sd_ok"] else "**fail**"
         lines.append(f"| {r['group']} | {r['quantity']} | {r['n']} | {r['coverage95']:.2f} | {r['z_mean']:+.2f} | "
                      f"{r['z_sd']:.2f} | {verdict} |")
+    if "code" in ok and ok["code"].nunique() > 1:
+        lines += ["", "Gates by the code that fitted the campaigns (column `code`; the model is the same, the "
+                  "sampler may differ):", ""]
+        for code, part in ok.groupby("code", sort=False):
+            lines.append(f"- `{code}`: {int(part['gate_pass'].astype(bool).sum())} of {len(part)} passed every gate"
+                         + (f", {int(passed_first_time(part).sum())} first time" if "retries" in part else "") + ".")
     readings = []
     if "test_mass_kg" in records and records["test_mass_kg"].notna().all():
         readings.append(("A reading, not a rule: 95 % coverage by the declared test mass (the heavy-duty variant "

@@ -67,6 +67,21 @@ def test_a_bias_shows_in_the_mean_z_and_the_coverage_not_in_sd_z():
     assert float(row.split("|")[5]) == pytest.approx(overall["z_mean"].iloc[0], abs=0.005)
 
 
+def test_the_gates_are_read_apart_by_the_code_that_fitted_them():
+    """Records fitted by two commits (column ``code``): the section counts each commit's gates
+    and first-time passes on its own campaigns; one commit adds no such lines."""
+    rec = _records(1.0, n=10)
+    rec["retries"] = 0
+    rec["code"] = ["old"] * 6 + ["new"] * 4
+    rec.loc[[0, 1], "gate_pass"] = False
+    rec.loc[7, "retries"] = 1
+    text = calibration_markdown(rec, calibration_table(rec))
+    assert "- `old`: 4 of 6 passed every gate, 4 first time." in text
+    assert "- `new`: 4 of 4 passed every gate, 3 first time." in text
+    rec["code"] = "old"
+    assert "Gates by the code" not in calibration_markdown(rec, calibration_table(rec))
+
+
 def test_the_truth_split_reads_coverage_on_either_side():
     """The reading by a true value (``DIAGNOSTIC_SPLIT``): campaigns above the threshold whose
     intervals all miss show coverage 0 there, those below keep theirs, and the section says it
