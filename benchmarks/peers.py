@@ -63,7 +63,8 @@ from jax.flatten_util import ravel_pytree
 
 from bayes_roadload import config
 from bayes_roadload.inference.bayes import build_problem
-from bayes_roadload.inference.nuts import find_map, prepare_problem, run_nuts, unconstrained_posterior
+from bayes_roadload.inference.nuts import (find_map, laplace_cholesky, prepare_problem, run_nuts,
+                                           unconstrained_posterior)
 from bayes_roadload.inference.spec import SOFTPLUS_FRACTION
 from bayes_roadload.physics import integrate as integ
 from bayes_roadload.simulate import get_case, simulate_campaign
@@ -205,8 +206,7 @@ def build_setup(pairs: int) -> Setup:
     m = find_map(problem, {}, posterior=post)
     t2 = time.perf_counter()
     flat_map = np.asarray(ravel_pytree(m.z)[0])
-    n = flat_map.size
-    chol = np.linalg.cholesky(m.cov + 1e-14 * np.abs(np.diag(m.cov)).max() * np.eye(n))
+    chol = laplace_cholesky(np.asarray(m.cov))  # ours' whitening, for the whitened peers too
     unravel = post.unravel
     logdensity = jax.jit(lambda x: -post.potential_fn(unravel(x)))
     return Setup(campaign, problem, post, m, t1 - t0, t2 - t1, logdensity, post.flat0, flat_map, chol)
@@ -294,7 +294,7 @@ def stan_data(setup: Setup, whitened: bool) -> dict:
         "prior_loc": np.array([p.loc for p in priors]), "prior_scale": np.array([p.scale for p in priors]),
         "positive": [int(p.low is not None) for p in priors],
         "low": np.array([p.low if p.low is not None else 0.0 for p in priors]),
-        "soft_scale": np.array([SOFTPLUS_FRACTION * p.scale for p in priors]),
+        "soft_scale": np.array([(SOFTPLUS_FRACTION if p.softness is None else p.softness) * p.scale for p in priors]),
         "v0_loc": np.asarray(b.speed_mps)[:, 0], "v0_scale": config.NOISE_PRIORS["v0_scale_mps"],
         "sigma_rate": 2.0 / config.NOISE_PRIORS["sigma_speed_mean_mps"], "sigma_floor": config.SPEED_NOISE_FLOOR_MPS,
         "q_rate": 2.0 / config.NOISE_PRIORS["q_mps_per_sqrt_s"],
