@@ -392,7 +392,7 @@ _ESTIMABLE_TOL = 1e-6
 
 
 def fit_lsq(campaign, spec: ModelSpec | str | os.PathLike = "four_term", grouping: str = "pair", *,
-            initial: Mapping[str, float] | None = None,
+            initial: Mapping[str, float] | None = None, hold: Mapping[str, float] | None = None,
             settings: LsqSettings = DEFAULT_LSQ) -> LsqResult:
     """Fit a model variant to a campaign by least squares, group by group.
 
@@ -405,6 +405,10 @@ def fit_lsq(campaign, spec: ModelSpec | str | os.PathLike = "four_term", groupin
         pair (the thesis' practice), or the whole campaign.
     initial : free parameter -> starting value (SI); defaults to the spec's ``initial``, else
         the model default.
+    hold : free parameter -> value (SI) at which it is held while the others are fitted: the
+        same fit as with the parameter fixed in the spec, through the compiled programs of the
+        unheld fit (the solver's unknowns are the unheld ones, the residual's Jacobian keeps
+        their columns); a held parameter's estimate is its value, its standard error 0.
     settings : optimiser tolerances and reference conditions.
 
     Returns
@@ -419,7 +423,10 @@ def fit_lsq(campaign, spec: ModelSpec | str | os.PathLike = "four_term", groupin
     if not free:
         raise ValueError(f"model {spec.name!r} has no free parameter to fit")
     defaults = model.defaults
-    start = {p: (initial or {}).get(p, spec.initial.get(p, defaults[p])) for p in free}
+    hold = dict(hold or {})
+    if unknown := sorted(set(hold) - set(free)):
+        raise ValueError(f"hold: {', '.join(unknown)} not free in model {spec.name!r}")
+    start = {p: hold.get(p, (initial or {}).get(p, spec.initial.get(p, defaults[p]))) for p in free}
     scales = np.asarray([config.PARAMETER_SCALES[p] for p in free])
     theta0 = np.asarray([start[p] for p in free]) / scales
 
@@ -436,6 +443,14 @@ def fit_lsq(campaign, spec: ModelSpec | str | os.PathLike = "four_term", groupin
     n_runs = len(groups[0][1])  # every group of a grouping has the same number of runs
     x0 = np.concatenate([theta0, np.zeros(n_runs)]) if fit_v0 else theta0
     n_fit = len(x0)
+    solved = np.asarray([i for i in range(n_fit) if i >= len(free) or free[i] not in hold], int)
+    unit_solved = np.eye(n_fit)[:, solved]  # full vector -> the solver's unknowns
+
+    def full(x):
+        out = x0.copy()
+        out[solved] = x
+        return out
+
     t_compile = time.perf_counter()
     first = _select(batch, [index[r] for r in groups[0][1]])
     jax.block_until_ready(fun(jnp.asarray(x0), fixed_j, first))
@@ -448,29 +463,30 @@ def fit_lsq(campaign, spec: ModelSpec | str | os.PathLike = "four_term", groupin
         t0 = time.perf_counter()
         b = _select(batch, [index[r] for r in ids])
         res = least_squares(
-            lambda x: np.asarray(fun(jnp.asarray(x), fixed_j, b)),
-            x0,
-            jac=lambda x: np.asarray(jac(jnp.asarray(x), fixed_j, b)),
+            lambda x: np.asarray(fun(jnp.asarray(full(x)), fixed_j, b)),
+            x0[solved],
+            jac=lambda x: np.asarray(jac(jnp.asarray(full(x)), fixed_j, b))[:, solved],
             method=settings.method, ftol=settings.ftol, xtol=settings.xtol, gtol=settings.gtol,
             max_nfev=settings.max_nfev)
         # with the measured initial speed each run's first residual is 0 by construction
         n = int(np.asarray(b.mask).sum()) - (0 if fit_v0 else len(ids))
         ssr = float(np.sum(res.fun**2))
-        cv = _Covariance.from_jacobian(np.asarray(res.jac), ssr, n - n_fit, settings.rank_rcond)
+        cv = _Covariance.from_jacobian(np.asarray(res.jac), ssr, n - len(solved), settings.rank_rcond)
         p = len(free)
-        cov = cv.cov[:p, :p] * np.outer(scales, scales)  # marginal over the v0 offsets
-        est_phys = res.x[:p] * scales
-        v0_offsets = tuple(float(x) * V0_OFFSET_SCALE_MPS for x in res.x[p:])
+        x_full = full(res.x)
+        cov_full = unit_solved @ cv.cov @ unit_solved.T  # held parameters: zero rows and columns
+        cov = cov_full[:p, :p] * np.outer(scales, scales)  # marginal over the v0 offsets
+        est_phys = x_full[:p] * scales
+        v0_offsets = tuple(float(x) * V0_OFFSET_SCALE_MPS for x in x_full[p:])
         estimate = dict(zip(free, (float(x) for x in est_phys)))
-        unit = np.eye(n_fit)
-        se = {q: cv.se(unit[i]) * scales[i] for i, q in enumerate(free)}
+        se = {q: cv.se(unit_solved[i]) * scales[i] for i, q in enumerate(free)}
         curve = _driveline_curve(campaign, ids)
         d = np.asarray(figures_j(jnp.asarray(est_phys), fixed_j, jnp.asarray(curve), vehicle))
         g = np.asarray(figures_jac(jnp.asarray(est_phys), fixed_j, jnp.asarray(curve), vehicle))
         g = np.concatenate([g * scales, np.zeros((g.shape[0], n_fit - p))], axis=1)
         for k, name in enumerate(derived_names):
             estimate[name] = float(d[k])
-            se[name] = cv.se(g[k])
+            se[name] = cv.se(g[k] @ unit_solved)
         unidentified = tuple(q for q in free + derived_names if math.isinf(se[q]))
         for i, q in enumerate(free):
             if q in unidentified:

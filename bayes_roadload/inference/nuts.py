@@ -267,7 +267,8 @@ def least_squares_start(problem: FitProblem, campaign: Campaign):
     fit of every run together (:class:`~bayes_roadload.inference.lsq.LsqGroup`) and the free
     parameters held at their prior's centre because their estimate lay far outside the prior
     (:func:`most_implausible_estimate`: the worst first, the others refitted with it there,
-    until none is left); None when the fit fails (the prior centres are a valid start)."""
+    until none is left; ``fit_lsq(..., hold=centres)``, whose refits reuse the first fit's
+    compiled programs); None when the fit fails (the prior centres are a valid start)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -278,8 +279,7 @@ def least_squares_start(problem: FitProblem, campaign: Campaign):
             while (worst := most_implausible_estimate({k: v for k, v in free.items() if k not in centres},
                                                       g.estimate)) is not None:
                 centres[worst] = free[worst].center  # the others refitted with it there
-                g = fit_lsq(campaign, with_fixed(problem.spec, centres), grouping="all",
-                            settings=settings).groups[0]
+                g = fit_lsq(campaign, problem.spec, grouping="all", hold=centres, settings=settings).groups[0]
         return g, centres
     except Exception:  # noqa: BLE001 - the prior centres are a valid fallback start
         return None

@@ -356,3 +356,34 @@ def test_pad_batch_repeats_the_last_sample_and_masks_it():
     one = pad_batch(batch.run(1), 9)  # one run's [N] arrays, its constants scalars
     assert one.time_s.shape == (9,) and np.ndim(one.mass_kg) == 0 and not np.asarray(one.mask)[7:].any()
     assert pad_batch(batch, 7) is batch
+
+
+def test_a_held_parameter_gives_the_fit_with_it_fixed_through_the_same_programs(two_pairs):
+    """``hold``: K_D held 30 % above its estimate is the fit of the others with K_D fixed in the
+    spec: the same least-squares problem from the same start, so the same iterates (measured
+    bit-identical here; 1e-12 leaves room for the rounding of another compiler) in the
+    estimates, the initial-speed offsets, the standard errors and the derived figures'; the
+    held parameter keeps its value with standard error 0, and the fit traces no program beyond
+    the unheld fit's."""
+    from bayes_roadload.inference import lsq
+    from bayes_roadload.inference.nuts import with_fixed
+
+    noisy = with_speed_noise(two_pairs, 0.05, 5)
+    spec = load_model_spec("four_term")
+    free_fit = fit_lsq(noisy, spec, "all", settings=FITTED_V0).groups[0]
+    value = 1.3 * free_fit.estimate["KD"]
+    model, _, free = spec.build(noisy)
+    fun, jac = lsq._compiled(model, free, FITTED_V0.integrator, True)
+    traced = (fun._cache_size(), jac._cache_size())
+    held = fit_lsq(noisy, spec, "all", hold={"KD": value}, settings=FITTED_V0).groups[0]
+    assert (fun._cache_size(), jac._cache_size()) == traced
+    fixed = fit_lsq(noisy, with_fixed(spec, {"KD": value}), "all", settings=FITTED_V0).groups[0]
+    assert held.estimate["KD"] == value and held.se["KD"] == 0.0
+    assert held.estimate["AD"] != pytest.approx(free_fit.estimate["AD"], rel=1e-3)  # the hold moved the others
+    for q in ("AD", "BD", "CD0", "F50_N", "F0_N", "F2_N_per_kph2"):
+        assert held.estimate[q] == pytest.approx(fixed.estimate[q], rel=1e-12), q
+        assert held.se[q] == pytest.approx(fixed.se[q], rel=1e-12), q
+    assert held.v0_offset_mps == pytest.approx(fixed.v0_offset_mps, rel=1e-12, abs=1e-15)
+    assert held.ssr_m2ps2 == pytest.approx(fixed.ssr_m2ps2, rel=1e-12)
+    with pytest.raises(ValueError, match="not free"):
+        fit_lsq(noisy, spec, "all", hold={"tyre_lag_gain_per_mps": 0.0})
