@@ -7,6 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from bayes_roadload import config
 from bayes_roadload.inference.results import (
     SUMMARY_COLUMNS,
     posterior_predictive,
@@ -66,7 +67,11 @@ def test_derived_road_load_is_consistent(pooled_fit):
 def test_posterior_predictive_covers_the_observed_speeds(pooled_fit):
     """About 95 % of the measured speeds lie inside the 95 % predictive band (not per-run
     independent, hence the wide acceptance 0.85-0.995)."""
-    pp = posterior_predictive(pooled_fit, n_draws=100)["speed_mps"]
+    pred = posterior_predictive(pooled_fit, n_draws=100)
+    pp = pred["speed_mps"]
+    # stored in float32: what the traces lose to it is below the likelihood's noise floor
+    assert pp.dtype == pred["speed_integrated_mps"].dtype == np.float32
+    assert np.nanmax(np.abs(pp)) * np.finfo(np.float32).eps < config.SPEED_NOISE_FLOOR_MPS / 100
     flat = pp.reshape((-1,) + pp.shape[2:])
     lo, hi = np.nanpercentile(flat, [2.5, 97.5], axis=0)
     obs = np.asarray(pooled_fit.problem.batch.speed_mps)
