@@ -20,9 +20,9 @@ The rules are frozen before the confirmatory seeds run (``docs/calibration.md``)
   current choice); confirmatory seeds: from 5000 on (``--seed0 5000``,
   :data:`~bayes_roadload.analysis.calibration.CONFIRMATORY_SEED0`).
 
-Writes every record, with the commit of the code that fitted it (``code``), to ``--records`` (CSV; a ``.partial.csv`` while running, from which an
-interrupted run resumes: its campaigns are not fitted again), prints the
-summary as JSON and, with ``--docs``, regenerates the section of ``docs/calibration.md`` between
+Writes every record, with the commit of the code that fitted it (``code``), to ``--records``
+(CSV; a ``.partial.csv`` while running, from which an interrupted run resumes: its campaigns are
+not fitted again), prints the summary as JSON and, with ``--docs``, regenerates the section of ``docs/calibration.md`` between
 its markers.
 
     python benchmarks/calibration_study.py --n 200 --seed0 5000 --workers 2 --docs

@@ -82,17 +82,18 @@ def _draw_dicts(fit: NutsFit, idx: np.ndarray) -> dict[str, jnp.ndarray]:
 
 PREDICTIVE_DTYPE = np.float32
 """Storage type of the replicated speed traces (:func:`posterior_predictive`), the bulk of
-``posterior.nc`` (59 of its 60 MB at 18 pairs in float64).  Their rounding, 6e-8 relative
+``posterior.nc`` (two arrays of draws x runs x samples: 59 MB in float64 for 200 draws of 36 runs
+padded to 512 samples, against ~2 MB for everything else).  Their rounding, 6e-8 relative
 (2.4e-6 m/s at 40 m/s), is 400 times below the likelihood's speed-noise floor
 (:data:`~bayes_roadload.config.SPEED_NOISE_FLOOR_MPS`); they are computed in float64."""
 
 
 PREDICTIVE_PRNG = "rbg"
 """JAX PRNG of the replicated traces' noise: XLA's RngBitGenerator for the bits, Threefry for
-the per-draw keys (``jax.random.key(seed, impl="rbg")``).  Its program compiles in 3.2 s of
-CPU where Threefry's took 4.6 s (the predictive of the 36-run reference campaign, 200 draws,
-compilation and run); the noise is as random and reproducible for a given seed and
-installation, not across JAX versions."""
+the per-draw keys (``jax.random.key(seed, impl="rbg")``).  The predictive of the 36-run
+cold-start reference (200 draws, compiled and run) takes 3.4 s of CPU against 5.0 s with
+Threefry bits (``benchmarks/predictive_prng.py``, records ``predictive_prng.jsonl``).  The
+noise is reproducible for a given seed and installation, not across JAX versions."""
 
 
 def posterior_predictive(fit: NutsFit, n_draws: int | None = None, seed: int = 1) -> dict[str, np.ndarray]:
