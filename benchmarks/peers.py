@@ -65,7 +65,6 @@ from bayes_roadload import config
 from bayes_roadload.inference.bayes import build_problem
 from bayes_roadload.inference.nuts import (find_map, laplace_cholesky, prepare_problem, run_nuts,
                                            unconstrained_posterior)
-from bayes_roadload.inference.spec import SOFTPLUS_FRACTION
 from bayes_roadload.physics import integrate as integ
 from bayes_roadload.simulate import get_case, simulate_campaign
 
@@ -294,7 +293,7 @@ def stan_data(setup: Setup, whitened: bool) -> dict:
         "prior_loc": np.array([p.loc for p in priors]), "prior_scale": np.array([p.scale for p in priors]),
         "positive": [int(p.low is not None) for p in priors],
         "low": np.array([p.low if p.low is not None else 0.0 for p in priors]),
-        "soft_scale": np.array([(SOFTPLUS_FRACTION if p.softness is None else p.softness) * p.scale for p in priors]),
+        "soft_scale": np.array([p.softplus_fraction * p.scale for p in priors]),
         "v0_loc": np.asarray(b.speed_mps)[:, 0], "v0_scale": config.NOISE_PRIORS["v0_scale_mps"],
         "sigma_rate": 2.0 / config.NOISE_PRIORS["sigma_speed_mean_mps"], "sigma_floor": config.SPEED_NOISE_FLOOR_MPS,
         "q_rate": 2.0 / config.NOISE_PRIORS["q_mps_per_sqrt_s"],

@@ -214,3 +214,14 @@ def benchmark_script(name: str):
         yield module
     finally:
         sys.modules.pop(spec.name, None)
+
+
+def with_fixed(spec, values: dict[str, float]):
+    """``spec`` with the free parameters ``values`` fixed at those values (SI): the reference
+    the held least-squares fits (``fit_lsq(..., hold=...)``) are checked against."""
+    import dataclasses
+
+    return dataclasses.replace(spec, free=tuple(p for p in spec.free if p not in values),
+                               fixed={**spec.fixed, **values},
+                               priors={k: v for k, v in spec.priors.items() if k not in values},
+                               initial={k: v for k, v in spec.initial.items() if k not in values})

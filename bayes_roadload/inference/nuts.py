@@ -240,14 +240,6 @@ def most_implausible_estimate(priors: dict, estimate: dict[str, float]) -> str |
     return worst
 
 
-def with_fixed(spec: ModelSpec, values: dict[str, float]) -> ModelSpec:
-    """``spec`` with the free parameters ``values`` fixed at those values (SI)."""
-    return dataclasses.replace(spec, free=tuple(p for p in spec.free if p not in values),
-                               fixed={**spec.fixed, **values},
-                               priors={k: v for k, v in spec.priors.items() if k not in values},
-                               initial={k: v for k, v in spec.initial.items() if k not in values})
-
-
 def start_lsq_settings(problem: FitProblem) -> LsqSettings:
     """The least-squares start's settings for ``problem``: every run's initial speed fitted with
     the coefficients (the default, :data:`~bayes_roadload.inference.lsq.DEFAULT_LSQ`) while

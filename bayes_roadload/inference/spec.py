@@ -210,6 +210,12 @@ class Prior:
             return float(math.exp(self.loc))
         return 0.5 * (self.low + self.high)
 
+    @property
+    def softplus_fraction(self) -> float:
+        """The softplus coordinate's width as a fraction of the scale (a normal prior truncated
+        from below only): ``softness``, else :data:`SOFTPLUS_FRACTION`."""
+        return SOFTPLUS_FRACTION if self.softness is None else self.softness
+
     def to_numpyro(self):
         """The numpyro distribution (imported lazily: only the Bayesian layer needs it).  A
         normal truncated from below only is :func:`soft_lower_truncated_normal`: the same
@@ -220,8 +226,7 @@ class Prior:
             if self.low is None and self.high is None:
                 return dist.Normal(self.loc, self.scale)
             if self.high is None:
-                fraction = SOFTPLUS_FRACTION if self.softness is None else self.softness
-                return soft_lower_truncated_normal(self.loc, self.scale, self.low, fraction)
+                return soft_lower_truncated_normal(self.loc, self.scale, self.low, self.softplus_fraction)
             return dist.TruncatedNormal(self.loc, self.scale, low=self.low, high=self.high)
         if self.dist == "half_normal":
             return dist.HalfNormal(self.scale)

@@ -366,7 +366,8 @@ def test_a_held_parameter_gives_the_fit_with_it_fixed_through_the_same_programs(
     held parameter keeps its value with standard error 0, and the fit traces no program beyond
     the unheld fit's."""
     from bayes_roadload.inference import lsq
-    from bayes_roadload.inference.nuts import with_fixed
+
+    from ..conftest import with_fixed
 
     noisy = with_speed_noise(two_pairs, 0.05, 5)
     spec = load_model_spec("four_term")

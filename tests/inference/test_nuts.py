@@ -619,7 +619,9 @@ def test_an_estimate_its_prior_excludes_starts_at_the_prior_centre_and_the_other
     there (they trade along the ridge: the drag the fixed C_D0 adds comes off A_D and B_D)."""
     from bayes_roadload.inference.bayes import build_problem
     from bayes_roadload.inference.lsq import fit_lsq
-    from bayes_roadload.inference.nuts import initial_values, with_fixed
+    from bayes_roadload.inference.nuts import initial_values
+
+    from ..conftest import with_fixed
     from bayes_roadload.inference.spec import Prior
 
     problem = build_problem(small_campaign, "three_term")
