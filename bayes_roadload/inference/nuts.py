@@ -24,10 +24,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import math
 import os
+import threading
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -996,7 +998,8 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
              "s" if sampler.num_chains > 1 else "", sampler.num_warmup, sampler.num_samples, sampler.target_accept)
     t0 = time.perf_counter()
     # warm-up and sampling are one compiled program: a failure in either is the "sampling" stage
-    with stage("sampling"):
+    beat = 0.0 if sampler.progress_bar else sampler.heartbeat_s
+    with stage("sampling"), heartbeat("NUTS (warm-up and sampling)", beat):
         mcmc.run(key, *args, init_params=init_params, extra_fields=fields)
         raw = jax.block_until_ready(mcmc.get_samples(group_by_chain=True))
     elapsed = time.perf_counter() - t0
@@ -1037,7 +1040,8 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
         mcmc.post_warmup_state = mcmc.last_state
         mcmc.num_samples = more
         t0 = time.perf_counter()
-        with stage("sampling"):
+        with stage("sampling"), heartbeat("NUTS (further draws)", beat,
+                                          expected_s=timings["sampling_s"] * more / sampler.num_samples):
             mcmc.run(mcmc.post_warmup_state.rng_key, *args, extra_fields=fields)
             raw_more = jax.block_until_ready(mcmc.get_samples(group_by_chain=True))
         timings["extension_s"] = time.perf_counter() - t0
@@ -1048,6 +1052,32 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
         extra = {k: np.concatenate([v, np.asarray(extra_more[k])], axis=1) for k, v in extra.items()}
         fit = finished(raw, extra, dataclasses.replace(sampler, num_samples=sampler.num_samples + more))
     return fit
+
+
+@contextlib.contextmanager
+def heartbeat(what: str, every_s: float, expected_s: float | None = None):
+    """Log ``what`` with the time so far at INFO every ``every_s`` seconds until the block
+    ends (``SamplerConfig.heartbeat_s``), from a daemon thread; with ``expected_s``, also the
+    time left at that estimate.  Nothing when ``every_s`` is 0 or INFO is not shown."""
+    if every_s <= 0.0 or not log.isEnabledFor(logging.INFO):
+        yield
+        return
+    done = threading.Event()
+    t0 = time.perf_counter()
+
+    def beat():
+        while not done.wait(every_s):
+            so_far = time.perf_counter() - t0
+            left = "" if expected_s is None else f", about {max(expected_s - so_far, 0.0):.0f} s left at the first attempt's pace"
+            log.info("%s: still running after %.0f s%s", what, so_far, left)
+
+    thread = threading.Thread(target=beat, name="bayes-roadload-heartbeat", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
 
 
 def prepare_problem(problem: FitProblem, campaign: Campaign) -> tuple[FitProblem, dict[str, Any]]:

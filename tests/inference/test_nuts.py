@@ -1,6 +1,7 @@
 """MAP + Laplace-preconditioned NUTS on a small, correctly specified campaign."""
 
 import dataclasses
+import logging
 
 import numpy as np
 import pytest
@@ -75,6 +76,39 @@ def test_sampler_config_is_validated():
         config.SamplerConfig(precondition="whitened")
     with pytest.raises(ValueError):
         config.SamplerConfig(num_samples=0)
+    with pytest.raises(ValueError):
+        config.SamplerConfig(heartbeat_s=-1.0)
+
+
+def test_heartbeat_logs_while_its_block_runs_and_stops_with_it(caplog):
+    import threading
+    import time
+
+    from bayes_roadload.inference.nuts import heartbeat
+
+    caplog.set_level(logging.INFO, logger="bayes_roadload")
+    with heartbeat("work", 0.05, expected_s=100.0):
+        time.sleep(0.4)
+    lines = [r.getMessage() for r in caplog.records if "still running" in r.getMessage()]
+    # a line every 0.05 s of a 0.4 s block: about 8, at least 2 on a loaded machine
+    assert len(lines) >= 2 and all(m.startswith("work: still running after") and "s left" in m for m in lines)
+    assert not any(t.name == "bayes-roadload-heartbeat" for t in threading.enumerate())
+    caplog.clear()
+    with heartbeat("work", 0.0):
+        time.sleep(0.1)
+    caplog.set_level(logging.WARNING, logger="bayes_roadload")
+    with heartbeat("work", 0.01):
+        time.sleep(0.1)
+    assert not caplog.records  # off, or INFO not shown: nothing
+
+
+def test_a_fit_without_a_progress_bar_logs_its_heartbeat(caplog):
+    from bayes_roadload.inference.steady import fit_steady_nuts
+
+    caplog.set_level(logging.INFO, logger="bayes_roadload")
+    # the compiled warm-up and sampling program of even this small fit runs for well over 1 ms
+    fit_steady_nuts(_steady_campaign(), "four_term", sampler=dataclasses.replace(TINY, heartbeat_s=1e-3))
+    assert any(r.getMessage().startswith("NUTS (warm-up and sampling): still running") for r in caplog.records)
 
 
 @pytest.mark.slow  # a second numerical check: the exact Hessian by reverse mode through the ODE, ~25 s
