@@ -217,6 +217,7 @@ def _sampler(args):
                                                     "quiet_trace_target_accept": None}
     return config.SamplerConfig(num_warmup=args.warmup, num_samples=args.draws, num_chains=args.chains,
                                 seed=args.seed, progress_bar=console.progress_bars(not args.no_progress),
+                                iteration_bars=bool(args.iteration_bars),
                                 precondition="none" if args.no_precondition else "laplace",
                                 noise_scaled_metric=bool(args.noise_scaled_metric), **stated)
 
@@ -986,6 +987,10 @@ def _add_nuts_options(p: argparse.ArgumentParser, seed: int) -> None:
                         "same posterior without the funnel one or two pairs leave at small q (default: on; "
                         "--no-noise-scaled-metric samples in the Laplace coordinates alone)")
     p.add_argument("--no-progress", action="store_true", help="nuts: no progress bar")
+    p.add_argument("--iteration-bars", action="store_true",
+                   help="nuts, on a terminal: numpyro's bars of each chain's iterations instead of the time bar; "
+                        "the sampler's program then compiles in every run (JAX does not cache programs with host "
+                        "callbacks)")
     p.add_argument("--no-precondition", action="store_true",
                    help="nuts: numpyro's default NUTS without the MAP/Laplace start (slow; for comparison)")
 

@@ -134,12 +134,14 @@ def test_sampler_options_reach_the_sampler():
     from bayes_roadload.cli import _sampler, build_parser
 
     args = build_parser().parse_args(["fit", "campaign", "--out", "o", "--target-accept", "0.95", "--draws", "50",
-                                      "--no-precondition", "--no-noise-scaled-metric"])
+                                      "--no-precondition", "--no-noise-scaled-metric", "--iteration-bars"])
     s = _sampler(args)
     assert (s.target_accept, s.num_samples, s.precondition, s.noise_scaled_metric) == (0.95, 50, "none", False)
+    assert s.iteration_bars
     default = _sampler(build_parser().parse_args(["fit", "campaign", "--out", "o"]))
     assert default.target_accept == config.DEFAULT_SAMPLER.target_accept
     assert default.noise_scaled_metric == config.DEFAULT_SAMPLER.noise_scaled_metric
+    assert not default.iteration_bars  # the time bar: the sampler's program stays cacheable
     assert default.small_campaign_target_accept == config.DEFAULT_SAMPLER.small_campaign_target_accept
     assert s.small_campaign_target_accept is None  # a stated acceptance holds for every campaign size
     assert s.quiet_trace_target_accept is None

@@ -991,15 +991,17 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
     method, why = chain_method(sampler, problem)
     if method == "sequential" and sampler.num_chains > 1:
         log.info("chains one after the other: %s", why)
+    iteration_bars = sampler.progress_bar and sampler.iteration_bars
     mcmc = MCMC(kernel, num_warmup=sampler.num_warmup, num_samples=sampler.num_samples,
-                num_chains=sampler.num_chains, chain_method=method, progress_bar=sampler.progress_bar)
+                num_chains=sampler.num_chains, chain_method=method, progress_bar=iteration_bars)
     collect_warmup(mcmc)
     log.info("NUTS: %d chain%s x (%d warm-up + %d draws), target acceptance %.2f ...", sampler.num_chains,
              "s" if sampler.num_chains > 1 else "", sampler.num_warmup, sampler.num_samples, sampler.target_accept)
     t0 = time.perf_counter()
     # warm-up and sampling are one compiled program: a failure in either is the "sampling" stage
-    beat = 0.0 if sampler.progress_bar else sampler.heartbeat_s
-    with stage("sampling"), heartbeat("NUTS (warm-up and sampling)", beat):
+    beat = 0.0 if iteration_bars else sampler.heartbeat_s
+    bar = sampler.progress_bar and not iteration_bars
+    with stage("sampling"), heartbeat("NUTS (warm-up and sampling)", beat, bar=bar):
         mcmc.run(key, *args, init_params=init_params, extra_fields=fields)
         raw = jax.block_until_ready(mcmc.get_samples(group_by_chain=True))
     elapsed = time.perf_counter() - t0
@@ -1040,7 +1042,7 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
         mcmc.post_warmup_state = mcmc.last_state
         mcmc.num_samples = more
         t0 = time.perf_counter()
-        with stage("sampling"), heartbeat("NUTS (further draws)", beat,
+        with stage("sampling"), heartbeat("NUTS (further draws)", beat, bar=bar,
                                           expected_s=timings["sampling_s"] * more / sampler.num_samples):
             mcmc.run(mcmc.post_warmup_state.rng_key, *args, extra_fields=fields)
             raw_more = jax.block_until_ready(mcmc.get_samples(group_by_chain=True))
@@ -1055,11 +1057,14 @@ def run_nuts(problem: Problem, *, sampler: config.SamplerConfig = config.DEFAULT
 
 
 @contextlib.contextmanager
-def heartbeat(what: str, every_s: float, expected_s: float | None = None):
-    """Log ``what`` with the time so far at INFO every ``every_s`` seconds until the block
-    ends (``SamplerConfig.heartbeat_s``), from a daemon thread; with ``expected_s``, also the
-    time left at that estimate.  Nothing when ``every_s`` is 0 or INFO is not shown."""
-    if every_s <= 0.0 or not log.isEnabledFor(logging.INFO):
+def heartbeat(what: str, every_s: float, expected_s: float | None = None, bar: bool = False):
+    """Show that a block (a compiled program that reports nothing until it ends) is running,
+    from a daemon thread: with ``bar``, a progress bar of the time so far on standard error,
+    redrawn every half second (of the time left when ``expected_s`` is given);
+    otherwise ``what`` with the time so far logged at INFO every ``every_s`` seconds
+    (``SamplerConfig.heartbeat_s``), with the time left at ``expected_s``.  Nothing when
+    ``every_s`` is 0 and there is no bar, or INFO is not shown."""
+    if not log.isEnabledFor(logging.INFO) or (every_s <= 0.0 and not bar):
         yield
         return
     done = threading.Event()
@@ -1071,7 +1076,16 @@ def heartbeat(what: str, every_s: float, expected_s: float | None = None):
             left = "" if expected_s is None else f", about {max(expected_s - so_far, 0.0):.0f} s left at the first attempt's pace"
             log.info("%s: still running after %.0f s%s", what, so_far, left)
 
-    thread = threading.Thread(target=beat, name="bayes-roadload-heartbeat", daemon=True)
+    def draw():
+        total = None if expected_s is None else max(expected_s, 1.0)
+        form = "{desc}: {elapsed}" if total is None else "{desc}: {percentage:3.0f}%|{bar}| {elapsed}, about {remaining} left"
+        with tqdm(total=total, desc=what, bar_format=form, leave=False, dynamic_ncols=True) as line:
+            while not done.wait(0.5):
+                so_far = time.perf_counter() - t0
+                line.n = so_far if total is None else min(so_far, total)
+                line.refresh()
+
+    thread = threading.Thread(target=draw if bar else beat, name="bayes-roadload-heartbeat", daemon=True)
     thread.start()
     try:
         yield

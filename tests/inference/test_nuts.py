@@ -102,6 +102,33 @@ def test_heartbeat_logs_while_its_block_runs_and_stops_with_it(caplog):
     assert not caplog.records  # off, or INFO not shown: nothing
 
 
+def test_the_heartbeats_bar_shows_the_time_so_far_and_the_time_left(caplog, capsys):
+    import time
+
+    from bayes_roadload.inference.nuts import heartbeat
+
+    caplog.set_level(logging.INFO, logger="bayes_roadload")
+    with heartbeat("work", 0.0, bar=True):
+        time.sleep(1.2)
+    with heartbeat("more", 0.0, expected_s=100.0, bar=True):
+        time.sleep(1.2)
+    err = capsys.readouterr().err
+    assert "work: 00:01" in err  # redrawn every 0.5 s: at least once after the first second
+    assert "more:   1%|" in err and "left" in err
+    assert not caplog.records  # a bar, not log lines
+
+
+def test_a_terminal_fit_draws_the_time_bar_not_numpyros_iteration_bars(caplog, capsys):
+    from bayes_roadload.inference.steady import fit_steady_nuts
+
+    caplog.set_level(logging.INFO, logger="bayes_roadload")
+    fit_steady_nuts(_steady_campaign(), "four_term", sampler=dataclasses.replace(TINY, progress_bar=True))
+    err = capsys.readouterr().err
+    # numpyro's bars come from host callbacks that keep the program out of the compilation cache
+    assert "NUTS (warm-up and sampling)" in err
+    assert "Running chain" not in err and "sample:" not in err and "warmup:" not in err
+
+
 def test_a_fit_without_a_progress_bar_logs_its_heartbeat(caplog):
     from bayes_roadload.inference.steady import fit_steady_nuts
 
