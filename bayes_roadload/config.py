@@ -280,8 +280,8 @@ class SamplerConfig:
     iteration_bars : with ``progress_bar``, numpyro's bars of each chain's iterations instead.
         They are drawn by host callbacks inside the program, and JAX keeps programs with host
         callbacks out of its persistent compilation cache: the sampler then compiles again in
-        every process (measured on a 2-pair fit: 25.1 s of compiling with them when warm, 16.2 s
-        without; docs/performance.md).
+        every process (a 2-pair fit started warm on a terminal: 72 s with them, 59 s with the
+        time bar; ``benchmarks/terminal_cache.py``, docs/performance.md).
     heartbeat_s : without a progress bar, log a plain line at INFO every ``heartbeat_s``
         seconds while warm-up and sampling run (one compiled program that reports nothing
         until it ends: a 500-pair fit ran 39 min without a line), with the time so far; 0: none.
