@@ -1174,8 +1174,12 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
         checked["failed"], checked["extremes"] = gate_check(fit)
         checked["first_s"] = fit.timings["warmup_s"] + fit.timings["sampling_s"]
         if checked["failed"] and set(checked["failed"]) <= CONTINUED_GATES:
-            log.warning("gates failed (%s): %d more draws per chain of the same chains",
-                        ", ".join(checked["failed"]), sampler.num_samples)
+            ext = checked["extremes"]
+            why = (f"; largest R-hat {ext['max_r_hat']:.4f} on {ext['max_r_hat_quantity']}, which chains that have "
+                   "converged exceed 1.01 in several per cent of fits of many runs by chance (docs/calibration.md, "
+                   "\"A fit's own false-alarm rate\")") if "r_hat" in checked["failed"] else ""
+            log.warning("gates failed (%s%s): %d more draws per chain of the same chains",
+                        ", ".join(checked["failed"]), why, sampler.num_samples)
             return sampler.num_samples
         return 0
 

@@ -517,7 +517,7 @@ def _first_gates_read_as(monkeypatch, failed):
     return found
 
 
-def test_a_failed_r_hat_or_ess_continues_the_same_chains(monkeypatch):
+def test_a_failed_r_hat_or_ess_continues_the_same_chains(monkeypatch, caplog):
     """When only R-hat or ESS failed, the chains go on for as many draws again: the fit holds the
     first attempt's draws unchanged followed by the new ones, warm-up is not repeated, and
     ``retries`` says so with what the first attempt's gates read."""
@@ -549,6 +549,12 @@ def test_a_failed_r_hat_or_ess_continues_the_same_chains(monkeypatch):
     report = steady_report(fit, campaign)
     assert first["min_ess_bulk_quantity"].split("[")[0] in report.idata.posterior
     assert first["max_r_hat"] > 1.0 and first["its_ess_bulk"] >= first["min_ess_bulk"]
+    # the warning names what R-hat read, and that converged chains do that by chance
+    (warned,) = [r.getMessage() for r in caplog.records if r.getMessage().startswith("gates failed (r_hat, ess_bulk")]
+    assert f" on {first['max_r_hat_quantity']}," in warned
+    value = float(warned.split("largest R-hat ")[1].split(" ")[0])
+    assert value == pytest.approx(first["max_r_hat"], abs=1e-4)  # first's is rounded to 1e-5
+    assert "by chance" in warned
     diag = report.diagnostics
     assert diag["retries"] == fit.retries and diag["draws_per_chain"] == 40
     # a batch record (the studies' tables) says the retry continued the chains
