@@ -188,7 +188,20 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
         check_contiguous(rows, rid, "samples", where)
         check_time_increases(df["time_s"].to_numpy()[rows], rows, rid, where)
         check_run_constants(df, rows, RUN_CONSTANT_COLUMNS, rid, where)
+        check_moving(df["speed_mps"].to_numpy(float)[rows], rows, rid, where)
     return df.reset_index(drop=True)
+
+
+def check_moving(speed_mps: np.ndarray, rows: np.ndarray, rid, where: str) -> None:
+    """Refuse a run with a sample at or below :data:`~bayes_roadload.config.STANDSTILL_MPS`,
+    naming its first such row: the coastdown model describes a rolling vehicle, so a run ends
+    before the vehicle stops."""
+    slow = np.flatnonzero(speed_mps <= config.STANDSTILL_MPS)
+    if slow.size:
+        i = int(slow[0])
+        refuse(where, "speed_mps", int(rows[i]) + 1,
+               f"run {rid!r}: speed {speed_mps[i]:g} m/s, at or below standstill ({config.STANDSTILL_MPS:g} m/s): "
+               "the model describes a rolling vehicle; end the run at its last sample above that speed")
 
 
 def read_runs(root: str | os.PathLike) -> tuple[pd.DataFrame, Path]:
