@@ -115,12 +115,13 @@ that every unknown is O(1)."""
 
 # --- data validation limits -----------------------------------------------------------------
 MAX_SPEED_MPS = 100.0
-STANDSTILL_MPS = 0.5
-"""A speed-trace sample at or below this speed (1.8 km/h) is a vehicle at or coming to rest, and
-its run is refused (:func:`bayes_roadload.data.traces.validate_runs`): eq. 5.4 describes a rolling
-vehicle, the integrator continues a trajectory below zero at the forces of standstill
-(:func:`bayes_roadload.physics.integrate.integrate_run`), and coastdown speed ranges end far
-above it (SAE J2263 / GTR 15: 15 km/h)."""
+STANDSTILL_MPS = 0.2
+"""A speed-trace sample at or below this speed (0.72 km/h) is a vehicle at rest, and its run is
+refused (:func:`bayes_roadload.data.traces.validate_runs`): eq. 5.4 describes a rolling vehicle,
+and the integrator continues a trajectory below zero at the forces of standstill
+(:func:`bayes_roadload.physics.integrate.integrate_run`).  Coastdown speed ranges end far above
+it (SAE J2263, GTR 15: 15 km/h); a run simulated down to 0.5 m/s with the thesis' speed noise
+(0.05 m/s) stays above it by 6 sd."""
 MIN_RUN_SAMPLES = 10
 MASS_RANGE_KG = (0.5, 60_000.0)
 AREA_RANGE_M2 = (0.001, 15.0)

@@ -67,7 +67,7 @@ def test_wheel_torque_and_rotating_inertia(tmp_path):
         (lambda d: d.assign(speed_mps=d["speed_mps"].where(d.index != 3, -1.0)), "row 4"),
         (lambda d: d.assign(speed_mps=d["speed_mps"].where(d.index != 52, 0.0)),
          "column 'speed_mps', row 53: run 2: speed 0 m/s, at or below standstill"),
-        (lambda d: d.assign(speed_mps=d["speed_mps"].where(d.index != 12, 0.5)), "row 13: run 1: speed 0.5 m/s"),
+        (lambda d: d.assign(speed_mps=d["speed_mps"].where(d.index != 12, 0.2)), "row 13: run 1: speed 0.2 m/s"),
         (lambda d: d.assign(time_s=d["time_s"].where(d.index != 5, 0.0)), "column 'time_s', row 6"),
         (lambda d: d.assign(direction=d["direction"].where(d.index != 2, 2)), "column 'direction', row 3"),
         (lambda d: d.assign(direction=d["direction"].where(d.index != 9, -1)), "direction changes within run"),
