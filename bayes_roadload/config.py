@@ -445,6 +445,13 @@ with mean 0.01 (sd 0.007; vanishes at 0, so few pairs do not leave a funnel at s
 measured 0.0078 per pair over 100 simulated pairs at 2 m/s head and cross wind (the
 turbulence that does not average out over a run), and the thesis' track groups of 3 pairs
 scattered by 0.0063 (table 4.1), ~0.011 per pair."""
+MAX_BEYOND_SUPPORT_SHARE = 1e-3
+"""A fit is sampled in its problem's alternative coordinates from the start when this share or
+more of its MAP's Laplace approximation maps beyond a coefficient's prior support in the sampled
+ones (:meth:`bayes_roadload.inference.problem.Problem.beyond_support`): there the potential jumps
+to infinity, and NUTS diverges whatever its step (the eco-car GNSS traces: 28-88 divergences in
+2000 draws at target acceptance 0.95 and 0.99 in the tyre-lag model's apparent coefficients,
+none with A_D, B_D, C_D0 sampled directly)."""
 SPEED_NOISE_FLOOR_MPS = 1e-3
 """m/s: the speed noise of the likelihood is sqrt(sigma_mps^2 + floor^2).  A logged speed is
 never exact: a 0.01 km/h resolution alone is 0.0008 m/s of quantisation noise (resolution /

@@ -150,6 +150,10 @@ class NutsFit:
     noise_scaled_rates: dict[str, float] | None = None
     """The rates of :func:`noise_scaled_coordinates` by coordinate name when the fit was sampled
     in those coordinates, else None."""
+    coordinates: str = ""
+    """What :func:`sample_problem` changed in the sampled coordinates before the first attempt
+    (the problem's alternative coordinates when its MAP's Laplace approximation reached a wall:
+    :meth:`~bayes_roadload.inference.problem.Problem.beyond_support`); "" when nothing."""
 
 
 def _site_scales(problem: Problem, z: dict[str, Any]) -> dict[str, Any]:
@@ -1158,12 +1162,29 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
     A first attempt that fails its gates is retried once: its chains continued when only more
     draws are missing (:data:`CONTINUED_GATES`), else sampled anew with :func:`remedy`'s
     sampler, after divergences in the problem's alternative coordinates where it has them
-    (:func:`retry_coordinates`); ``fit.retries`` records which."""
+    (:func:`retry_coordinates`); ``fit.retries`` records which.  A problem whose MAP's Laplace
+    approximation puts :data:`~bayes_roadload.config.MAX_BEYOND_SUPPORT_SHARE` or more beyond a
+    coefficient's support in the sampled coordinates (:meth:`~.problem.Problem.beyond_support`)
+    is sampled in its alternative coordinates from the start, with their own MAP
+    (``fit.coordinates`` says so)."""
     sampler = campaign_sampler(sampler, problem)
     map_result = post = None
+    walled = ""
     if sampler.precondition == "laplace":
         post = unconstrained_posterior(problem, init)
         map_result = find_map(problem, {}, posterior=post, progress=sampler.progress_bar)
+        beyond = problem.beyond_support(map_result.z, map_result.cov)
+        other = problem.alternative_coordinates(map_result.constrained) \
+            if beyond >= config.MAX_BEYOND_SUPPORT_SHARE else None
+        if other is not None:
+            first_map_s = map_result.time_s
+            problem, start, walled = other
+            log.warning("MAP: %.1f %% of its Laplace approximation lies where a coefficient leaves its prior's "
+                        "support (a wall in the sampled coordinates, on which NUTS diverges): %s", 100 * beyond, walled)
+            post = unconstrained_posterior(problem, start)
+            map_result = find_map(problem, {}, posterior=post, progress=sampler.progress_bar)
+            map_result.time_s += first_map_s
+            walled = f"{walled} ({100 * beyond:.1f} % of the Laplace approximation beyond a support)"
         sampler = quiet_trace_sampler(sampler, map_result)
     checked: dict[str, Any] = {}
 
@@ -1213,6 +1234,7 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
                         "target_accept": kept.target_accept, "seed": kept.seed, "coordinates": coordinates}]
     if map_s is not None:
         fit.timings["map_s"] = map_s
+    fit.coordinates = walled or fit.coordinates
     fit.truth = truth
     return fit
 

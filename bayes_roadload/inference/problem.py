@@ -85,6 +85,14 @@ class Problem(Protocol):
         what changed, for ``diagnostics.json``; None when the problem has no other coordinates."""
         ...
 
+    def beyond_support(self, z: dict[str, Any], cov: np.ndarray) -> float:
+        """The share of the Laplace approximation (unconstrained sites ``z`` at the MAP,
+        covariance ``cov`` of their flat vector in ravel order) at which a sampled coordinate maps
+        to a coefficient outside its prior's support: a wall inside the sampled space, where the
+        potential jumps to infinity and NUTS diverges whatever its step.  0 for a problem whose
+        sampled coordinates map into the supports by construction."""
+        ...
+
     def shift_constant(self, name: str, delta: float) -> "Problem | None":
         """The same problem with its fixed model constant ``name`` moved by ``delta`` (SI),
         everything else as it is: a model constant's Type B shift
@@ -138,6 +146,10 @@ class PooledRunProblem:
 
     def alternative_coordinates(self, values: dict[str, Any]) -> None:
         return None
+
+    def beyond_support(self, z: dict[str, Any], cov: np.ndarray) -> float:
+        """0: every sampled coordinate maps into its support (:class:`Problem`)."""
+        return 0.0
 
     def shift_constant(self, name: str, delta: float):
         return shifted_constant(self, name, delta)

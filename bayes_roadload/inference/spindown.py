@@ -89,6 +89,10 @@ class SpindownProblem:
         """None: one set of coordinates (:class:`~.problem.Problem`)."""
         return None
 
+    def beyond_support(self, z: dict[str, Any], cov: np.ndarray) -> float:
+        """0: every sampled coordinate maps into its support (:class:`~.problem.Problem`)."""
+        return 0.0
+
     def shift_constant(self, name: str, delta: float) -> None:
         """None: no fixed drag-model constants (:meth:`~.problem.Problem.shift_constant`)."""
         return None

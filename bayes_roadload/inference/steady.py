@@ -100,6 +100,10 @@ class SteadyProblem:
         """None: one set of coordinates (:class:`~.problem.Problem`)."""
         return None
 
+    def beyond_support(self, z: dict[str, Any], cov: np.ndarray) -> float:
+        """0: every sampled coordinate maps into its support (:class:`~.problem.Problem`)."""
+        return 0.0
+
     def shift_constant(self, name: str, delta: float) -> "SteadyProblem | None":
         """The problem with a fixed constant moved (:meth:`~.problem.Problem.shift_constant`)."""
         return shifted_constant(self, name, delta)

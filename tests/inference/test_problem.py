@@ -2,6 +2,8 @@
 
 import dataclasses
 
+import jax.numpy as jnp
+import numpy as np
 import pytest
 
 
@@ -114,3 +116,33 @@ def test_the_truth_keeps_the_simulators_constants_not_the_analysis_assumptions(s
     shift = mean.truth_values(assumed)["F2_N_per_kph2"] - scored["F2_N_per_kph2"]
     from bayes_roadload.config import GRAVITY_MPS2
     assert shift == pytest.approx(1e-6 * mean.mass_kg * GRAVITY_MPS2 / 3.6**2, rel=1e-6)
+
+
+def test_the_laplace_share_beyond_a_support_of_the_apparent_coefficients(small_campaign):
+    """``beyond_support`` maps Laplace draws of the apparent sites and the lag gain to A_D, B_D,
+    C_D0 (``coefficients_from_apparent``) and counts those outside the priors' supports: none
+    with C_D0' far above kappa B_D G_T, about half when C_D0' equals it (the derived C_D0 then
+    straddles its bound at 0, with a spread small enough for the map to be linear), and 0 for
+    the same traces sampled directly."""
+    from numpyro.distributions.transforms import biject_to
+
+    from bayes_roadload.inference.bayes import APPARENT_SITES, LAG_GAIN, build_problem
+
+    lag = build_problem(small_campaign, "four_term_tyre_lag")
+    c, b, kappa = lag.apparent
+    bd, gain = 2e-4, 0.005
+
+    def z_of(cd0_apparent):
+        values = {"AD_apparent": 0.01, "BD_apparent": bd, "CD0_apparent": cd0_apparent, LAG_GAIN: gain}
+        support = {s: lag.priors[n].to_numpyro().support for n, s in APPARENT_SITES.items()}
+        support[LAG_GAIN] = lag.priors[LAG_GAIN].to_numpyro().support
+        return {s: float(biject_to(support[s]).inv(jnp.asarray(v))) for s, v in values.items()}
+
+    sites = sorted([*APPARENT_SITES.values(), LAG_GAIN])
+    cov = np.diag([1e-16 if s != "CD0_apparent" else 1e-10 for s in sites])   # ravel order: sorted
+    assert lag.beyond_support(z_of(0.35), cov) == 0.0
+    s = 1.0 - gain * c
+    at_bound = kappa * ((bd - 0.01 / s * gain * b) / s) * gain   # C_D0' at which the derived C_D0 is 0
+    assert 0.45 <= lag.beyond_support(z_of(at_bound), cov) <= 0.55
+    direct, _, _ = lag.alternative_coordinates({})
+    assert direct.beyond_support(z_of(at_bound), cov) == 0.0
