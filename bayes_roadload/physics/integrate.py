@@ -275,12 +275,12 @@ def integrate_run(
             return jnp.stack([model.acceleration_mps2(p, c, run.effective_mass_kg), v])
         # eq. 5.4 with the forces seen at v >= 0: below zero the trajectory continues at the
         # forces of standstill, a(0) (a quadratic drag in a negative ground speed would grow
-        # without bound).  Where the speed crosses zero its gradient in the parameters jumps only
-        # by the forces' speed slope at standstill, and a trajectory that stops before its
-        # run's last sample is penalised smoothly.  Holding it at zero put a kink into the likelihood wherever an
-        # integrator stage crossed zero, and NUTS' step size collapsed there (a one-pair GNSS
-        # fit of a light car: one chain at tree depth 10).  Runs end while the vehicle moves
-        # (traces.check_moving), so no measured sample is at standstill.
+        # without bound).  Where the speed crosses zero its gradient in the parameters jumps
+        # only by the forces' speed slope at standstill, and a trajectory that stops before its
+        # run's last sample is penalised smoothly.  Holding it at zero put a kink into the
+        # likelihood wherever an integrator stage crossed zero, and NUTS' step size collapsed
+        # there (a one-pair GNSS fit of a light car: one chain at tree depth 10).  Runs end
+        # while the vehicle moves (traces.check_moving), so no measured sample is at standstill.
         moving = jnp.maximum(v, 0.0)
         c = _conditions(model, p, run, moving, s, t, uu)
         return jnp.stack([model.acceleration_mps2(p, c, run.effective_mass_kg), moving])
