@@ -282,15 +282,13 @@ class FitProblem:
             return 0.0
         from numpyro.distributions.transforms import biject_to
 
+        from .nuts import _coordinate_names  # nuts imports this module
+
         sites = [*APPARENT_SITES.values(), LAG_GAIN]
-        names, offset, index = sorted(z), 0, {}
-        for name in names:  # ravel_pytree's order: sorted keys, each site flattened
-            size = int(np.size(z[name]))
-            index[name] = offset if size == 1 else None
-            offset += size
-        if any(index.get(s) is None for s in sites):
+        names = _coordinate_names(z)
+        if not set(sites) <= set(names):  # a site per run (hierarchical): names carry an index
             return 0.0
-        at = [index[s] for s in sites]
+        at = [names.index(s) for s in sites]
         mean = np.array([float(np.asarray(z[s])) for s in sites])
         draws = np.random.default_rng(0).multivariate_normal(mean, np.asarray(cov)[np.ix_(at, at)],
                                                              BEYOND_SUPPORT_DRAWS, method="cholesky")

@@ -1234,7 +1234,7 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
                         "target_accept": kept.target_accept, "seed": kept.seed, "coordinates": coordinates}]
     if map_s is not None:
         fit.timings["map_s"] = map_s
-    fit.coordinates = walled or fit.coordinates
+    fit.coordinates = walled
     fit.truth = truth
     return fit
 
