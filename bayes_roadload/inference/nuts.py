@@ -1178,11 +1178,9 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
             if beyond >= config.MAX_BEYOND_SUPPORT_SHARE else None
         if other is not None:
             first_map_s = map_result.time_s
-            problem, start, walled = other
             log.warning("MAP: %.1f %% of its Laplace approximation lies where a coefficient leaves its prior's "
-                        "support (a wall in the sampled coordinates, on which NUTS diverges): %s", 100 * beyond, walled)
-            post = unconstrained_posterior(problem, start)
-            map_result = find_map(problem, {}, posterior=post, progress=sampler.progress_bar)
+                        "support (a wall in the sampled coordinates, on which NUTS diverges): %s", 100 * beyond, other[2])
+            problem, post, map_result, walled = _in_coordinates(other, sampler)
             map_result.time_s += first_map_s
             walled = f"{walled} ({100 * beyond:.1f} % of the Laplace approximation beyond a support)"
         sampler = quiet_trace_sampler(sampler, map_result)
@@ -1219,9 +1217,7 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
             second = remedy(sampler, failed)
             other = retry_coordinates(problem, map_result, failed)
             if other is not None:
-                problem, start, coordinates = other
-                post = unconstrained_posterior(problem, start)
-                map_result = find_map(problem, {}, posterior=post, progress=sampler.progress_bar)
+                problem, post, map_result, coordinates = _in_coordinates(other, sampler)
                 map_s += map_result.time_s
             log.warning("gates failed (%s): retrying once with %d + %d draws per chain, target acceptance %.2f%s",
                         ", ".join(failed), second.num_warmup, second.num_samples, second.target_accept,
@@ -1237,6 +1233,16 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
     fit.coordinates = walled
     fit.truth = truth
     return fit
+
+
+def _in_coordinates(other: tuple[Problem, dict[str, Any], str], sampler: config.SamplerConfig
+                    ) -> tuple[Problem, Any, MapResult, str]:
+    """The problem of :meth:`~.problem.Problem.alternative_coordinates`'s answer ``other``
+    (problem, constrained start, label), its unconstrained posterior, its MAP from that start
+    and the label."""
+    problem, start, label = other
+    post = unconstrained_posterior(problem, start)
+    return problem, post, find_map(problem, {}, posterior=post, progress=sampler.progress_bar), label
 
 
 def retry_coordinates(problem: Problem, map_result: MapResult | None, failed: list[str]
