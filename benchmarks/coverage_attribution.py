@@ -14,7 +14,7 @@ largest in magnitude, with the approximate two-sided 5 % bound for no correlatio
 2 / sqrt(n).  A correlation is a pointer to a cause, to be checked by an ablation
 (``benchmarks/admittance_ablation.py`` is one), not a finding on its own.
 
-    python benchmarks/coverage_attribution.py docs/calibration/independent_records.partial.csv \\
+    python benchmarks/coverage_attribution.py docs/calibration/independent_records.csv \\
         docs/calibration/design_seeds3000_3015_admittance.csv --out docs/calibration/attribution.csv
     python benchmarks/coverage_attribution.py --from-table docs/calibration/attribution.csv
 """
