@@ -86,6 +86,25 @@ def compilation_cache():
     enable_compilation_cache()
     yield
 
+@pytest.fixture(autouse=True)
+def package_logger_as_before():
+    """The ``bayes_roadload`` logger's handlers, level and propagation restored after every
+    test.  A command run in process (``cli.main``) configures it for a terminal
+    (``console.configure``: its own handlers, ``propagate = False``), and without the restore
+    every later test of the same worker that reads log records with ``caplog`` (which listens
+    at the root logger) saw none: which tests failed depended on the order the workers drew."""
+    import logging
+
+    from bayes_roadload import console
+
+    logger = logging.getLogger(console.PACKAGE_LOGGER)
+    state = (list(logger.handlers), logger.level, logger.propagate)
+    yield
+    logger.handlers[:] = state[0]
+    logger.setLevel(state[1])
+    logger.propagate = state[2]
+
+
 SMALL_SAMPLER = config.SamplerConfig(num_warmup=300, num_samples=800, num_chains=2, seed=3, target_accept=0.95)
 """Small draw counts for tests, and what a two-pair campaign needs to pass the gates: with
 2 x 400 draws (bulk ESS ~300) the max split R-hat over the 13 unknowns came out 1.007-1.013
