@@ -86,23 +86,39 @@ def compilation_cache():
     enable_compilation_cache()
     yield
 
-@pytest.fixture(autouse=True)
-def package_logger_as_before():
-    """The ``bayes_roadload`` logger's handlers, level and propagation restored after every
-    test.  A command run in process (``cli.main``) configures it for a terminal
-    (``console.configure``: its own handlers, ``propagate = False``), and without the restore
-    every later test of the same worker that reads log records with ``caplog`` (which listens
-    at the root logger) saw none: which tests failed depended on the order the workers drew."""
+def _package_logger_state():
+    """The ``bayes_roadload`` logger's handlers, level and propagation."""
     import logging
 
     from bayes_roadload import console
 
     logger = logging.getLogger(console.PACKAGE_LOGGER)
-    state = (list(logger.handlers), logger.level, logger.propagate)
+    return logger, (list(logger.handlers), logger.level, logger.propagate)
+
+
+_PRISTINE_LOGGER = _package_logger_state()[1]
+"""The package logger as the test process imported it, before any command configured it."""
+
+
+@pytest.fixture(autouse=True)
+def package_logger_as_imported():
+    """The ``bayes_roadload`` logger set back to its state at import (:data:`_PRISTINE_LOGGER`)
+    before and after every test.  A command run in process (``cli.main``) configures it for a
+    terminal (``console.configure``: its own handlers, ``propagate = False``), and every later
+    test of the same worker that reads log records with ``caplog`` (which listens at the root
+    logger) then saw none.  Reset at set-up too: a session fixture that runs a command (e.g.
+    the shared command-line fit) does so while the first test that asks for it is set up,
+    after an autouse fixture of the test's own scope could have saved the state."""
+    def reset():
+        logger, _ = _package_logger_state()
+        handlers, level, propagate = _PRISTINE_LOGGER
+        logger.handlers[:] = handlers
+        logger.setLevel(level)
+        logger.propagate = propagate
+
+    reset()
     yield
-    logger.handlers[:] = state[0]
-    logger.setLevel(state[1])
-    logger.propagate = state[2]
+    reset()
 
 
 SMALL_SAMPLER = config.SamplerConfig(num_warmup=300, num_samples=800, num_chains=2, seed=3, target_accept=0.95)
