@@ -11,6 +11,7 @@ machine code is less optimised.  Set ``XLA_FLAGS`` yourself to run the suite oth
 import contextlib
 import dataclasses
 import importlib.util
+import logging
 import os
 import shutil
 import sys
@@ -23,7 +24,7 @@ if "XLA_FLAGS" not in os.environ:  # before bayes_roadload starts JAX (its devic
 
 import pytest  # noqa: E402
 
-from bayes_roadload import config  # noqa: E402
+from bayes_roadload import config, console  # noqa: E402
 from bayes_roadload.simulate import get_case, simulate_campaign  # noqa: E402
 
 
@@ -86,18 +87,11 @@ def compilation_cache():
     enable_compilation_cache()
     yield
 
-def _package_logger_state():
-    """The ``bayes_roadload`` logger's handlers, level and propagation."""
-    import logging
 
-    from bayes_roadload import console
-
-    logger = logging.getLogger(console.PACKAGE_LOGGER)
-    return logger, (list(logger.handlers), logger.level, logger.propagate)
-
-
-_PRISTINE_LOGGER = _package_logger_state()[1]
-"""The package logger as the test process imported it, before any command configured it."""
+_PACKAGE_LOGGER = logging.getLogger(console.PACKAGE_LOGGER)
+_PRISTINE_LOGGER = (list(_PACKAGE_LOGGER.handlers), _PACKAGE_LOGGER.level, _PACKAGE_LOGGER.propagate)
+"""The package logger's handlers, level and propagation as the test process imported it,
+before any command configured it."""
 
 
 @pytest.fixture(autouse=True)
@@ -110,11 +104,10 @@ def package_logger_as_imported():
     the shared command-line fit) does so while the first test that asks for it is set up,
     after an autouse fixture of the test's own scope could have saved the state."""
     def reset():
-        logger, _ = _package_logger_state()
         handlers, level, propagate = _PRISTINE_LOGGER
-        logger.handlers[:] = handlers
-        logger.setLevel(level)
-        logger.propagate = propagate
+        _PACKAGE_LOGGER.handlers[:] = handlers
+        _PACKAGE_LOGGER.setLevel(level)
+        _PACKAGE_LOGGER.propagate = propagate
 
     reset()
     yield
