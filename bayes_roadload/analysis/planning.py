@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import logging
 import math
 import re
 from dataclasses import dataclass
@@ -50,6 +51,8 @@ from .. import config
 from ..data.campaign import Campaign
 from ..physics import integrate_batch
 from .batch import FitJob, interval_key, quantile_key, successful
+
+log = logging.getLogger(__name__)
 
 QUANTITY_UNITS: dict[str, str] = {**config.PARAMETER_UNITS, "F50_N": "N", "F50_tyre_N": "N", "F0_N": "N",
                                   "F2_N_per_kph2": "N/(km/h)^2"}
@@ -407,6 +410,11 @@ def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: flo
     return out[cols + [c for c in out.columns if c not in cols]]
 
 
+FLOOR_FIT_DRAWS = 2
+"""Draws of the Gaussian approximation of the floor's MAP fit (:func:`type_b_floors` reads its
+mode only)."""
+
+
 def type_b_floors(population: Population, targets: Sequence[Target], confidence: float = config.PLAN_CONFIDENCE,
                   model: str | None = None) -> pd.DataFrame:
     """The half-width that the Type B uncertainty alone gives each target's quantity, whatever
@@ -415,9 +423,14 @@ def type_b_floors(population: Population, targets: Sequence[Target], confidence:
     ``confidence`` interval of a fit carrying them (:mod:`.budget`: ``sum_s c_s delta_s``
     added to every draw, delta_s ~ N(0, u_s^2)) is never narrower than
     z sqrt(sum_s (c_s u_s)^2), z the normal quantile of (1 + confidence) / 2.  The
-    sensitivities c_s are those of the conditions campaign fitted with ``model`` (default: the
-    population's; the refits' model), first order
-    (:func:`~bayes_roadload.analysis.budget.type_b_sensitivities`); a relative target divides
+    sources and sensitivities c_s are those a refit carries (:func:`plan_jobs`, ``type_b``): of
+    the conditions campaign fitted with ``model`` (default: the population's; the refits'
+    model) as the refits are, MAP + Laplace from the population's start
+    (:func:`~bayes_roadload.inference.laplace.fit_laplace`, no importance draws), taken at that
+    fit's posterior mode (:func:`~bayes_roadload.analysis.budget.type_b_sensitivities` with
+    ``fit``), so that the model file's constants with an ``uncertainty`` (a shape's time
+    constant, the yaw drag's levelling) count as they do in every refit; should that fit fail
+    (logged), the least-squares step, which has no model constants.  A relative target divides
     by the quantity at the population's mean coefficients.
 
     Returns one row per target: ``quantity, target, unit, type_b_half_width`` (the target's
@@ -426,12 +439,20 @@ def type_b_floors(population: Population, targets: Sequence[Target], confidence:
     from statistics import NormalDist
 
     from ..inference.bayes import build_problem
+    from ..inference.laplace import fit_laplace
     from ..inference.results import truth_derived
     from .budget import BUDGET_QUANTITIES, type_b_sensitivities
 
     model = model or population.model
     quantities = [t.quantity for t in targets if t.quantity in BUDGET_QUANTITIES]
-    typeb = type_b_sensitivities(population.conditions, model, quantities)
+    try:
+        fit = fit_laplace(population.conditions, model, pooling=population.pooling, importance=False,
+                          draws=FLOOR_FIT_DRAWS, start=population.start_values())
+    except Exception as e:  # noqa: BLE001 - the floor falls back to the least-squares step, the plan goes on
+        log.warning("Type B floor: the MAP of the conditions campaign failed (%s: %s); the least-squares step "
+                    "instead, without the model's constants", type(e).__name__, e)
+        fit = None
+    typeb = type_b_sensitivities(population.conditions, model, quantities, fit=fit)
     values = population.mean_values()
     values.update(truth_derived(build_problem(population.conditions, population.model, pooling="pooled"), values))
     z = NormalDist().inv_cdf((1.0 + confidence) / 2.0)

@@ -305,13 +305,19 @@ def _shifted_trace_problems(problem, mode, campaign) -> Callable[[Any], Any]:
     if not problem.varying:
         return lambda c: problem_like(problem, c)
     means = run_effect_means(problem, mode.constrained)
-    shared = SharedData(problem_like(problem, campaign)).compile(
-        lambda p, base, v0: run_sensitivities(p, base, v0, p.batch))
+    shared = SharedData(problem_like(problem, campaign)).compile(_run_sensitivities_of_own_batch)
 
     def sensitivities(p, base, v0, batch):
         jac = shared(p, base, v0)
         return run_sensitivities(p, base, v0, batch) if jac is None else jac
     return lambda c: problem_like(problem, c, mode.constrained, means, sensitivities)
+
+
+def _run_sensitivities_of_own_batch(p, base, v0):
+    """The run sensitivities of ``p`` on its own batch (:func:`~bayes_roadload.inference.bayes.
+    run_sensitivities`): one function object, so that every same-shaped campaign of a process
+    reuses its compilation (:meth:`~bayes_roadload.inference.shift.SharedData.compile`)."""
+    return run_sensitivities(p, base, v0, p.batch)
 
 
 def _map_type_b(build: Callable[[Any, ModelSpec, FitOptions], Problem]):

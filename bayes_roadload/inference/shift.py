@@ -212,15 +212,45 @@ class SharedData:
         """The template with the data ``leaves`` (arrays or tracers) in place of its own."""
         return _with_leaves(self.template, self.structure, list(leaves))
 
+    def accepts(self, problem: Problem) -> bool:
+        """Whether ``problem`` has this template's structure (:meth:`data_of` is not None)."""
+        return self.data_of(problem) is not None
+
     def compile(self, fn: Callable[..., Any]) -> Callable[..., Any]:
         """``call(problem, *args)``: ``fn(problem, *args)`` compiled once with the problem's data
-        as arguments; None for a problem of another structure."""
-        jitted = jax.jit(lambda leaves, *args: fn(self.with_data(leaves), *args))
+        as arguments; None for a problem of another structure.  ``fn`` is compiled once per
+        process for each structure (:func:`_compiled`): a later template of the same structure
+        (the next refit of a study, the next same-shaped campaign of a fleet) is traced and
+        compiled again only when ``fn`` is another function object, so ``fn`` should be defined
+        at module level."""
+        jitted = _compiled(self, fn)
 
         def call(problem: Problem, *args):
             data = self.data_of(problem)
             return None if data is None else jitted(data, *args)
         return call
+
+
+_RECENT_COMPILED: list[tuple[Callable[..., Any], SharedData, Callable[..., Any]]] = []
+COMPILED_KEPT = 4
+"""The programs :meth:`SharedData.compile` keeps per process, most recently used first."""
+
+
+def _compiled(shared: SharedData, fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn`` jitted with the data of ``shared``'s structure as arguments: the program compiled
+    for an earlier template of the same structure (:func:`_data_leaves`: the same model variant,
+    priors, sites and shapes; the other fields, compared by value, equal) when one of the last
+    :data:`COMPILED_KEPT` was, else a new one.  The earlier template's fields outside the data
+    equal this one's, so its :meth:`SharedData.with_data` builds the same problem from the same
+    leaves."""
+    for i, (f, owner, jitted) in enumerate(_RECENT_COMPILED):
+        if f is fn and owner.accepts(shared.template):
+            _RECENT_COMPILED.insert(0, _RECENT_COMPILED.pop(i))
+            return jitted
+    jitted = jax.jit(lambda leaves, *args: fn(shared.with_data(leaves), *args))
+    _RECENT_COMPILED.insert(0, (fn, shared, jitted))
+    del _RECENT_COMPILED[COMPILED_KEPT:]
+    return jitted
 
 
 class PotentialProgram(SharedData):
@@ -263,18 +293,24 @@ def _site_structure(z: dict[str, Any]) -> tuple:
 
 
 _RECENT_PROGRAMS: list[PotentialProgram] = []
-PROGRAMS_KEPT = 2
-"""The potential programs of the last problems :func:`potential_program` was asked for: a
-fit's MAP compiles its problem's and the fit's Type B step reuses it."""
+PROGRAMS_KEPT = 4
+"""The potential programs :func:`potential_program` keeps per process, most recently used
+first: a fit's MAP compiles its problem's and the fit's Type B step reuses it, and so do the
+next fits of the same structure in the process."""
 
 
 def potential_program(problem: Problem, z: dict[str, Any]) -> PotentialProgram:
-    """The :class:`PotentialProgram` of ``problem`` (the object itself) with the site layout of
-    ``z``: the one built for it earlier in this process when one of the last
-    :data:`PROGRAMS_KEPT` was, else a new one."""
+    """The :class:`PotentialProgram` for ``problem`` with the site layout of ``z``: one built
+    earlier in this process, for ``problem`` itself or for a problem of the same structure
+    (:func:`_data_leaves`: the same model variant, priors, sites and array shapes; only the data
+    differ), when one of the last :data:`PROGRAMS_KEPT` was, else a new one.  Its site layout
+    (:func:`~bayes_roadload.inference.nuts.site_layout`) is a function of that structure, and the
+    data go in as arguments, so a study's refits and a fleet's same-shaped campaigns trace and
+    compile the potential once per process."""
     structure = _site_structure(z)
-    for program in _RECENT_PROGRAMS:
-        if program.template is problem and program.z_structure == structure:
+    for i, program in enumerate(_RECENT_PROGRAMS):
+        if program.z_structure == structure and (program.template is problem or program.accepts(problem)):
+            _RECENT_PROGRAMS.insert(0, _RECENT_PROGRAMS.pop(i))
             return program
     program = PotentialProgram(problem, z)
     _RECENT_PROGRAMS.insert(0, program)

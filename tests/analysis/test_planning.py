@@ -278,3 +278,33 @@ def test_a_top_up_adds_new_campaigns_with_the_seeds_of_a_full_run(conditions):
     model_file = str(MODELS_DIR / "three_term.toml")  # a fit directory's model is its file
     assert plan_jobs(dataclasses.replace(pop, model=model_file), pairs=(1,), simulations=1)[0].name \
         == "plan-three_term-laplace-n1-0"
+
+
+def test_the_type_b_floor_counts_the_model_constants_the_refits_carry(small_campaign):
+    """A refit's draws carry the Type B uncertainty of the model file's constants (a shape's
+    time constant, K_alpha, the yaw drag's levelling: ``fixed_shifts``) as well as the
+    campaign's sources, so the floor must too (``planning.type_b_floors``): with the default
+    speed-trace model some target's floor is dominated by such a constant and exceeds the floor
+    of the campaign's sources alone (the least-squares step, which shifts none: until
+    2026-12-06 the floor, which let `plan` simulate targets no size reaches).  Adding
+    independent sources only adds variance, so the difference cannot come from rounding."""
+    from statistics import NormalDist
+
+    from bayes_roadload.analysis.budget import type_b_sensitivities
+    from bayes_roadload.analysis.planning import population_from_pilot, type_b_floors
+    from bayes_roadload.inference.spec import load_model_spec
+
+    model = "four_term_tyre_lag_admittance_pitch_shapes"
+    spec = load_model_spec(model)
+    means = {k: small_campaign.truth.get(k, spec.initial.get(k)) for k in spec.free}
+    population = population_from_pilot(means, {}, 2, small_campaign, model,
+                                       noise={"sigma_mps": 0.05, "q_mps_per_sqrt_s": 0.002})
+    targets = [Target.parse(t) for t in ("AD=1%", "BD=5%", "CD0=1%", "F50_N=0.5%")]
+    floors = type_b_floors(population, targets).set_index("quantity")
+    campaign_only = type_b_sensitivities(small_campaign, model, list(floors.index))
+    z = NormalDist().inv_cdf(0.975)
+    constants = [q for q in floors.index if floors.loc[q, "main_source"] in spec.uncertainty and q in means]
+    assert constants, floors   # the sampled coefficients' floors: relative to the population's mean
+    for q in constants:
+        lsq_floor = 100.0 * z * math.sqrt(sum(campaign_only.variances(q).values())) / abs(float(means[q]))
+        assert floors.loc[q, "type_b_half_width"] > lsq_floor, (q, floors.loc[q, "type_b_half_width"], lsq_floor)

@@ -103,3 +103,56 @@ def test_padding_to_a_longer_length_leaves_the_density_unchanged(campaigns):
     padded = _potential(longer)
     z = post.z0
     assert np.isclose(float(jax.jit(padded.potential_fn)(z)), float(jax.jit(post.potential_fn)(z)), rtol=1e-12, atol=0)
+
+
+def _data_sum(p):
+    """A function of every data leaf of a problem (``shift._data_leaves``)."""
+    import jax.numpy as jnp
+
+    from bayes_roadload.inference.shift import _data_leaves
+
+    leaves: list = []
+    _data_leaves(p, leaves)
+    return sum(jnp.sum(jnp.asarray(x, float)) for x in leaves)
+
+
+def test_problems_of_one_structure_share_one_compiled_program_and_each_keeps_its_own_data(small_campaign):
+    """A study's refits and a fleet's same-shaped campaigns build a new problem each; their
+    potential (``shift.potential_program``) and other shared functions (``SharedData.compile``)
+    are compiled once per process for a structure, the data going in as arguments.  The shared
+    program must give each problem its own potential -- the value of a program compiled for that
+    problem alone, to rounding -- not the first problem's; a problem of another structure gets a
+    program of its own."""
+    import dataclasses
+
+    from bayes_roadload.inference.shift import PotentialProgram, SharedData, _compiled, potential_program
+
+    problem = build_problem(small_campaign, "four_term")
+    heavier = dataclasses.replace(small_campaign, vehicle=dataclasses.replace(
+        small_campaign.vehicle, mass_kg=small_campaign.vehicle.mass_kg + 10.0))
+    other = build_problem(heavier, "four_term")
+    post = unconstrained_posterior(problem, initial_values(problem, small_campaign, start={}))
+    program = potential_program(problem, post.z0)
+    assert program.accepts(other)                       # the same structure, other data
+    y = post.flat0 / program.scale
+    program.fg(program.data_of(other), y)
+    compiled = program.fg_compiled._cache_size()
+    assert potential_program(other, post.z0) is program
+    u_shared, g_shared = (np.asarray(a) for a in program.fg(program.data_of(other), y))
+    own = PotentialProgram(other, post.z0)
+    u_own, g_own = (np.asarray(a) for a in own.fg(own.data_of(other), y))
+    np.testing.assert_allclose(u_shared, u_own, rtol=1e-12)
+    np.testing.assert_allclose(g_shared, g_own, rtol=1e-9, atol=1e-9 * np.max(np.abs(g_own)))
+    assert not np.isclose(u_shared, float(program.fg(program.data_of(problem), y)[0]), rtol=1e-9)
+    assert program.fg_compiled._cache_size() == compiled   # no new compilation for `other`
+
+    jitted = _compiled(SharedData(problem), _data_sum)
+    assert _compiled(SharedData(other), _data_sum) is jitted
+    call = SharedData(problem).compile(_data_sum)
+    assert float(call(other)) == pytest.approx(float(_data_sum(other)), rel=1e-12)
+    assert float(call(other)) != pytest.approx(float(_data_sum(problem)), rel=1e-9)
+
+    three = build_problem(small_campaign, "three_term")
+    post3 = unconstrained_posterior(three, initial_values(three, small_campaign, start={}))
+    assert not program.accepts(three)
+    assert potential_program(three, post3.z0) is not program
