@@ -70,7 +70,11 @@ def time_refits(fit_dir: Path, pairs: int, refits: int) -> list[dict]:
 
 def summarise(plan_dir: Path, wall_s: float, args: str, note: str = "") -> dict:
     """The record of one plan run from its output directory."""
-    rec = pd.read_csv(plan_dir / "plan_records.csv")
+    try:
+        rec = pd.read_csv(plan_dir / "plan_records.csv")
+    except pd.errors.EmptyDataError:   # no target reachable: nothing simulated
+        rec = pd.DataFrame(columns=["n_pairs", "time_total_s", "time_compile_s", "rss_mb", "jax_caches_cleared",
+                                    "error"])
     per_size = rec.groupby("n_pairs").agg(refits=("n_pairs", "size"), mean_s=("time_total_s", "mean"),
                                           compile_s=("time_compile_s", "sum"), max_rss_mb=("rss_mb", "max"),
                                           caches_cleared=("jax_caches_cleared", "sum"))
