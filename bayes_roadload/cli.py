@@ -772,12 +772,13 @@ def _cmd_plan(args) -> int:
     # (planning.sizes_to_fit; --all-sizes: every size), and the simulations at a size in steps,
     # each after the first only where a target's assurance is still undecided
     # (planning.undecided_sizes; --all-simulations: all at once)
-    echo(f"Population: {population.source}; {population.n_draws} draws; refitting {first} simulated campaigns at "
-          + (f"each of {pairs} pairs" if args.all_sizes else
-             f"the sizes among {pairs} pairs that locate each target's smallest passing size (bisection)")
-          + f" with {fit_model} ({population.pooling}, MAP + Laplace)"
-          + (f", {first} more at a time up to {args.simulations} where a target stays undecided"
-             if first < args.simulations else "") + " ...")
+    if quantities:   # else every target is below its Type B floor: nothing is refitted
+        echo(f"Population: {population.source}; {population.n_draws} draws; refitting {first} simulated campaigns "
+             + (f"at each of {pairs} pairs" if args.all_sizes else
+                f"at the sizes among {pairs} pairs that locate each target's smallest passing size (bisection)")
+             + f" with {fit_model} ({population.pooling}, MAP + Laplace)"
+             + (f", {first} more at a time up to {args.simulations} where a target stays undecided"
+                if first < args.simulations else "") + " ...")
     progress = not args.no_progress and _output.isEnabledFor(logging.INFO)
     records = pd.DataFrame()
     simulated: list[int] = []

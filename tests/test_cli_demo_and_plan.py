@@ -104,6 +104,15 @@ def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys, m
     assert int(f50["n_sims"]) == len(records) == (2 if first_met else 1)
     assert ("undecided after 1 simulations at [2] pairs" in printed) == first_met
 
+    # every target below its floor: answered from the floors alone, nothing refitted
+    code = main(["plan", str(fit_dir), "--target", "CD0=1%", "--pairs", "2", "--simulations", "2", "--workers", "1",
+                 "--out", str(tmp_path / "floor_only")])
+    printed = capsys.readouterr().out
+    assert code == 0 and "nothing simulated" in printed and "refitting" not in printed
+    only = pd.read_csv(tmp_path / "floor_only" / "recommendation.csv").set_index("quantity")
+    assert not only.loc["CD0", "reached"] and not only.loc["CD0", "reachable"]
+    assert pd.read_csv(tmp_path / "floor_only" / "plan.csv").empty
+
     # --confirm: the recommended size refitted by NUTS (one campaign, short chains), beside its
     # Laplace refit of the same campaign, on the plan's own batch client (one cluster started)
     from bayes_roadload.analysis import batch
