@@ -722,7 +722,7 @@ def _cmd_plan(args) -> int:
     from . import config
     from .analysis.batch import batch_client, compilation_cache_dir, run_batch
     from .analysis.planning import (Target, plan_jobs, plan_table, plot_plan, recommend, refit_size, refit_work,
-                                    sizes_to_fit, small_size_caveat, type_b_floors, undecided_sizes)
+                                    floor_hint, sizes_to_fit, small_size_caveat, type_b_floors, undecided_sizes)
     from .analysis.regulation import regulation_checks
 
     if args.identify:
@@ -765,8 +765,9 @@ def _cmd_plan(args) -> int:
                  f"{r['unit']}{main}{verdict}")
         unreachable = set(floors.loc[~floors["reachable"], "quantity"])
         if unreachable:
-            echo("  a smaller standard uncertainty of the main source (vehicle.toml [uncertainty], e.g. a fresh "
-                 "calibration) lowers the floor; `plan --no-type-b` plans the data's share alone")
+            from .inference.spec import load_model_spec
+
+            echo(f"  {floor_hint(floors, load_model_spec(fit_model).uncertainty)}")
         quantities = [q for q in quantities if q not in unreachable]
     # adaptive in two ways: the sizes by bisection on each target's smallest size meeting it
     # (planning.sizes_to_fit; --all-sizes: every size), and the simulations at a size in steps,

@@ -96,6 +96,7 @@ def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys, m
     printed = capsys.readouterr().out
     assert "pairs needed" in printed and "Regulation precision" in printed
     assert "NOT REACHABLE" in printed and "none (Type B floor)" in printed
+    assert "vehicle.toml [uncertainty] for airspeed_factor_rel" in printed   # a campaign's source, not a model's
     # the simulations come in steps (config.PLAN_STEPS: here 1 of the 2), the second only where
     # a target's assurance is still undecided after the first (its Wilson interval holds 0.8)
     # (one refit meeting the target: Wilson interval 0.21-1; one missing it: 0-0.79, decided)

@@ -470,6 +470,23 @@ def type_b_floors(population: Population, targets: Sequence[Target], confidence:
     return pd.DataFrame(rows)
 
 
+def floor_hint(floors: pd.DataFrame, model_constants: Sequence[str]) -> str:
+    """What lowers the floors of the unreachable targets in ``floors`` (:func:`type_b_floors`):
+    the standard uncertainty of each one's main source, in ``vehicle.toml`` ``[uncertainty]``
+    for a campaign's source, in the model file for one of ``model_constants`` (the sources the
+    model file gives an ``uncertainty``)."""
+    mains = set(floors.loc[~floors["reachable"].astype(bool), "main_source"].dropna()) - {""}
+    constants = mains & set(model_constants)
+    where = []
+    if mains - constants:
+        where.append(f"vehicle.toml [uncertainty] for {', '.join(sorted(mains - constants))} (e.g. a fresh calibration)")
+    if constants:
+        where.append(f"the model file's [parameters.NAME] uncertainty for {', '.join(sorted(constants))} (a constant "
+                     "of the model's physics: a measurement of it, or a model that fits it)")
+    return ("a smaller standard uncertainty of the main source lowers the floor"
+            + (f": {'; '.join(where)}" if where else "") + "; `plan --no-type-b` plans the data's share alone")
+
+
 def refit_work(job: FitJob) -> float:
     """A planning refit's share of the work, for the time left of its progress bar: one unit
     plus one per pair (measured on a 12-pair hierarchical population, one worker: 2 s at 1 pair,

@@ -308,3 +308,20 @@ def test_the_type_b_floor_counts_the_model_constants_the_refits_carry(small_camp
     for q in constants:
         lsq_floor = 100.0 * z * math.sqrt(sum(campaign_only.variances(q).values())) / abs(float(means[q]))
         assert floors.loc[q, "type_b_half_width"] > lsq_floor, (q, floors.loc[q, "type_b_half_width"], lsq_floor)
+
+
+def test_the_floor_hint_names_where_each_main_source_is_declared():
+    """An unreachable target's main source is lowered in vehicle.toml when it is a campaign's
+    source and in the model file when it is one of the model's constants; reachable targets'
+    sources are not named."""
+    from bayes_roadload.analysis.planning import floor_hint
+
+    floors = pd.DataFrame([
+        {"quantity": "AD", "reachable": False, "main_source": "yaw_levelling_per_rad2"},
+        {"quantity": "CD0", "reachable": False, "main_source": "airspeed_factor_rel"},
+        {"quantity": "BD", "reachable": True, "main_source": "mass_kg"}])
+    hint = floor_hint(floors, ["yaw_levelling_per_rad2", "Kalpha"])
+    assert "vehicle.toml [uncertainty] for airspeed_factor_rel" in hint
+    assert "model file's [parameters.NAME] uncertainty for yaw_levelling_per_rad2" in hint
+    assert "mass_kg" not in hint and "Kalpha" not in hint
+    assert "model file" not in floor_hint(floors.iloc[1:], ["yaw_levelling_per_rad2"])
