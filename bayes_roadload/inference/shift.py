@@ -200,13 +200,18 @@ class SharedData:
         self.structure = _data_leaves(template, self.leaves)
         self.shapes = [np.shape(x) for x in self.leaves]
 
-    def data_of(self, problem: Problem) -> list | None:
-        """``problem``'s data leaves, or None when it has another structure."""
+    def _leaves(self, problem: Problem) -> list | None:
+        """``problem``'s data leaves as it holds them, or None when it has another structure."""
         leaves: list = []
         structure = _data_leaves(problem, leaves)
         if not _same_structure(structure, self.structure) or [np.shape(x) for x in leaves] != self.shapes:
             return None
-        return [jnp.asarray(x) for x in leaves]
+        return leaves
+
+    def data_of(self, problem: Problem) -> list | None:
+        """``problem``'s data leaves, or None when it has another structure."""
+        leaves = self._leaves(problem)
+        return None if leaves is None else [jnp.asarray(x) for x in leaves]
 
     def with_data(self, leaves) -> Problem:
         """The template with the data ``leaves`` (arrays or tracers) in place of its own."""
@@ -214,7 +219,7 @@ class SharedData:
 
     def accepts(self, problem: Problem) -> bool:
         """Whether ``problem`` has this template's structure (:meth:`data_of` is not None)."""
-        return self.data_of(problem) is not None
+        return self._leaves(problem) is not None
 
     def compile(self, fn: Callable[..., Any]) -> Callable[..., Any]:
         """``call(problem, *args)``: ``fn(problem, *args)`` compiled once with the problem's data
@@ -243,14 +248,22 @@ def _compiled(shared: SharedData, fn: Callable[..., Any]) -> Callable[..., Any]:
     :data:`COMPILED_KEPT` was, else a new one.  The earlier template's fields outside the data
     equal this one's, so its :meth:`SharedData.with_data` builds the same problem from the same
     leaves."""
-    for i, (f, owner, jitted) in enumerate(_RECENT_COMPILED):
-        if f is fn and owner.accepts(shared.template):
-            _RECENT_COMPILED.insert(0, _RECENT_COMPILED.pop(i))
-            return jitted
-    jitted = jax.jit(lambda leaves, *args: fn(shared.with_data(leaves), *args))
-    _RECENT_COMPILED.insert(0, (fn, shared, jitted))
-    del _RECENT_COMPILED[COMPILED_KEPT:]
-    return jitted
+    return _most_recent(_RECENT_COMPILED, COMPILED_KEPT,
+                        lambda entry: entry[0] is fn and entry[1].accepts(shared.template),
+                        lambda: (fn, shared, jax.jit(lambda leaves, *args: fn(shared.with_data(leaves), *args))))[2]
+
+
+def _most_recent(kept: list, size: int, matches: Callable[[Any], bool], build: Callable[[], Any]) -> Any:
+    """The first entry of ``kept`` (most recently used first) that ``matches``, moved to the
+    front; else ``build()``'s, put in front, ``kept`` cut to ``size``."""
+    for i, entry in enumerate(kept):
+        if matches(entry):
+            kept.insert(0, kept.pop(i))
+            return entry
+    entry = build()
+    kept.insert(0, entry)
+    del kept[size:]
+    return entry
 
 
 class PotentialProgram(SharedData):
@@ -308,14 +321,10 @@ def potential_program(problem: Problem, z: dict[str, Any]) -> PotentialProgram:
     data go in as arguments, so a study's refits and a fleet's same-shaped campaigns trace and
     compile the potential once per process."""
     structure = _site_structure(z)
-    for i, program in enumerate(_RECENT_PROGRAMS):
-        if program.z_structure == structure and (program.template is problem or program.accepts(problem)):
-            _RECENT_PROGRAMS.insert(0, _RECENT_PROGRAMS.pop(i))
-            return program
-    program = PotentialProgram(problem, z)
-    _RECENT_PROGRAMS.insert(0, program)
-    del _RECENT_PROGRAMS[PROGRAMS_KEPT:]
-    return program
+    return _most_recent(_RECENT_PROGRAMS, PROGRAMS_KEPT,
+                        lambda program: program.z_structure == structure
+                        and (program.template is problem or program.accepts(problem)),
+                        lambda: PotentialProgram(problem, z))
 
 
 class SharedPotential:
