@@ -25,7 +25,7 @@ import pandas as pd
 
 from .. import config
 from ..inference.kinds import FitOptions
-from ..simulate.independent import simulate_independent
+from ..simulate.independent import CHANNELS, DEFAULT_CHANNELS, simulate_independent
 from ..simulate.independent.effects import EFFECTS
 from .batch import FitJob, coverage_summary, passed_first_time, successful
 
@@ -55,7 +55,8 @@ def pairs_of(seed: int, lo: int, hi: int) -> int:
 
 def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
                      options: FitOptions | None = None, model: str | None = None,
-                     withhold: Iterable[str] = (), model_heavy: str | None = None) -> list[FitJob]:
+                     withhold: Iterable[str] = (), model_heavy: str | None = None,
+                     log: Iterable[str] = ()) -> list[FitJob]:
     """One fit job per seed, with the default fit options (or ``options``: method, pooling,
     noise, robust, sampler and Type B budget pass through) and ``model`` (unless given,
     ``"auto"``: ``fit``'s default for each campaign, the registry's
@@ -65,15 +66,25 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
     off (a run's length shifts the random stream, so the later runs' own draws differ); a
     campaign keeps its name ``ind-SEED``, so its records compare seed by seed.  ``model_heavy``:
     with ``model``, the model of the campaigns above the heavy-duty test mass
-    (:attr:`~bayes_roadload.analysis.batch.FitJob.model_heavy`), as ``fit`` routes its default."""
+    (:attr:`~bayes_roadload.analysis.batch.FitJob.model_heavy`), as ``fit`` routes its default.
+    ``log``: channels of :data:`~bayes_roadload.simulate.independent.CHANNELS` logged beside the
+    default ones (e.g. ``"humidity"``; their draws come from streams of their own, so every other
+    draw of a seed is unchanged)."""
     o = options or FitOptions()
     model = model or "auto"
     withhold = tuple(withhold)
     unknown = sorted(set(withhold) - set(EFFECTS))
     if unknown:
         raise ValueError(f"unknown effect(s) {', '.join(unknown)}: the independent simulator's are {', '.join(EFFECTS)}")
+    log = tuple(log)
+    unknown = sorted(set(log) - set(CHANNELS))
+    if unknown:
+        raise ValueError(f"unknown channel(s) {', '.join(unknown)}: the independent simulator's are {', '.join(CHANNELS)}")
     extra = {"withhold": withhold} if withhold else {}
     tags = {"withheld": " ".join(withhold)} if withhold else {}
+    if log:
+        extra["channels"] = DEFAULT_CHANNELS + tuple(c for c in log if c not in DEFAULT_CHANNELS)
+        tags["logged"] = " ".join(log)
     return [FitJob(f"ind-{s}", functools.partial(simulate_independent, s, pairs=pairs_of(s, lo, hi), **extra), model=model,
                    method=o.method, pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler,
                    type_b=o.type_b, derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi), **tags},

@@ -46,6 +46,11 @@ UNIT_HINTS = {
     "pressure": "pressure_pa (pascal)",
     "pressure_kpa": "pressure_pa (pascal): multiply kPa by 1000",
     "pressure_hpa": "pressure_pa (pascal): multiply hPa by 100",
+    "relative_humidity": "relative_humidity_pct (percent, 0-100): multiply a fraction by 100",
+    "humidity": "relative_humidity_pct (percent, 0-100)",
+    "rh": "relative_humidity_pct (percent, 0-100)",
+    "humidity_pct": "relative_humidity_pct (percent, 0-100)",
+    "dew_point_c": "relative_humidity_pct (percent, 0-100): the relative humidity, not the dew point",
 }
 """Column names that say a unit the contract does not use -> the column to give instead (and
 the conversion): such a column is refused rather than guessed."""
@@ -57,9 +62,13 @@ CHANNEL_LIMITS = {
     "yaw_rad": (-math.pi / 2, math.pi / 2, "degrees in a radian column"),
     "temperature_k": (200.0, 350.0, "degrees Celsius in a kelvin column"),
     "pressure_pa": (50_000.0, 120_000.0, "kPa, hPa or bar in a pascal column"),
+    "relative_humidity_pct": (0.0, 100.0, "not a relative humidity in percent"),
     "mass_kg": config.MASS_RANGE_KG + ("not a test mass in kg",),
 }
 """column -> (low, high, what a value outside usually means), SI units."""
+
+AMBIENT_LIMITS = {c: CHANNEL_LIMITS[c] for c in ("temperature_k", "pressure_pa", "relative_humidity_pct")}
+"""The ambient columns' limits (:mod:`bayes_roadload.data.ambient`), shared by every kind."""
 
 WHEEL_TORQUE_COLUMNS = ("wheel_torque_left_nm", "wheel_torque_right_nm")
 

@@ -20,7 +20,9 @@ import numpy as np
 import pandas as pd
 
 from .. import config
+from .ambient import check_humidity_percent
 from .checks import (
+    AMBIENT_LIMITS,
     read_csv_table,
     UNIT_HINTS,
     check_columns,
@@ -52,7 +54,7 @@ DESCRIPTION = "distance-time records"
 OPTIONS: tuple[str, ...] = ()
 
 DISTANCE_REQUIRED = ("run", "distance_m", "time_s")
-DISTANCE_RUN_CONSTANT = ("direction", "pair", "mass_kg", "temperature_k", "pressure_pa")
+DISTANCE_RUN_CONSTANT = ("direction", "pair", "mass_kg", "temperature_k", "pressure_pa", "relative_humidity_pct")
 DISTANCE_OPTIONAL = DISTANCE_RUN_CONSTANT
 DISTANCE_COLUMNS = DISTANCE_REQUIRED + DISTANCE_OPTIONAL
 _TEXT_COLUMNS = ("run", "pair")
@@ -69,8 +71,7 @@ _DISTANCE_HINTS = dict(UNIT_HINTS, **{
 
 _LIMITS = {
     "distance_m": (-1.0e5, 1.0e5, "not a distance in metres"),
-    "temperature_k": (200.0, 350.0, "degrees Celsius in a kelvin column"),
-    "pressure_pa": (50_000.0, 120_000.0, "kPa, hPa or bar in a pascal column"),
+    **AMBIENT_LIMITS,
     "mass_kg": config.MASS_RANGE_KG + ("not a test mass in kg",),
 }
 
@@ -158,6 +159,7 @@ def validate_distances(df: pd.DataFrame, where: str = "distances.csv") -> pd.Dat
         if c in cols:
             check_no_missing(df, c, f"missing {c}", where)
     check_numeric(df, [c for c in cols if c not in _TEXT_COLUMNS], _LIMITS, where)
+    check_humidity_percent(df, where)
     check_direction_codes(df, where)
     lo_v, hi_v = config.DISTANCE_SEGMENT_SPEED_RANGE_MPS
     for rid, rows in run_rows(df):

@@ -19,7 +19,9 @@ import numpy as np
 import pandas as pd
 
 from .. import config
+from .ambient import check_humidity_percent
 from .checks import (
+    AMBIENT_LIMITS,
     read_csv_table,
     UNIT_HINTS,
     check_columns,
@@ -51,7 +53,7 @@ OPTIONS: tuple[str, ...] = ()
 
 INTERVAL_REQUIRED = ("run", "speed_start_mps", "speed_end_mps", "interval_s")
 RUN_CONSTANT_COLUMNS = ("direction", "pair", "window", "valid", "run_distance_m", "start_time_of_day_s",
-                        "temperature_k", "pressure_pa", "mass_kg")
+                        "temperature_k", "pressure_pa", "relative_humidity_pct", "mass_kg")
 INTERVAL_OPTIONAL = RUN_CONSTANT_COLUMNS
 INTERVAL_COLUMNS = INTERVAL_REQUIRED + INTERVAL_OPTIONAL
 _TEXT_COLUMNS = ("run", "pair", "window")
@@ -72,8 +74,7 @@ _LIMITS = {
     "interval_s": (0.0, 3600.0, "not a band time in seconds"),
     "run_distance_m": (0.0, 1.0e5, "not a distance in metres"),
     "start_time_of_day_s": (0.0, 86400.0, "seconds since midnight"),
-    "temperature_k": (200.0, 350.0, "degrees Celsius in a kelvin column"),
-    "pressure_pa": (50_000.0, 120_000.0, "kPa, hPa or bar in a pascal column"),
+    **AMBIENT_LIMITS,
     "mass_kg": config.MASS_RANGE_KG + ("not a test mass in kg",),
 }
 
@@ -168,6 +169,7 @@ def validate_intervals(df: pd.DataFrame, where: str = "intervals.csv") -> pd.Dat
     if "window" in cols:
         df["window"] = df["window"].astype(str)
     check_numeric(df, [c for c in cols if c not in _TEXT_COLUMNS], _LIMITS, where)
+    check_humidity_percent(df, where)
     if (df["interval_s"] <= 0).any():
         i = int(np.flatnonzero(df["interval_s"].to_numpy() <= 0)[0])
         refuse(where, "interval_s", i + 1, "a band time must be positive")

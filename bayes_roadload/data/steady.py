@@ -42,9 +42,11 @@ import numpy as np
 import pandas as pd
 
 from .. import config
+from .ambient import check_humidity_percent
 from .checks import (
     read_csv_table,
     CHANNEL_LIMITS,
+    UNIT_HINTS,
     WHEEL_TORQUE_COLUMNS,
     check_columns,
     check_contiguous,
@@ -78,7 +80,7 @@ OPTIONS: tuple[str, ...] = ()
 FORCE_COLUMNS = ("tractive_force_n",)
 TORQUE_COLUMNS = WHEEL_TORQUE_COLUMNS
 OPTIONAL_COLUMNS = ("time_s", "accel_mps2", "airspeed_mps", "yaw_rad", "direction", "pair",
-                    "temperature_k", "pressure_pa", "gearbox_input_force_n")
+                    "temperature_k", "pressure_pa", "relative_humidity_pct", "gearbox_input_force_n")
 KNOWN_COLUMNS = ("run", "speed_mps") + FORCE_COLUMNS + TORQUE_COLUMNS + OPTIONAL_COLUMNS
 RUN_CONSTANT = ("direction", "pair")
 
@@ -93,6 +95,7 @@ _AMBIGUOUS_HINTS = {
     "accel_g": "accel_mps2 (m/s^2): multiply g by 9.81",
     "yaw_deg": "yaw_rad (radians): multiply degrees by pi/180",
     "temperature_c": "temperature_k (kelvin): add 273.15",
+    **{k: v for k, v in UNIT_HINTS.items() if v.startswith("relative_humidity_pct")},
 }
 
 
@@ -174,6 +177,7 @@ def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_
     check_no_missing(df, "run", "missing run id", where)
     check_numeric(df, [c for c in cols if c != "run" and not (c == "pair" and not pd.api.types.is_numeric_dtype(df[c]))],
                   CHANNEL_LIMITS, where)
+    check_humidity_percent(df, where)
     if (df["speed_mps"] <= 0).any():
         refuse(where, "speed_mps", int(np.flatnonzero(df["speed_mps"].to_numpy() <= 0)[0]) + 1,
               "a steady-state run needs a positive speed")

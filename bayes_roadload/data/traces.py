@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from .. import config
-from ..physics.atmosphere import air_density_kgpm3
+from .ambient import air_density, check_humidity_percent, mean_air_density
 from ..physics.integrate import make_run, stack_runs
 from .checks import (
     read_csv_table,
@@ -68,6 +68,7 @@ OPTIONAL_COLUMNS = (
     "position_m",
     "temperature_k",
     "pressure_pa",
+    "relative_humidity_pct",
     "mass_kg",
 )
 KNOWN_COLUMNS = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
@@ -143,7 +144,6 @@ class Campaign:
         v = self.vehicle
         for rid, g in self.runs.groupby("run", sort=False):
             t = g["time_s"].to_numpy(float)
-            pressure = g["pressure_pa"].to_numpy(float) if "pressure_pa" in g else config.REFERENCE_PRESSURE_PA
             temp = g["temperature_k"].to_numpy(float) if "temperature_k" in g else config.REFERENCE_TEMPERATURE_K
             direction = float(g["direction"].iloc[0]) if "direction" in g else 1.0
             start = float(g["position_m"].iloc[0]) if "position_m" in g else 0.0
@@ -156,7 +156,7 @@ class Campaign:
                 airspeed_mps=g["airspeed_mps"].to_numpy(float) if "airspeed_mps" in g else None,
                 yaw_rad=g["yaw_rad"].to_numpy(float) if "yaw_rad" in g else None,
                 driveline_force_n=g["driveline_force_n"].to_numpy(float) if "driveline_force_n" in g else None,
-                air_density_kgpm3=np.broadcast_to(np.asarray(air_density_kgpm3(pressure, temp)), t.shape),
+                air_density_kgpm3=air_density(g),
                 temperature_k=temp,
                 direction=direction,
                 start_position_m=start,
@@ -179,6 +179,7 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
     check_not_empty(df, "samples", where)
     check_no_missing(df, "run", "missing run id", where)
     check_numeric(df, [c for c in cols if c != "run"], CHANNEL_LIMITS, where)
+    check_humidity_percent(df, where)
     check_direction_codes(df, where)
     if check_wheel_torque_pair(cols, where) and "driveline_force_n" in cols:
         refuse(where, "driveline_force_n", None,
@@ -237,10 +238,7 @@ def load(root: str | os.PathLike, speed_unit: str | None = None, airspeed_unit: 
     vehicle, anem, tunnel, meta = read_vehicle_file(root / VEHICLE_FILE)
     df, conversions = convert_units(df, str(runs_file), speed_unit, airspeed_unit)
     df = validate_runs(df, str(runs_file))
-    rho = air_density_kgpm3(float(df["pressure_pa"].mean()) if "pressure_pa" in df else config.REFERENCE_PRESSURE_PA,
-                            float(df["temperature_k"].mean()) if "temperature_k" in df
-                            else config.REFERENCE_TEMPERATURE_K)
-    check_plausible_road_load(df, str(runs_file), vehicle.effective_mass_kg, vehicle.mass_kg, float(rho))
+    check_plausible_road_load(df, str(runs_file), vehicle.effective_mass_kg, vehicle.mass_kg, mean_air_density(df))
     if "wheel_torque_left_nm" in df:
         df["driveline_force_n"] = wheel_torque_force_n(df, vehicle.rolling_radius_m)
     if conversions:

@@ -164,6 +164,10 @@ SOURCES: dict[str, UncertaintySource] = {s.key: s for s in (
                       _shift_column("temperature_k")),
     UncertaintySource("pressure_pa", 700.0 / _SQRT3, "SAE J1263 atmospheric pressure +-0.7 kPa",
                       _shift_column("pressure_pa")),
+    UncertaintySource("relative_humidity_pct", 3.0 / _SQRT3,
+                      "weather-station hygrometer +-3 % relative humidity (the standards state none; "
+                      "a Kestrel 5500 states +-2 %), where the campaign logs it",
+                      _shift_column("relative_humidity_pct")),
     UncertaintySource("driveline_scale_rel", 0.01 / _SQRT3, "wheel-torque transducer +-1 % (class 0.5-1)",
                       _scale_columns(lambda ch: ch.force)),
 )}

@@ -20,8 +20,8 @@ Interleaved files (high- and low-speed runs in one table, each run filling one g
 columns) take one gate list per group.  ``Run-Use`` becomes the ``valid`` column (On = 1),
 ``Heading`` the ``direction`` (+ = +1), ``Start Time`` ``start_time_of_day_s``; opposite-heading
 runs of the same file and window that follow each other form the pairs.  A Kestrel weather log
-(``--weather``) adds each run's temperature and station pressure (the sample nearest the run's
-start, within ``max_weather_gap_s``).
+(``--weather``) adds each run's temperature, station pressure and relative humidity (the sample
+nearest the run's start, within ``max_weather_gap_s``).
 """
 
 from __future__ import annotations
@@ -185,7 +185,8 @@ def _group_columns(gates: list[list[float]], n_bands: int, path) -> list[slice]:
 
 def read_kestrel(path: str | os.PathLike) -> pd.DataFrame:
     """A Kestrel weather-meter CSV log as ``datetime, temperature_k, pressure_pa`` (station
-    pressure; the log's ``Time`` is ``dd/mm/yyyy hh:mm``)."""
+    pressure) and, when the log has its ``Rel. Hum.`` column (percent), ``relative_humidity_pct``;
+    the log's ``Time`` is ``dd/mm/yyyy hh:mm``."""
     path = Path(path)
     text = path.read_text(encoding="latin-1").splitlines()
     header = next((i for i, line in enumerate(text) if line.startswith("Time,")), None)
@@ -197,6 +198,9 @@ def read_kestrel(path: str | os.PathLike) -> pd.DataFrame:
     t = pd.to_datetime(df["Time"], format="%d/%m/%Y %H:%M", errors="coerce")
     out = pd.DataFrame({"datetime": t, "temperature_k": pd.to_numeric(df["Temp"], errors="coerce") + 273.15,
                         "pressure_pa": pd.to_numeric(df["Station P."], errors="coerce") * 100.0})
+    humidity = pd.to_numeric(df["Rel. Hum."], errors="coerce") if "Rel. Hum." in df else None
+    if humidity is not None and humidity.notna().any():
+        out["relative_humidity_pct"] = humidity
     return out.dropna().sort_values("datetime").reset_index(drop=True)
 
 
@@ -210,7 +214,7 @@ def import_vbox(paths, vehicle: Vehicle, *, gates: list[str | None] | None = Non
     vehicle : the vehicle (its mass is not in the exports).
     gates : one gate text per file (:func:`parse_gates`), ``None`` entries (or no list) for the
         documented defaults by band count.
-    weather : optional Kestrel log (:func:`read_kestrel`) for temperature and pressure.
+    weather : optional Kestrel log (:func:`read_kestrel`) for temperature, pressure and humidity.
     max_weather_gap_s : largest distance in time from a run's start to a weather sample.
 
     Returns
@@ -315,7 +319,8 @@ def _pairs(run_meta) -> dict:
 
 
 def _add_weather(df, run_meta, log: pd.DataFrame, max_gap_s: float, source) -> tuple[pd.DataFrame, str]:
-    temps, press, missing = {}, {}, []
+    ambient = [c for c in ("temperature_k", "pressure_pa", "relative_humidity_pct") if c in log]
+    values, missing = {c: {} for c in ambient}, []
     times = log["datetime"].to_numpy()
     for rid, _stem, _window, _d, date, clock in run_meta:
         if clock is None:
@@ -331,13 +336,14 @@ def _add_weather(df, run_meta, log: pd.DataFrame, max_gap_s: float, source) -> t
         if k < 0 or abs((times[k] - when) / np.timedelta64(1, "s")) > max_gap_s:
             missing.append(rid)
             continue
-        temps[rid], press[rid] = float(log["temperature_k"].iloc[k]), float(log["pressure_pa"].iloc[k])
+        for c in ambient:
+            values[c][rid] = float(log[c].iloc[k])
     if missing:
         return df, (f"{Path(source).name} does not cover {len(missing)} of {len(run_meta)} runs (first: "
                     f"{missing[0]}); not used: reference conditions (100 kPa, 293.2 K)")
     df = df.copy()
-    df["temperature_k"] = df["run"].map(temps)
-    df["pressure_pa"] = df["run"].map(press)
+    for c in ambient:
+        df[c] = df["run"].map(values[c])
     return df, f"{Path(source).name}: nearest sample to each run's start"
 
 

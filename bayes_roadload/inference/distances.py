@@ -40,7 +40,7 @@ import numpyro.distributions as dist
 
 from .. import config
 from ..data.distances import DistanceCampaign
-from ..physics.atmosphere import air_density_kgpm3
+from ..data.ambient import air_density
 from ..physics.distances import MarkerRuns, segment_times
 from ..physics.intervals import check_speed_domain
 from ..physics.model import DragModel
@@ -166,7 +166,7 @@ def build_distance_problem(campaign: DistanceCampaign, spec: ModelSpec | str = D
     dist_m = np.zeros((n, k))
     obs = np.zeros((n, k - 1))
     mask = np.zeros((n, k - 1), bool)
-    mass, temp, press, direction, v0 = (np.zeros(n) for _ in range(5))
+    mass, temp, rho, direction, v0 = (np.zeros(n) for _ in range(5))
     for i, r in enumerate(runs):
         g = groups[r]
         x, t = g["distance_m"].to_numpy(float), g["time_s"].to_numpy(float)
@@ -177,13 +177,13 @@ def build_distance_problem(campaign: DistanceCampaign, spec: ModelSpec | str = D
         mask[i, :m - 1] = True
         mass[i] = float(g["mass_kg"].iloc[0]) if "mass_kg" in g else v.mass_kg
         temp[i] = float(g["temperature_k"].iloc[0]) if "temperature_k" in g else config.REFERENCE_TEMPERATURE_K
-        press[i] = float(g["pressure_pa"].iloc[0]) if "pressure_pa" in g else config.REFERENCE_PRESSURE_PA
+        rho[i] = air_density(g.iloc[:1])[0]   # the ambient columns are constant within a run
         direction[i] = float(g["direction"].iloc[0]) if "direction" in g else 1.0
         v0[i] = _v0_guess(x, t)
     me = v.effective_mass_kg + (mass - v.mass_kg)   # the rotating inertia does not change with the load
     markers = MarkerRuns(
         distance_m=jnp.asarray(dist_m), mask=jnp.asarray(np.concatenate([np.ones((n, 1), bool), mask], axis=1)),
-        direction=jnp.asarray(direction), air_density_kgpm3=jnp.asarray(np.asarray(air_density_kgpm3(press, temp))),
+        direction=jnp.asarray(direction), air_density_kgpm3=jnp.asarray(rho),
         temperature_k=jnp.asarray(temp), mass_kg=jnp.asarray(mass), effective_mass_kg=jnp.asarray(me),
         frontal_area_m2=jnp.full(n, v.frontal_area_m2))
     initial = {p: float(spec.initial.get(p, priors[p].center)) for p in free}

@@ -46,7 +46,7 @@ import pandas as pd
 
 from .. import config
 from ..data.intervals import IntervalCampaign
-from ..physics.atmosphere import air_density_kgpm3
+from ..data.ambient import air_density
 from ..physics.intervals import (
     IntervalBands,
     band_time_covariance,
@@ -164,7 +164,6 @@ def build_interval_problem(campaign: IntervalCampaign, spec: ModelSpec | str = "
     v = campaign.vehicle
     n = len(df)
     temp = df["temperature_k"].to_numpy(float) if "temperature_k" in df else np.full(n, config.REFERENCE_TEMPERATURE_K)
-    press = df["pressure_pa"].to_numpy(float) if "pressure_pa" in df else np.full(n, config.REFERENCE_PRESSURE_PA)
     mass = df["mass_kg"].to_numpy(float) if "mass_kg" in df else np.full(n, v.mass_kg)
     me = v.effective_mass_kg + (mass - v.mass_kg)   # the rotating inertia does not change with the load
     direction = df["direction"].to_numpy(float) if "direction" in df else np.ones(n)
@@ -172,7 +171,7 @@ def build_interval_problem(campaign: IntervalCampaign, spec: ModelSpec | str = "
         speed_start_mps=jnp.asarray(df["speed_start_mps"].to_numpy(float)),
         speed_end_mps=jnp.asarray(df["speed_end_mps"].to_numpy(float)),
         direction=jnp.asarray(direction),
-        air_density_kgpm3=jnp.asarray(np.asarray(air_density_kgpm3(press, temp))),
+        air_density_kgpm3=jnp.asarray(air_density(df)),
         temperature_k=jnp.asarray(temp), mass_kg=jnp.asarray(mass), effective_mass_kg=jnp.asarray(me),
         frontal_area_m2=jnp.full(n, v.frontal_area_m2))
     groups = df.groupby("run", sort=False).indices

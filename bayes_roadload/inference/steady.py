@@ -47,7 +47,7 @@ import pandas as pd
 
 from .. import config
 from ..thesis import THESIS_TABLE_7_11
-from ..physics.atmosphere import air_density_kgpm3
+from ..data.ambient import air_density, mean_air_density
 from ..physics.model import DragModel, StillAir, WindAir
 from ..physics.roadload import road_load_summary
 from ..physics.terms import Conditions
@@ -167,14 +167,13 @@ def build_steady_problem(campaign, spec: ModelSpec | str = "four_term", *, wind:
     air_reading = runs["airspeed_mps"].to_numpy(float) if campaign.has_anemometer else v
     yaw_reading = runs["yaw_rad"].to_numpy(float) if campaign.has_anemometer else np.zeros(n)
     temp = runs["temperature_k"].to_numpy(float) if "temperature_k" in runs else np.full(n, config.REFERENCE_TEMPERATURE_K)
-    pres = runs["pressure_pa"].to_numpy(float) if "pressure_pa" in runs else np.full(n, config.REFERENCE_PRESSURE_PA)
     direction = runs["direction"].to_numpy(float) if "direction" in runs else np.ones(n)
     z = np.zeros(n)
     vehicle = campaign.vehicle
     c = Conditions(speed_mps=jnp.asarray(v), airspeed_mps=jnp.asarray(air_reading), yaw_rad=jnp.asarray(yaw_reading),
                    driveline_force_n=jnp.asarray(z), position_m=jnp.asarray(z), distance_m=jnp.asarray(z),
                    time_s=jnp.asarray(z), accel_mps2=jnp.asarray(runs["accel_mps2"].to_numpy(float)),
-                   direction=jnp.asarray(direction), air_density_kgpm3=jnp.asarray(np.asarray(air_density_kgpm3(pres, temp))),
+                   direction=jnp.asarray(direction), air_density_kgpm3=jnp.asarray(air_density(runs)),
                    temperature_k=jnp.asarray(temp), mass_kg=jnp.asarray(z + vehicle.mass_kg),
                    frontal_area_m2=jnp.asarray(z + vehicle.frontal_area_m2))
     run_ids = tuple(campaign.run_ids)
@@ -324,9 +323,7 @@ def classical_steady(campaign, *, averaged: bool = True) -> pd.DataFrame:
         if not pairs:
             raise ValueError("averaging opposite directions needs pairs (direction / pair columns)")
         per_run = pd.DataFrame([per_run.loc[list(p)].mean() for p in pairs])
-    temp = runs["temperature_k"].mean() if "temperature_k" in runs else config.REFERENCE_TEMPERATURE_K
-    pres = runs["pressure_pa"].mean() if "pressure_pa" in runs else config.REFERENCE_PRESSURE_PA
-    rho = float(air_density_kgpm3(pres, temp))
+    rho = mean_air_density(runs)
     (c0, b0, a0), cov = np.polyfit(per_run["v"], per_run["f"], 2, cov=True)
     se = np.sqrt(np.diag(cov))[::-1]
     mg = campaign.vehicle.mass_kg * config.GRAVITY_MPS2

@@ -158,6 +158,17 @@ def test_an_ablation_withholds_the_effect_from_every_campaign_and_keeps_the_name
     with pytest.raises(ValueError, match="cd_yaw_shape"):
         calibration_jobs([1], 1, 1, withhold=["cd_yaw_shap"])
 
+def test_a_study_can_log_the_humidity_too():
+    """``log=("humidity",)``: the same campaign under the same name with the hygrometer's column
+    added (tagged ``logged``); a channel the simulator does not have is refused."""
+    plain, logged = calibration_jobs([3001], 1, 1)[0], calibration_jobs([3001], 1, 1, log=["humidity"])[0]
+    assert logged.name == plain.name and logged.tags["logged"] == "humidity" and "logged" not in plain.tags
+    a, b = plain.campaign().runs, logged.campaign().runs
+    assert "relative_humidity_pct" in b and b.drop(columns="relative_humidity_pct").equals(a)
+    with pytest.raises(ValueError, match="humidity"):
+        calibration_jobs([1], 1, 1, log=["humidty"])
+
+
 def test_campaign_sizes_come_from_the_seed():
     assert [pairs_of(s, 1, 12) for s in range(50)] == [pairs_of(s, 1, 12) for s in range(50)]
     assert {pairs_of(s, 1, 12) for s in range(200)} == set(range(1, 13))

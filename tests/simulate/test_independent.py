@@ -225,3 +225,26 @@ def test_an_overflowing_trial_step_of_the_stiff_wind_filter_is_rejected_not_rais
     assert np.isfinite(runs.select_dtypes("number").to_numpy()).all()
     ends = runs.groupby("run")["speed_mps"].agg(["first", "last"])
     assert len(ends) == 8 and (ends["first"] > 30.0).all() and (ends["last"] < 6.0).all()
+
+
+def test_humidity_is_logged_on_request_and_leaves_every_other_draw_alone(tmp_path):
+    """The ``humidity`` channel adds the hygrometer's reading (bias inside its +-2 %, noise
+    0.3 %) and changes nothing else of the seed; without the humidity effect there is no vapour
+    to read and no column."""
+    from bayes_roadload.simulate.independent import CHANNELS, DEFAULT_CHANNELS
+
+    assert "humidity" in CHANNELS and "humidity" not in DEFAULT_CHANNELS
+    plain = simulate_independent(7, pairs=1)
+    logged = simulate_independent(7, pairs=1, channels=DEFAULT_CHANNELS + ("humidity",))
+    rh = logged.runs.pop("relative_humidity_pct").to_numpy()
+    assert logged.runs.equals(plain.runs)
+    true_pct = 100.0 * logged.truth["meta"]["relative_humidity"]
+    assert 30.0 <= true_pct <= 95.0
+    # bias within +-2 %, noise 0.3 % (5 sd), rounding 0.05 %
+    assert np.all(np.abs(rh - true_pct) <= sens.HUMIDITY_ACCURACY_PCT + 5 * 0.3 + 0.05)
+    assert abs(rh.mean() - true_pct - logged.truth["meta"]["hygrometer"]["bias_pct"]) < 0.1
+    back = load_campaign(save_campaign(simulate_independent(7, pairs=1, channels=DEFAULT_CHANNELS + ("humidity",)),
+                                       tmp_path / "c"))
+    assert "relative_humidity_pct" in back.runs
+    dry = simulate_independent(7, pairs=1, withhold=("humidity",), channels=DEFAULT_CHANNELS + ("humidity",))
+    assert "relative_humidity_pct" not in dry.runs

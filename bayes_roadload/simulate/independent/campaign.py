@@ -25,9 +25,16 @@ from .track import surveyed_track
 from .vehicles import TrueVehicle, random_vehicle
 from .wind import Shelter, WindField, random_shelter, von_karman_turbulence
 
-CHANNELS = ("anemometer", "weather", "position", "driveline")
+CHANNELS = ("anemometer", "weather", "position", "driveline", "humidity")
 """Optional logged channels: airspeed_mps + yaw_rad, temperature_k + pressure_pa, position_m
-+ distance_m, driveline_force_n (only when the vehicle has a driveline loss)."""
++ distance_m, driveline_force_n (only when the vehicle has a driveline loss),
+relative_humidity_pct (a hygrometer's reading; only when the ``humidity`` effect is on)."""
+DEFAULT_CHANNELS = ("anemometer", "weather", "position", "driveline")
+"""The channels logged by default: every one but the humidity, which the studies' campaigns did
+not log before it was a channel (their records stay reproducible)."""
+HYGROMETER_STREAM = 0x68756D
+"""Second entropy word of the hygrometer's own random stream (``default_rng([seed, this])``),
+so that logging the humidity leaves every other draw of a seed as it was."""
 SAMPLE_RATES_HZ = (1.0, 2.0, 4.0, 5.0, 10.0, 20.0)
 AXLES_OF = {"small_car": 2, "mid_car": 2, "suv_van": 2, "light_truck": 2, "heavy_truck": 5}
 MAX_MEAN_WIND_MPS = 16.0 / 3.6   # SAE J1263: no test with average wind above 16 km/h ...
@@ -137,7 +144,7 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
                          category: str | None = None, wind: str | WindField = "random",
                          effects: Iterable[str] | None = None, withhold: Iterable[str] = (),
                          type_b: bool = True, run_to_run_sd: float = 0.01,
-                         sample_rate_hz: float | None = None, channels: Iterable[str] = CHANNELS,
+                         sample_rate_hz: float | None = None, channels: Iterable[str] = DEFAULT_CHANNELS,
                          perfect_instruments: bool = False, speed_noise_sd_mps: float | None = None,
                          mean_wind_mps: tuple[float, float] | None = None,
                          errors: Mapping[str, float] | None = None,
@@ -158,7 +165,7 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     run_to_run_sd : relative standard deviation of the run-to-run variation of the
         rolling-resistance constant and C_D0 (the thesis' system noise).
     sample_rate_hz : logging rate (default: drawn from 1-20 Hz).
-    channels : optional channels to log (:data:`CHANNELS`).
+    channels : optional channels to log (:data:`CHANNELS`; default :data:`DEFAULT_CHANNELS`).
     perfect_instruments : the logger records exactly what the body feels (no instrument
         effect, no Type B error, no quantisation), apart from white speed noise.
     speed_noise_sd_mps : the speed noise (default: drawn with the instrument).
@@ -225,6 +232,8 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
                               vane_wavelength_m=float(rng.uniform(4.5, 7.0)))
            if "anemometer_dynamics" in chosen else None)
     ahead = float(rng.uniform(1.5, 2.5)) if "anemometer_position" in chosen else None
+    hygrometer_rng = np.random.default_rng([int(seed), HYGROMETER_STREAM])
+    hygrometer = sens.random_hygrometer(hygrometer_rng, type_b=type_b and not perfect_instruments)
     if "yaw_offset_rad" in errors:
         inst = dataclasses.replace(inst, yaw_offset_rad=float(errors["yaw_offset_rad"]))
 
@@ -286,6 +295,8 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
                 row["airspeed_mps"], row["yaw_rad"] = sens.read_anemometer(inst, trace.cup_mps, trace.vane_rad, rng)
         if "weather" in channels:
             row["temperature_k"], row["pressure_pa"] = sens.read_weather(inst, t_amb, p_amb, n, rng)
+        if "humidity" in channels and humidity > 0.0:
+            row["relative_humidity_pct"] = sens.read_humidity(hygrometer, humidity, n, hygrometer_rng)
         if "position" in channels:
             row["position_m"], row["distance_m"] = trace.position_m, trace.distance_m
         if "driveline" in channels and has_driveline:
@@ -334,7 +345,7 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
             "yaw_offset_rad": inst.yaw_offset_rad, "speed_scale_rel": inst.speed_scale - 1.0,
             "temperature_bias_k": inst.temperature_bias_k, "pressure_bias_pa": inst.pressure_bias_pa,
             "driveline_scale_rel": inst.driveline_scale - 1.0, "track_mean_grade": mean_grade},
-        "instruments": inst.as_dict(),
+        "instruments": inst.as_dict(), "hygrometer": dataclasses.asdict(hygrometer),
         "anemometer_dynamics": dataclasses.asdict(dyn) if dyn else None, "anemometer_ahead_m": ahead,
         "wind": {"mean_speed_mps": field.mean_speed_mps, "direction_rad": field.direction_rad,
                  "shelter": dataclasses.asdict(field.shelter),

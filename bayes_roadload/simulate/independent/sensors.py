@@ -29,6 +29,7 @@ ROTATING_INERTIA_ACCURACY = 0.10           # measured wheel/driveline inertia +-
                                            # default implies a +-1-1.5 % of M spread on M_e
 GRADE_ACCURACY = 0.0002                    # 40 CFR 1066.310: grade above 0.02 % must enter the analysis
 DRIVELINE_SCALE_ACCURACY = 0.01            # wheel-torque transducer, class 0.5-1 %
+HUMIDITY_ACCURACY_PCT = 2.0                # hand-held weather meter (Kestrel 5500): +-2 % relative humidity
 
 
 @dataclass(frozen=True)
@@ -131,6 +132,28 @@ def read_weather(inst: Instruments, temperature_k, pressure_pa, n: int, rng: np.
     t = temperature_k + inst.temperature_bias_k + rng.normal(0.0, inst.temperature_noise_sd_k, n)
     p = pressure_pa + inst.pressure_bias_pa + rng.normal(0.0, inst.pressure_noise_sd_pa, n)
     return t, p
+
+
+@dataclass(frozen=True)
+class Hygrometer:
+    """The weather station's relative-humidity sensor: a bias and white noise, in percent."""
+
+    bias_pct: float = 0.0
+    noise_sd_pct: float = 0.3
+
+
+def random_hygrometer(rng: np.random.Generator, *, type_b: bool = True) -> Hygrometer:
+    """A hygrometer whose bias is drawn inside :data:`HUMIDITY_ACCURACY_PCT` (none without
+    ``type_b``)."""
+    bias = float(rng.uniform(-HUMIDITY_ACCURACY_PCT, HUMIDITY_ACCURACY_PCT)) if type_b else 0.0
+    return Hygrometer(bias_pct=bias)
+
+
+def read_humidity(hygrometer: Hygrometer, relative_humidity: float, n: int, rng: np.random.Generator):
+    """Logged relative humidity (percent, 0-100) of air at ``relative_humidity`` (a fraction),
+    ``n`` samples."""
+    h = 100.0 * relative_humidity + hygrometer.bias_pct + rng.normal(0.0, hygrometer.noise_sd_pct, n)
+    return np.clip(np.round(h, 1), 0.0, 100.0)
 
 
 def read_driveline(inst: Instruments, force_n, rng: np.random.Generator):

@@ -1,0 +1,53 @@
+"""The ambient-air columns every data kind may log, and the air density they give.
+
+``temperature_k`` (K), ``pressure_pa`` (Pa, station pressure) and ``relative_humidity_pct``
+(percent, 0-100) are optional in every kind's table (per sample in speed traces and steady
+tests, per run in interval and distance-time campaigns).  Without them the analysis takes the
+thesis' reference conditions (293.2 K, 100 kPa) and dry air, as the standards' corrections do
+(SAE J1263, 40 CFR 1066.310: density from temperature and pressure).  With the humidity the
+density is the moist air's (:func:`bayes_roadload.physics.atmosphere.air_density_kgpm3`): at
+20-30 C and 30-95 % relative humidity 0.3-1.5 % below the dry value, which a fit of the dry
+value reads as C_D0 and K_D low by the same fraction.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .. import config
+from ..physics.atmosphere import air_density_kgpm3
+from .checks import refuse
+
+TEMPERATURE_COLUMN = "temperature_k"
+PRESSURE_COLUMN = "pressure_pa"
+HUMIDITY_COLUMN = "relative_humidity_pct"
+AMBIENT_COLUMNS = (TEMPERATURE_COLUMN, PRESSURE_COLUMN, HUMIDITY_COLUMN)
+"""The ambient columns of every kind's contract (docs/data-format.md)."""
+
+def air_density(table: pd.DataFrame) -> np.ndarray:
+    """The air density (kg/m^3) of every row of ``table`` from its ambient columns (module
+    docstring): the reference temperature and pressure where a column is absent, dry air
+    without ``relative_humidity_pct``."""
+    n = len(table)
+    temp = table[TEMPERATURE_COLUMN].to_numpy(float) if TEMPERATURE_COLUMN in table else np.full(
+        n, config.REFERENCE_TEMPERATURE_K)
+    press = table[PRESSURE_COLUMN].to_numpy(float) if PRESSURE_COLUMN in table else np.full(
+        n, config.REFERENCE_PRESSURE_PA)
+    humidity = table[HUMIDITY_COLUMN].to_numpy(float) / 100.0 if HUMIDITY_COLUMN in table else None
+    return np.asarray(air_density_kgpm3(press, temp, humidity), float)
+
+
+def mean_air_density(table: pd.DataFrame) -> float:
+    """The mean of :func:`air_density` over the rows of ``table``."""
+    return float(np.mean(air_density(table))) if len(table) else float(air_density_kgpm3())
+
+
+def check_humidity_percent(df: pd.DataFrame, where: str) -> None:
+    """Refuse a ``relative_humidity_pct`` column whose every value is at most 1: a fraction in
+    a percent column (outdoor air below 1 % relative humidity is not a test day)."""
+    if HUMIDITY_COLUMN in df and len(df):
+        values = pd.to_numeric(df[HUMIDITY_COLUMN], errors="coerce").to_numpy(float)
+        if np.all(values[np.isfinite(values)] <= 1.0):
+            refuse(where, HUMIDITY_COLUMN, 1, f"every value is at most 1 (first {values[0]:g}): a fraction "
+                   "in a percent column; multiply by 100")
