@@ -148,6 +148,22 @@ def mass_class_table(records: pd.DataFrame) -> pd.DataFrame:
     return _group_coverage(rec, [mass_class(limit), mass_class(limit + 1.0)])
 
 
+def yaw_class_table(records: pd.DataFrame, classes: int = 4) -> pd.DataFrame:
+    """95 % coverage and mean z of every quantity of :data:`QUANTITIES` by the quantile class
+    (``classes`` of equal count) of the campaigns' mean absolute logged yaw
+    (``mean_abs_yaw_rad``), labelled by its range in degrees; fits that failed are left out.
+    Columns ``group``, ``quantity``, ``n``, ``coverage95``, ``z_mean``."""
+    rec = successful(records).copy()
+    deg = np.degrees(rec["mean_abs_yaw_rad"].astype(float))
+    bins = pd.qcut(deg, classes)
+    rec["group"] = [f"{b.left:.1f}-{b.right:.1f} deg" for b in bins]
+    labels = [f"{b.left:.1f}-{b.right:.1f} deg" for b in bins.cat.categories]
+    cov = coverage_summary(rec, by=("group",), quantities=list(QUANTITIES), levels=(0.95,))
+    cov = cov.rename(columns={"coverage": "coverage95"}).set_index(["group", "quantity"])
+    index = pd.MultiIndex.from_product([labels, QUANTITIES], names=["group", "quantity"])
+    return cov.reindex(index)[["n", "coverage95", "z_mean"]].reset_index()
+
+
 def campaign_test_mass(seed: int, pairs: int) -> float:
     """The declared test mass (kg) of calibration campaign ``seed`` of ``pairs`` pairs, from
     the campaign itself (for records written before :func:`~.batch.run_job` recorded it)."""
@@ -181,9 +197,11 @@ def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: flo
     """The study's section of ``docs/calibration.md``: counts, gates (and those passed without a
     retry), the intervals that hold, the table with verdicts, the gates by ``code`` (the commit
     that fitted the campaigns, when the records hold more than one), the coverage by test mass
-    (:func:`mass_class_table`, when every record has ``test_mass_kg``) and, with ``split`` (e.g.
-    :data:`DIAGNOSTIC_SPLIT`), the coverage on either side of a true value
-    (:func:`truth_split_table`); the last two marked as readings."""
+    (:func:`mass_class_table`, when every record has ``test_mass_kg``), with ``split`` (e.g.
+    :data:`DIAGNOSTIC_SPLIT`) the coverage on either side of a true value
+    (:func:`truth_split_table`), and the coverage and mean z by the campaigns' mean absolute yaw
+    (:func:`yaw_class_table`, when every fit records it and there are at least 8); the last
+    three marked as readings."""
     ok = successful(records)
     gate = ok["gate_pass"].astype(bool)
     first = f" ({int(passed_first_time(ok).sum())} first time, without a retry)" if "retries" in ok else ""
@@ -220,6 +238,15 @@ def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: flo
             part = st[st["group"] == g]
             lines.append(f"| {g} | {int(part['n'].iloc[0])} | "
                          + " | ".join(f"{c:.2f}" for c in part["coverage95"]) + " |")
+    if "mean_abs_yaw_rad" in ok and ok["mean_abs_yaw_rad"].notna().all() and len(ok) >= 8:
+        yt = yaw_class_table(ok)
+        lines += ["", "A reading, not a rule (the classes are the quartiles of this run's campaigns): 95 % coverage "
+                  "and, in brackets, the mean z by the campaign's mean absolute logged yaw.", "",
+                  "| mean abs. yaw | n | " + " | ".join(QUANTITIES) + " |", "|---|---|" + "---|" * len(QUANTITIES)]
+        for g in dict.fromkeys(yt["group"]):
+            part = yt[yt["group"] == g]
+            lines.append(f"| {g} | {int(part['n'].max())} | "
+                         + " | ".join(f"{c:.2f} ({z:+.2f})" for c, z in zip(part["coverage95"], part["z_mean"])) + " |")
     if wall_s is not None and "time_total_s" in ok:
         lines += ["", f"Mean fit time {ok['time_total_s'].mean():.0f} s; wall time {wall_s / 60:.0f} min."]
     return "\n".join(lines) + "\n"

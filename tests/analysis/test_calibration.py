@@ -132,6 +132,28 @@ def test_the_header_counts_held_intervals_and_first_time_gates_and_the_mass_clas
     assert "by the declared test mass" not in calibration_markdown(rec.drop(columns="test_mass_kg"), calibration_table(rec))
 
 
+def test_the_yaw_classes_read_coverage_and_bias_apart():
+    """Quartiles of the mean absolute yaw: a shift of the estimates in the gustiest quarter shows
+    there (its coverage and mean z) and nowhere else; the section prints the table."""
+    from bayes_roadload.analysis.calibration import yaw_class_table
+
+    rec = _records(1.0, n=40)
+    rec["mean_abs_yaw_rad"] = np.radians(np.arange(40) * 0.3 + 1.0)   # 1.0-12.7 deg, increasing
+    top = np.arange(40) >= 30
+    for q in QUANTITIES:
+        rec.loc[top, f"{q}_mean"] -= 5.0
+        rec.loc[top, f"{q}_in95"] = False
+    t = yaw_class_table(rec)
+    groups = list(dict.fromkeys(t["group"]))
+    assert len(groups) == 4 and (t["n"] == 10).all()
+    last = t[t["group"] == groups[-1]]
+    assert (last["coverage95"] == 0.0).all() and (last["z_mean"] < -3.0).all()
+    rest = t[t["group"] != groups[-1]]
+    assert (rest["z_mean"].abs() < 1.5).all()      # 10 unit-normal z: |mean| < 1.5 is 4.7 sd
+    text = calibration_markdown(rec, calibration_table(rec))
+    assert "by the campaign's mean absolute logged yaw" in text and f"| {groups[-1]} | 10 | 0.00 (" in text
+
+
 def test_jobs_carry_the_model_asked_for():
     """The study fits fit's default model for each campaign unless told otherwise (``--model``):
     "auto", which the batch job resolves for each campaign as ``fit`` does."""
