@@ -18,6 +18,8 @@ mass, and ``F0_N``, ``F2_N_per_kph2`` are per tonne (scale them by the real test
     python benchmarks/real_data.py --extras-only     # drift tables and GNSS fits onto saved records
     python benchmarks/real_data.py --markdown-only   # rewrite docs/real_data.md from docs/real_data.json
     python benchmarks/real_data.py --gnss-lopo-only  # the eco-car traces' leave-one-pair-out coverage onto them
+    python benchmarks/real_data.py --only "MrLee (vehicle not named), 2024-04-22, Kestrel weather"
+        # fit, LOPO, drift tables and diagnosis of the named campaigns again, onto the saved records
 
 Prints a JSON record of every figure on stdout.
 """
@@ -187,9 +189,13 @@ def heading_diagnosis(camp) -> dict:
             "top": d.top, "wall_s": round(time.perf_counter() - t0, 1)}
 
 
-def run(data: Path, skip_lopo: bool):
+def run(data: Path, skip_lopo: bool, only=None):
+    """Fit (and with LOPO score) every interval campaign of :data:`DATASETS`, or those named in
+    ``only``."""
     records = {}
     for name, (files, use_weather) in DATASETS.items():
+        if only is not None and name not in only:
+            continue
         t0 = time.perf_counter()
         coast = data / "coastdown"
         weather = data / "meteo" / "AGRICULTR_SPLIT.csv" if use_weather else None
@@ -562,12 +568,40 @@ def main(argv=None):
     ap.add_argument("--gnss-lopo-model", default="split_f0_f2",
                     help="the model of --gnss-lopo-only (default %(default)s; four_term_tyre_lag: the speed-trace "
                          "default of `fit`)")
+    ap.add_argument("--only", nargs="+", metavar="CAMPAIGN",
+                    help="fit (with LOPO unless --skip-lopo), drift tables and diagnosis of these campaigns again "
+                         "(names as in the tables), onto the records in --json; the others' records are kept")
     ap.add_argument("--diagnose-only", action="store_true",
                     help="read the records in --json, run `diagnose` on every interval campaign and on the "
                          "eco-car speed traces, rewrite the markdown")
     args = ap.parse_args(argv)
     if args.markdown_only:
         _write_markdown(json.loads(args.json.read_text()), args.out)
+        return 0
+    if args.only:
+        unknown = sorted(set(args.only) - set(DATASETS))
+        if unknown:
+            ap.error(f"--only: unknown campaign(s) {unknown}; known: {sorted(DATASETS)}")
+        if not (args.data / "coastdown").is_dir():
+            print(json.dumps({"skipped": f"{args.data} not found"}))
+            return 0
+        records = json.loads(args.json.read_text())
+        fresh = run(args.data, args.skip_lopo, only=set(args.only))
+        for name, rec in fresh.items():
+            files, use_weather = DATASETS[name]
+            paths = [args.data / "coastdown" / f for f in files]
+            plain, _ = import_vbox(paths, VEHICLE)   # the drift tables, as the full run takes them
+            validity = interval_validity(plain)
+            accepted = list(validity.loc[~validity["rejected"], "run"])
+            rec["heading_trends"] = heading_trends(plain, accepted)
+            rec["heading_forces"] = heading_forces(plain, accepted)
+            weather = args.data / "meteo" / "AGRICULTR_SPLIT.csv" if use_weather else None
+            rec["diagnosis"] = heading_diagnosis(import_vbox(paths, VEHICLE, weather=weather)[0])
+            if args.skip_lopo and "lopo" in records.get(name, {}):
+                rec["lopo"] = records[name]["lopo"]
+            records[name] = rec
+        args.json.write_text(json.dumps(records, indent=2) + "\n")
+        _write_markdown(records, args.out)
         return 0
     if args.gnss_lopo_only:
         records = json.loads(args.json.read_text())
