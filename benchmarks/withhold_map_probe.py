@@ -69,9 +69,9 @@ def summary(records: pd.DataFrame) -> str:
     where the records carry intervals, the 95 % intervals of each arm that hold the truth and the
     median ratio of the arms' posterior sd (the Type B budget included): one table per second
     arm (its withheld effects and model) the records hold."""
-    records = records.assign(withheld=records["withheld"].fillna("") if "withheld" in records else "",
-                             arm_model=records["arm_model"].fillna("default") if "arm_model" in records else "default",
-                             arm_logged=records["arm_logged"].fillna("") if "arm_logged" in records else "")
+    records = records.assign(withheld=records["withheld"].astype(object).fillna("") if "withheld" in records else "",
+                             arm_model=records["arm_model"].astype(object).fillna("default") if "arm_model" in records else "default",
+                             arm_logged=records["arm_logged"].astype(object).fillna("") if "arm_logged" in records else "")
     from bayes_roadload.analysis.batch import successful
 
     records = successful(records)  # a failed fit has no interval: it is left out of the pairs

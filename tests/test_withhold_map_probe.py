@@ -62,21 +62,28 @@ def test_the_held_intervals_and_the_sd_ratio_are_counted_per_arm_on_the_paired_s
 
 def test_each_arm_is_fitted_with_its_own_models(probe, monkeypatch):
     """The first arm takes --base-model (--base-model-heavy), every effect on; the second
-    --model (--model-heavy) with the withheld effects off; the records name each arm's model."""
+    --model (--model-heavy) with the withheld effects off and the --log channels logged; the
+    records name each arm's model and logged channels."""
     import bayes_roadload.analysis.batch as batch
     import bayes_roadload.analysis.calibration as calibration
 
     calls = []
 
-    def jobs(seeds, lo, hi, options=None, model=None, withhold=(), model_heavy=None):
-        calls.append((model, model_heavy, tuple(withhold)))
+    def jobs(seeds, lo, hi, options=None, model=None, withhold=(), model_heavy=None, log=()):
+        calls.append((model, model_heavy, tuple(withhold), tuple(log)))
         return [model]
 
     monkeypatch.setattr(calibration, "calibration_jobs", jobs)
     monkeypatch.setattr(batch, "run_batch", lambda jobs, progress=True: pd.DataFrame({"name": ["ind-1"]}))
-    records = probe.run([1], ["pitch"], 1, 2, model="m", model_heavy="mh", base_model="b", base_model_heavy="bh")
-    assert calls == [("b", "bh", ()), ("m", "mh", ("pitch",))]
+    records = probe.run([1], ["pitch"], 1, 2, model="m", model_heavy="mh", base_model="b", base_model_heavy="bh",
+                        log=["humidity"])
+    assert calls == [("b", "bh", (), ()), ("m", "mh", ("pitch",), ("humidity",))]
     assert records["arm_model"].tolist() == ["b", "m"] and records["arm"].tolist() == ["all", "withheld"]
+    assert records["arm_logged"].tolist() == ["", "humidity"]
+    table = probe.summary(pd.concat([_records("all", [-4.0], names=("ind-1",)),
+                                     _records("withheld", [-2.0], names=("ind-1",)).assign(arm_logged="humidity")],
+                                    ignore_index=True))
+    assert "also logged: humidity" in table
 
 
 def test_a_failed_fit_is_left_out_of_the_pairs_not_counted_as_held(probe):
