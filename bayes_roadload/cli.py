@@ -234,10 +234,11 @@ def _fit_options(args, runs=None):
 
 def _provenance(args, campaign, campaign_path):
     """``fit.json`` / ``posterior.nc`` provenance of a fit of ``campaign`` read from ``campaign_path``."""
+    from .data.ambient import ambient_record
     from .output import fit_provenance
 
     return fit_provenance(getattr(args, "command_line", None), campaign_path,
-                          getattr(campaign, "meta", {}).get("conversions"))
+                          getattr(campaign, "meta", {}).get("conversions"), ambient_record(campaign))
 
 
 def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None, provenance=None, stages=None):

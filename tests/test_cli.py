@@ -93,6 +93,9 @@ def test_fit_nuts_writes_outputs_and_flags_gates(cli_nuts_fit):
     assert idata.posterior.attrs["command_line"].startswith("bayes-roadload fit ")
     assert idata.posterior.attrs["campaign_sha256"] == json.loads((out / "fit.json").read_text())[
         "provenance"]["campaign_sha256"]
+    # the air the fit took is printed after the posterior table and kept in fit.json
+    ambient = json.loads((out / "fit.json").read_text())["provenance"]["ambient"]
+    assert ambient["air"] == "dry" and f"mean density {ambient['air_density_kgpm3']:.4f} kg/m^3" in printed
     diag = json.loads((out / "diagnostics.json").read_text())
     assert code == (0 if diag["pass"] else 3)
     # a failed fit is announced before anything else is printed

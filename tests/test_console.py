@@ -110,6 +110,34 @@ def test_speed_unit_is_converted_and_recorded(campaign_dir, tmp_path, capsys):
     assert len(prov["campaign_sha256"]) == 64 and prov["command_line"].endswith("--speed-unit kph")
 
 
+def test_a_logged_humidity_lightens_the_air_and_fit_json_says_so(campaign_dir, tmp_path):
+    """The same campaign with a ``relative_humidity_pct`` column: the least-squares fit sees the
+    drag force through rho C_D, so C_D0 rises by the dry-to-moist density ratio and the rolling
+    terms stay (but for the lift's share); ``fit.json`` records the air each fit took."""
+    from bayes_roadload.physics.atmosphere import air_density_kgpm3
+
+    moist = tmp_path / "moist"
+    moist.mkdir()
+    runs = pd.read_csv(campaign_dir / "runs.csv")
+    runs.assign(relative_humidity_pct=70.0).to_csv(moist / "runs.csv", index=False)
+    (moist / "vehicle.toml").write_text((campaign_dir / "vehicle.toml").read_text())
+    assert lsq(moist, tmp_path / "fit") == 0 and lsq(campaign_dir, tmp_path / "ref") == 0
+    got, ref = (pd.read_csv(tmp_path / d / "summary.csv").set_index("parameter") for d in ("fit", "ref"))
+    t = runs["temperature_k"].mean() if "temperature_k" in runs else 293.2
+    p = runs["pressure_pa"].mean() if "pressure_pa" in runs else 100_000.0
+    ratio = air_density_kgpm3(p, t) / air_density_kgpm3(p, t, 0.70)
+    assert ratio > 1.004   # the effect is resolved against the tolerances below
+    # rho C_D is what the data fix: the optimum scales exactly, the optimiser's tolerance aside
+    assert got.loc["CD0", "mean"] / ref.loc["CD0", "mean"] == pytest.approx(ratio, rel=1e-4)
+    # the rolling terms move only through the tunnel lift that unloads the tyres (q_r A C_L: its
+    # few per cent of the weight, 0.5 % lighter): by at most 0.05 x (ratio - 1) < 1e-3
+    assert got.loc["AD", "mean"] == pytest.approx(ref.loc["AD", "mean"], rel=1e-3)
+    amb, dry = (json.loads((tmp_path / d / "fit.json").read_text())["provenance"]["ambient"] for d in ("fit", "ref"))
+    assert amb["air"] == "moist" and amb["relative_humidity_pct"] == pytest.approx(70.0)
+    assert dry["air"] == "dry" and dry["relative_humidity_pct"] is None
+    assert amb["air_density_kgpm3"] == pytest.approx(dry["air_density_kgpm3"] / ratio, rel=1e-6)
+
+
 def test_the_command_line_fills_and_reuses_the_compilation_cache(campaign_dir, tmp_path):
     """Two processes fit the same campaign: the first writes compiled programs to
     $BAYES_ROADLOAD_CACHE_DIR, the second finds every program there and adds none."""

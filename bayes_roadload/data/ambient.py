@@ -51,3 +51,26 @@ def check_humidity_percent(df: pd.DataFrame, where: str) -> None:
         if np.all(values[np.isfinite(values)] <= 1.0):
             refuse(where, HUMIDITY_COLUMN, 1, f"every value is at most 1 (first {values[0]:g}): a fraction "
                    "in a percent column; multiply by 100")
+
+
+def ambient_record(campaign) -> dict:
+    """What air a fit of ``campaign`` assumed, for ``fit.json`` (``provenance.ambient``) and the
+    line ``fit`` prints: the means of the logged ambient columns of its measured table (the
+    table its class declares, :class:`~bayes_roadload.data.uncertainty.TypeBChannels`; None
+    where a column is absent), the mean air density, and ``air`` "moist" (the humidity logged)
+    or "dry"."""
+    table = getattr(campaign, type(campaign).type_b_channels.table)
+    mean = {c: (float(table[c].astype(float).mean()) if c in table else None) for c in AMBIENT_COLUMNS}
+    return {**mean, "air_density_kgpm3": mean_air_density(table),
+            "air": "moist" if mean[HUMIDITY_COLUMN] is not None else "dry"}
+
+
+def ambient_line(record: dict) -> str:
+    """One line saying what air the fit took (:func:`ambient_record`)."""
+    t, p, h = (record[c] for c in AMBIENT_COLUMNS)
+    where = (f"{t:.1f} K, {p / 1000:.1f} kPa" if t is not None and p is not None else
+             f"{'logged' if t is not None else 'reference'} temperature, "
+             f"{'logged' if p is not None else 'reference'} pressure")
+    air = (f"moist air at {h:.0f} % relative humidity" if h is not None else
+           "dry air (no relative_humidity_pct column: humid air is up to 1.5 % lighter, read as C_D0 that much low)")
+    return f"air: {where}, {air}; mean density {record['air_density_kgpm3']:.4f} kg/m^3"

@@ -337,6 +337,15 @@ def _through_problem(build: Callable[[Any, ModelSpec, FitOptions], Problem]) -> 
 
 # ----------------------------------------------------------------------------- printing and extras
 
+def _air_notes(fit, campaign, extras) -> list[str]:
+    """The air the fit took (:func:`~bayes_roadload.data.ambient.ambient_line`), printed after
+    the posterior table (a failed gate stays the first line) by every kind whose model has an
+    aerodynamic force."""
+    from ..data.ambient import ambient_line, ambient_record
+
+    return [ambient_line(ambient_record(campaign))]
+
+
 def _distance_preamble(campaign) -> list[str]:
     masses = sorted(set(campaign.masses_kg().values()))
     return [f"{len(campaign.run_ids)} runs at {', '.join(f'{m:g}' for m in masses)} kg, "
@@ -379,25 +388,26 @@ KINDS: dict[str, KindEntry] = {e.name: e for e in (
     KindEntry("traces", "speed-trace", Campaign, traces_default_model, _check_traces, _fit_traces,
               trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
               diagnosis_model="three_term", type_b=_traces_type_b, default_pooling=traces_default_pooling,
-              lagged_speed_drop=True,
+              lagged_speed_drop=True, notes=_air_notes,
               default_models={"four_term_tyre_lag_admittance_pitch_shapes":
                                   f"Bayesian fit up to {config.HEAVY_DUTY_MASS_KG:g} kg test mass",
                               "four_term_tyre_lag_admittance_heavy_pitch_shapes":
                                   f"Bayesian fit above {config.HEAVY_DUTY_MASS_KG:g} kg test mass",
                               "four_term": "least squares (--method lsq)"}),
     KindEntry("intervals", "interval", IntervalCampaign, lambda c, o: "split_f0_f2", _check_intervals,
-              report=interval_report, validity_default="reject", diagnosis="band_times",
+              report=interval_report, validity_default="reject", diagnosis="band_times", notes=_air_notes,
               diagnosis_model="split_f0_f2", default_models={"split_f0_f2": "always"},
               **_through_problem(_intervals_problem)),
     KindEntry("distances", "distance-time", DistanceCampaign, lambda c, o: DISTANCE_DEFAULT_MODEL,
-              _nuts_only("distance-time"), report=distance_report, preamble=_distance_preamble,
+              _nuts_only("distance-time"), report=distance_report, preamble=_distance_preamble, notes=_air_notes,
               diagnosis="band_times", diagnosis_model=DISTANCE_DEFAULT_MODEL, default_models={DISTANCE_DEFAULT_MODEL: "always"},
               **_through_problem(_distances_problem)),
     KindEntry("spindown", "spin-down", SpindownCampaign, lambda c, o: "undriven_spindown", _check_spindown,
               report=spindown_report, extras=lambda f, c, s, o: spindown_extras(f, c, s), notes=_spindown_notes,
               default_models={"undriven_spindown": "always"}, **_through_problem(_spindown_problem)),
     KindEntry("steady", "steady-state", SteadyCampaign, _steady_default_model, _check_steady,
-              report=steady_report, extras=_steady_extras, notes=_steady_notes, driveline_channel=on_load_channel,
+              report=steady_report, extras=_steady_extras, driveline_channel=on_load_channel,
+              notes=lambda f, c, e: _steady_notes(f, c, e) + _air_notes(f, c, e),
               default_models={"four_term": "measured wind", "three_term": "no measured wind"},
               **_through_problem(_steady_problem)),
 )}

@@ -82,13 +82,17 @@ def variable_units(name: str) -> str:
 
 
 def fit_provenance(command_line: str | None = None, campaign: str | os.PathLike | None = None,
-               conversions: list | None = None) -> dict[str, Any]:
+               conversions: list | None = None, ambient: dict | None = None) -> dict[str, Any]:
     """Where a fit came from: ``package_version``, ``command_line`` (or null), ``campaign_sha256``
-    (:func:`~bayes_roadload.data.campaign_sha256` of the campaign directory, or null) and the
-    unit ``conversions`` made on load (:mod:`bayes_roadload.data.units`)."""
-    return {"package_version": __version__, "command_line": command_line,
-            "campaign_sha256": campaign_sha256(campaign) if campaign is not None and Path(campaign).is_dir() else None,
-            "conversions": list(conversions or [])}
+    (:func:`~bayes_roadload.data.campaign_sha256` of the campaign directory, or null), the
+    unit ``conversions`` made on load (:mod:`bayes_roadload.data.units`) and, when given, the
+    ``ambient`` air the fit took (:func:`~bayes_roadload.data.ambient.ambient_record`)."""
+    out = {"package_version": __version__, "command_line": command_line,
+           "campaign_sha256": campaign_sha256(campaign) if campaign is not None and Path(campaign).is_dir() else None,
+           "conversions": list(conversions or [])}
+    if ambient is not None:
+        out["ambient"] = dict(ambient)
+    return out
 
 
 def _annotate(idata: az.InferenceData, prov: dict[str, Any]) -> None:
