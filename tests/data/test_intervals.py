@@ -112,3 +112,38 @@ def test_speed_traces_at_several_test_masses(small_campaign):
     runs.loc[1, "mass_kg"] = 1200.0
     with pytest.raises(CampaignError, match="mass_kg changes within run"):
         Campaign(runs, small_campaign.vehicle)
+
+
+KESTREL = """Device Information:,,,
+Name:,TEST,,
+,,,
+Time,Temp,Wet Bulb Temp.,Rel. Hum.,Baro.,Station P.
+yyyy-MM-dd hh:mm:ss,Celsius,Celsius,%,mb,mb
+{rows}
+"""
+
+
+def test_a_kestrel_log_brings_temperature_pressure_and_humidity_to_each_run(tmp_path):
+    """The log's sample nearest each run's start (the exports' 12:00 start, runs 120 s apart)
+    gives the run's ``temperature_k``, ``pressure_pa`` and ``relative_humidity_pct``, and the
+    fit's density is the moist air's."""
+    from bayes_roadload.data.ambient import air_density
+    from bayes_roadload.data.vbox import read_kestrel
+    from bayes_roadload.physics.atmosphere import air_density_kgpm3
+
+    rows = "\n".join(f"01/01/2026 12:{m:02d},{20 + 0.1 * m:.1f},15.0,{50 + m},1000.0,{950 + m:.1f}" for m in range(0, 20))
+    log = tmp_path / "kestrel.csv"
+    log.write_text(KESTREL.format(rows=rows), encoding="latin-1")
+    w = read_kestrel(log)
+    assert list(w.columns) == ["datetime", "temperature_k", "pressure_pa", "relative_humidity_pct"]
+    assert w["relative_humidity_pct"].iloc[3] == 53.0 and w["pressure_pa"].iloc[3] == pytest.approx(95_300.0)
+    high = write_vbox_csv(split_campaign(), tmp_path / "high.csv")
+    camp, report = import_vbox([high], VEHICLE, weather=log)
+    assert "nearest sample" in report.weather
+    per_run = camp.intervals.groupby("run", sort=False)[["temperature_k", "pressure_pa", "relative_humidity_pct"]].first()
+    # runs start at 12:00, 12:02, 12:04, 12:06: the samples of minutes 0, 2, 4, 6
+    np.testing.assert_allclose(per_run["relative_humidity_pct"], [50.0, 52.0, 54.0, 56.0])
+    np.testing.assert_allclose(per_run["temperature_k"], [293.15, 293.35, 293.55, 293.75])
+    rho = air_density(camp.intervals.groupby("run", sort=False).head(1))
+    np.testing.assert_allclose(rho, [air_density_kgpm3(95_000.0 + 200.0 * k, 293.15 + 0.2 * k, (50.0 + 2 * k) / 100)
+                                     for k in range(4)], rtol=1e-12)
