@@ -25,6 +25,7 @@ HUMIDITY_COLUMN = "relative_humidity_pct"
 AMBIENT_COLUMNS = (TEMPERATURE_COLUMN, PRESSURE_COLUMN, HUMIDITY_COLUMN)
 """The ambient columns of every kind's contract (docs/data-format.md)."""
 
+
 def air_density(table: pd.DataFrame) -> np.ndarray:
     """The air density (kg/m^3) of every row of ``table`` from its ambient columns (module
     docstring): the reference temperature and pressure where a column is absent, dry air

@@ -73,12 +73,14 @@ def _scale_columns(columns_of: Callable[[TypeBChannels], tuple[str, ...]]) -> Ca
     return apply
 
 
-def _shift_column(column: str) -> Callable[[Any, float], Any]:
+def _shift_column(column: str, bounds: tuple[float, float] | None = None) -> Callable[[Any, float], Any]:
+    """Shift ``column`` by ``delta``, kept inside ``bounds`` when given (a reading the contract
+    refuses outside them: the relative humidity's 0-100 %)."""
     def apply(c, delta: float):
         def shift(t: pd.DataFrame) -> pd.DataFrame | None:
             if column not in t:
                 return None
-            t[column] = t[column] + delta
+            t[column] = t[column] + delta if bounds is None else (t[column] + delta).clip(*bounds)
             return t
         return _with_table(c, shift)
     return apply
@@ -167,7 +169,9 @@ SOURCES: dict[str, UncertaintySource] = {s.key: s for s in (
     UncertaintySource("relative_humidity_pct", 3.0 / _SQRT3,
                       "weather-station hygrometer +-3 % relative humidity (the standards state none; "
                       "a Kestrel 5500 states +-2 %), where the campaign logs it",
-                      _shift_column("relative_humidity_pct")),
+                      # kept inside 0-100 %: near saturation the difference spans less than +-u,
+                      # which understates a term of ~0.03 % of the density by at most a fifth
+                      _shift_column("relative_humidity_pct", (0.0, 100.0))),
     UncertaintySource("driveline_scale_rel", 0.01 / _SQRT3, "wheel-torque transducer +-1 % (class 0.5-1)",
                       _scale_columns(lambda ch: ch.force)),
 )}

@@ -68,6 +68,7 @@ def test_interval_campaigns_take_it_per_run(tmp_path):
 
 
 def test_the_hygrometer_is_a_type_b_source_where_humidity_is_logged(tmp_path):
+    """Its default is +-3 % read as rectangular; a shift near saturation stays a valid campaign."""
     df = runs_frame()
     df[HUMIDITY_COLUMN] = 60.0
     c = load_campaign(write(tmp_path, df))
@@ -75,5 +76,9 @@ def test_the_hygrometer_is_a_type_b_source_where_humidity_is_logged(tmp_path):
     assert s.default == pytest.approx(3.0 / np.sqrt(3.0))
     shifted = s.apply(c, 2.0)
     assert (shifted.runs[HUMIDITY_COLUMN] - c.runs[HUMIDITY_COLUMN]).to_numpy() == pytest.approx(2.0)
+    (tmp_path / "near").mkdir()
+    near = load_campaign(write(tmp_path / "near", runs_frame().assign(relative_humidity_pct=99.0)))
+    up, down = s.apply(near, s.default), s.apply(near, -s.default)   # kept inside the contract's 0-100 %
+    assert up.runs[HUMIDITY_COLUMN].max() == 100.0 and down.runs[HUMIDITY_COLUMN].iloc[0] == pytest.approx(99.0 - s.default)
     (tmp_path / "dry").mkdir()
     assert s.apply(load_campaign(write(tmp_path / "dry", runs_frame())), 2.0) is None
