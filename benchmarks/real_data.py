@@ -89,15 +89,18 @@ def lopo_coverage(camp, runs, model="split_f0_f2"):
     pairs = [p for p in camp.pairs() if all(r in runs for r in p)]
     hits = {lv: [] for lv in LEVELS}
     total_hits = {lv: [] for lv in LEVELS}
-    pit, gates_failed = [], 0
+    pit, gates_failed, failed_gates = [], 0, {}
     for pair in pairs:
         keep = [r for r in runs if r not in pair]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             fit = fit_intervals_nuts(camp, model, sampler=LOPO_SAMPLER, runs=keep)
         idata = to_inference_data(fit)
-        if not _diag(fit, idata, summary_table(fit, idata))["pass"]:
+        diag = _diag(fit, idata, summary_table(fit, idata))
+        if not diag["pass"]:
             gates_failed += 1
+            for gate in diag.get("failed", []):
+                failed_gates[gate] = failed_gates.get(gate, 0) + 1
         held = build_interval_problem(camp, model, runs=list(pair))
         pred = predictive_band_times(held, fit.samples, n_draws=1000)["interval_s"]
         obs = observed_band_times(held)
@@ -110,7 +113,7 @@ def lopo_coverage(camp, runs, model="split_f0_f2"):
             tlo, thi = np.percentile(tot_pred, [50 * (1 - lv), 50 * (1 + lv)], axis=0)
             total_hits[lv].extend((tot_obs >= tlo) & (tot_obs <= thi))
     return {"pairs": len(pairs), "bands": len(hits[LEVELS[0]]), "lopo_fits_failing_gates": gates_failed,
-            "band_coverage": {str(lv): float(np.mean(hits[lv])) for lv in LEVELS},
+            "lopo_failed_gates": failed_gates, "band_coverage": {str(lv): float(np.mean(hits[lv])) for lv in LEVELS},
             "run_total_coverage": {str(lv): float(np.mean(total_hits[lv])) for lv in LEVELS},
             "pit_mean": float(np.mean(pit)), "pit_sd": float(np.std(pit))}
 
@@ -487,7 +490,9 @@ def markdown(records) -> str:
             bc, tc = lo["band_coverage"], lo["run_total_coverage"]
             lines.append(f"| {name} | {lo['pairs']} | {lo['bands']} | {bc['0.5']:.2f} | {bc['0.9']:.2f} | "
                          f"{bc['0.95']:.2f} | {tc['0.5']:.2f} / {tc['0.9']:.2f} / {tc['0.95']:.2f} | "
-                         f"{lo['pit_mean']:.2f} ({lo['pit_sd']:.2f}) | {lo['lopo_fits_failing_gates']} |")
+                         f"{lo['pit_mean']:.2f} ({lo['pit_sd']:.2f}) | {lo['lopo_fits_failing_gates']}"
+                         + (" (" + ", ".join(f"{g} {n}" for g, n in lo["lopo_failed_gates"].items()) + ")"
+                            if lo.get("lopo_failed_gates") else "") + " |")
         lines += ["", "A calibrated predictive gives coverage near the nominal level and PIT values uniform "
                       "(mean 0.5, sd 0.29).", ""]
     lines += ["## The + / - heading difference", "",
