@@ -192,17 +192,32 @@ def heading_diagnosis(camp) -> dict:
             "top": d.top, "wall_s": round(time.perf_counter() - t0, 1)}
 
 
+def _import(data: Path, name: str, weather: bool = True):
+    """The interval campaign ``name`` of :data:`DATASETS` and its import report, with its
+    Kestrel log when it has one and ``weather``."""
+    files, use_weather = DATASETS[name]
+    log = data / "meteo" / "AGRICULTR_SPLIT.csv" if use_weather and weather else None
+    return import_vbox([data / "coastdown" / f for f in files], VEHICLE, weather=log)
+
+
+def drift_tables(data: Path, name: str) -> dict:
+    """``heading_trends`` and ``heading_forces`` of campaign ``name`` over its accepted runs,
+    imported without its weather log."""
+    camp, _ = _import(data, name, weather=False)
+    validity = interval_validity(camp)
+    accepted = list(validity.loc[~validity["rejected"], "run"])
+    return {"heading_trends": heading_trends(camp, accepted), "heading_forces": heading_forces(camp, accepted)}
+
+
 def run(data: Path, skip_lopo: bool, only=None):
     """Fit (and with LOPO score) every interval campaign of :data:`DATASETS`, or those named in
     ``only``."""
     records = {}
-    for name, (files, use_weather) in DATASETS.items():
+    for name, (files, _) in DATASETS.items():
         if only is not None and name not in only:
             continue
         t0 = time.perf_counter()
-        coast = data / "coastdown"
-        weather = data / "meteo" / "AGRICULTR_SPLIT.csv" if use_weather else None
-        camp, report = import_vbox([coast / f for f in files], VEHICLE, weather=weather)
+        camp, report = _import(data, name)
         validity = interval_validity(camp)
         runs = list(validity.loc[~validity["rejected"], "run"])
         fit, idata, summary, diag = fit_campaign(camp, runs, "split_f0_f2")
@@ -593,15 +608,8 @@ def main(argv=None):
         records = json.loads(args.json.read_text())
         fresh = run(args.data, args.skip_lopo, only=set(args.only))
         for name, rec in fresh.items():
-            files, use_weather = DATASETS[name]
-            paths = [args.data / "coastdown" / f for f in files]
-            plain, _ = import_vbox(paths, VEHICLE)   # the drift tables, as the full run takes them
-            validity = interval_validity(plain)
-            accepted = list(validity.loc[~validity["rejected"], "run"])
-            rec["heading_trends"] = heading_trends(plain, accepted)
-            rec["heading_forces"] = heading_forces(plain, accepted)
-            weather = args.data / "meteo" / "AGRICULTR_SPLIT.csv" if use_weather else None
-            rec["diagnosis"] = heading_diagnosis(import_vbox(paths, VEHICLE, weather=weather)[0])
+            rec.update(drift_tables(args.data, name))
+            rec["diagnosis"] = heading_diagnosis(_import(args.data, name)[0])
             if args.skip_lopo and "lopo" in records.get(name, {}):
                 rec["lopo"] = records[name]["lopo"]
             records[name] = rec
@@ -624,11 +632,9 @@ def main(argv=None):
             print(json.dumps({"skipped": f"{args.data} not found"}))
             return 0
         records = json.loads(args.json.read_text())
-        for name, (files, use_weather) in DATASETS.items():  # every interval campaign
+        for name in DATASETS:  # every interval campaign
             if name in records:
-                weather = args.data / "meteo" / "AGRICULTR_SPLIT.csv" if use_weather else None
-                camp, _ = import_vbox([args.data / "coastdown" / f for f in files], VEHICLE, weather=weather)
-                records[name]["diagnosis"] = heading_diagnosis(camp)
+                records[name]["diagnosis"] = heading_diagnosis(_import(args.data, name)[0])
                 print(f"{name}: diagnosed", file=sys.stderr)
         if GNSS_DIR.is_dir() and "gnss" in records.get("_extra", {}):
             records["_extra"]["gnss"]["diagnosis"] = gnss_diagnosis()
@@ -643,13 +649,9 @@ def main(argv=None):
             print(json.dumps({"skipped": f"{args.data} not found"}))
             return 0
         records = run(args.data, args.skip_lopo)
-    for name, (files, use_weather) in DATASETS.items():
+    for name in DATASETS:
         if name in records:
-            camp, _ = import_vbox([args.data / "coastdown" / f for f in files], VEHICLE)
-            validity = interval_validity(camp)
-            accepted = list(validity.loc[~validity["rejected"], "run"])
-            records[name]["heading_trends"] = heading_trends(camp, accepted)
-            records[name]["heading_forces"] = heading_forces(camp, accepted)
+            records[name].update(drift_tables(args.data, name))
     if GNSS_DIR.is_dir():
         records.setdefault("_extra", {})["gnss"] = gnss_record()
         records["_extra"]["gnss"]["lopo"] = gnss_lopo()
