@@ -120,13 +120,13 @@ def calibration_table(records: pd.DataFrame) -> pd.DataFrame:
 
 
 def _group_coverage(rec: pd.DataFrame, labels: list[str]) -> pd.DataFrame:
-    """95 % coverage of every quantity of :data:`QUANTITIES` by ``rec["group"]``, in the order
-    of ``labels`` (columns ``group``, ``quantity``, ``n``, ``coverage95``; n = 0 where a group
-    has no fit)."""
+    """95 % coverage and mean z of every quantity of :data:`QUANTITIES` by ``rec["group"]``, in
+    the order of ``labels`` (columns ``group``, ``quantity``, ``n``, ``coverage95``, ``z_mean``;
+    n = 0 where a group has no fit)."""
     cov = coverage_summary(rec, by=("group",), quantities=list(QUANTITIES), levels=(0.95,))
     cov = cov.rename(columns={"coverage": "coverage95"}).set_index(["group", "quantity"])
     index = pd.MultiIndex.from_product([labels, QUANTITIES], names=["group", "quantity"])
-    out = cov.reindex(index)[["n", "coverage95"]].reset_index()
+    out = cov.reindex(index)[["n", "coverage95", "z_mean"]].reset_index()
     out["n"] = out["n"].fillna(0).astype(int)
     return out
 
@@ -157,11 +157,7 @@ def yaw_class_table(records: pd.DataFrame, classes: int = 4) -> pd.DataFrame:
     deg = np.degrees(rec["mean_abs_yaw_rad"].astype(float))
     bins = pd.qcut(deg, classes)
     rec["group"] = [f"{b.left:.1f}-{b.right:.1f} deg" for b in bins]
-    labels = [f"{b.left:.1f}-{b.right:.1f} deg" for b in bins.cat.categories]
-    cov = coverage_summary(rec, by=("group",), quantities=list(QUANTITIES), levels=(0.95,))
-    cov = cov.rename(columns={"coverage": "coverage95"}).set_index(["group", "quantity"])
-    index = pd.MultiIndex.from_product([labels, QUANTITIES], names=["group", "quantity"])
-    return cov.reindex(index)[["n", "coverage95", "z_mean"]].reset_index()
+    return _group_coverage(rec, [f"{b.left:.1f}-{b.right:.1f} deg" for b in bins.cat.categories])
 
 
 def campaign_test_mass(seed: int, pairs: int) -> float:
