@@ -52,7 +52,7 @@ import pandas as pd
 
 from .. import config
 from ..data.campaign import Campaign
-from .batch import FitJob, coverage_summary, successful
+from .batch import FitJob, coverage_summary, record_z, successful
 
 SBC_MODEL = "four_term_driveline_informative"
 """Model that draws the truths and fits them (``models/four_term_driveline_informative.toml``)."""
@@ -414,6 +414,29 @@ def rank_histograms(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAM
     return pd.DataFrame(rows)
 
 
+Z_SD_RESAMPLES = 2000
+"""Bootstrap resamples of :func:`z_sd_interval`."""
+
+
+def z_sd_interval(z: np.ndarray, level: float = 0.95, resamples: int = Z_SD_RESAMPLES,
+                  seed: int = 0) -> tuple[float, float]:
+    """Percentile-bootstrap ``level`` interval of sd(z) over the fits (campaigns resampled with
+    replacement, a fixed seed so that the tables reproduce).  It is the sampling uncertainty of
+    the sd(z) an arm of n fits measures: about sd(z) (1 +- 1.96 sqrt((kappa - 1) / (4 n))) for z
+    of kurtosis kappa (sqrt(1 / (2 n)) relative for normal z), so a target such as sd(z) in
+    [0.9, 1.1] is missed with confidence only when the interval lies outside it.  NaN for
+    fewer than 3 fits."""
+    z = np.asarray(z, float)
+    z = z[np.isfinite(z)]
+    if z.size < 3:
+        return math.nan, math.nan
+    rng = np.random.default_rng(seed)
+    sds = z[rng.integers(0, z.size, (resamples, z.size))].std(axis=1, ddof=1)
+    tail = 0.5 * (1.0 - level)
+    lo, hi = np.quantile(sds, [tail, 1.0 - tail])
+    return float(lo), float(hi)
+
+
 def sbc_tests(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS, bins: int = SBC_BINS,
               alpha: float = SBC_ALPHA, levels: Sequence[float] = (0.5, 0.9, 0.95)) -> pd.DataFrame:
     """Uniformity and coverage of every arm and parameter.
@@ -421,7 +444,8 @@ def sbc_tests(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS,
     Returns one row per arm and parameter: ``n`` campaigns, ``chi2`` and ``p_value`` of
     Pearson's chi-square test of the rank histogram against uniform (``bins - 1`` degrees of
     freedom; scipy.stats.chisquare), ``coverage50`` / ``coverage90`` / ``coverage95`` of the
-    central intervals, ``z_sd`` (sd over campaigns of (mean - truth) / sd), ``uniform``
+    central intervals, ``z_sd`` (sd over campaigns of (mean - truth) / sd) with its bootstrap
+    95 % interval ``z_sd_low``, ``z_sd_high`` (:func:`z_sd_interval`), ``uniform``
     (p_value >= alpha / number of parameters: Bonferroni within the arm) and ``arm_pass`` (every
     parameter of the arm uniform).  Requires ``n >= 5 bins`` for the chi-square approximation
     to be fair; with fewer campaigns ``p_value`` is still computed but flagged by ``n``.
@@ -441,6 +465,9 @@ def sbc_tests(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS,
             sel = c[np.isclose(c["level"], lv)]
             row[f"coverage{100 * lv:g}"] = float(sel["coverage"].iloc[0]) if len(sel) else math.nan
         row["z_sd"] = float(c["z_sd"].iloc[0]) if len(c) else math.nan
+        ok = _ok(records)
+        arm = ok[(ok["arm"] == h["arm"]) & ok[f"{h['parameter']}_truth"].notna()]
+        row["z_sd_low"], row["z_sd_high"] = z_sd_interval(record_z(arm, h["parameter"]).to_numpy())
         rows.append(row)
     out = pd.DataFrame(rows)
     if out.empty:
@@ -482,21 +509,82 @@ def z_sd_by_truth_q(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAM
     return pd.DataFrame(rows)
 
 
+MIN_PAIRED = 20
+"""Fewest shared seeds for :func:`paired_arms` to compare two arms."""
+def paired_arms(records: pd.DataFrame, parameters: Sequence[str] = ("CD0",),
+                arms: Sequence[tuple[str, str]] | None = None, seed: int = 0) -> pd.DataFrame:
+    """Arms that drew the same campaigns, compared seed by seed.
+
+    Two arms fitted the same draws, but for their models' extra terms, when their campaigns come
+    from the same seeds with the same truth and the same noise: e.g. the exact arms of two
+    models with the same priors for A_D, B_D, C_D0, K_D (:class:`ModelDrawnCampaign` draws the
+    truth and the noise from the seed).  ``arms``: the pairs of arm names the caller knows to be
+    drawn so; None pairs any two arms whose records both state the drawn noise intensity
+    ``q_mps_per_sqrt_s_truth``.  Either way the seeds compared are those of both arms with the
+    same truth of the parameter and, where both state it, the same drawn q (1e-9 relative),
+    and a pair needs :data:`MIN_PAIRED` of them.  One row per such pair and
+    parameter: ``n`` shared seeds, ``corr_z`` (correlation of their z), ``mean_z2_a``,
+    ``mean_z2_b`` (mean z^2 over the shared seeds, 1 for a calibrated arm), ``diff_z2`` (b less a)
+    with its paired-bootstrap 95 % interval ``diff_low``, ``diff_high`` (:data:`Z_SD_RESAMPLES`,
+    fixed ``seed``), and ``sd_ratio`` (median ratio of b's posterior sd to a's): is b's excess
+    over a a property of b's model on the same data?"""
+    ok = _ok(records)
+    if "seed" not in ok or ok.empty:
+        return pd.DataFrame()
+    by_arm = {arm: g.drop_duplicates("seed").set_index("seed") for arm, g in ok.groupby("arm", sort=False)}
+    q = "q_mps_per_sqrt_s_truth"
+    if arms is None:
+        named = [arm for arm, g in by_arm.items() if q in g and g[q].notna().all()]
+        arms = [(x, y) for i, x in enumerate(named) for y in named[i + 1:]]
+    rows = []
+    rng = np.random.default_rng(seed)
+    for arm_a, arm_b in arms:
+        if arm_a not in by_arm or arm_b not in by_arm:
+            continue
+        a, b = by_arm[arm_a], by_arm[arm_b]
+        shared = a.index.intersection(b.index)
+        for p in parameters:
+            if f"{p}_truth" not in a or f"{p}_truth" not in b:
+                continue
+            same = shared
+            for col, stated in ((f"{p}_truth", False), (q, True)):
+                if col in a and col in b:
+                    ta, tb = a.loc[same, col].astype(float), b.loc[same, col].astype(float)
+                    unstated = (ta.isna() | tb.isna()).to_numpy() if stated else False
+                    same = same[np.isclose(ta, tb, rtol=1e-9, atol=0.0) | unstated]
+            if same.size < MIN_PAIRED:
+                continue
+            za, zb = record_z(a.loc[same], p).to_numpy(), record_z(b.loc[same], p).to_numpy()
+            d = zb**2 - za**2
+            boot = d[rng.integers(0, d.size, (Z_SD_RESAMPLES, d.size))].mean(axis=1)
+            lo, hi = np.quantile(boot, [0.025, 0.975])
+            rows.append({"arm_a": arm_a, "arm_b": arm_b, "parameter": p, "n": int(same.size),
+                         "corr_z": float(np.corrcoef(za, zb)[0, 1]), "mean_z2_a": float(np.mean(za**2)),
+                         "mean_z2_b": float(np.mean(zb**2)), "diff_z2": float(d.mean()),
+                         "diff_low": float(lo), "diff_high": float(hi),
+                         "sd_ratio": float(np.median(b.loc[same, f"{p}_sd"].astype(float)
+                                                     / a.loc[same, f"{p}_sd"].astype(float)))})
+    return pd.DataFrame(rows)
+
+
 def sbc_markdown(records: pd.DataFrame, tests: pd.DataFrame | None = None,
-                 parameters: Sequence[str] = SBC_PARAMETERS, bins: int = SBC_BINS) -> str:
+                 parameters: Sequence[str] = SBC_PARAMETERS, bins: int = SBC_BINS,
+                 paired: Sequence[tuple[str, str]] | None = None) -> str:
     """Markdown tables of an SBC study: per arm and parameter the rank histogram, the
-    chi-square test and the interval coverage; then the gate pass rate and the redraw count."""
+    chi-square test and the interval coverage; then the gate pass rate and the redraw count,
+    sd(z) by the true q, and the arms fitted to the same draws (:func:`paired_arms`, ``paired``
+    as its ``arms``)."""
     tests = sbc_tests(records, parameters, bins) if tests is None else tests
     hist = rank_histograms(records, parameters, bins)
     ok = _ok(records)
-    lines = ["| arm | parameter | n | rank histogram (10 bins) | chi2 | p | cov. 50 % | cov. 90 % | cov. 95 % | z sd | uniform |",
+    lines = ["| arm | parameter | n | rank histogram (10 bins) | chi2 | p | cov. 50 % | cov. 90 % | cov. 95 % | z sd (95 % CI) | uniform |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for _, t in tests.iterrows():
         h = hist[(hist["arm"] == t["arm"]) & (hist["parameter"] == t["parameter"])].iloc[0]
         counts = " ".join(str(int(h[f"bin{i}"])) for i in range(bins))
         lines.append(f"| {t['arm']} | {t['parameter']} | {t['n']} | {counts} | {t['chi2']:.1f} | "
                      f"{t['p_value']:.3g} | {t['coverage50']:.2f} | {t['coverage90']:.2f} | "
-                     f"{t['coverage95']:.2f} | {t['z_sd']:.2f} | {'yes' if t['uniform'] else '**no**'} |")
+                     f"{t['coverage95']:.2f} | {t['z_sd']:.2f} ({t['z_sd_low']:.2f}-{t['z_sd_high']:.2f}) | {'yes' if t['uniform'] else '**no**'} |")
     lines.append("")
     for arm, g in ok.groupby("arm", sort=False):
         failed = int((~g["gate_pass"].astype(bool)).sum())
@@ -518,4 +606,14 @@ def sbc_markdown(records: pd.DataFrame, tests: pd.DataFrame | None = None,
         for _, r in by_q.iterrows():
             lines.append(f"| {r['arm']} | {r['q_low']:.4f}-{r['q_high']:.4f} | {r['n']} | "
                          + " | ".join(f"{r[p]:.2f}" for p in parameters) + " |")
+    paired = paired_arms(records, arms=paired)
+    if not paired.empty:
+        lines += ["", "Arms fitted to the same draws (shared seeds, equal truths; z^2 averages 1 when calibrated; "
+                  "difference b - a with its paired-bootstrap 95 % interval):", "",
+                  "| arm a | arm b | parameter | shared seeds | corr(z) | mean z^2 a | mean z^2 b | b - a (95 % CI) | posterior sd b / a |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for _, r in paired.iterrows():
+            lines.append(f"| {r['arm_a']} | {r['arm_b']} | {r['parameter']} | {r['n']} | {r['corr_z']:.3f} | "
+                         f"{r['mean_z2_a']:.2f} | {r['mean_z2_b']:.2f} | {r['diff_z2']:+.2f} "
+                         f"({r['diff_low']:+.2f} to {r['diff_high']:+.2f}) | {r['sd_ratio']:.3f} |")
     return "\n".join(lines) + "\n"

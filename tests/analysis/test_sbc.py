@@ -21,7 +21,7 @@ from bayes_roadload.analysis.batch import run_batch
 from bayes_roadload.analysis.sbc import (SBC_MODEL, SBC_PARAMETERS, SBC_SAMPLER, ModelDrawnCampaign, PriorDrawnCampaign,
                                          WrongEffectiveMass, draw_from_prior, rank_fractions, rank_histograms,
                                          extra_physics, sbc_case, sbc_jobs, sbc_markdown, sbc_tests, with_drawn_truth,
-                                         z_sd_by_truth_q)
+                                         z_sd_by_truth_q, z_sd_interval, paired_arms, MIN_PAIRED)
 from bayes_roadload.inference.spec import load_model_spec
 from bayes_roadload.simulate import SimulationSettings, simulate_campaign
 
@@ -227,6 +227,58 @@ def test_uniform_ranks_pass_and_shifted_ranks_fail():
     assert u["u"].between(0, 1).all()
     md = sbc_markdown(records, tests)
     assert "| calibrated | AD | 200 |" in md and "**no**" in md
+
+
+def test_z_sd_interval_holds_the_true_sd_at_its_level():
+    """The bootstrap interval of sd(z) covers the sd z was drawn with in about 95 % of arms of 200
+    normal z (binomial: 4 sds of 100 arms allow 86-100 covered), its width is near the normal
+    theory's 2 x 1.96 sqrt(1 / (2 n)) relative, and the table shows it."""
+    rng = np.random.default_rng(3)
+    held = 0
+    for _ in range(100):
+        lo, hi = z_sd_interval(rng.normal(0.0, 1.3, 200), seed=int(rng.integers(1 << 30)))
+        held += lo <= 1.3 <= hi
+    assert held >= 95 - 4 * np.sqrt(100 * 0.95 * 0.05)
+    lo, hi = z_sd_interval(rng.normal(0.0, 1.0, 200))
+    assert abs((hi - lo) - 2 * 1.96 * np.sqrt(1 / 400)) < 0.05
+    assert np.isnan(z_sd_interval(np.array([1.0, 2.0]))[0])
+    records = _synthetic_records({"calibrated": rng.uniform(size=50)})
+    tests = sbc_tests(records)
+    assert (tests["z_sd_low"] <= tests["z_sd"]).all() and (tests["z_sd"] <= tests["z_sd_high"]).all()
+    row = tests.iloc[0]
+    assert f"{row['z_sd']:.2f} ({row['z_sd_low']:.2f}-{row['z_sd_high']:.2f})" in sbc_markdown(records, tests)
+
+
+def test_paired_arms_compare_the_same_draws_seed_by_seed():
+    """Two models' arms fitted to the same draws (same seeds and truths): the arm whose posterior
+    sd is 1.5 times too narrow (z 1.5 times as large, mean z^2 2.25 against 1) shows a positive
+    difference whose paired interval excludes 0, a correlation of 1 and the sd ratio 1 / 1.5;
+    arms with other truths at the same seeds are not paired, nor are fewer than MIN_PAIRED seeds."""
+    rng = np.random.default_rng(4)
+    u = rng.uniform(size=200)
+    a = _synthetic_records({"exact_calibrated": u}).assign(model=SBC_MODEL, seed=np.arange(200),
+                                                           q_mps_per_sqrt_s_truth=rng.gamma(2.0, 0.002, 200))
+    b = a.assign(model=LAG_MODEL)
+    for p in SBC_PARAMETERS:
+        b[f"{p}_sd"] = 1.0 / 1.5
+    table = paired_arms(pd.concat([a, b], ignore_index=True))
+    assert len(table) == 1
+    row = table.iloc[0]
+    assert row["n"] == 200 and row["corr_z"] == pytest.approx(1.0)
+    assert row["mean_z2_b"] == pytest.approx(2.25 * row["mean_z2_a"])
+    assert row["diff_low"] > 0.0 and row["sd_ratio"] == pytest.approx(1 / 1.5)
+    other = b.assign(CD0_truth=b["CD0_truth"] + 1.0)
+    assert paired_arms(pd.concat([a, other], ignore_index=True)).empty
+    noise = b.assign(q_mps_per_sqrt_s_truth=b["q_mps_per_sqrt_s_truth"] * 1.1)  # same truth, other noise
+    assert paired_arms(pd.concat([a, noise], ignore_index=True)).empty
+    # records without the drawn q pair only when the caller names the arms
+    old_a = a.drop(columns="q_mps_per_sqrt_s_truth")
+    assert paired_arms(pd.concat([old_a, b], ignore_index=True)).empty
+    named = [("exact_calibrated", f"exact_calibrated {LAG_MODEL}")]
+    assert len(paired_arms(pd.concat([old_a, b], ignore_index=True), arms=named)) == 1
+    few = pd.concat([a, b.iloc[:MIN_PAIRED - 1]], ignore_index=True)
+    assert paired_arms(few).empty
+    assert "| shared seeds |" in sbc_markdown(pd.concat([a, b], ignore_index=True))
 
 
 def test_arms_of_another_model_stay_apart():
