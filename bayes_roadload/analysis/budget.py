@@ -30,6 +30,9 @@ fixed at their declared values.  They are marginalised to first order after the 
 * **draws**: every posterior draw gets ``sum_s c_{x,s} delta_s`` with ``delta_s ~ N(0, u_s^2)``
   drawn once per draw and shared by all quantities (so their correlations through a common
   source are kept) -- the law of propagation of uncertainty (GUM eq. 10) applied draw by draw;
+  a source whose true value lies above the analysis' (the humidity where it is not logged: the
+  analysis takes dry air) draws ``delta_s ~ U(0, sqrt(12) u_s)`` instead, so that its draws
+  also carry its mean, ``c_{x,s} sqrt(3) u_s`` (budget column ``mean_shift``);
 * **budget**: the share of each source in the variance of each quantity,
   ``c_{x,s}^2 u_s^2 / (var_data + sum_s c_{x,s}^2 u_s^2)``, and the share of the data (the
   posterior's own variance).  The shares sum to 1.
@@ -57,7 +60,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from ..data.uncertainty import SOURCES, standard_uncertainties
+from ..data.uncertainty import SOURCES, source_distribution, standard_uncertainties
 from ..inference.kinds import FitOptions, kind_of
 from ..inference.lsq import fit_lsq
 from ..inference.results import SUMMARY_COLUMNS
@@ -77,7 +80,8 @@ quantity is a constant of the model and has no budget.  Rounding leaves such a c
 ~ 2e-13.  A fitted quantity's uncertainty is above ~1e-6 (AD, the smallest, is ~1e-2 known to
 ~1 %), so the floor sits three orders of magnitude from either."""
 
-BUDGET_COLUMNS = ("quantity", "source", "standard_uncertainty", "sensitivity", "variance", "variance_share", "note")
+BUDGET_COLUMNS = ("quantity", "source", "standard_uncertainty", "sensitivity", "variance", "variance_share", "note",
+                  "mean_shift")
 
 
 @dataclass
@@ -179,9 +183,21 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
 
 
 def type_b_draws(typeb: TypeB, shape: tuple[int, ...], seed: int = 0) -> dict[str, np.ndarray]:
-    """``delta_s`` ~ N(0, u_s^2) for every propagated source, one per draw (``shape``)."""
+    """``delta_s`` for every propagated source, one per draw (``shape``): N(0, u_s^2), or
+    U(0, sqrt(12) u_s) for a source whose true value lies above the analysis' (distribution
+    "above", :class:`~bayes_roadload.data.uncertainty.UncertaintySource`)."""
     rng = np.random.default_rng([seed, 20240])
-    return {s: rng.normal(0.0, typeb.u[s], shape) for s in typeb.sources}
+    return {s: (rng.uniform(0.0, math.sqrt(12.0) * typeb.u[s], shape) if source_distribution(s) == "above"
+                else rng.normal(0.0, typeb.u[s], shape)) for s in typeb.sources}
+
+
+def mean_shift(typeb: TypeB, quantity: str, source: str) -> float:
+    """The mean of the draws ``source`` adds to ``quantity``: c sqrt(3) u for a source above the
+    analysis' value, 0 for a normal one."""
+    c = typeb.sensitivity.get(quantity, {}).get(source)
+    if c is None or source_distribution(source) != "above":
+        return 0.0
+    return c * math.sqrt(3.0) * typeb.u[source]
 
 
 def add_type_b(posterior: dict[str, np.ndarray], typeb: TypeB, seed: int = 0) -> dict[str, np.ndarray]:
@@ -200,8 +216,9 @@ def add_type_b(posterior: dict[str, np.ndarray], typeb: TypeB, seed: int = 0) ->
 
 def budget_table(typeb: TypeB, data_sd: dict[str, float]) -> pd.DataFrame:
     """``budget.csv``: per quantity, a row per source (standard uncertainty, sensitivity, its
-    variance c^2 u^2 and share) and a ``data`` row (the posterior's own variance), then a row
-    per source left out with the reason.  A quantity without variance (a constant of the
+    variance c^2 u^2 and share, and ``mean_shift``, the mean its draws add: non-zero for a
+    source above the analysis' value, :func:`mean_shift`) and a ``data`` row (the posterior's
+    own variance), then a row per source left out with the reason.  A quantity without variance (a constant of the
     model, e.g. F50_undriven_N of a fit without undriven wheels, F1_N_per_kph of one without a
     linear term: total standard uncertainty below :data:`CONSTANT_SD`) has no rows."""
     rows = []
@@ -212,14 +229,16 @@ def budget_table(typeb: TypeB, data_sd: dict[str, float]) -> pd.DataFrame:
         if not total > CONSTANT_SD**2:
             continue
         rows.append({"quantity": q, "source": "data", "standard_uncertainty": math.nan, "sensitivity": math.nan,
-                     "variance": sd**2, "variance_share": sd**2 / total, "note": ""})
+                     "variance": sd**2, "variance_share": sd**2 / total, "note": "", "mean_shift": math.nan})
         for s in sorted(var, key=var.get, reverse=True):
+            above = source_distribution(s) == "above"
             rows.append({"quantity": q, "source": s, "standard_uncertainty": typeb.u[s], "sensitivity": row[s],
                          "variance": var[s], "variance_share": var[s] / total,
-                         "note": ""})
+                         "note": "uniform above the analysis' value" if above else "",
+                         "mean_shift": mean_shift(typeb, q, s)})
     for s, why in typeb.notes.items():
         rows.append({"quantity": "", "source": s, "standard_uncertainty": typeb.u[s], "sensitivity": math.nan,
-                     "variance": math.nan, "variance_share": math.nan, "note": why})
+                     "variance": math.nan, "variance_share": math.nan, "note": why, "mean_shift": math.nan})
     return pd.DataFrame(rows, columns=list(BUDGET_COLUMNS))
 
 
@@ -233,7 +252,9 @@ def format_budget(budget: pd.DataFrame, quantities: Sequence[str] = ("F50_N", "C
         if g.empty:
             continue
         parts = [f"{r.source} {100 * r.variance_share:.0f} %" for r in g.head(top + 1).itertuples()]
-        lines.append(f"  {q}: " + ", ".join(parts))
+        shifts = [f"{r.source} shifts it by {r.mean_shift:+.4g}" for r in g.itertuples()
+                  if np.isfinite(r.mean_shift) and r.mean_shift != 0.0]
+        lines.append(f"  {q}: " + ", ".join(parts) + ("; " + "; ".join(shifts) if shifts else ""))
     return "\n".join(lines)
 
 

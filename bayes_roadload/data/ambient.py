@@ -73,5 +73,7 @@ def ambient_line(record: dict) -> str:
              f"{'logged' if t is not None else 'reference'} temperature, "
              f"{'logged' if p is not None else 'reference'} pressure")
     air = (f"moist air at {h:.0f} % relative humidity" if h is not None else
-           "dry air (no relative_humidity_pct column: humid air is up to 1.5 % lighter, read as C_D0 that much low)")
+           "dry air (no relative_humidity_pct column: humid air is up to 1.5 % lighter"
+           + ("; the Type B budget takes the humidity as 0-100 %, relative_humidity_unlogged_pct)"
+              if t is not None and p is not None else ", read as C_D0 that much low)"))
     return f"air: {where}, {air}; mean density {record['air_density_kgpm3']:.4f} kg/m^3"

@@ -86,6 +86,27 @@ def _shift_column(column: str, bounds: tuple[float, float] | None = None) -> Cal
     return apply
 
 
+UNLOGGED_HUMIDITY_CENTRE_PCT = 50.0
+"""Relative humidity (%) about which :func:`_unlogged_humidity` shifts: the middle of 0-100 %."""
+
+
+def _unlogged_humidity(c, delta: float):
+    """A campaign whose table logs the temperature and pressure but not the humidity, with
+    ``relative_humidity_pct`` = :data:`UNLOGGED_HUMIDITY_CENTRE_PCT` + ``delta`` (clipped to
+    0-100 %) added: its moist air (:func:`~bayes_roadload.data.ambient.air_density`) against the
+    dry air the analysis takes.  None where the humidity is logged (its hygrometer is the source
+    ``relative_humidity_pct``) or the density is not measured (no temperature or pressure
+    column: the reference air)."""
+    from .ambient import HUMIDITY_COLUMN, PRESSURE_COLUMN, TEMPERATURE_COLUMN
+
+    def add(t: pd.DataFrame) -> pd.DataFrame | None:
+        if HUMIDITY_COLUMN in t or TEMPERATURE_COLUMN not in t or PRESSURE_COLUMN not in t:
+            return None
+        t[HUMIDITY_COLUMN] = min(max(UNLOGGED_HUMIDITY_CENTRE_PCT + delta, 0.0), 100.0)
+        return t
+    return _with_table(c, add)
+
+
 def _airspeed_factor(c, delta: float):
     if not _channels(c).vehicle or "airspeed_mps" not in getattr(c, _channels(c).table):
         return None
@@ -126,19 +147,37 @@ def _rotating_inertia(c, delta: float):
         v, effective_mass_kg=v.mass_kg + rotating * (1.0 + delta)))
 
 
+DISTRIBUTIONS = ("normal", "above")
+"""How a source's error is drawn (:attr:`UncertaintySource.distribution`)."""
+
+
 @dataclass(frozen=True)
 class UncertaintySource:
     """One Type B source: its key in ``[uncertainty]`` (unit in the name), its default standard
-    uncertainty, the accuracy it comes from, and the campaign transformation.
+    uncertainty, the accuracy it comes from, the campaign transformation and the distribution
+    of its error.
 
     ``apply(campaign, delta)`` returns the campaign with the source shifted by ``delta`` (in
     the key's unit), or None when the campaign has nothing the source acts on (no airspeed
-    channel for the anemometer's factor, no temperature channel, ...)."""
+    channel for the anemometer's factor, no temperature channel, ...).
+
+    ``distribution``: "normal", the error ~ N(0, u^2) about the value the analysis takes (the
+    sensors' accuracies, GUM 4.3.7); or "above", the analysis takes the lower bound of the
+    source's range and the true value lies uniformly above it, the error ~ U(0, sqrt(12) u)
+    (mean sqrt(3) u, sd u; GUM 4.3.7 and 4.3.8: a rectangular distribution whose estimate is
+    not the analysis' value): the dry air the analysis takes when the humidity is not logged.
+    The sensitivity is linear (central differences of ``apply`` at +-u), so where it holds the
+    draws carry the mean shift with the spread."""
 
     key: str
     default: float
     accuracy: str
     transform: Callable[[Any, float], Any]
+    distribution: str = "normal"
+
+    def __post_init__(self) -> None:
+        if self.distribution not in DISTRIBUTIONS:
+            raise ValueError(f"source {self.key}: distribution {self.distribution!r} is not one of {DISTRIBUTIONS}")
 
     def apply(self, campaign, delta: float):
         return self.transform(campaign, float(delta))
@@ -174,6 +213,11 @@ SOURCES: dict[str, UncertaintySource] = {s.key: s for s in (
                       _shift_column("relative_humidity_pct", (0.0, 100.0))),
     UncertaintySource("driveline_scale_rel", 0.01 / _SQRT3, "wheel-torque transducer +-1 % (class 0.5-1)",
                       _scale_columns(lambda ch: ch.force)),
+    UncertaintySource("relative_humidity_unlogged_pct", 100.0 / math.sqrt(12.0),
+                      "relative humidity not logged: the analysis takes dry air, as SAE J1263 and 40 CFR "
+                      "1066.310 do, and the day's humidity lies anywhere above it, 0-100 % (uniform: mean "
+                      "50 %, u = 100 / sqrt(12)); only where the campaign logs temperature and pressure",
+                      _unlogged_humidity, distribution="above"),
 )}
 """Every Type B source by its ``[uncertainty]`` key."""
 
@@ -191,6 +235,12 @@ def uncertainty_from_toml(table: Mapping[str, Any] | None, where: str) -> dict[s
             refuse(where, f"[{UNCERTAINTY_TABLE}] {k}", None, f"{val!r} is negative (a standard uncertainty)")
         out[k] = float(val)
     return out
+
+
+def source_distribution(key: str) -> str:
+    """The distribution of source ``key``'s error (:attr:`UncertaintySource.distribution`);
+    "normal" for a key that is no campaign source (a model constant's uncertainty)."""
+    return SOURCES[key].distribution if key in SOURCES else "normal"
 
 
 def standard_uncertainties(campaign) -> dict[str, float]:

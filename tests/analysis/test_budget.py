@@ -94,6 +94,55 @@ def test_added_draws_have_the_propagated_variance():
     assert set(typeb.sources) == {"mass_kg", "airspeed_factor_rel"} <= set(SOURCES)
 
 
+def test_a_source_above_the_analysis_value_adds_its_mean_and_its_variance():
+    """The unlogged humidity's draws are U(0, sqrt(12) u): their mean c sqrt(3) u shifts the
+    quantity (the budget's ``mean_shift``), their variance is c^2 u^2 as a normal source's;
+    40000 draws estimate the mean to 0.3 % of c sqrt(12) u and a variance to 1.4 %."""
+    from bayes_roadload.analysis.budget import mean_shift
+
+    u = SOURCES["relative_humidity_unlogged_pct"].default
+    typeb = TypeB(u={"relative_humidity_unlogged_pct": u, "mass_kg": 4.0},
+                  sensitivity={"CD0": {"relative_humidity_unlogged_pct": 7e-5, "mass_kg": 1e-4}})
+    x = np.full((4, 10000), 0.35)
+    added = add_type_b({"CD0": x}, typeb, seed=5)["CD0"] - x
+    expected_mean = 7e-5 * np.sqrt(3.0) * u
+    assert mean_shift(typeb, "CD0", "relative_humidity_unlogged_pct") == pytest.approx(expected_mean)
+    assert mean_shift(typeb, "CD0", "mass_kg") == 0.0
+    assert np.mean(added) == pytest.approx(expected_mean, abs=5 * np.sqrt(typeb.variances("CD0")["mass_kg"]
+                                                                    + (7e-5 * u) ** 2) / np.sqrt(x.size))
+    assert np.var(added) == pytest.approx((7e-5 * u) ** 2 + (1e-4 * 4.0) ** 2, rel=0.05)
+    budget = budget_table(typeb, {"CD0": 0.004})
+    row = budget[budget["source"] == "relative_humidity_unlogged_pct"].iloc[0]
+    assert row["mean_shift"] == pytest.approx(expected_mean) and "above" in row["note"]
+    assert budget.loc[budget["source"] == "mass_kg", "mean_shift"].iloc[0] == 0.0
+    assert f"shifts it by {expected_mean:+.4g}" in format_budget(budget)
+
+
+def test_the_unlogged_humidity_moves_cd0_up_as_the_moist_air_lightens():
+    """On a campaign that logs temperature and pressure but not the humidity (the independent
+    simulator's), C_D0's sensitivity to the relative humidity is the moist air's relative
+    lightening per percent times C_D0 (the fitted force held, rho C_D0 fixed): d rho / rho at
+    0-100 % from CIPM-2007 over 100, within 10 % (the Gauss-Newton step and the other
+    coefficients' small share of the density)."""
+    import warnings
+
+    from bayes_roadload.data.ambient import air_density
+    from bayes_roadload.simulate.independent import simulate_independent
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        campaign = simulate_independent(1, pairs=2)
+        typeb = type_b_sensitivities(campaign, "four_term", ["CD0"])
+    c = typeb.sensitivity["CD0"]["relative_humidity_unlogged_pct"]
+    runs = campaign.runs
+    lighter = 1.0 - np.mean(air_density(runs.assign(relative_humidity_pct=100.0))) / np.mean(air_density(runs))
+    cd0 = fit_lsq(campaign, "four_term", grouping="all").weighted_mean["CD0"]
+    assert c > 0 and c == pytest.approx(cd0 * lighter / 100.0, rel=0.10)
+    logged = dataclasses.replace(campaign, runs=runs.assign(relative_humidity_pct=60.0))
+    notes = type_b_sensitivities(logged, "four_term", ["CD0"]).notes
+    assert "not applicable" in notes["relative_humidity_unlogged_pct"] and "relative_humidity_pct" not in notes
+
+
 def _mode(campaign, model):
     """The quantities at the MAP of ``campaign``'s own problem (its kind's registry entry), and
     a fit holding that MAP (what ``fit`` hands the budget: the shifted campaigns share its

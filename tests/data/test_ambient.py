@@ -82,3 +82,19 @@ def test_the_hygrometer_is_a_type_b_source_where_humidity_is_logged(tmp_path):
     assert up.runs[HUMIDITY_COLUMN].max() == 100.0 and down.runs[HUMIDITY_COLUMN].iloc[0] == pytest.approx(99.0 - s.default)
     (tmp_path / "dry").mkdir()
     assert s.apply(load_campaign(write(tmp_path / "dry", runs_frame())), 2.0) is None
+
+
+def test_the_air_line_says_where_the_unlogged_humidity_goes():
+    """The line ``fit`` prints: logged humidity -> moist air at its mean; temperature and
+    pressure logged without it -> dry air, the humidity in the Type B budget (the source that
+    applies there); no ambient columns -> dry reference air, the humidity's bias stated."""
+    from bayes_roadload.data.ambient import ambient_line
+
+    base = {"air_density_kgpm3": 1.2}
+    moist = ambient_line({**base, "temperature_k": 295.0, "pressure_pa": 99000.0, HUMIDITY_COLUMN: 55.0})
+    assert "moist air at 55 %" in moist and "unlogged" not in moist
+    dry = ambient_line({**base, "temperature_k": 295.0, "pressure_pa": 99000.0, HUMIDITY_COLUMN: None})
+    assert "dry air" in dry and "relative_humidity_unlogged_pct" in dry
+    reference = ambient_line({**base, "temperature_k": None, "pressure_pa": None, HUMIDITY_COLUMN: None})
+    assert "reference temperature" in reference and "C_D0 that much low" in reference
+    assert "relative_humidity_unlogged_pct" not in reference

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -75,6 +76,28 @@ def test_each_source_shifts_what_it_names(campaign):
     # the campaign logs no temperature or driveline channel: nothing for those sources to act on
     assert SOURCES["temperature_k"].apply(campaign, 1.0) is None
     assert SOURCES["driveline_scale_rel"].apply(campaign, d) is None
+
+
+def test_the_unlogged_humidity_is_set_above_dry_air_only_where_the_density_is_measured(campaign):
+    """Relative humidity not logged: the source adds the column at 50 % + delta (clipped to
+    0-100 %) where temperature and pressure are logged; where the humidity is logged its
+    hygrometer is the source instead, and without temperature or pressure (the reference air)
+    nothing is measured to correct.  Its error lies above the dry air the analysis takes: a
+    rectangle of 0-100 % is u = 100 / sqrt(12)."""
+    source = SOURCES["relative_humidity_unlogged_pct"]
+    assert source.distribution == "above" and source.default == pytest.approx(100.0 / math.sqrt(12.0))
+    assert all(s.distribution == "normal" for k, s in SOURCES.items() if k != "relative_humidity_unlogged_pct")
+    assert source.apply(campaign, 10.0) is None  # no temperature or pressure column
+    runs = campaign.runs.assign(temperature_k=295.0, pressure_pa=99000.0)
+    logged_tp = dataclasses.replace(campaign, runs=runs)
+    up, down = source.apply(logged_tp, 28.9), source.apply(logged_tp, -28.9)
+    assert up.runs["relative_humidity_pct"].to_numpy() == pytest.approx(50.0 + 28.9)
+    assert down.runs["relative_humidity_pct"].to_numpy() == pytest.approx(50.0 - 28.9)
+    assert source.apply(logged_tp, 80.0).runs["relative_humidity_pct"].max() == 100.0
+    assert "relative_humidity_pct" not in logged_tp.runs
+    assert source.apply(dataclasses.replace(campaign, runs=runs.assign(relative_humidity_pct=40.0)), 10.0) is None
+    with pytest.raises(ValueError, match="distribution"):
+        dataclasses.replace(source, distribution="lognormal")
 
 
 
