@@ -16,8 +16,9 @@ The rules are frozen before the confirmatory seeds run (``docs/calibration.md``)
   fits of z = (mean - truth) / sd lies in [0.85, 1.15]; reported by quantity and by campaign
   size (1-2, 3-5, 6-12 pairs);
 * design seeds (used while choosing the default analysis): 100-199, and 1000-1059, 2000-2013,
-  3000-3032 and 4000-4052 (earlier defaults' and a variant's confirmatory runs, which informed the
-  current choice); confirmatory seeds: from 5000 on (``--seed0 5000``,
+  3000-3032, 4000-4052, 5000-5073 and 6000-6199 (earlier defaults' and a variant's confirmatory
+  runs, which informed the current choice), 8000-8015 (MAP probes); confirmatory seeds of the
+  current default analysis: from 9000 on (``--seed0 9000``,
   :data:`~bayes_roadload.analysis.calibration.CONFIRMATORY_SEED0`).
 
 Writes every record, with the commit of the code that fitted it (``code``), to ``--records``
@@ -25,7 +26,7 @@ Writes every record, with the commit of the code that fitted it (``code``), to `
 not fitted again), prints the summary as JSON and, with ``--docs``, regenerates the section of ``docs/calibration.md`` between
 its markers.
 
-    python benchmarks/calibration_study.py --n 200 --seed0 5000 --workers 2 --docs
+    python benchmarks/calibration_study.py --n 200 --seed0 9000 --workers 2 --docs
 """
 
 from __future__ import annotations
