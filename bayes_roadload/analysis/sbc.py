@@ -453,7 +453,8 @@ def sbc_tests(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS,
     from scipy.stats import chisquare
 
     hist = rank_histograms(records, parameters, bins)
-    cov = coverage_summary(_ok(records), by=("arm",), quantities=list(parameters), levels=levels)
+    ok = _ok(records)
+    cov = coverage_summary(ok, by=("arm",), quantities=list(parameters), levels=levels)
     rows = []
     for _, h in hist.iterrows():
         counts = np.asarray([h[f"bin{i}"] for i in range(bins)], float)
@@ -465,7 +466,6 @@ def sbc_tests(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS,
             sel = c[np.isclose(c["level"], lv)]
             row[f"coverage{100 * lv:g}"] = float(sel["coverage"].iloc[0]) if len(sel) else math.nan
         row["z_sd"] = float(c["z_sd"].iloc[0]) if len(c) else math.nan
-        ok = _ok(records)
         arm = ok[(ok["arm"] == h["arm"]) & ok[f"{h['parameter']}_truth"].notna()]
         row["z_sd_low"], row["z_sd_high"] = z_sd_interval(record_z(arm, h["parameter"]).to_numpy())
         rows.append(row)
@@ -511,6 +511,8 @@ def z_sd_by_truth_q(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAM
 
 MIN_PAIRED = 20
 """Fewest shared seeds for :func:`paired_arms` to compare two arms."""
+
+
 def paired_arms(records: pd.DataFrame, parameters: Sequence[str] = ("CD0",),
                 arms: Sequence[tuple[str, str]] | None = None, seed: int = 0) -> pd.DataFrame:
     """Arms that drew the same campaigns, compared seed by seed.
