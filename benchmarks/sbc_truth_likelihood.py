@@ -23,7 +23,7 @@ arm's largest |z| of C_D0; 0-4: not chosen)::
 ``--noise-only`` (no fit, :func:`drawn_noise_profile`): the residual at the truth against the
 noise the draw added, and the q profile of that noise alone::
 
-    python benchmarks/sbc_truth_likelihood.py --noise-only --seeds 124 46 0 1 2 3 4 \\
+    python benchmarks/sbc_truth_likelihood.py --noise-only --seeds 46 24 124 16 0 1 2 3 4 \\
         --records benchmarks/records/sbc/drawn_noise_profile.jsonl
 """
 
