@@ -27,6 +27,7 @@ Prints a JSON record of every figure on stdout.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import re
 import sys
@@ -192,9 +193,11 @@ def heading_diagnosis(camp) -> dict:
             "top": d.top, "wall_s": round(time.perf_counter() - t0, 1)}
 
 
+@functools.cache
 def _import(data: Path, name: str, weather: bool = True):
     """The interval campaign ``name`` of :data:`DATASETS` and its import report, with its
-    Kestrel log when it has one and ``weather``."""
+    Kestrel log when it has one and ``weather``; imported once per process (the fit, the drift
+    tables and the diagnosis read the same campaign, which none of them changes)."""
     files, use_weather = DATASETS[name]
     log = data / "meteo" / "AGRICULTR_SPLIT.csv" if use_weather and weather else None
     return import_vbox([data / "coastdown" / f for f in files], VEHICLE, weather=log)

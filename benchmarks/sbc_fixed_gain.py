@@ -15,7 +15,6 @@ same draw (docs/calibration.md, *The same draws without the lag*).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -28,10 +27,9 @@ GAIN = "tyre_lag_gain_per_mps"
 
 def with_gain_fixed(spec, value: float):
     """``spec`` with the lag gain fixed at ``value`` (no prior, no start value)."""
-    return dataclasses.replace(spec, name=spec.name + "_gain_fixed", free=tuple(p for p in spec.free if p != GAIN),
-                               fixed={**spec.fixed, GAIN: float(value)},
-                               priors={k: v for k, v in spec.priors.items() if k != GAIN},
-                               initial={k: v for k, v in spec.initial.items() if k != GAIN})
+    from bayes_roadload.inference.spec import without_free
+
+    return without_free(spec, (GAIN,), fixed={GAIN: value}, name=spec.name + "_gain_fixed")
 
 
 def record(seed: int, pairs: int = 2) -> dict:

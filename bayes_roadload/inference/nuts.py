@@ -58,7 +58,7 @@ from .bayes import (
 )
 from .problem import Problem
 from .lsq import DEFAULT_LSQ, LsqSettings, fit_lsq
-from .spec import SOFTPLUS_FRACTION_AT_BOUND, ModelSpec
+from .spec import SOFTPLUS_FRACTION_AT_BOUND, ModelSpec, without_free
 
 log = logging.getLogger(__name__)
 
@@ -179,10 +179,7 @@ def _site_scales(problem: Problem, z: dict[str, Any]) -> dict[str, Any]:
 def _still_air_spec(spec: ModelSpec) -> ModelSpec:
     """The spec without its latent wind: the start of a latent-wind fit (over a pair the wind's
     force cancels to first order, so the still-air joint fit is close)."""
-    drop = ("head_wind_mps",)
-    return dataclasses.replace(spec, air="still", free=tuple(p for p in spec.free if p not in drop),
-                               priors={k: v for k, v in spec.priors.items() if k not in drop},
-                               initial={k: v for k, v in spec.initial.items() if k not in drop})
+    return dataclasses.replace(without_free(spec, [p for p in ("head_wind_mps",) if p in spec.free]), air="still")
 
 
 def _latent_wind_start(problem: FitProblem, campaign: Campaign, init: dict, first: np.ndarray) -> dict:

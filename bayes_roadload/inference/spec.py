@@ -693,6 +693,24 @@ def with_undriven_wheels(spec: ModelSpec, au_n: float, bu_nspm: float) -> ModelS
                                fixed=dict(spec.fixed, Au=float(au_n), Bu=float(bu_nspm)))
 
 
+def without_free(spec: ModelSpec, names, fixed: Mapping[str, float] | None = None,
+                 name: str | None = None) -> ModelSpec:
+    """``spec`` with the free parameters ``names`` no longer estimated: dropped from ``free``,
+    ``priors`` and ``initial``; ``fixed`` gives the values they then hold (absent: the model's
+    default, or nothing where the air model no longer reads them).  Refused for a name that is
+    not free."""
+    import dataclasses
+
+    drop = tuple(names)
+    missing = [p for p in drop if p not in spec.free]
+    if missing:
+        raise ModelSpecError(f"{spec._where}: {', '.join(missing)} not free")
+    return dataclasses.replace(spec, name=name or spec.name, free=tuple(p for p in spec.free if p not in drop),
+                               fixed={**spec.fixed, **{k: float(v) for k, v in (fixed or {}).items()}},
+                               priors={k: v for k, v in spec.priors.items() if k not in drop},
+                               initial={k: v for k, v in spec.initial.items() if k not in drop})
+
+
 def available_models() -> list[str]:
     """Names of the model files in the model library (:data:`MODELS_DIR`), sorted."""
     if not MODELS_DIR.is_dir():

@@ -11,7 +11,7 @@ import pytest
 from bayes_roadload.thesis import THESIS_COEFFICIENTS, THESIS_DRIVELINE, THESIS_TUNNEL_TABLE
 from bayes_roadload.data import Anemometer, Campaign, Vehicle
 from bayes_roadload.inference import ModelSpecError, available_models, load_model_spec
-from bayes_roadload.inference.spec import MODELS_DIR, Prior
+from bayes_roadload.inference.spec import MODELS_DIR, Prior, without_free
 from bayes_roadload.physics import MeasuredAir, StillAir
 
 REQUIRED = ("four_term", "four_term_driveline", "three_term", "tunnel_table", "two_term_tyres")
@@ -361,3 +361,18 @@ def test_the_shapes_variant_samples_its_parents_posterior_and_budgets_the_shapes
         levelled = float(ms.acceleration_mps2({**coef, **fs, **coef, "yaw_levelling_per_rad2": 1.0}, c, m_e))
         if yaw > 0.0:
             assert a_b < levelled < 0.0
+
+
+def test_without_free_drops_a_parameter_everywhere_and_fixes_it_where_told():
+    spec = load_model_spec("four_term_tyre_lag")
+    gain = "tyre_lag_gain_per_mps"
+    assert gain in spec.free and gain in spec.priors
+    held = without_free(spec, (gain,), fixed={gain: 0.004}, name="held")
+    assert gain not in held.free and gain not in held.priors and gain not in held.initial
+    assert held.fixed[gain] == 0.004 and held.name == "held"
+    assert held.free == tuple(p for p in spec.free if p != gain)
+    assert gain not in spec.fixed and gain in spec.free  # the original is untouched
+    dropped = without_free(spec, (gain,))
+    assert gain not in dropped.free and gain not in dropped.fixed and dropped.name == spec.name
+    with pytest.raises(ModelSpecError, match="not free"):
+        without_free(spec, ("no_such_parameter",))
