@@ -54,7 +54,7 @@ import time
 import traceback
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Callable, Hashable, Iterable, Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Hashable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -63,6 +63,9 @@ from tqdm import tqdm
 from .. import config
 from .._jax import compile_seconds
 from ..data.campaign import Campaign
+
+if TYPE_CHECKING:
+    from ..inference.kinds import FitOptions
 
 COVERAGE_LEVELS = (0.5, 0.9, 0.95)
 """Central posterior interval levels recorded for every quantity (and checked for coverage)."""
@@ -290,7 +293,7 @@ def retry_fields(retries: list[dict[str, Any]]) -> dict[str, Any]:
 def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
     from ..inference.results import diagnostics, summary_table, to_inference_data, truth_derived
 
-    from .budget import BUDGET_QUANTITIES, add_type_b_to_idata, type_b_sensitivities
+    from .budget import BUDGET_QUANTITIES, add_type_b_to_idata, budget_record, type_b_sensitivities
 
     problem = fit.problem
     truth = campaign.truth or {}
@@ -303,6 +306,8 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
     if job.type_b:  # the draws every interval below is read from get the Type B uncertainty (analysis.budget)
         typeb = type_b_sensitivities(campaign, problem.spec,
                                      [q for q in BUDGET_QUANTITIES if q in idata.posterior], fit=fit)
+        recorded = [q for q in (*problem.free, *job.derived) if q in typeb.sensitivity and q in idata.posterior]
+        rec.update(budget_record(typeb, {q: float(np.std(idata.posterior[q].values)) for q in recorded}))
         add_type_b_to_idata(idata, typeb, seed=job.sampler.seed)
         rec["time_type_b_s"] = typeb.time_s
     for name in problem.free:
@@ -352,9 +357,11 @@ def _laplace_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
                            "rank_draws": int(np.asarray(fit.samples[problem.free[0]]).size), "type_b": job.type_b}
     draws = fit.samples
     if job.type_b:  # as the NUTS record (_fit_record) and `fit`: the intervals carry the Type B uncertainty
-        from .budget import BUDGET_QUANTITIES, add_type_b, type_b_sensitivities
+        from .budget import BUDGET_QUANTITIES, add_type_b, budget_record, type_b_sensitivities
 
         typeb = type_b_sensitivities(campaign, problem.spec, [q for q in BUDGET_QUANTITIES if q in draws], fit=fit)
+        recorded = [q for q in (*problem.free, *job.derived) if q in typeb.sensitivity and q in draws]
+        rec.update(budget_record(typeb, {q: float(np.std(draws[q])) for q in recorded}))
         draws = {**draws, **add_type_b({q: draws[q] for q in typeb.sensitivity}, typeb, seed=job.sampler.seed)}
         rec["time_type_b_s"] = typeb.time_s
     for name in problem.free:

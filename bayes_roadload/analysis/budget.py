@@ -242,6 +242,24 @@ def budget_table(typeb: TypeB, data_sd: dict[str, float]) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(BUDGET_COLUMNS))
 
 
+def budget_record(typeb: TypeB, data_sd: dict[str, float]) -> dict[str, float]:
+    """The budget of each quantity of ``data_sd`` as flat columns of a study's record:
+    ``{q}_sd_data`` (the posterior's own sd), ``{q}_sd_typeb_{source}`` (|c_s| u_s, the sd its
+    draws add; a uniform source's sd is its u as well) and, for a source above the analysis'
+    value, ``{q}_mean_shift_{source}`` (:func:`mean_shift`).  With them a study can read which
+    sources make its intervals too wide or too narrow: the interval's sd is about
+    sqrt(sd_data^2 + sum of the sources' sd^2) (the sources' draws are independent of the
+    posterior's)."""
+    out: dict[str, float] = {}
+    for q, sd in data_sd.items():
+        out[f"{q}_sd_data"] = float(sd)
+        for s, c in typeb.sensitivity.get(q, {}).items():
+            out[f"{q}_sd_typeb_{s}"] = abs(float(c)) * typeb.u[s]
+            if source_distribution(s) == "above":
+                out[f"{q}_mean_shift_{s}"] = mean_shift(typeb, q, s)
+    return out
+
+
 def format_budget(budget: pd.DataFrame, quantities: Sequence[str] = ("F50_N", "CD0", "F50_undriven_N"),
                   top: int = 3) -> str:
     """A few lines for the terminal: each quantity's data share and its largest sources (those

@@ -130,6 +130,13 @@ def test_record_keys_and_values(batch):
         assert np.all(np.diff(ends) >= 0), q
         assert good[f"{q}_sd"] > 0 and math.isfinite(good[f"{q}_truth"])
         assert good[f"{q}_in95"] == (good[f"{q}_q2.5"] <= good[f"{q}_truth"] <= good[f"{q}_q97.5"])
+        # the budget's columns (analysis.budget.budget_record): the interval's sd is the posterior's
+        # and the sources' added in quadrature, to the Monte Carlo error of 200 draws (an sd's
+        # relative SE ~ 1 / sqrt(2 n) = 5 %; 5 SE allowed)
+        typeb = [good[c] for c in df.columns if c.startswith(f"{q}_sd_typeb_") and math.isfinite(good[c])]
+        assert good[f"{q}_sd_data"] > 0 and typeb and min(typeb) >= 0, q
+        assert good[f"{q}_sd"] == pytest.approx(math.sqrt(good[f"{q}_sd_data"] ** 2 + sum(v**2 for v in typeb)),
+                                                rel=5 / math.sqrt(2 * 200)), q
     assert 0 < good["time_compile_s"] < good["time_total_s"]
     # the draws are not in the record, only scalars
     assert all(np.ndim(v) == 0 for v in good.to_dict().values())
@@ -266,3 +273,5 @@ def test_a_laplace_record_carries_the_model_constants_type_b(tmp_path):
                                           pooling="pooled")) for i, m in enumerate(models))
     assert on_rec["error"] is None and off_rec["error"] is None, (on_rec.get("traceback"), off_rec.get("traceback"))
     assert on_rec["F50_N_sd"] > 1.2 * off_rec["F50_N_sd"]
+    # the budget's columns name the constant's share: present where it is a source, absent where switched off
+    assert on_rec["F50_N_sd_typeb_Kalpha"] > 0 and "F50_N_sd_typeb_Kalpha" not in off_rec

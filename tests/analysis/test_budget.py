@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bayes_roadload.analysis.budget import (TypeB, add_type_b, budget_table, format_budget,
+from bayes_roadload.analysis.budget import (TypeB, add_type_b, budget_record, budget_table, format_budget,
                                             type_b_sensitivities)
 from bayes_roadload.data.uncertainty import SOURCES
 from bayes_roadload.inference.lsq import fit_lsq
@@ -580,3 +580,24 @@ def test_a_model_constant_with_an_uncertainty_is_a_source_of_the_budget():
     weight = campaign.vehicle.mass_kg * 9.81 / 3.6**2   # N per (km/h)^2 per unit C_R
     for sensitivity in (typeb.sensitivity["F2_N_per_kph2"][name], full["F2_N_per_kph2"]):
         assert 0.5 * weight < sensitivity <= 1.05 * weight
+
+
+def test_budget_record_gives_each_sources_sd_and_the_interval_it_adds_up_to():
+    """The record's columns rebuild the sd of the Type B draws (add_type_b) of a posterior whose
+    own sd is ``sd_data``: sqrt(sd_data^2 + sum sd_s^2), to the Monte Carlo error of the draws
+    (relative SE of an sd over n normal-ish draws ~ 1 / sqrt(2 n); 5 SE allowed)."""
+    u = {"airspeed_factor_rel": 0.005, "relative_humidity_unlogged_pct": 100 / np.sqrt(12)}
+    typeb = TypeB(u=u, sensitivity={"CD0": {"airspeed_factor_rel": -0.8, "relative_humidity_unlogged_pct": 2e-5}})
+    rec = budget_record(typeb, {"CD0": 0.002})
+    assert rec["CD0_sd_data"] == 0.002
+    assert rec["CD0_sd_typeb_airspeed_factor_rel"] == pytest.approx(0.8 * 0.005)
+    assert rec["CD0_sd_typeb_relative_humidity_unlogged_pct"] == pytest.approx(2e-5 * 100 / np.sqrt(12))
+    assert rec["CD0_mean_shift_relative_humidity_unlogged_pct"] == pytest.approx(2e-5 * 50.0)
+    assert "CD0_mean_shift_airspeed_factor_rel" not in rec  # a normal source adds no mean
+    n = 400_000
+    posterior = {"CD0": np.random.default_rng(1).normal(0.4, 0.002, (2, n // 2))}
+    drawn = add_type_b(posterior, typeb, seed=3)["CD0"]
+    sd = np.sqrt(rec["CD0_sd_data"] ** 2 + sum(v ** 2 for k, v in rec.items() if k.startswith("CD0_sd_typeb_")))
+    assert np.std(drawn) == pytest.approx(sd, rel=5 / np.sqrt(2 * n))
+    assert np.mean(drawn) - 0.4 == pytest.approx(rec["CD0_mean_shift_relative_humidity_unlogged_pct"],
+                                                 abs=5 * sd / np.sqrt(n))
