@@ -191,6 +191,52 @@ def truth_split_table(records: pd.DataFrame, quantity: str, threshold: float) ->
     return _group_coverage(rec, labels)
 
 
+def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTITIES) -> pd.DataFrame:
+    """Which Type B source makes the intervals too wide or too narrow, from the budget columns of
+    the records (:func:`~bayes_roadload.analysis.budget.budget_record`; fits without them are left
+    out).  Per quantity and source (and ``data only``, every source left out): the campaigns
+    ``n``, the source's median share of the interval's variance (sd_s^2 / sd^2), and sd(z) and 95 %
+    coverage with the source left out, read in the normal approximation: z = (mean - shift_s -
+    truth) / sqrt(sd^2 - sd_s^2), covered when |z| <= 1.96 (``shift_s``: the source's mean shift,
+    0 for a normal source).  Beside them the same with every source in (``z_sd``,
+    ``coverage95``), so the change is the source's alone.  A reading: the sources' sds are first
+    order and the normal approximation is not the recorded interval."""
+    rows = []
+    q975 = 1.959963984540054
+    for q in quantities:
+        if f"{q}_sd_data" not in records:
+            continue
+        rec = successful(records)
+        rec = rec[rec[f"{q}_sd_data"].notna() & rec[f"{q}_truth"].notna()]
+        if rec.empty:
+            continue
+        mean, sd, truth = (rec[f"{q}_{c}"].astype(float).to_numpy() for c in ("mean", "sd", "truth"))
+        z_all = (mean - truth) / sd
+        prefix = f"{q}_sd_typeb_"
+        sources = [c[len(prefix):] for c in rec.columns if c.startswith(prefix) and rec[c].notna().any()]
+
+        def shift_of(source: str) -> np.ndarray:
+            col = f"{q}_mean_shift_{source}"
+            return rec[col].fillna(0.0).to_numpy(float) if col in rec else np.zeros(len(rec))
+
+        def row(label: str, var_out: np.ndarray, shift: np.ndarray) -> dict:
+            sd_wo = np.sqrt(np.maximum(sd**2 - var_out, 1e-300))
+            z = (mean - shift - truth) / sd_wo
+            return {"quantity": q, "source": label, "n": len(rec),
+                    "median_share": float(np.median(var_out / sd**2)),
+                    "z_sd": float(np.std(z_all, ddof=1)), "coverage95": float(np.mean(np.abs(z_all) <= q975)),
+                    "z_sd_without": float(np.std(z, ddof=1)), "coverage95_without": float(np.mean(np.abs(z) <= q975)),
+                    "z_mean_without": float(np.mean(z))}
+
+        var = {src: rec[prefix + src].fillna(0.0).to_numpy(float) ** 2 for src in sources}
+        for src in sorted(sources, key=lambda x: -float(np.median(var[x]))):
+            rows.append(row(src, var[src], shift_of(src)))
+        if sources:
+            rows.append(row("data only", sum(var.values()), sum(shift_of(src) for src in sources)))
+    return pd.DataFrame(rows, columns=["quantity", "source", "n", "median_share", "z_sd", "coverage95",
+                                       "z_sd_without", "coverage95_without", "z_mean_without"])
+
+
 def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: float | None = None,
                          split: tuple[str, float] | None = None) -> str:
     """The study's section of ``docs/calibration.md``: counts, gates (and those passed without a
@@ -246,6 +292,19 @@ def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: flo
             part = yt[yt["group"] == g]
             lines.append(f"| {g} | {int(part['n'].max())} | "
                          + " | ".join(f"{c:.2f} ({z:+.2f})" for c, z in zip(part["coverage95"], part["z_mean"])) + " |")
+    attribution = budget_attribution(records)
+    if not attribution.empty:
+        lines += ["", "A reading, not a rule: each quantity's three largest Type B sources (median share of the "
+                  "interval's variance) and what sd(z) and the 95 % coverage would be without each, in the normal "
+                  "approximation (`analysis.calibration.budget_attribution`; campaigns whose records carry the "
+                  "budget's columns); *data only*: every source left out.", "",
+                  "| quantity | n | source | median share | sd(z) with / without | 95 % coverage with / without |",
+                  "|---|---|---|---|---|---|"]
+        for q, part in attribution.groupby("quantity", sort=False):
+            shown = pd.concat([part[part["source"] != "data only"].head(3), part[part["source"] == "data only"]])
+            for _, r in shown.iterrows():
+                lines.append(f"| {q} | {r['n']} | {r['source']} | {r['median_share']:.2f} | {r['z_sd']:.2f} / "
+                             f"{r['z_sd_without']:.2f} | {r['coverage95']:.2f} / {r['coverage95_without']:.2f} |")
     if wall_s is not None and "time_total_s" in ok:
         lines += ["", f"Mean fit time {ok['time_total_s'].mean():.0f} s; wall time {wall_s / 60:.0f} min."]
     return "\n".join(lines) + "\n"

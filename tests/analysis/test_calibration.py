@@ -10,7 +10,7 @@ from scipy.stats import norm
 
 from bayes_roadload import config
 from bayes_roadload.analysis.batch import run_batch
-from bayes_roadload.analysis.calibration import (COVERAGE_TARGET, QUANTITIES, calibration_jobs,
+from bayes_roadload.analysis.calibration import (COVERAGE_TARGET, QUANTITIES, budget_attribution, calibration_jobs,
                                                  calibration_markdown, calibration_table, mass_class, mass_class_table,
                                                  pairs_of, size_bin, with_test_mass)
 from bayes_roadload.inference.kinds import KINDS, FitOptions
@@ -65,6 +65,39 @@ def test_a_bias_shows_in_the_mean_z_and_the_coverage_not_in_sd_z():
     assert "| mean z |" in text and f"| all | {QUANTITIES[0]} | 400 |" in text
     row = next(line for line in text.splitlines() if line.startswith(f"| all | {QUANTITIES[0]} |"))
     assert float(row.split("|")[5]) == pytest.approx(overall["z_mean"].iloc[0], abs=0.005)
+
+
+def test_the_budget_attribution_finds_the_source_that_widens_the_intervals():
+    """Errors N(0, 1) from the data plus N(0, 1) from a real source; the interval also carries a
+    spurious source (sd 1.5) and a humidity-like source that shifts the mean by +0.6 without
+    moving the truth (sd 0.3).  With every source: sd(z) = sqrt(2) / sqrt(1 + 1 + 2.25 + 0.09)
+    = 0.68; without the spurious one sqrt(2 / 2.09) = 0.98; the shift's removal takes the mean z
+    to 0.  4000 campaigns: sd(z)'s standard error ~0.011, the coverage's ~0.004 (5 SE allowed)."""
+    rng = np.random.default_rng(7)
+    n = 4000
+    err = rng.standard_normal(n) + rng.standard_normal(n)
+    sd = np.sqrt(1 + 1 + 1.5**2 + 0.3**2)
+    rec = pd.DataFrame({"seed": np.arange(n), "pairs": 3, "error": np.nan, "gate_pass": True,
+                        "CD0_truth": 0.0, "CD0_mean": err + 0.6, "CD0_sd": sd, "CD0_sd_data": 1.0,
+                        "CD0_sd_typeb_real": 1.0, "CD0_sd_typeb_spurious": 1.5, "CD0_sd_typeb_humid": 0.3,
+                        "CD0_mean_shift_humid": 0.6})
+    rec["CD0_in95"] = (rec["CD0_mean"] / sd).abs() <= norm.ppf(0.975)
+    a = budget_attribution(rec, quantities=("CD0",)).set_index("source")
+    assert list(a.index) == ["spurious", "real", "humid", "data only"]  # by median share, data only last
+    assert a.loc["spurious", "median_share"] == pytest.approx(1.5**2 / sd**2)
+    assert a.loc["spurious", "z_sd"] == pytest.approx(np.sqrt(2) / sd, abs=0.06)
+    assert a.loc["spurious", "z_sd_without"] == pytest.approx(np.sqrt(2 / 2.09), abs=0.06)
+    assert a.loc["real", "z_sd_without"] == pytest.approx(np.sqrt(2 / 3.34), abs=0.06)
+    assert a.loc["data only", "z_sd_without"] == pytest.approx(np.sqrt(2), abs=0.06)
+    assert a.loc["humid", "z_mean_without"] == pytest.approx(0.0, abs=0.06)
+    assert a.loc["real", "z_mean_without"] == pytest.approx(0.6 / np.sqrt(sd**2 - 1), abs=0.06)
+    cover = 2 * norm.cdf(norm.ppf(0.975) * np.sqrt(2.09 / 2)) - 1  # without the spurious source: 0.955
+    assert a.loc["spurious", "coverage95_without"] == pytest.approx(cover, abs=0.02)
+    full = _records(1.0, n=40)  # the section reads the attribution where the records carry the columns
+    full["CD0_sd_data"], full["CD0_sd_typeb_spurious"] = 0.5, 0.8
+    text = calibration_markdown(full, calibration_table(full))
+    assert "| CD0 | 40 | spurious | 0.64 |" in text and "| CD0 | 40 | data only | 0.64 |" in text
+    assert budget_attribution(rec.drop(columns=[c for c in rec if "_typeb_" in c or "_sd_data" in c])).empty
 
 
 def test_the_gates_are_read_apart_by_the_code_that_fitted_them():
