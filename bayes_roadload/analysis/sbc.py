@@ -285,6 +285,12 @@ class ModelDrawnCampaign:
         runs["speed_mps"] = speed
         extra: dict[str, Any] = {"q_mps_per_sqrt_s": float(q),
                                  "sigma_mps": [float(x) for x in sigma]}
+        # the model's fixed constants are the draw's (drawn_speed integrates with problem.fixed):
+        # where the template's truth states another value (e.g. the tyre's v^2 coefficient, 0 in
+        # the project's simulator, held at its J2452 mean by the default), the truth of the road
+        # load (inference.problem.road_load_truth) must read the value the data were drawn with
+        extra.update({k: float(v) for k, v in problem.fixed.items()
+                      if k in template.truth and isinstance(v, (int, float))})
         if problem.driveline_channel:
             p = {**problem.fixed, **truth}
             sigma_d = abs(rng.normal(0.0, config.NOISE_PRIORS["sigma_driveline_n"]))
