@@ -60,6 +60,7 @@ PARAMETER_UNITS: dict[str, str] = {
     # candidate effects of the sim-to-real diagnosis (physics/effects.py)
     "tyre_transient": "-",
     "tyre_time_constant_s": "s",
+    "tyre_level": "-",
     "tyre_power_coeff": "-",
     "tyre_speed_exponent": "-",
     "side_slip_coeff_per_n": "1/N",
@@ -102,6 +103,7 @@ PARAMETER_SCALES: dict[str, float] = {
     "cross_wind_mps": 1.0,
     "tyre_transient": 0.1,
     "tyre_time_constant_s": 10.0,
+    "tyre_level": 0.01,
     "tyre_power_coeff": 1e-3,
     "tyre_speed_exponent": 1.0,
     "side_slip_coeff_per_n": 1e-4,

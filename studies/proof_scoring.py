@@ -11,7 +11,23 @@ import numpy as np
 import pandas as pd
 
 from bayes_roadload import config
+from bayes_roadload.analysis import effects as fx
 from bayes_roadload.analysis.effects import EFFECT_NAMES
+
+CAUSES = fx.causes(fx.load_library())
+"""Candidate -> the physical effect it stands for, from the shipped library (``cause``): a
+claim of any form of the injected effect names it.  Candidates of earlier libraries are their
+own cause."""
+
+
+def cause_of(name: str) -> str:
+    """The effect candidate ``name`` stands for (:data:`CAUSES`; itself when not a form)."""
+    return CAUSES.get(name, name)
+
+
+def _forms(effect: str) -> list[str]:
+    """The candidates that stand for ``effect`` (its own first)."""
+    return [effect] + [n for n in EFFECT_NAMES if n != effect and cause_of(n) == effect]
 
 
 def read_records(path: Path) -> pd.DataFrame:
@@ -25,40 +41,46 @@ def read_records(path: Path) -> pd.DataFrame:
 
 
 def outcome(row) -> str:
-    """``correct`` (the true effect ranked first and supported), ``flagged`` (nothing claimed and
-    the true effect reported not identifiable here), ``indistinct`` (nothing claimed and the
-    true effect among the candidates reported not distinguishable here), ``none`` (nothing
-    claimed), ``wrong`` (another effect claimed)."""
+    """``correct`` (a form of the true effect ranked first and supported), ``flagged`` (nothing
+    claimed and the true effect reported not identifiable here), ``indistinct`` (nothing claimed
+    and the true effect among the candidates reported not distinguishable here), ``none``
+    (nothing claimed), ``wrong`` (another effect claimed).  Candidates count by their cause
+    (:func:`cause_of`)."""
     truth, top = row["true_effect"], row["top"]
     if truth == "null":
         return "correct" if top == "none" else "wrong"
-    if top == truth:
+    if cause_of(top) == truth:
         return "correct"
-    flagged = str(row.get("not_identifiable") or "").split(",")
     if top == "none":
-        if truth in str(row.get("not_distinguishable") or "").split(","):
+        if truth in {cause_of(c) for c in str(row.get("not_distinguishable") or "").split(",")}:
             return "indistinct"
+        flagged = {cause_of(c) for c in str(row.get("not_identifiable") or "").split(",")}
         return "flagged" if truth in flagged else "none"
     return "wrong"
 
 
-def true_rank(row) -> float:
-    """Rank of the true effect among every candidate by delta_elpd alone (1 = best), claimed
-    or not; NaN for nulls."""
-    truth = row["true_effect"]
-    if truth == "null" or f"delta_elpd_{truth}" not in row:
-        return float("nan")
-    scores = {e: float(row.get(f"delta_elpd_{e}", float("nan"))) for e in EFFECT_NAMES}
-    mine = scores[truth]
-    if not np.isfinite(mine):
-        return float("nan")
-    return 1.0 + sum(1 for e, v in scores.items() if e != truth and np.isfinite(v) and v > mine)
+def _scores(row) -> dict[str, float]:
+    return {e: float(row.get(f"delta_elpd_{e}", float("nan"))) for e in EFFECT_NAMES}
 
 
 def true_gain(row) -> float:
-    """The true effect's own delta_elpd (NaN for nulls and when it was not scored)."""
-    value = row.get(f"delta_elpd_{row['true_effect']}")
-    return float("nan") if value is None else float(value)
+    """The true effect's own delta_elpd, the best of its forms' (NaN for nulls and when none
+    was scored)."""
+    truth = row["true_effect"]
+    if truth == "null":
+        return float("nan")
+    values = [v for e, v in _scores(row).items() if e in _forms(truth) and np.isfinite(v)]
+    return max(values) if values else float("nan")
+
+
+def true_rank(row) -> float:
+    """Rank of the true effect (its best form) among the other effects' candidates by
+    delta_elpd alone (1 = best), claimed or not; NaN for nulls."""
+    mine = true_gain(row)
+    if not np.isfinite(mine):
+        return float("nan")
+    return 1.0 + sum(1 for e, v in _scores(row).items()
+                     if cause_of(e) != row["true_effect"] and np.isfinite(v) and v > mine)
 
 
 def true_visible(row) -> bool:
@@ -74,8 +96,7 @@ def rank_one(row) -> str:
     delta_elpd (supported or not); "none" when no candidate was scored."""
     if row["top"] != "none":
         return str(row["top"])
-    scores = {e: float(row.get(f"delta_elpd_{e}", float("nan"))) for e in EFFECT_NAMES}
-    scores = {e: v for e, v in scores.items() if np.isfinite(v)}
+    scores = {e: v for e, v in _scores(row).items() if np.isfinite(v)}
     return max(scores, key=scores.get) if scores else "none"
 
 
@@ -95,12 +116,13 @@ def summarise(records: pd.DataFrame) -> dict:
     nulls = ok[ok["true_effect"] == "null"]
     shrink = effects.loc[effects["outcome"] == "correct", "shrink_trend_rms_mps"].astype(float)
     visible = effects.apply(true_visible, axis=1) if len(effects) else pd.Series(dtype=bool)
+    first = (effects.apply(lambda r: cause_of(rank_one(r)), axis=1) == effects["true_effect"]) if len(effects) \
+        else pd.Series(dtype=bool)
     return {
         "campaigns": int(len(ok)), "failed": int(len(records) - len(ok)),
         "effect_campaigns": int(len(effects)),
-        "true_ranked_first": int((effects.apply(rank_one, axis=1) == effects["true_effect"]).sum()),
-        "true_ranked_first_pct": 100.0 * float((effects.apply(rank_one, axis=1) == effects["true_effect"]).mean())
-        if len(effects) else None,
+        "true_ranked_first": int(first.sum()),
+        "true_ranked_first_pct": 100.0 * float(first.mean()) if len(effects) else None,
         "true_first": int((effects["outcome"] == "correct").sum()),
         "true_first_pct": 100.0 * float((effects["outcome"] == "correct").mean()) if len(effects) else None,
         "true_top_by_delta_elpd": int((effects["true_rank"] == 1).sum()),
@@ -113,7 +135,8 @@ def summarise(records: pd.DataFrame) -> dict:
         "nothing_claimed": int((effects["outcome"] == "none").sum()),
         "wrong_claim": int((effects["outcome"] == "wrong").sum()),
         "extra_claims": int(sum(1 for _, r in effects.iterrows()
-                                if set(filter(None, str(r["supported"]).split(","))) - {r["true_effect"]})),
+                                if {cause_of(c) for c in filter(None, str(r["supported"]).split(","))}
+                                - {r["true_effect"]})),
         "null_campaigns": int(len(nulls)), "null_false_claims": int((nulls["top"] != "none").sum()),
         "median_trend_shrink_pct_when_correct": float(shrink.median()) if len(shrink) else None,
         **{f"median_spread_excess_{arm}": median_of(arm_rows, "before_spread_excess")

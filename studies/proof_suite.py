@@ -372,10 +372,12 @@ def diagnosis_record(d: Diagnosis) -> dict[str, Any]:
     return rec
 
 
-SAME_FORMULA_EFFECTS = tuple(e for e in fx.EFFECT_NAMES if e != "aero_admittance")
+SAME_FORMULA_EFFECTS = tuple(e for e, cause in fx.causes(fx.load_library()).items()
+                             if e == cause and e != "aero_admittance")
 """The candidates the ``standard`` and ``identifying`` designs inject (the project's simulator
 has the admittance only together with its cup and vane dynamics, the ``anemometer_dynamics``
-arm)."""
+arm; a form of another candidate's effect, such as ``tyre_start_temperature``, has no arm of
+its own: its cause's arm injects the cause)."""
 
 
 def design_effects(design: str) -> tuple[str, ...]:

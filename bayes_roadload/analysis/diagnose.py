@@ -122,6 +122,11 @@ def vuong_z(best: list[float] | None, rival: list[float] | None) -> float:
     return float(d.sum() / (math.sqrt(d.size) * sd)) if sd > 0 else (math.inf if d.sum() > 0 else -math.inf)
 
 
+def _cause_of(library, name: str) -> str:
+    """The physical effect candidate ``name`` stands for (:attr:`.effects.Effect.cause`)."""
+    return library[name].cause if name in library else name
+
+
 def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings: config.DiagnosisConfig) -> list[str]:
     """Decide which candidates are supported (sets ``supported`` in ``entries``) and return them
     in order.  A candidate *qualifies* when it is identifiable here and its own delta_elpd
@@ -133,7 +138,8 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
     does not beat run by run (``min_vuong_z``, Vuong's test; not asked of a run-level best,
     whose gain lies by construction in the runs that differ most).  After the claimed one, the other
     qualifying candidates join by forward selection, each when it still gains
-    ``support_delta_elpd`` given those already in (at most ``max_refit_effects``).  The
+    ``support_delta_elpd`` given those already in (at most ``max_refit_effects``).  Forms of
+    one cause (:attr:`.effects.Effect.cause`) are not each other's rivals.  The
     airspeed scale adds the paired-run kinematics (independent data) to its dynamics, less
     their disagreement (:func:`.effects.kinematic_conflict`), also in the forward selection."""
     scored = [c for c in entries if math.isfinite(c["delta_elpd"])]
@@ -143,10 +149,13 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
     if not qualifying:
         return []
     best = qualifying[0]
-    rivals = [c for c in scored if c is not best and c["delta_elpd"] > best["delta_elpd"] - settings.ambiguity_margin]
+    cause = _cause_of(library, best["effect"])
+    # forms of the best's own cause name the same effect: they are not its rivals
+    others = [c for c in scored if c is not best and _cause_of(library, c["effect"]) != cause]
+    rivals = [c for c in others if c["delta_elpd"] > best["delta_elpd"] - settings.ambiguity_margin]
     if not best.get("kinematics"):
-        for c in scored:
-            if c is best or c in rivals or c.get("kinematics") or c["delta_elpd"] <= 0.0:
+        for c in others:
+            if c in rivals or c.get("kinematics") or c["delta_elpd"] <= 0.0:
                 continue
             # a rival with nearly the same signature (what is left of the best's information
             # once the rival is fitted: VIF rule) that explains the gap on its own cannot be
@@ -249,7 +258,9 @@ def _statement(effect: fx.Effect, entry: dict, cfg: config.DiagnosisConfig) -> s
         how = " (from the paired-run kinematics)" if kin else ""
         given = entry.get("delta_elpd_given_supported")
         extra = f", {given:.1f} given the effects ranked above it" if given is not None else ""
-        return f"supported{how}: delta_elpd {entry['delta_elpd']:.1f} >= {cfg.support_delta_elpd:g}{extra}{_shape_text(entry)}"
+        form = f" (a form of {effect.cause})" if effect.cause != effect.name else ""
+        return (f"supported{how}{form}: delta_elpd {entry['delta_elpd']:.1f} >= {cfg.support_delta_elpd:g}{extra}"
+                f"{_shape_text(entry)}")
     if entry.get("qualifies"):
         given = entry.get("delta_elpd_given_supported")
         return (f"not supported: explained by the effects ranked above it" +
@@ -315,7 +326,7 @@ class Diagnosis:
         return c["effect"] if c is not None and c["supported"] else None
 
 
-DIAGNOSIS_CONTRACT = 5
+DIAGNOSIS_CONTRACT = 6
 """Version of ``diagnosis.json``'s contract: the keys ``gap``, ``localisation``, ``inputs`` (each
 logged anemometer channel's :func:`.gap.input_resolution`, null when not logged),
 ``candidates`` (each candidate with :data:`CANDIDATE_KEYS`), ``contract`` (this number) and
@@ -324,12 +335,13 @@ so a committed diagnosis older than the code is detected."""
 
 CANDIDATE_KEYS = ("effect", "rank", "supported", "qualifies", "delta_elpd", "gap_before", "gap_after", "shrink_pct",
                   "identifiable", "identification", "estimates", "against_sign", "unavailable", "needs", "statement",
-                  "shape", "unresolved")
+                  "shape", "unresolved", "cause")
 """The keys every candidate entry of ``diagnosis.json`` carries (``against_sign``: the
 estimates whose sign no physical value of the effect has, :meth:`.effects.Effect.against_sign`;
 empty when none; ``shape``: for a family, its profiled shape and the gain at every grid point,
 :func:`.effects.fit_shapes`, else empty; ``unresolved``: the channels of its ``resolved_inputs``
-whose reading does not follow the gusts, with their lag-1 autocorrelation, empty when none)."""
+whose reading does not follow the gusts, with their lag-1 autocorrelation, empty when none;
+``cause``: the physical effect the candidate is a form of, :attr:`.effects.Effect.cause`)."""
 
 
 def _sha256_json(obj: Any) -> str:
@@ -346,7 +358,7 @@ def rules_fingerprint(library: Mapping[str, fx.Effect],
     # options an effect leaves unused (no shape grid, not each-run, no resolved inputs) are not
     # hashed: declaring them changes the fingerprint, their existence does not
     lib = {name: {k: v for k, v in dataclasses.asdict(e).items()
-                  if not (k in ("shape", "each_run", "resolved_inputs") and not v)}
+                  if not (k in ("shape", "each_run", "resolved_inputs", "form_of") and not v)}
            for name, e in sorted(library.items())}
     thresholds = dataclasses.asdict(settings)
     return {"library_sha256": _sha256_json(lib), "thresholds_sha256": _sha256_json(thresholds),
@@ -439,6 +451,7 @@ def diagnose(campaign: Campaign, model: Any = "three_term", *, library: Mapping[
                 entry["delta_lopo_lpd"] = (after["lopo_lpd_per_sample"] - before["lopo_lpd_per_sample"]) * lin.n_samples
             entry["shrink_pct"] = shrink(before, after, lin.n_runs)
         entry["needs"] = e.needs
+        entry["cause"] = e.cause
         entries.append(entry)
     air = next((c for c in entries if c.get("kinematics")), None)
     yaw = next((c for c in entries if c["effect"] == "yaw_calibration" and "yaw_factor" in c["estimates"]), None)

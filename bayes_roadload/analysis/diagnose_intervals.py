@@ -60,6 +60,9 @@ STATEMENTS = {
                         "tyre temperature, or runs started at different speeds",
     "run_to_run_variation": "in the model already: each run's deceleration offset is part of the band-time "
                             "likelihood (run_decel_sd_mps2)",
+    "tyre_start_temperature": "in the model already: each run's rolling level is part of its deceleration "
+                              "offset (run_decel_sd_mps2); needs tyre temperature logged at each run's start "
+                              "to be told from the other run-level causes",
 }
 
 GAP_FLOORS = {"band_z_rms": 1.0, "lag1_autocorr": 0.0, "heading_z_diff": 0.0}

@@ -65,8 +65,11 @@ LIBRARY_PATH = MODELS_DIR / "effects" / "library.toml"
 
 EFFECT_NAMES = ("track_gradient", "tyre_temperature", "airspeed_calibration", "yaw_calibration", "aero_lift",
                 "side_force_slip", "pitch_attitude", "driveline_quadratic", "tyre_speed_exponent", "spatial_wind",
-                "anemometer_dynamics", "run_to_run_variation", "mass_error", "aero_admittance")
-"""The effect names of the issue's contract, in library order."""
+                "anemometer_dynamics", "run_to_run_variation", "mass_error", "aero_admittance",
+                "tyre_start_temperature")
+"""The candidate names of the issue's contract, in library order.  A candidate is one formula;
+the physical effect it stands for is its ``cause`` (:attr:`Effect.cause`: its own name unless
+the library says which other candidate's effect it is a form of)."""
 
 SIGNS = {"positive": 1, "negative": -1}
 """The physical signs a one-parameter effect may declare (``sign`` in the library)."""
@@ -104,6 +107,10 @@ class Effect:
         effect's signature reads: on a campaign whose reading does not resolve them
         (:func:`bayes_roadload.analysis.gap.input_resolution` below
         ``DiagnosisConfig.min_input_lag1``) the effect is not identifiable here.
+    form_of : the physical effect the candidate is a form of (library key ``cause``: a
+        candidate of the library that is its own cause); "" when it is its own.  :attr:`cause`
+        is the effect either way.  Two forms of one cause are not each other's rivals in the
+        diagnosis, and a claim of either names the cause.
     """
 
     name: str
@@ -119,6 +126,12 @@ class Effect:
     shape: dict[str, tuple[float, ...]] = field(default_factory=dict)
     each_run: bool = False
     resolved_inputs: tuple[str, ...] = ()
+    form_of: str = ""
+
+    @property
+    def cause(self) -> str:
+        """The physical effect this candidate stands for (``form_of``, else its own name)."""
+        return self.form_of or self.name
 
     def against_sign(self, estimates: Mapping[str, float]) -> dict[str, float]:
         """The estimates (offsets from the null) whose sign no physical value of the effect has."""
@@ -206,6 +219,11 @@ def load_library(path: str | Path = LIBRARY_PATH) -> dict[str, Effect]:
         for ch in resolved:
             if ch not in RESOLVABLE_INPUTS:
                 raise ValueError(f"{where}: resolved_inputs: {ch!r} not one of {RESOLVABLE_INPUTS}")
+        form_of = str(e.get("cause", ""))
+        if form_of == name:
+            form_of = ""
+        if form_of and form_of not in EFFECT_NAMES:
+            raise ValueError(f"{where}: cause {form_of!r} is not an effect of the contract")
         shape = {}
         for p, spec in e.get("shape", {}).items():
             if p not in e.get("fixed", {}) or kind != "term":
@@ -216,8 +234,17 @@ def load_library(path: str | Path = LIBRARY_PATH) -> dict[str, Effect]:
                            null={p: v.get("null", 0.0) for p, v in params.items()},
                            fixed={k: float(v) for k, v in e.get("fixed", {}).items()},
                            needs=e.get("needs", ""), confounded_with=tuple(e.get("confounded_with", [])),
-                           sign=sign, shape=shape, each_run=each_run, resolved_inputs=resolved)
+                           sign=sign, shape=shape, each_run=each_run, resolved_inputs=resolved, form_of=form_of)
+    for name, e in out.items():
+        if e.form_of and (e.form_of not in out or out[e.form_of].form_of):
+            raise ValueError(f"{path}: [effects.{name}]: cause {e.form_of!r} must be a candidate of the library "
+                             "that is its own cause")
     return out
+
+
+def causes(library: Mapping[str, Effect]) -> dict[str, str]:
+    """Candidate name -> the physical effect it stands for (:attr:`Effect.cause`)."""
+    return {name: e.cause for name, e in library.items()}
 
 
 # ----------------------------------------------------------------------------- linearisation

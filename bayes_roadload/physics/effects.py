@@ -50,6 +50,25 @@ class TyreTemperatureTransient(Term):
 
 @register_term
 @dataclass(frozen=True)
+class TyreLossLevel(Term):
+    """Tyre rolling loss off its law by a constant fraction over the run: M g (A_D + B_D v)
+    tyre_level (eq. 2.38 scaled).  With one ``tyre_level`` per run it is each run's tyres
+    starting at their own temperature (a warm-up that differs between runs: SAE J2452's
+    temperature sensitivity of the rolling loss, GTR 15's warm-up), a level where the run is
+    short against the tyres' thermal time constant."""
+
+    name: ClassVar[str] = "tyre_loss_level"
+    defaults: ClassVar[Mapping[str, float]] = {"tyre_level": 0.0}
+    speed_affine: ClassVar[bool] = True
+    equation: ClassVar[str] = "2.38 scaled"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        tyre = c.weight_n * (p["AD"] + p["BD"] * c.speed_mps) * tyre_temperature_factor(p, c)
+        return tyre * p["tyre_level"]
+
+
+@register_term
+@dataclass(frozen=True)
 class TyreSpeedPower(Term):
     """Tyre loss growing faster than linearly with speed: M g tyre_power_coeff (v / v_ref)^b
     (the A + X_D v^b forms of eq. 2.9, b = 4 Dayman, 3.5 Emtage), v_ref =

@@ -160,6 +160,30 @@ def test_a_claim_needs_a_margin_over_every_other_candidate():
     assert "ambiguous_with" not in entries[2]
 
 
+def test_forms_of_one_cause_are_not_each_others_rivals(monkeypatch):
+    """Two forms of one cause within the margin name the same effect: the best is claimed;
+    a candidate of another cause within the margin still blocks it."""
+    from bayes_roadload.analysis import diagnose as dg
+    from bayes_roadload.analysis import effects as fx
+
+    library = fx.load_library()
+    form = next(e for e in library.values() if e.cause != e.name)
+    cfg = config.DEFAULT_DIAGNOSIS
+    monkeypatch.setattr(fx, "fit_effects", lambda lin, eff, lib: type("S", (), {"loglik_gain": 40.0})())
+    monkeypatch.setattr(fx, "n_added_parameters", lambda lin, eff, lib: 1)
+
+    def entries(rival):
+        return [{"effect": form.name, "delta_elpd": 30.0, "qualifies": True},
+                {"effect": rival, "delta_elpd": 30.0 - cfg.ambiguity_margin / 2, "qualifies": False}]
+
+    e = entries(form.cause)
+    assert dg.select_effects(None, e, library, cfg) == [form.name]
+    assert "ambiguous_with" not in e[0]
+    e = entries("spatial_wind")
+    assert dg.select_effects(None, e, library, cfg) == []
+    assert e[0]["ambiguous_with"] == ["spatial_wind"]
+
+
 def test_shrink_is_the_share_of_the_excess_over_the_floor():
     from bayes_roadload.analysis.diagnose import shrink
 
@@ -234,8 +258,8 @@ def test_a_lead_made_by_one_run_is_not_a_claim(monkeypatch):
     assert dg.select_effects(None, e, {}, cfg) == ["mass_error"]
     # a run-level best (each run its own coefficients) gains where the runs differ: the same
     # lucky-looking gains are its nature, and Vuong's test is not asked of it
-    run_level = {"run_to_run_variation": type("E", (), {"per_run": True})(),
-                 "anemometer_dynamics": type("E", (), {"per_run": False})()}
+    run_level = {"run_to_run_variation": type("E", (), {"per_run": True, "cause": "run_to_run_variation"})(),
+                 "anemometer_dynamics": type("E", (), {"per_run": False, "cause": "anemometer_dynamics"})()}
     e = entries(lucky)
     e[0]["effect"] = "run_to_run_variation"
     assert dg.select_effects(None, e, run_level, cfg) == ["run_to_run_variation"]

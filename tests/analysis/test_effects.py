@@ -195,9 +195,12 @@ def test_a_one_parameter_effect_may_declare_its_physical_sign(tmp_path):
 def test_a_family_declares_its_shape_grid_and_each_run_amplitudes(tmp_path):
     """``shape.P`` in the library: P must be a fixed parameter of a term effect; the grid spaces
     ``points`` values from ``low`` to ``high`` (log or linear, ends included); ``each_run`` is for
-    term effects only.  No shipped candidate is a family or each run's."""
+    term effects only.  No shipped candidate is a family; the one each run's is a form of
+    another candidate's effect (each run's tyre level)."""
     lib = fx.load_library()
-    assert not any(e.shape or e.each_run for e in lib.values())
+    assert not any(e.shape for e in lib.values())
+    assert [e.name for e in lib.values() if e.each_run] == ["tyre_start_temperature"]
+    assert lib["tyre_start_temperature"].per_run and lib["tyre_start_temperature"].cause == "tyre_temperature"
     assert not lib["tyre_temperature"].per_run and lib["run_to_run_variation"].run_coefficients
     head = ('[effects.tyre_temperature]\nterms = ["tyre_temperature_transient"]\nkind = "term"\n'
             'parameters.tyre_transient = { prior_sd = 0.2 }\n')
@@ -253,8 +256,9 @@ def test_added_parameters_count_each_run_amplitudes_and_shapes():
 
 
 def test_the_rules_fingerprint_sees_a_family_but_not_the_unused_option():
-    """Declaring a shape grid or each_run changes the library's SHA-256; the shipped library,
-    which uses neither, hashes as the rules frozen in docs/sim_to_real/frozen_rules.json."""
+    """Declaring a shape grid or each_run changes the library's SHA-256 (an option left unused
+    does not); the shipped library hashes as the rules frozen in
+    docs/sim_to_real/frozen_rules.json."""
     import dataclasses
 
     from bayes_roadload.analysis.diagnose import rules_fingerprint
@@ -266,6 +270,9 @@ def test_the_rules_fingerprint_sees_a_family_but_not_the_unused_option():
     each = dict(lib, tyre_temperature=dataclasses.replace(tyre, each_run=True))
     hashes = {base, rules_fingerprint(shaped)["library_sha256"], rules_fingerprint(each)["library_sha256"]}
     assert len(hashes) == 3
+    # the cause left at its default is not hashed: a library without the key hashes as before
+    plain = dict(lib, tyre_temperature=dataclasses.replace(tyre, form_of=""))
+    assert rules_fingerprint(plain)["library_sha256"] == base
     # the shipped rules are the ones frozen for the sim-to-real proof suite
     import json
     from pathlib import Path

@@ -28,6 +28,7 @@ def conditions(**kw):
 
 EFFECT_TERMS = {  # term -> (effect parameter, a non-null value)
     "tyre_temperature_transient": ("tyre_transient", 0.1),
+    "tyre_loss_level": ("tyre_level", 0.02),
     "tyre_speed_power": ("tyre_power_coeff", 3e-4),
     "side_slip_drag": ("side_slip_coeff_per_n", 5.76e-5),
     "driveline_quadratic": ("Ct", 0.03),
@@ -48,6 +49,18 @@ def test_effect_terms_are_registered_null_at_zero_and_linear(name):
     f2 = np.asarray(term.force_n({**p, param: 2 * value}, c))
     assert np.any(np.abs(f1) > 1e-6)
     np.testing.assert_allclose(f2, 2 * f1, rtol=1e-12)  # linear: the diagnosis linearises about 0
+
+
+def test_tyre_loss_level_is_the_transient_that_never_decays():
+    """tyre_level scales the rolling loss like tyre_transient at t = 0, and stays (eq. 2.38 scaled)."""
+    c = conditions()
+    p = {"AD": 0.01, "BD": 2e-4, "KT": 0.0, "CD0": 0.4, "KD": 0.6}
+    level = TERMS["tyre_loss_level"]().force_n({**p, "tyre_level": 0.03}, c)
+    start = TERMS["tyre_temperature_transient"]().force_n({**p, "tyre_transient": 0.03, "tyre_time_constant_s": 40.0},
+                                                          c._replace(time_s=jnp.zeros(3)))
+    np.testing.assert_allclose(level, start, rtol=1e-12)
+    rolling = TERMS["tyre_rolling"]().force_n(p, c)
+    np.testing.assert_allclose(level, 0.03 * np.asarray(rolling), rtol=1e-12)
 
 
 def test_side_slip_drag_equals_side_force_slip_with_folded_coefficient():

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from bayes_roadload import config
-from studies.proof_scoring import outcome, read_records, summarise, true_visible
+from studies.proof_scoring import CAUSES, outcome, read_records, summarise, true_rank, true_visible
 
 RECORDS = Path(__file__).resolve().parents[2] / "docs" / "sim_to_real"
 THRESHOLD = config.DEFAULT_DIAGNOSIS.support_delta_elpd
@@ -40,6 +40,27 @@ def test_a_missing_score_is_not_visible():
 ])
 def test_outcomes(kw, expected):
     assert outcome(_row(**kw)) == expected
+
+
+FORM = next(name for name, cause in CAUSES.items() if cause != name)  # a candidate that is a form of another
+
+
+@pytest.mark.parametrize("kw, expected", [
+    (dict(top=FORM), "correct"),
+    (dict(not_distinguishable=f"spatial_wind,{FORM}"), "indistinct"),
+    (dict(not_identifiable=FORM), "flagged"),
+])
+def test_a_form_of_the_true_effect_counts_as_the_effect(kw, expected):
+    assert outcome(_row(**{"true_effect": CAUSES[FORM], **kw})) == expected
+    assert outcome(_row(**{"true_effect": "track_gradient", **kw})) in ("wrong", "none")
+
+
+def test_the_true_effects_rank_and_gain_are_its_best_forms_against_the_other_effects():
+    cause = CAUSES[FORM]
+    row = _row(true_effect=cause, **{f"delta_elpd_{cause}": -1.0, f"delta_elpd_{FORM}": 30.0,
+                                     "delta_elpd_track_gradient": 20.0, "delta_elpd_spatial_wind": 40.0})
+    assert true_visible(row) and true_rank(row) == 2.0
+    assert true_rank(row.drop("delta_elpd_spatial_wind")) == 1.0
 
 
 def _committed() -> list[Path]:
