@@ -334,8 +334,9 @@ def independent_section(label: str, records: pd.DataFrame, earlier: str | None =
 WHY = {
     ("tyre_temperature", "run_to_run_variation"):
         "the independent simulator starts each run's tyres 4 K below to 2 K above their equilibrium, so the runs' "
-        "rolling losses differ: what the data show is a run-to-run variation, which the library's tyre candidate "
-        "(one transient shared by the runs) does not describe",
+        "rolling losses differ: what the data show is a run-to-run variation, which the tyre candidate of the "
+        "rules up to 6b6636d0 (one transient shared by the runs) does not describe; the rules 8870425e add each "
+        "run's tyre level (`tyre_start_temperature`)",
 }
 WHY.update({(e, "tyre_temperature"): "under the rules cb27efa6 the tyre family had an amplitude per run and a free "
             "time constant (13 parameters at 6 pairs): a transient of any sign in each run fits whatever drifts "
@@ -381,6 +382,16 @@ def reading_lines(records: pd.DataFrame) -> list[str]:
                     or "none")
                  + ": at its plausible size such an effect leaves no trace a candidate can fit on this campaign, "
                  "whatever the ranking rules; its `needs` name the test that would show it.")
+    if "category" in eff:
+        seeds = eff.drop_duplicates("seed")["category"].astype(str).value_counts()
+        claimed = eff.groupby(eff["category"].astype(str))["outcome"].agg(lambda o: f"{int((o == 'correct').sum())} "
+                                                                                     f"of {len(o)}")
+        lines.append("- Vehicles (one drawn per seed, every effect of a seed on it): "
+                     + ", ".join(f"{c} {n}" for c, n in seeds.items()) + "; true effect claimed by vehicle: "
+                     + ", ".join(f"{c} {claimed[c]}" for c in seeds.index) + ".")
+    by_form = eff[(eff["outcome"] == "correct") & (eff["top"] != eff["true_effect"])]
+    for (t, top), n in by_form.groupby(["true_effect", "top"]).size().items():
+        lines.append(f"- Claimed by a form of its cause: `{t}` as `{top}` in {n} campaign(s).")
     wrong = eff[eff["outcome"] == "wrong"]
     for (t, top), n in wrong.groupby(["true_effect", "top"]).size().items():
         why = WHY.get((t, top))

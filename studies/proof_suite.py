@@ -142,7 +142,8 @@ def _project_withheld_campaign(effect: str | None, seed: int, pairs: int = 3,
         settings = dataclasses.replace(settings, sensors=dataclasses.replace(
             s, cup_distance_constant_m=s.cup_distance_constant_m * f))
     elif effect == "aero_admittance":
-        arm["effects"] = ("admittance", "anemometer_position")
+        raise ValueError("the project's simulator has the aerodynamic admittance only together with the cup and "
+                         "vane dynamics (the anemometer_dynamics arm); the independent design injects it alone")
     elif effect == "run_to_run_variation":
         case = dataclasses.replace(case, system_noise=True)
         settings = dataclasses.replace(settings, system_noise_mode="per_run",

@@ -169,3 +169,12 @@ def test_a_yaw_reading_that_misses_the_gusts_claims_no_vane_factor():
     vane = next(c for c in d.candidates if c["effect"] == "yaw_calibration")
     assert not vane["identifiable"] and "does not resolve" in vane["statement"]
     assert d.top is None
+
+
+def test_the_same_formula_designs_refuse_an_effect_they_have_no_arm_for():
+    """aero_admittance has no arm of its own in the project's simulator: asking for it is a
+    clear error, not a campaign without the effect."""
+    from studies.proof_suite import withheld_campaign
+
+    with pytest.raises(ValueError, match="anemometer_dynamics arm"):
+        withheld_campaign("aero_admittance", 1, design="standard")
