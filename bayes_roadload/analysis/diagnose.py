@@ -553,8 +553,10 @@ def write_diagnosis(diag: Diagnosis, out_dir: str | Path,
     lines = [f"# Sim-to-real diagnosis: model `{diag.model}`", ""]
     top = diag.top
     ambiguous = [c["effect"] for c in diag.candidates if c.get("ambiguous_with")]
+    causes = {c["effect"]: c["cause"] for c in diag.candidates}
     if top:
-        verdict = f"`{top}` is the leading supported effect."
+        form = f" (a form of `{causes[top]}`)" if causes[top] != top else ""
+        verdict = f"`{top}`{form} is the leading supported effect."
     elif ambiguous:
         verdict = ("the model misses something, but " + ", ".join(f"`{e}`" for e in ambiguous)
                    + f" explain it alike (delta_elpd within {settings.ambiguity_margin:g}): not distinguishable here.")
@@ -580,7 +582,8 @@ def write_diagnosis(diag: Diagnosis, out_dir: str | Path,
               "| rank | effect | supported | delta_elpd | delta LOPO lpd | trend shrink % | statement |",
               "| --- | --- | --- | --- | --- | --- | --- |"]
     for c in diag.candidates:
-        lines.append(f"| {c['rank']} | `{c['effect']}` | {'yes' if c['supported'] else 'no'} | {_fmt(c['delta_elpd'], 3)} | "
+        name = f"`{c['effect']}`" + (f" (form of `{c['cause']}`)" if c["cause"] != c["effect"] else "")
+        lines.append(f"| {c['rank']} | {name} | {'yes' if c['supported'] else 'no'} | {_fmt(c['delta_elpd'], 3)} | "
                      f"{_fmt(c.get('delta_lopo_lpd'), 3)} | {_fmt(c['shrink_pct'].get('trend_rms_mps'), 3)} | "
                      f"{c['statement']} |")
     lines += ["", "![candidates](candidates.png)", "", "## 4. How far it shrinks", ""]

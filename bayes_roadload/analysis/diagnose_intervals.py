@@ -223,6 +223,7 @@ def diagnose_intervals(campaign, model: Any = "split_f0_f2", *, library: Mapping
             continue
         entry: dict[str, Any] = {"effect": name, "rank": None, "supported": False, "delta_elpd": math.nan,
                                  "gap_before": before, "gap_after": {}, "shrink_pct": {}, "needs": e.needs,
+                                 "cause": e.cause,
                                  "identifiable": name in SCORED,
                                  "unavailable": None if name in SCORED else STATEMENTS[name]}
         cand = candidate_spec(spec, name, library) if name in SCORED else None

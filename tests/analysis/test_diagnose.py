@@ -277,6 +277,9 @@ def test_the_committed_example_is_of_the_current_contract_and_rules():
     assert d["rules"]["thresholds_sha256"] == now["thresholds_sha256"], "thresholds changed: regenerate the example"
     report = (EXAMPLE / "report.md").read_text()
     assert now["library_sha256"][:16] in report and now["thresholds_sha256"][:16] in report
+    # every candidate states its cause; a form of another candidate's effect says so in the table
+    forms = {c["effect"]: c["cause"] for c in d["candidates"] if c["cause"] != c["effect"]}
+    assert forms and all(f"`{e}` (form of `{c}`)" in report for e, c in forms.items())
     for png in ("residuals.png", "localisation.png", "candidates.png"):
         assert png in report and (EXAMPLE / png).stat().st_size > 1000
 
