@@ -443,6 +443,27 @@ def z_sd_interval(z: np.ndarray, level: float = 0.95, resamples: int = Z_SD_RESA
     return float(lo), float(hi)
 
 
+def variance_ratio(error: np.ndarray, sd: np.ndarray, level: float = 0.95, resamples: int = Z_SD_RESAMPLES,
+                   seed: int = 0) -> tuple[float, float, float]:
+    """The mean squared error of the posterior means over the mean posterior variance,
+    mean((mean - truth)^2) / mean(sd^2), with its percentile-bootstrap ``level`` interval (fits
+    resampled with replacement, fixed seed).  By the law of total variance,
+    E[(E[theta | y] - theta)^2] = E[Var(theta | y)] when the truths are drawn from the prior and
+    the posterior is exact, whatever its shape: 1 for a calibrated arm, below 1 for posteriors
+    too wide.  Unlike sd(z) it does not assume Gaussian posteriors (a truncated prior, a skewed
+    posterior).  NaN for fewer than 3 fits."""
+    e2, v = np.asarray(error, float) ** 2, np.asarray(sd, float) ** 2
+    ok = np.isfinite(e2) & np.isfinite(v)
+    e2, v = e2[ok], v[ok]
+    if e2.size < 3:
+        return math.nan, math.nan, math.nan
+    idx = np.random.default_rng(seed).integers(0, e2.size, (resamples, e2.size))
+    boot = e2[idx].mean(axis=1) / v[idx].mean(axis=1)
+    tail = 0.5 * (1.0 - level)
+    lo, hi = np.quantile(boot, [tail, 1.0 - tail])
+    return float(e2.mean() / v.mean()), float(lo), float(hi)
+
+
 def sbc_tests(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS, bins: int = SBC_BINS,
               alpha: float = SBC_ALPHA, levels: Sequence[float] = (0.5, 0.9, 0.95)) -> pd.DataFrame:
     """Uniformity and coverage of every arm and parameter.
@@ -451,7 +472,8 @@ def sbc_tests(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS,
     Pearson's chi-square test of the rank histogram against uniform (``bins - 1`` degrees of
     freedom; scipy.stats.chisquare), ``coverage50`` / ``coverage90`` / ``coverage95`` of the
     central intervals, ``z_sd`` (sd over campaigns of (mean - truth) / sd) with its bootstrap
-    95 % interval ``z_sd_low``, ``z_sd_high`` (:func:`z_sd_interval`), ``uniform``
+    95 % interval ``z_sd_low``, ``z_sd_high`` (:func:`z_sd_interval`), ``var_ratio`` with
+    ``var_ratio_low``, ``var_ratio_high`` (:func:`variance_ratio`), ``uniform``
     (p_value >= alpha / number of parameters: Bonferroni within the arm) and ``arm_pass`` (every
     parameter of the arm uniform).  Requires ``n >= 5 bins`` for the chi-square approximation
     to be fair; with fewer campaigns ``p_value`` is still computed but flagged by ``n``.
@@ -474,6 +496,9 @@ def sbc_tests(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS,
         row["z_sd"] = float(c["z_sd"].iloc[0]) if len(c) else math.nan
         arm = ok[(ok["arm"] == h["arm"]) & ok[f"{h['parameter']}_truth"].notna()]
         row["z_sd_low"], row["z_sd_high"] = z_sd_interval(record_z(arm, h["parameter"]).to_numpy())
+        q = h["parameter"]
+        row["var_ratio"], row["var_ratio_low"], row["var_ratio_high"] = variance_ratio(
+            (arm[f"{q}_mean"] - arm[f"{q}_truth"]).to_numpy(float), arm[f"{q}_sd"].to_numpy(float))
         rows.append(row)
     out = pd.DataFrame(rows)
     if out.empty:
@@ -585,14 +610,17 @@ def sbc_markdown(records: pd.DataFrame, tests: pd.DataFrame | None = None,
     tests = sbc_tests(records, parameters, bins) if tests is None else tests
     hist = rank_histograms(records, parameters, bins)
     ok = _ok(records)
-    lines = ["| arm | parameter | n | rank histogram (10 bins) | chi2 | p | cov. 50 % | cov. 90 % | cov. 95 % | z sd (95 % CI) | uniform |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| arm | parameter | n | rank histogram (10 bins) | chi2 | p | cov. 50 % | cov. 90 % | cov. 95 % | z sd (95 % CI) "
+             "| MSE / mean var (95 % CI) | uniform |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for _, t in tests.iterrows():
         h = hist[(hist["arm"] == t["arm"]) & (hist["parameter"] == t["parameter"])].iloc[0]
         counts = " ".join(str(int(h[f"bin{i}"])) for i in range(bins))
         lines.append(f"| {t['arm']} | {t['parameter']} | {t['n']} | {counts} | {t['chi2']:.1f} | "
                      f"{t['p_value']:.3g} | {t['coverage50']:.2f} | {t['coverage90']:.2f} | "
-                     f"{t['coverage95']:.2f} | {t['z_sd']:.2f} ({t['z_sd_low']:.2f}-{t['z_sd_high']:.2f}) | {'yes' if t['uniform'] else '**no**'} |")
+                     f"{t['coverage95']:.2f} | {t['z_sd']:.2f} ({t['z_sd_low']:.2f}-{t['z_sd_high']:.2f}) | "
+                     f"{t['var_ratio']:.2f} ({t['var_ratio_low']:.2f}-{t['var_ratio_high']:.2f}) | "
+                     f"{'yes' if t['uniform'] else '**no**'} |")
     lines.append("")
     for arm, g in ok.groupby("arm", sort=False):
         failed = int((~g["gate_pass"].astype(bool)).sum())

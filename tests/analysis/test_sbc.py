@@ -21,7 +21,8 @@ from bayes_roadload.analysis.batch import run_batch
 from bayes_roadload.analysis.sbc import (SBC_MODEL, SBC_PARAMETERS, SBC_SAMPLER, ModelDrawnCampaign, PriorDrawnCampaign,
                                          WrongEffectiveMass, draw_from_prior, rank_fractions, rank_histograms,
                                          extra_physics, sbc_case, sbc_jobs, sbc_markdown, sbc_tests, with_drawn_truth,
-                                         z_sd_by_truth_q, z_sd_interval, paired_arms, MIN_PAIRED)
+                                         z_sd_by_truth_q, z_sd_interval, paired_arms, variance_ratio,
+                                         MIN_PAIRED)
 from bayes_roadload.inference.spec import load_model_spec
 from bayes_roadload.simulate import SimulationSettings, simulate_campaign
 
@@ -247,6 +248,23 @@ def test_z_sd_interval_holds_the_true_sd_at_its_level():
     assert (tests["z_sd_low"] <= tests["z_sd"]).all() and (tests["z_sd"] <= tests["z_sd_high"]).all()
     row = tests.iloc[0]
     assert f"{row['z_sd']:.2f} ({row['z_sd_low']:.2f}-{row['z_sd_high']:.2f})" in sbc_markdown(records, tests)
+
+
+def test_the_variance_ratio_is_one_for_an_exact_posterior_of_any_shape():
+    """Conjugate draws with a skewed posterior: theta ~ Gamma(a, 1), y ~ Poisson(theta), whose
+    posterior is Gamma(a + y, 2) (mean (a + y) / 2, variance (a + y) / 4).  By the law of total
+    variance mean((mean - theta)^2) / mean(var) is 1 within its bootstrap interval; posteriors
+    k times too wide give 1 / k^2."""
+    rng = np.random.default_rng(5)
+    a = 0.7 + rng.uniform(0.0, 2.0, 4000)            # a shape per fit: sds that vary, skewed posteriors
+    theta = rng.gamma(a, 1.0)
+    y = rng.poisson(theta)
+    mean, sd = (a + y) / 2.0, np.sqrt(a + y) / 2.0
+    ratio, lo, hi = variance_ratio(mean - theta, sd)
+    assert lo <= 1.0 <= hi and hi - lo < 0.2
+    ratio_wide, lo_w, hi_w = variance_ratio(mean - theta, 1.5 * sd)
+    assert ratio_wide == pytest.approx(ratio / 1.5**2) and hi_w < 1.0
+    assert np.isnan(variance_ratio(np.array([1.0, 2.0]), np.array([1.0, 1.0]))[0])
 
 
 def test_paired_arms_compare_the_same_draws_seed_by_seed():
