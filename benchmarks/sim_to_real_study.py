@@ -463,8 +463,10 @@ def markdown(by_design: dict[str, pd.DataFrame], args_text: str) -> str:
              "with the candidates' own terms; `independent` injects it with the independent simulator's physics, "
              "which shares no formula, code or constant with the candidates, under rules frozen before its "
              "confirmatory seeds ran.  A candidate whose library entry declares a physical sign (`sign`) is "
-             "scored at its null when its estimate has the other sign.", "",
-             "Outcomes: *correct* = the true effect ranked first and supported (nulls: nothing claimed); "
+             "scored at its null when its estimate has the other sign.  A candidate that is a form of another "
+             "candidate's effect (`cause` in the library: `tyre_start_temperature`, each run's tyre level, of "
+             "`tyre_temperature`) is not that candidate's rival, and a claim of it counts as its cause.", "",
+             "Outcomes: *correct* = a form of the true effect ranked first and supported (nulls: nothing claimed); "
              "*flagged* = nothing claimed and the true effect reported 'not identifiable here'; *indistinct* = nothing "
              "claimed, the true effect among candidates reported 'not distinguishable here'; *none* = nothing "
              "claimed; *wrong* = another effect claimed.  *true rank*: the true effect's place by delta_elpd alone.", ""]
