@@ -436,10 +436,18 @@ def z_sd_interval(z: np.ndarray, level: float = 0.95, resamples: int = Z_SD_RESA
     z = z[np.isfinite(z)]
     if z.size < 3:
         return math.nan, math.nan
-    rng = np.random.default_rng(seed)
-    sds = z[rng.integers(0, z.size, (resamples, z.size))].std(axis=1, ddof=1)
+    return _bootstrap_interval(lambda zs: zs.std(axis=1, ddof=1), (z,), level, resamples, seed)
+
+
+def _bootstrap_interval(statistic, arrays: tuple[np.ndarray, ...], level: float, resamples: int,
+                        seed: int) -> tuple[float, float]:
+    """Percentile-bootstrap ``level`` interval of ``statistic`` (applied to the arrays resampled
+    together, one resample per row) over fits resampled with replacement, fixed seed."""
+    n = arrays[0].size
+    idx = np.random.default_rng(seed).integers(0, n, (resamples, n))
+    boot = statistic(*(a[idx] for a in arrays))
     tail = 0.5 * (1.0 - level)
-    lo, hi = np.quantile(sds, [tail, 1.0 - tail])
+    lo, hi = np.quantile(boot, [tail, 1.0 - tail])
     return float(lo), float(hi)
 
 
@@ -457,11 +465,8 @@ def variance_ratio(error: np.ndarray, sd: np.ndarray, level: float = 0.95, resam
     e2, v = e2[ok], v[ok]
     if e2.size < 3:
         return math.nan, math.nan, math.nan
-    idx = np.random.default_rng(seed).integers(0, e2.size, (resamples, e2.size))
-    boot = e2[idx].mean(axis=1) / v[idx].mean(axis=1)
-    tail = 0.5 * (1.0 - level)
-    lo, hi = np.quantile(boot, [tail, 1.0 - tail])
-    return float(e2.mean() / v.mean()), float(lo), float(hi)
+    lo, hi = _bootstrap_interval(lambda e, w: e.mean(axis=1) / w.mean(axis=1), (e2, v), level, resamples, seed)
+    return float(e2.mean() / v.mean()), lo, hi
 
 
 def sbc_tests(records: pd.DataFrame, parameters: Sequence[str] = SBC_PARAMETERS, bins: int = SBC_BINS,
