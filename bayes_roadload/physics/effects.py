@@ -140,6 +140,40 @@ class AnemometerLag(Term):
 
 @register_term
 @dataclass(frozen=True)
+class AdmittanceLag(Term):
+    """The body feels the wind a distance L = ``admittance_lag_m`` after the anemometer reads
+    it, to first order in the lag: the aerodynamic admittance (a first-order filter of time
+    constant ~ vehicle length / v_r, thesis ch. 6) and an anemometer sampling the air ahead of
+    the nose.  The wind, not the vehicle's own speed, is delayed: with the reading's relative
+    air along and across the vehicle a_x = v_r cos psi, a_y = v_r sin psi, the wind components
+    w_x = a_x - v, w_y = a_y are felt as w - (L / v_r) dw/dt.  The drag
+    1/2 rho A v_r^2 C_D(psi) (eq. 2.26, C_D = C_D0 + K_D psi^2) then changes by
+
+        dF = -rho A L [C_D(psi) dv_r/dt + K_D psi v_r dpsi/dt - (C_D(psi) cos psi - K_D psi sin psi) dv/dt]
+
+    with the readings' rates (``Conditions.airspeed_rate_mps2``, ``Conditions.yaw_rate_radps``)
+    and the deceleration (``uses_accel``).  The first part alone is :class:`AnemometerLag`'s
+    rate term with ``cup_lag_m = -L``; the second is the lag of the yaw the K_D term sees in a
+    gusty cross wind; the third removes the vehicle's own deceleration, which no admittance
+    delays.  Linear in L, zero at L = 0; L > 0 when the force follows the reading."""
+
+    name: ClassVar[str] = "admittance_lag"
+    defaults: ClassVar[Mapping[str, float]] = {"admittance_lag_m": 0.0}
+    uses_accel: ClassVar[bool] = True
+    speed_affine: ClassVar[bool] = True
+    needs_measured_air: ClassVar[bool] = True
+    equation: ClassVar[str] = "2.26 with the wind felt after a first-order admittance (thesis ch. 6)"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        kd = p.get("KD", 0.0)
+        cd = p.get("CD0", 0.4) + kd * c.yaw_rad**2
+        rate = (cd * c.airspeed_rate_mps2 + kd * c.yaw_rad * c.airspeed_mps * c.yaw_rate_radps
+                - (cd * jnp.cos(c.yaw_rad) - kd * c.yaw_rad * jnp.sin(c.yaw_rad)) * c.accel_mps2)
+        return -c.air_density_kgpm3 * c.frontal_area_m2 * p["admittance_lag_m"] * rate
+
+
+@register_term
+@dataclass(frozen=True)
 class EffectiveMassError(Term):
     """An error in the stated effective mass M_e (eq. 2.2): with the true one M_e + dM the
     equation of motion (M_e + dM) dv/dt = -F is M_e dv/dt = -(F + dM dv/dt), a force

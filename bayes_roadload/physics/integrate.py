@@ -59,9 +59,9 @@ class RunBatch(NamedTuple):
 _CHANNELS = ("airspeed_mps", "yaw_rad", "driveline_force_n", "air_density_kgpm3", "temperature_k")
 """The logged channels of a run the forces read, in the order of the inputs' last axis."""
 
-_INPUTS = _CHANNELS + ("airspeed_rate_mps2", "speed_measured_mps", "speed_drop_lagged_mps")
+_INPUTS = _CHANNELS + ("airspeed_rate_mps2", "yaw_rate_radps", "speed_measured_mps", "speed_drop_lagged_mps")
 """Every column of the inputs' last axis: the logged channels, then what :func:`_inputs`
-derives from them (the reading's rate, the measured speed), then the lagged speed drop that
+derives from them (the readings' rates, the measured speed), then the lagged speed drop that
 :func:`_with_model_channel` appends only for a model whose terms read it."""
 
 _AT = {name: i for i, name in enumerate(_INPUTS)}
@@ -87,6 +87,7 @@ def _conditions(model: DragModel, p, run: RunBatch, v, s, t, u) -> Conditions:
         mass_kg=run.mass_kg,
         frontal_area_m2=run.frontal_area_m2,
         airspeed_rate_mps2=u[_AT["airspeed_rate_mps2"]],
+        yaw_rate_radps=u[_AT["yaw_rate_radps"]],
         speed_drop_lagged_mps=u[lagged] if len(u) > lagged else 0.0,
         speed_measured_mps=u[_AT["speed_measured_mps"]],
     )
@@ -213,11 +214,12 @@ def reading_rate(time_s, reading, mask):
 
 def _inputs(run: RunBatch):
     """The input channels stacked on a last axis ([..., N, C]): the columns of :data:`_INPUTS`
-    but the lagged speed drop: those of ``_CHANNELS``, the rate of the airspeed reading
-    (:func:`reading_rate`) and the measured speed; with numpy when they are concrete, so that
+    but the lagged speed drop: those of ``_CHANNELS``, the rates of the airspeed and yaw
+    readings (:func:`reading_rate`) and the measured speed; with numpy when they are concrete, so that
     data-only work on them is done once per trace."""
     channels = [getattr(run, ch) for ch in _CHANNELS]
     channels.append(reading_rate(run.time_s, run.airspeed_mps, run.mask))
+    channels.append(reading_rate(run.time_s, run.yaw_rad, run.mask))
     channels.append(run.speed_mps)
     assert len(channels) == _AT["speed_drop_lagged_mps"]
     if any(isinstance(x, jax.core.Tracer) for x in channels):

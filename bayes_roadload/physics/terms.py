@@ -43,6 +43,8 @@ class Conditions(NamedTuple):
     frontal_area_m2 : frontal area A.
     airspeed_rate_mps2 : d/dt of the airspeed *reading* (the logged channel, before
         calibration), for terms that undo an instrument lag; 0 where no reading is integrated.
+    yaw_rate_radps : d/dt of the yaw *reading*, likewise (the admittance lag's cross-wind
+        part); 0 where no reading is integrated.
     speed_drop_lagged_mps : the part of the measured speed drop since the start of the run
         that a first-order lag of the model's time constant has not yet followed
         (:func:`~bayes_roadload.physics.integrate.lagged_speed_drop`); 0 unless a term of the
@@ -66,6 +68,7 @@ class Conditions(NamedTuple):
     mass_kg: Array
     frontal_area_m2: Array
     airspeed_rate_mps2: Array = 0.0
+    yaw_rate_radps: Array = 0.0
     speed_drop_lagged_mps: Array = 0.0
     speed_measured_mps: Array | None = None
 
