@@ -140,36 +140,34 @@ class AnemometerLag(Term):
 
 @register_term
 @dataclass(frozen=True)
-class AdmittanceLag(Term):
-    """The body feels the wind a distance L = ``admittance_lag_m`` after the anemometer reads
-    it, to first order in the lag: the aerodynamic admittance (a first-order filter of time
-    constant ~ vehicle length / v_r, thesis ch. 6) and an anemometer sampling the air ahead of
-    the nose.  The wind, not the vehicle's own speed, is delayed: with the reading's relative
-    air along and across the vehicle a_x = v_r cos psi, a_y = v_r sin psi, the wind components
-    w_x = a_x - v, w_y = a_y are felt as w - (L / v_r) dw/dt.  The drag
-    1/2 rho A v_r^2 C_D(psi) (eq. 2.26, C_D = C_D0 + K_D psi^2) then changes by
+class AdmittanceFilter(Term):
+    """The drag in the air the body feels minus the drag at the reading, scaled by
+    ``admittance_gain``: admittance_gain x [q_f A C_D(psi_f) - q_r A C_D(psi)] (eq. 2.26), with
+    (v_f, psi_f) the relative air after a first-order filter of the wind of time constant
+    ``admittance_length_m`` / v_r (:func:`~bayes_roadload.physics.admittance.felt_air`; thesis
+    6.2.3: gusts shorter than the vehicle reach the force attenuated and late), calibrated as the
+    readings (``Conditions.felt_airspeed_mps``, ``Conditions.felt_yaw_rad``).  For a short
+    body the filter delays the wind by the length (w_f = w - (l / v_r) dw/dt to first order,
+    the vehicle's own speed not delayed); for a long one it also takes out the gusts' share of
+    the mean of v_r^2 and psi^2 that the body does not feel, which no delay describes.
+    Linear in the gain, zero at 0, the full filter at 1; the length is its shape.  Uses the
+    aerodynamic CD0, KD."""
 
-        dF = -rho A L [C_D(psi) dv_r/dt + K_D psi v_r dpsi/dt - (C_D(psi) cos psi - K_D psi sin psi) dv/dt]
-
-    with the readings' rates (``Conditions.airspeed_rate_mps2``, ``Conditions.yaw_rate_radps``)
-    and the deceleration (``uses_accel``).  The first part alone is :class:`AnemometerLag`'s
-    rate term with ``cup_lag_m = -L``; the second is the lag of the yaw the K_D term sees in a
-    gusty cross wind; the third removes the vehicle's own deceleration, which no admittance
-    delays.  Linear in L, zero at L = 0; L > 0 when the force follows the reading."""
-
-    name: ClassVar[str] = "admittance_lag"
-    defaults: ClassVar[Mapping[str, float]] = {"admittance_lag_m": 0.0}
-    uses_accel: ClassVar[bool] = True
+    name: ClassVar[str] = "admittance_filter"
+    defaults: ClassVar[Mapping[str, float]] = {"admittance_gain": 0.0, "admittance_length_m": 5.0}
     speed_affine: ClassVar[bool] = True
     needs_measured_air: ClassVar[bool] = True
-    equation: ClassVar[str] = "2.26 with the wind felt after a first-order admittance (thesis ch. 6)"
+    felt_air_length: ClassVar[str] = "admittance_length_m"
+    equation: ClassVar[str] = "2.26 in the air felt after the admittance (thesis 6.2.3)"
 
     def force_n(self, p: Params, c: Conditions) -> Array:
-        kd = p.get("KD", 0.0)
-        cd = p.get("CD0", 0.4) + kd * c.yaw_rad**2
-        rate = (cd * c.airspeed_rate_mps2 + kd * c.yaw_rad * c.airspeed_mps * c.yaw_rate_radps
-                - (cd * jnp.cos(c.yaw_rad) - kd * c.yaw_rad * jnp.sin(c.yaw_rad)) * c.accel_mps2)
-        return -c.air_density_kgpm3 * c.frontal_area_m2 * p["admittance_lag_m"] * rate
+        if c.felt_airspeed_mps is None or c.felt_yaw_rad is None:
+            raise ValueError("admittance_filter reads the felt air (Conditions.felt_airspeed_mps, felt_yaw_rad), "
+                             "which only the integrator of logged readings computes")
+        cd0, kd = p.get("CD0", 0.4), p.get("KD", 0.0)
+        felt = c.felt_airspeed_mps**2 * (cd0 + kd * c.felt_yaw_rad**2)
+        read = c.airspeed_mps**2 * (cd0 + kd * c.yaw_rad**2)
+        return 0.5 * c.air_density_kgpm3 * c.frontal_area_m2 * p["admittance_gain"] * (felt - read)
 
 
 @register_term

@@ -59,19 +59,36 @@ class RunBatch(NamedTuple):
 _CHANNELS = ("airspeed_mps", "yaw_rad", "driveline_force_n", "air_density_kgpm3", "temperature_k")
 """The logged channels of a run the forces read, in the order of the inputs' last axis."""
 
-_INPUTS = _CHANNELS + ("airspeed_rate_mps2", "yaw_rate_radps", "speed_measured_mps", "speed_drop_lagged_mps")
+_INPUTS = _CHANNELS + ("airspeed_rate_mps2", "speed_measured_mps", "speed_drop_lagged_mps",
+                       "felt_airspeed_reading", "felt_yaw_reading")
 """Every column of the inputs' last axis: the logged channels, then what :func:`_inputs`
-derives from them (the readings' rates, the measured speed), then the lagged speed drop that
-:func:`_with_model_channel` appends only for a model whose terms read it."""
+derives from them (the reading's rate, the measured speed), then the channels that
+:func:`_with_model_channel` appends only for a model whose terms read them, in this order: the
+lagged speed drop (a term naming a ``lag_time_constant``), the felt air's readings (a term
+naming a ``felt_air_length``)."""
 
 _AT = {name: i for i, name in enumerate(_INPUTS)}
+_BASE = _AT["speed_drop_lagged_mps"]
+"""The number of input columns every model has (:func:`_inputs`)."""
+
+
+def _model_columns(model: DragModel) -> dict[str, int]:
+    """The columns :func:`_with_model_channel` appends for ``model``, by name, at their index."""
+    names = (("speed_drop_lagged_mps",) if model.lag_time_constant else ()) + (
+        ("felt_airspeed_reading", "felt_yaw_reading") if model.felt_air_length else ())
+    return {name: _BASE + i for i, name in enumerate(names)}
 
 
 def _conditions(model: DragModel, p, run: RunBatch, v, s, t, u) -> Conditions:
     """The conditions at speed ``v``, distance ``s`` and time ``t`` with the inputs ``u``
-    (the columns of :data:`_INPUTS`, the last only when the model appended it)."""
+    (the columns of :data:`_INPUTS`, those of :func:`_model_columns` only when the model
+    appended them)."""
     airspeed, yaw = model.air.relative_air(p, v, u[_AT["airspeed_mps"]], u[_AT["yaw_rad"]])
-    lagged = _AT["speed_drop_lagged_mps"]
+    extra = _model_columns(model)
+    felt_airspeed = felt_yaw = None
+    if "felt_airspeed_reading" in extra:
+        felt_airspeed, felt_yaw = model.air.relative_air(p, v, u[extra["felt_airspeed_reading"]],
+                                                         u[extra["felt_yaw_reading"]])
     return Conditions(
         speed_mps=v,
         airspeed_mps=airspeed,
@@ -87,9 +104,10 @@ def _conditions(model: DragModel, p, run: RunBatch, v, s, t, u) -> Conditions:
         mass_kg=run.mass_kg,
         frontal_area_m2=run.frontal_area_m2,
         airspeed_rate_mps2=u[_AT["airspeed_rate_mps2"]],
-        yaw_rate_radps=u[_AT["yaw_rate_radps"]],
-        speed_drop_lagged_mps=u[lagged] if len(u) > lagged else 0.0,
+        speed_drop_lagged_mps=u[extra["speed_drop_lagged_mps"]] if "speed_drop_lagged_mps" in extra else 0.0,
         speed_measured_mps=u[_AT["speed_measured_mps"]],
+        felt_airspeed_mps=felt_airspeed,
+        felt_yaw_rad=felt_yaw,
     )
 
 
@@ -141,16 +159,28 @@ def affine_scan(a: Array, b: Array, sequential: bool = False) -> tuple[Array, Ar
 
 
 def _with_model_channel(model: DragModel, p, run: RunBatch, u, schedule):
-    """Append the lagged speed drop (:func:`lagged_speed_drop`) to the inputs and to the
-    stride-2 schedule when a term of ``model`` reads it; else return them unchanged."""
-    if not model.lag_time_constant:
+    """Append the channels of :func:`_model_columns` to the inputs and to the stride-2
+    schedule: the lagged speed drop (:func:`lagged_speed_drop`) when a term of ``model`` reads
+    it, the readings of the air felt after the admittance filter of the length a term names
+    (:func:`~bayes_roadload.physics.admittance.felt_air_readings` of the readings and the
+    measured speed, calibration factors 1: the model's air calibrates them as the readings);
+    else return them unchanged."""
+    columns = []
+    if model.lag_time_constant:
+        columns.append(lagged_speed_drop(run.time_s, run.speed_mps, p[model.lag_time_constant]))
+    if model.felt_air_length:
+        from .admittance import felt_air_readings
+
+        columns.extend(felt_air_readings(run.time_s, run.speed_mps, run.airspeed_mps, run.yaw_rad,
+                                         1.0, 1.0, p[model.felt_air_length]))
+    if not columns:
         return u, schedule
-    lag = lagged_speed_drop(run.time_s, run.speed_mps, p[model.lag_time_constant])[:, None]
-    u = jnp.concatenate([jnp.asarray(u), lag], axis=-1)
+    added = jnp.stack([jnp.asarray(c) for c in columns], axis=-1)
+    u = jnp.concatenate([jnp.asarray(u), added], axis=-1)
     if schedule is None:
         return u, None
     t0, h, ua, um, uc, dense = schedule
-    _, _, la, lm, lc, _ = stride2_schedule(run.time_s, lag)
+    _, _, la, lm, lc, _ = stride2_schedule(run.time_s, added)
     join = lambda x, y: jnp.concatenate([jnp.asarray(x), jnp.asarray(y)], axis=-1)  # noqa: E731
     return u, (t0, h, join(ua, la), join(um, lm), join(uc, lc), dense)
 
@@ -214,14 +244,13 @@ def reading_rate(time_s, reading, mask):
 
 def _inputs(run: RunBatch):
     """The input channels stacked on a last axis ([..., N, C]): the columns of :data:`_INPUTS`
-    but the lagged speed drop: those of ``_CHANNELS``, the rates of the airspeed and yaw
-    readings (:func:`reading_rate`) and the measured speed; with numpy when they are concrete, so that
+    but the model's own: those of ``_CHANNELS``, the rate of the airspeed reading
+    (:func:`reading_rate`) and the measured speed; with numpy when they are concrete, so that
     data-only work on them is done once per trace."""
     channels = [getattr(run, ch) for ch in _CHANNELS]
     channels.append(reading_rate(run.time_s, run.airspeed_mps, run.mask))
-    channels.append(reading_rate(run.time_s, run.yaw_rad, run.mask))
     channels.append(run.speed_mps)
-    assert len(channels) == _AT["speed_drop_lagged_mps"]
+    assert len(channels) == _BASE
     if any(isinstance(x, jax.core.Tracer) for x in channels):
         return jnp.stack([jnp.asarray(x) for x in channels], axis=-1)
     return np.stack([np.asarray(x) for x in channels], axis=-1)

@@ -93,12 +93,22 @@ class DragModel:
         if len(lags) > 1:
             raise ValueError(f"terms {names} name {len(lags)} lag time constants ({sorted(lags)}); "
                              "a model carries at most one lagged speed drop")
+        felt = {t.felt_air_length for t in self.terms if t.felt_air_length}
+        if len(felt) > 1:
+            raise ValueError(f"terms {names} name {len(felt)} admittance lengths ({sorted(felt)}); "
+                             "a model carries at most one felt air")
 
     @property
     def lag_time_constant(self) -> str:
         """The parameter naming the time constant of the lagged speed drop a term reads
         (:attr:`~bayes_roadload.physics.terms.Term.lag_time_constant`), or ""."""
         return next((t.lag_time_constant for t in self.terms if t.lag_time_constant), "")
+
+    @property
+    def felt_air_length(self) -> str:
+        """The parameter naming the length of the admittance filter whose felt air a term reads
+        (:attr:`~bayes_roadload.physics.terms.Term.felt_air_length`), or ""."""
+        return next((t.felt_air_length for t in self.terms if t.felt_air_length), "")
 
     @property
     def term_names(self) -> tuple[str, ...]:

@@ -43,8 +43,10 @@ class Conditions(NamedTuple):
     frontal_area_m2 : frontal area A.
     airspeed_rate_mps2 : d/dt of the airspeed *reading* (the logged channel, before
         calibration), for terms that undo an instrument lag; 0 where no reading is integrated.
-    yaw_rate_radps : d/dt of the yaw *reading*, likewise (the admittance lag's cross-wind
-        part); 0 where no reading is integrated.
+    felt_airspeed_mps, felt_yaw_rad : the relative air the body feels after an admittance
+        filter of the length a model term names (``felt_air_length``;
+        :func:`~bayes_roadload.physics.admittance.felt_air`), calibrated as ``airspeed_mps``
+        and ``yaw_rad``; None unless a term of the model names that length.
     speed_drop_lagged_mps : the part of the measured speed drop since the start of the run
         that a first-order lag of the model's time constant has not yet followed
         (:func:`~bayes_roadload.physics.integrate.lagged_speed_drop`); 0 unless a term of the
@@ -68,9 +70,10 @@ class Conditions(NamedTuple):
     mass_kg: Array
     frontal_area_m2: Array
     airspeed_rate_mps2: Array = 0.0
-    yaw_rate_radps: Array = 0.0
     speed_drop_lagged_mps: Array = 0.0
     speed_measured_mps: Array | None = None
+    felt_airspeed_mps: Array | None = None
+    felt_yaw_rad: Array | None = None
 
     @property
     def dynamic_pressure_area_n(self) -> Array:
@@ -110,6 +113,9 @@ class Term:
     ``lag_time_constant`` names the parameter (a time, s) of the lagged speed drop the term
     reads from :attr:`Conditions.speed_drop_lagged_mps`; the integrator of speed traces
     computes that channel from the measured speed when a model term names one.
+    ``felt_air_length`` names the parameter (a length, m) of the admittance filter whose felt
+    air the term reads (:attr:`Conditions.felt_airspeed_mps`, :attr:`Conditions.felt_yaw_rad`);
+    the integrator computes those channels from the readings and the measured speed.
     """
 
     name: ClassVar[str] = ""
@@ -118,6 +124,7 @@ class Term:
     speed_affine: ClassVar[bool] = False
     needs_measured_air: ClassVar[bool] = False
     lag_time_constant: ClassVar[str] = ""
+    felt_air_length: ClassVar[str] = ""
     equation: ClassVar[str] = ""
 
     def force_n(self, p: Params, c: Conditions) -> Array:  # pragma: no cover - abstract

@@ -170,15 +170,15 @@ def test_fit_noise_recovers_the_local_level_noise_it_was_drawn_from():
 
 
 def test_a_one_parameter_effect_may_declare_its_physical_sign(tmp_path):
-    """``sign`` in the library: the cup lags the air and the force lags the reading (positive
-    distances); an estimate of the other sign is flagged; a sign on a multi-parameter effect
+    """``sign`` in the library: the cup lags the air (a positive distance), the admittance's
+    filter takes gust energy out (a positive gain); an estimate of the other sign is flagged; a sign on a multi-parameter effect
     or an unknown sign word is refused."""
     lib = fx.load_library()
     assert lib["anemometer_dynamics"].sign == {"cup_lag_m": 1}
-    assert lib["aero_admittance"].sign == {"admittance_lag_m": 1}
+    assert lib["aero_admittance"].sign == {"admittance_gain": 1}
     assert lib["anemometer_dynamics"].against_sign({"cup_lag_m": -4.0}) == {"cup_lag_m": -4.0}
     assert lib["anemometer_dynamics"].against_sign({"cup_lag_m": 1.5}) == {}
-    assert lib["aero_admittance"].against_sign({"admittance_lag_m": -1.5}) == {"admittance_lag_m": -1.5}
+    assert lib["aero_admittance"].against_sign({"admittance_gain": -0.5}) == {"admittance_gain": -0.5}
     assert lib["track_gradient"].against_sign({"grade_rad": -0.01}) == {}
     head = '[effects.track_gradient]\nterms = ["gradient"]\nkind = "term"\n'
     bad = tmp_path / "lib.toml"

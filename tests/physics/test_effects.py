@@ -22,7 +22,7 @@ def conditions(**kw):
                 direction=jnp.array(-1.0), air_density_kgpm3=jnp.array(RHO),
                 temperature_k=jnp.array(config.REFERENCE_TEMPERATURE_K), mass_kg=jnp.array(1100.0),
                 frontal_area_m2=jnp.array(1.85), airspeed_rate_mps2=jnp.array([-0.35, 0.1, -0.6]),
-                yaw_rate_radps=jnp.array([0.03, -0.08, 0.02]))
+                felt_airspeed_mps=jnp.array([11.5, 21.3, 28.6]), felt_yaw_rad=jnp.array([0.15, -0.08, 0.06]))
     base.update(kw)
     return Conditions(**base)
 
@@ -34,7 +34,7 @@ EFFECT_TERMS = {  # term -> (effect parameter, a non-null value)
     "side_slip_drag": ("side_slip_coeff_per_n", 5.76e-5),
     "driveline_quadratic": ("Ct", 0.03),
     "anemometer_lag": ("cup_lag_m", 1.5),
-    "admittance_lag": ("admittance_lag_m", 8.0),
+    "admittance_filter": ("admittance_gain", 1.0),
     "mass_error": ("mass_error_kg", 30.0),
     "spatial_wind": ("wind_gradient_mps", 2.0),
 }
@@ -97,61 +97,100 @@ def test_anemometer_lag_matches_the_drag_at_the_corrected_airspeed():
     np.testing.assert_allclose(lag, exact, rtol=1e-4)
 
 
-def _delayed_air(c, lag_m):
-    """The relative air (v_r, psi) felt when the wind along and across the vehicle is the
-    reading's delayed by ``lag_m`` to first order: w - (L / v_r) dw/dt, w_x = a_x - v, w_y = a_y,
-    the vehicle's deceleration not delayed."""
-    a, psi = np.asarray(c.airspeed_mps), np.asarray(c.yaw_rad)
-    a_dot, psi_dot, v_dot = (np.asarray(c.airspeed_rate_mps2), np.asarray(c.yaw_rate_radps),
-                             np.asarray(c.accel_mps2))
-    ax, ay = a * np.cos(psi), a * np.sin(psi)
-    wx_dot = a_dot * np.cos(psi) - a * np.sin(psi) * psi_dot - v_dot
-    wy_dot = a_dot * np.sin(psi) + a * np.cos(psi) * psi_dot
-    fx_, fy_ = ax - lag_m / a * wx_dot, ay - lag_m / a * wy_dot
-    return jnp.asarray(np.hypot(fx_, fy_)), jnp.asarray(np.arctan2(fy_, fx_))
+def _gusty_run(t, v):
+    """Readings of a run in gusty wind: airspeed v + 2 m/s head wind with a 7 s gust, yaw
+    0.15 rad with a 5 s one."""
+    return v + 2.0 + 1.5 * np.sin(2 * np.pi * t / 7.0), 0.15 + 0.1 * np.sin(2 * np.pi * t / 5.0)
 
 
-def test_admittance_lag_matches_the_drag_in_the_delayed_wind():
-    """The term is, to first order in L, the drag (eq. 2.26) in the wind delayed by L minus the
-    drag at the reading: the along and the cross component delayed, the vehicle's own
-    deceleration not.  Checked against the exact difference for a small lag; without the
-    yaw rate and the deceleration it is the cup-lag rate term with cup_lag_m = -L."""
-    c = conditions()
-    lag = 0.02
-    p = {"CD0": 0.4, "KD": 0.6, "admittance_lag_m": lag}
-    airspeed, yaw = _delayed_air(c, lag)
-    exact = AeroDrag().force_n(p, c._replace(airspeed_mps=airspeed, yaw_rad=yaw)) - AeroDrag().force_n(p, c)
-    term = fx.AdmittanceLag().force_n(p, c)
-    # first order: the neglected part is O(lag^2), a relative 1e-3 of the effect here
-    np.testing.assert_allclose(term, exact, rtol=2e-3)
-    still = c._replace(yaw_rate_radps=jnp.zeros(3), accel_mps2=jnp.zeros(3))
-    np.testing.assert_allclose(fx.AdmittanceLag().force_n(p, still),
-                               fx.AnemometerLag().force_n({"CD0": 0.4, "KD": 0.6, "cup_lag_m": -lag}, still),
-                               rtol=1e-12)
+def test_admittance_filter_at_full_gain_is_the_model_in_the_felt_air():
+    """End to end: a run integrated with the filter term at gain 1 on the readings equals the
+    run integrated without it on the air the body feels (physics.admittance.felt_air_readings,
+    the integrator's channels); at gain 0 it is the run on the readings."""
+    from bayes_roadload.physics.admittance import felt_air_readings
+    from bayes_roadload.physics.integrate import integrate_run, make_run
+
+    t = np.arange(0.0, 60.0, 0.25)
+    v = 30.0 - 0.35 * t
+    a_m, yaw = _gusty_run(t, v)
+    base = DragModel((TyreRolling(), AeroDrag()))
+    model = base.with_terms(fx.AdmittanceFilter())
+    p = {"AD": 0.01, "BD": 2e-4, "CD0": 0.4, "KD": 0.6, "admittance_length_m": 12.0}
+    run = make_run(t, v, airspeed_mps=a_m, yaw_rad=yaw, **VEHICLE)
+    felt_a, felt_y = felt_air_readings(t, v, a_m, yaw, 1.0, 1.0, 12.0)
+    v_felt, _ = integrate_run(base, p, make_run(t, v, airspeed_mps=np.asarray(felt_a), yaw_rad=np.asarray(felt_y),
+                                                **VEHICLE), v0_mps=30.0)
+    v_read, _ = integrate_run(base, p, run, v0_mps=30.0)
+    v_full, _ = integrate_run(model, {**p, "admittance_gain": 1.0}, run, v0_mps=30.0)
+    v_none, _ = integrate_run(model, {**p, "admittance_gain": 0.0}, run, v0_mps=30.0)
+    assert np.max(np.abs(np.asarray(v_felt) - np.asarray(v_read))) > 1e-3      # the filter matters
+    np.testing.assert_allclose(v_full, v_felt, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(v_none, v_read, rtol=0, atol=1e-12)
 
 
-def test_the_integrator_feeds_both_reading_rates_to_the_terms():
-    """The conditions the integrator builds carry the central-difference rates of the airspeed
-    and the yaw readings (the admittance lag reads both), sample by sample, zero on padding."""
-    from bayes_roadload.physics.integrate import _conditions, _inputs, make_run, reading_rate, stack_runs
+def test_a_short_admittance_filter_delays_the_wind_by_its_length():
+    """For a body short against the gusts the filter is a delay of the wind, not of the
+    vehicle's own speed: w_f = w - (l / v_r) dw/dt to first order (w_x = v_r cos psi - v,
+    w_y = v_r sin psi).  The neglected terms are of second order, tau^2 d^2w/dt^2 and
+    tau (dtau/dt) dw/dt (tau = l / v_r varies with the gusts); away from the start, where the
+    filter begins at the reading."""
+    from bayes_roadload.physics.admittance import felt_air
+
+    t = np.arange(0.0, 60.0, 0.05)
+    v = 30.0 - 0.35 * t
+    a_m, yaw = _gusty_run(t, v)
+    length = 0.5
+    felt_a, felt_y = (np.asarray(x) for x in felt_air(t, v, a_m, yaw, length))
+    tau = length / a_m
+    wx, wy = a_m * np.cos(yaw) - v, a_m * np.sin(yaw)
+    delayed_x, delayed_y = wx - tau * np.gradient(wx, t), wy - tau * np.gradient(wy, t)
+    fx_, fy_ = felt_a * np.cos(felt_y) - v, felt_a * np.sin(felt_y)
+    late = t > 20 * tau.max()
+    for w, felt, delayed in ((wx, fx_, delayed_x), (wy, fy_, delayed_y)):
+        rate = np.gradient(w, t)
+        second = tau**2 * np.gradient(rate, t) + tau * np.gradient(tau, t) * rate
+        size = np.max(np.abs(second)[late])
+        # the series converges: what the second order leaves is a fraction (third order, ~tau
+        # d/dt of the second) of it, so the first order's error is the second order's size
+        # plus that fraction
+        assert np.max(np.abs(felt - delayed - second)[late]) < 0.5 * size
+        assert np.max(np.abs(felt - delayed)[late]) < 1.5 * size
+        assert np.max(np.abs(felt - w)[late]) > 5 * size          # the delay itself is resolved
+
+
+def test_the_integrator_feeds_the_felt_air_to_a_term_naming_its_length():
+    """The conditions the integrator builds for a model with the filter term carry the felt
+    air of the readings (factors 1, then the model's calibration), sample by sample; without
+    such a term they carry none, and the tyre lag's channel keeps its place beside it."""
+    from bayes_roadload.physics.admittance import felt_air_readings
+    from bayes_roadload.physics.integrate import _conditions, _inputs, _with_model_channel, make_run, stack_runs
+    from bayes_roadload.physics.terms import TyreThermalLag
 
     t = np.arange(0.0, 30.0, 0.25)
     v = 30.0 - 0.35 * t
-    a_m = v + 2.0 + 1.5 * np.sin(2 * np.pi * t / 7.0)
-    yaw = 0.15 + 0.1 * np.sin(2 * np.pi * t / 5.0)
+    a_m, yaw = _gusty_run(t, v)
     short = make_run(t[:80], v[:80], airspeed_mps=a_m[:80], yaw_rad=yaw[:80], **VEHICLE)
     batch = stack_runs([make_run(t, v, airspeed_mps=a_m, yaw_rad=yaw, **VEHICLE), short])
-    u = _inputs(batch)
-    model = DragModel((TyreRolling(), AeroDrag(), fx.AdmittanceLag()))
-    p = model.complete({"AD": 0.01, "BD": 2e-4, "CD0": 0.4, "KD": 0.6, "admittance_lag_m": 3.0})
-    for r, n in ((0, t.size), (1, 80)):
-        run = batch.run(r)
-        c = _conditions(model, p, run, run.speed_mps, jnp.zeros_like(run.speed_mps),
-                        run.time_s, jnp.moveaxis(jnp.asarray(u[r]), -1, 0))
-        mask = np.arange(t.size) < n
-        np.testing.assert_array_equal(np.asarray(c.yaw_rate_radps)[:n], reading_rate(t[:n], yaw[:n], mask[:n]))
-        np.testing.assert_array_equal(np.asarray(c.airspeed_rate_mps2)[:n], reading_rate(t[:n], a_m[:n], mask[:n]))
-        assert not np.any(np.asarray(c.yaw_rate_radps)[n:])
+    air = OffsetAir()
+    for terms in ((TyreRolling(), AeroDrag(), fx.AdmittanceFilter()),
+                  (TyreRolling(), AeroDrag(), TyreThermalLag(), fx.AdmittanceFilter())):
+        model = DragModel(terms, air)
+        p = model.complete({"AD": 0.01, "BD": 2e-4, "CD0": 0.4, "KD": 0.6, "admittance_length_m": 9.0,
+                            "airspeed_factor": 1.05, "yaw_factor": 0.9, "tyre_lag_time_constant_s": 300.0})
+        for r, n in ((0, t.size), (1, 80)):
+            run = batch.run(r)
+            u, _ = _with_model_channel(model, p, run, jnp.asarray(_inputs(run)), None)
+            c = _conditions(model, p, run, run.speed_mps, jnp.zeros_like(run.speed_mps), run.time_s, jnp.moveaxis(u, -1, 0))
+            fa, fy = felt_air_readings(t[:n], v[:n], a_m[:n], yaw[:n], 1.0, 1.0, 9.0)
+            np.testing.assert_allclose(np.asarray(c.felt_airspeed_mps)[:n], 1.05 * np.asarray(fa), rtol=1e-12)
+            np.testing.assert_allclose(np.asarray(c.felt_yaw_rad)[:n], 0.9 * np.asarray(fy), rtol=1e-12)
+            np.testing.assert_allclose(np.asarray(c.airspeed_mps)[:n], 1.05 * a_m[:n], rtol=1e-12)
+    plain = DragModel((TyreRolling(), AeroDrag()), air)
+    run = batch.run(0)
+    u, _ = _with_model_channel(plain, plain.complete({}), run, jnp.asarray(_inputs(run)), None)
+    c = _conditions(plain, plain.complete({}), run, run.speed_mps, jnp.zeros_like(run.speed_mps), run.time_s,
+                    jnp.moveaxis(u, -1, 0))
+    assert c.felt_airspeed_mps is None and c.felt_yaw_rad is None
 
 
 def test_tyre_transient_decays_with_its_time_constant():

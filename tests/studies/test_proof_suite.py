@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from bayes_roadload import config
+from bayes_roadload.analysis import effects as fx
 from bayes_roadload.analysis.batch import run_batch
 from bayes_roadload.analysis.diagnose import diagnose
 from bayes_roadload.analysis.pooling import CombinedCampaign
@@ -134,9 +135,9 @@ def test_the_independent_design_injects_one_effect_at_its_stated_size():
 def test_a_lead_of_the_reading_is_the_admittance_not_a_cup_lag():
     """The independent simulator's body feels the wind through its admittance and the
     anemometer samples the air ahead of the nose: the reading leads the force.  The admittance
-    candidate fits a positive lag distance and carries the gain; the cup-lag candidate's rate
-    term, whose physical distance is positive, fits a negative one, is scored at its null
-    (delta_elpd = -1 parameter) and says why."""
+    candidate, a family over the filter's length, fits a positive gain and carries the
+    likelihood; the cup-lag candidate's rate term, whose physical distance is positive, fits a
+    negative one, is scored at its null (delta_elpd = -1 parameter) and says why."""
     from studies.proof_suite import independent_withheld_campaign
 
     factory, model = independent_withheld_campaign("aero_admittance", 3, pairs=2)
@@ -145,7 +146,8 @@ def test_a_lead_of_the_reading_is_the_admittance_not_a_cup_lag():
         d = diagnose(factory(), model)
     by = {c["effect"]: c for c in d.candidates}
     cup, adm = by["anemometer_dynamics"], by["aero_admittance"]
-    assert adm["estimates"]["admittance_lag_m"] > 0.0 and not adm["against_sign"]
+    assert adm["estimates"]["admittance_gain"] > 0.0 and not adm["against_sign"]
+    assert adm["shape"]["values"]["admittance_length_m"] in fx.load_library()["aero_admittance"].shape["admittance_length_m"]
     assert cup["against_sign"] and cup["against_sign"]["cup_lag_m"] < 0.0
     assert cup["delta_elpd"] == -1.0 and not cup["supported"] and "sign" in cup["statement"]
     assert adm["delta_elpd"] >= config.DEFAULT_DIAGNOSIS.support_delta_elpd
