@@ -90,9 +90,10 @@ class KindEntry:
         linearised candidates; "band_times": candidates refitted by NUTS), None when none
         applies; ``diagnosis_model`` its default model.
     default_pooling : (campaign, spec, options) -> the pooling of ``--pooling auto``.
-    lagged_speed_drop : the kind's integrator supplies the lagged speed drop of a measured
-        speed trace, which terms naming a ``lag_time_constant`` (the tyre thermal lag) read
-        (:func:`check_model`).
+    lagged_speed_drop : the kind's integrator supplies the channels it derives from a measured
+        speed trace and its readings: the lagged speed drop, which terms naming a
+        ``lag_time_constant`` (the tyre thermal lag) read, and the air felt after the
+        admittance, which terms naming a ``felt_air_length`` read (:func:`check_model`).
     type_b : (campaign, spec, shifts, options, fit) -> source -> quantity -> sensitivity: how the
         Type B uncertainty of the test's declared values and instruments reaches the kind's
         figures (:mod:`bayes_roadload.analysis.budget`, which adds it to the draws and writes
@@ -135,7 +136,8 @@ class KindEntry:
 
 def check_model(entry: KindEntry, spec: ModelSpec) -> None:
     """Refuse a model whose terms need what the kind's data cannot give: a term reading the
-    lagged speed drop (``lag_time_constant``) needs a measured speed trace."""
+    lagged speed drop (``lag_time_constant``) or the felt air (``felt_air_length``) needs a
+    measured speed trace."""
     from ..physics.terms import TERMS
 
     lagged = [t for t in spec.terms if t in TERMS and TERMS[t].lag_time_constant]
@@ -143,6 +145,11 @@ def check_model(entry: KindEntry, spec: ModelSpec) -> None:
         raise ValueError(f"model {spec.name!r}: the term {lagged[0]!r} follows the tyre temperature along a "
                          f"measured speed trace, which a {entry.label} campaign does not have; use a model "
                          "without it (bayes-roadload models)")
+    felt = [t for t in spec.terms if t in TERMS and TERMS[t].felt_air_length]
+    if felt and not entry.lagged_speed_drop:
+        raise ValueError(f"model {spec.name!r}: the term {felt[0]!r} filters the wind of a measured speed trace "
+                         f"and its anemometer readings, which a {entry.label} campaign does not have; use a "
+                         "model without it (bayes-roadload models)")
 
 
 def traces_default_model(campaign, o: FitOptions) -> str:

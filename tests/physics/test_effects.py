@@ -245,3 +245,28 @@ def test_the_integrator_feeds_the_reading_rate_to_the_cup_lag():
     effect = np.max(np.abs(np.asarray(v_cor) - np.asarray(v_none)))
     assert effect > 1e-4                                               # the lag matters
     assert np.max(np.abs(np.asarray(v_lag) - np.asarray(v_cor))) < 0.01 * effect
+
+
+def test_only_speed_traces_take_the_admittance_filter():
+    """The filter reads a measured speed trace and its readings: every other kind refuses a
+    model with it, naming the term; speed traces take it.  A model carries one felt air."""
+    import dataclasses
+
+    from bayes_roadload.inference.kinds import KINDS, check_model
+    from bayes_roadload.inference.spec import load_model_spec
+
+    plain = load_model_spec("four_term")
+    felt = dataclasses.replace(plain, terms=tuple(plain.terms) + ("admittance_filter",))
+    check_model(KINDS["traces"], felt)
+    for name, entry in KINDS.items():
+        if name != "traces":
+            with pytest.raises(ValueError, match="admittance_filter"):
+                check_model(entry, felt)
+
+    @dataclasses.dataclass(frozen=True)
+    class OtherFilter(fx.AdmittanceFilter):
+        name = "other_filter"
+        felt_air_length = "other_length_m"
+
+    with pytest.raises(ValueError, match="at most one felt air"):
+        DragModel((TyreRolling(), fx.AdmittanceFilter(), OtherFilter()))
