@@ -195,10 +195,12 @@ def test_a_one_parameter_effect_may_declare_its_physical_sign(tmp_path):
 def test_a_family_declares_its_shape_grid_and_each_run_amplitudes(tmp_path):
     """``shape.P`` in the library: P must be a fixed parameter of a term effect; the grid spaces
     ``points`` values from ``low`` to ``high`` (log or linear, ends included); ``each_run`` is for
-    term effects only.  No shipped candidate is a family; the one each run's is a form of
-    another candidate's effect (each run's tyre level)."""
+    term effects only.  The one shipped family is the admittance, over its filter's length (a
+    log grid 2-32 m); the one each run's is a form of another candidate's effect (each run's
+    tyre level)."""
     lib = fx.load_library()
-    assert not any(e.shape for e in lib.values())
+    assert {n: e.shape for n, e in lib.items() if e.shape} == {
+        "aero_admittance": {"admittance_length_m": (2.0, 4.0, 8.0, 16.0, 32.0)}}
     assert [e.name for e in lib.values() if e.each_run] == ["tyre_start_temperature"]
     assert lib["tyre_start_temperature"].per_run and lib["tyre_start_temperature"].cause == "tyre_temperature"
     assert not lib["tyre_temperature"].per_run and lib["run_to_run_variation"].run_coefficients
