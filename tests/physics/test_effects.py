@@ -163,7 +163,8 @@ def test_the_integrator_feeds_the_felt_air_to_a_term_naming_its_length():
     air of the readings (factors 1, then the model's calibration), sample by sample; without
     such a term they carry none, and the tyre lag's channel keeps its place beside it."""
     from bayes_roadload.physics.admittance import felt_air_readings
-    from bayes_roadload.physics.integrate import _conditions, _inputs, _with_model_channel, make_run, stack_runs
+    from bayes_roadload.physics.integrate import (_conditions, _inputs, _with_model_channel, lagged_speed_drop, make_run,
+                                                  stack_runs)
     from bayes_roadload.physics.terms import TyreThermalLag
 
     t = np.arange(0.0, 30.0, 0.25)
@@ -185,6 +186,9 @@ def test_the_integrator_feeds_the_felt_air_to_a_term_naming_its_length():
             np.testing.assert_allclose(np.asarray(c.felt_airspeed_mps)[:n], 1.05 * np.asarray(fa), rtol=1e-12)
             np.testing.assert_allclose(np.asarray(c.felt_yaw_rad)[:n], 0.9 * np.asarray(fy), rtol=1e-12)
             np.testing.assert_allclose(np.asarray(c.airspeed_mps)[:n], 1.05 * a_m[:n], rtol=1e-12)
+            lagged = lagged_speed_drop(t[:n], v[:n], 300.0) if model.lag_time_constant else np.zeros(n)
+            drop = np.broadcast_to(np.asarray(c.speed_drop_lagged_mps), np.shape(run.speed_mps))
+            np.testing.assert_allclose(drop[:n], lagged, rtol=1e-12, atol=1e-12)
     plain = DragModel((TyreRolling(), AeroDrag()), air)
     run = batch.run(0)
     u, _ = _with_model_channel(plain, plain.complete({}), run, jnp.asarray(_inputs(run)), None)
