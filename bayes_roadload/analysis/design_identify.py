@@ -176,13 +176,13 @@ def identify_designs(campaign: Campaign, model: str, effects: Sequence[str], cha
         raise ValueError(f"unknown candidate effect(s) {unknown}: one of {list(library)}")
     library = {e: library[e] for e in effects}   # each candidate is scored alone: the others' columns unused
     problem, fit = _fit(campaign, model)
-    designs = [("as tested", problem, fit)]
+    designs = [("as tested", campaign, problem, fit)]
     for change in changes:
         camp = designed_campaign(campaign, fit.constrained, problem.free, problem.spec.name, change, seed)
-        designs.append((change.label, *_fit(camp, model)))
+        designs.append((change.label, camp, *_fit(camp, model)))
     out = []
-    for label, prob, f in designs:
-        lin = fx.linearise(prob, f.constrained, library)
+    for label, camp, prob, f in designs:
+        lin = fx.linearise(prob, f.constrained, library, prob.spec.resolve_admittance(camp))
         for row in score_candidates(lin, library, effects, settings):
             out.append({"design": label, "runs": int(prob.n_runs), **row})
     return pd.DataFrame.from_records(out)

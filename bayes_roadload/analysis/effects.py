@@ -335,7 +335,8 @@ def _null_value(effect: Effect, param: str, model_values: Mapping[str, float], b
     return float(null)
 
 
-def linearisation_point(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effect]
+def linearisation_point(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effect],
+                        admittance_length_m: float = 0.0
                         ) -> tuple[DragModel, dict[str, str | None], dict[str, float], dict[str, tuple[str, ...]],
                                    list[str]]:
     """Where :func:`linearise` differentiates: the super-model (:func:`super_model`), each
@@ -344,6 +345,11 @@ def linearisation_point(problem, fit_values: Mapping[str, Any], library: Mapping
     coefficients, then the candidates' parameters and shapes; ``v0_mps`` is appended by
     :func:`linearise`)."""
     model, available = super_model(problem.model, library)
+    if admittance_length_m > 0.0:
+        for e in library.values():
+            if available[e.name] is None and any(TERMS[t].felt_air_length for t in e.terms):
+                available[e.name] = (f"the model applies the vehicle's admittance already (length "
+                                     f"{admittance_length_m:g} m): the candidate would filter the felt air again")
     values = {k: float(v) for k, v in problem.fixed.items()}
     values.update({k: float(np.asarray(fit_values[k])) for k in problem.free})
     base_terms = set(problem.model.term_names)
@@ -382,7 +388,8 @@ def linearisation_point(problem, fit_values: Mapping[str, Any], library: Mapping
     return model, available, values, effects, columns
 
 
-def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effect]) -> Linearisation:
+def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effect],
+              admittance_length_m: float = 0.0) -> Linearisation:
     """Differentiate the super-model's speed traces at the user's fit
     (:func:`linearisation_point`).
 
@@ -392,8 +399,12 @@ def linearise(problem, fit_values: Mapping[str, Any], library: Mapping[str, Effe
     fit_values : constrained values at the fit (the MAP): the free coefficients, ``v0_mps``,
         ``sigma_mps`` and, with integrated noise, ``q_mps_per_sqrt_s``.
     library : the candidates (:func:`load_library`).
+    admittance_length_m : the length of the admittance filter the user's model applies to the
+        readings (``ModelSpec.resolve_admittance``; 0: none): a candidate whose terms filter
+        the readings (``felt_air_length``) is then not applicable.
     """
-    model, available, values, effects, columns = linearisation_point(problem, fit_values, library)
+    model, available, values, effects, columns = linearisation_point(problem, fit_values, library,
+                                                                     admittance_length_m)
     columns.append("v0_mps")
     batch = problem.batch
     r = batch.n_runs

@@ -312,3 +312,25 @@ def test_the_linearisation_keeps_the_values_the_users_model_holds_for_a_candidat
     # the library's null (K_alpha 0) is a model without pitch: a different trace
     no_pitch = np.asarray(integrate_batch(problem.model, {**own, "Kalpha": jnp.asarray(0.0)}, problem.batch, v0)[0])
     assert np.max(np.abs(np.where(mask, no_pitch - base, 0.0))) > 1e-3
+
+
+def test_a_model_with_the_admittance_makes_the_filter_candidate_not_applicable():
+    """A model that reads the felt air already (``admittance = "auto"`` with the vehicle's
+    length) would have the admittance candidate filter it a second time: not applicable, and
+    said why; the same problem without the model's filter keeps the candidate."""
+    from bayes_roadload.analysis.batch import SimulatedCampaign
+    from bayes_roadload.inference.bayes import build_problem
+    from bayes_roadload.inference.nuts import initial_values
+    from bayes_roadload.simulate.cases import get_case
+
+    campaign = SimulatedCampaign(get_case(1), pairs=1, seed=0)()
+    problem = build_problem(campaign, "four_term_tyre_lag_admittance_pitch")
+    length = problem.spec.resolve_admittance(campaign)
+    assert length > 0.0
+    init = initial_values(problem, campaign)
+    library = fx.load_library()
+    _, available, _, effects, _ = fx.linearisation_point(problem, init, library, length)
+    assert "applies the vehicle's admittance already" in available["aero_admittance"]
+    assert "aero_admittance" not in effects and available["anemometer_dynamics"] is None
+    _, available, _, effects, _ = fx.linearisation_point(problem, init, library)
+    assert available["aero_admittance"] is None and effects["aero_admittance"] == ("admittance_gain",)
