@@ -140,16 +140,16 @@ def check_model(entry: KindEntry, spec: ModelSpec) -> None:
     measured speed trace."""
     from ..physics.terms import TERMS
 
-    lagged = [t for t in spec.terms if t in TERMS and TERMS[t].lag_time_constant]
-    if lagged and not entry.lagged_speed_drop:
-        raise ValueError(f"model {spec.name!r}: the term {lagged[0]!r} follows the tyre temperature along a "
-                         f"measured speed trace, which a {entry.label} campaign does not have; use a model "
-                         "without it (bayes-roadload models)")
-    felt = [t for t in spec.terms if t in TERMS and TERMS[t].felt_air_length]
-    if felt and not entry.lagged_speed_drop:
-        raise ValueError(f"model {spec.name!r}: the term {felt[0]!r} filters the wind of a measured speed trace "
-                         f"and its anemometer readings, which a {entry.label} campaign does not have; use a "
-                         "model without it (bayes-roadload models)")
+    if entry.lagged_speed_drop:
+        return
+    reads = [(t, "follows the tyre temperature along a measured speed trace") for t in spec.terms
+             if t in TERMS and TERMS[t].lag_time_constant]
+    reads += [(t, "filters the wind of a measured speed trace and its anemometer readings") for t in spec.terms
+              if t in TERMS and TERMS[t].felt_air_length]
+    if reads:
+        term, what = reads[0]
+        raise ValueError(f"model {spec.name!r}: the term {term!r} {what}, which a {entry.label} campaign does "
+                         "not have; use a model without it (bayes-roadload models)")
 
 
 def traces_default_model(campaign, o: FitOptions) -> str:
