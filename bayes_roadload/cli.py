@@ -238,7 +238,7 @@ def _provenance(args, campaign, campaign_path):
     from .output import fit_provenance
 
     return fit_provenance(getattr(args, "command_line", None), campaign_path,
-                          getattr(campaign, "meta", {}).get("conversions"), ambient_record(campaign))
+                          campaign.meta.get("conversions"), ambient_record(campaign))
 
 
 def _fit_and_write(entry, campaign, spec, options, out: Path, campaign_path=None, provenance=None, stages=None):
