@@ -134,9 +134,10 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
     beats every other candidate (qualifying or not) by ``ambiguity_margin``; otherwise the
     candidates within the margin explain the gap alike and none is supported ("not
     distinguishable here"); likewise a rival reaching support with nearly the same signature
-    (``min_distinct_share``, VIF rule) and any rival explaining part of the gap that the best
-    does not beat run by run (``min_vuong_z``, Vuong's test; not asked of a run-level best,
-    whose gain lies by construction in the runs that differ most).  After the claimed one, the other
+    (``min_distinct_share``, VIF rule) and any rival explaining part of the gap, at least
+    ``min_rival_share`` of the best's gain, that the best does not beat run by run
+    (``min_vuong_z``, Vuong's test; not asked of a run-level best, whose gain lies by
+    construction in the runs that differ most).  After the claimed one, the other
     qualifying candidates join by forward selection, each when it still gains
     ``support_delta_elpd`` given those already in (at most ``max_refit_effects``).  Forms of
     one cause (:attr:`.effects.Effect.cause`) are not each other's rivals.  The
@@ -169,8 +170,12 @@ def select_effects(lin: fx.Linearisation, entries: list[dict], library, settings
             # and any rival that explains part of it must lose run by run, not by one run's
             # luck (Vuong's test of non-nested models over the runs' gains).  Not asked of a
             # run-level best (each run its own coefficients): its gain lies, by what it is, in
-            # the runs that differ most, and runs that happen to match the mean gain nothing
+            # the runs that differ most, and runs that happen to match the mean gain nothing;
+            # nor against a rival that explains too little of the gap to be another
+            # explanation of it (below min_rival_share of the best's gain)
             if best["effect"] in library and library[best["effect"]].per_run:
+                continue
+            if c["delta_elpd"] < settings.min_rival_share * best["delta_elpd"]:
                 continue
             z = vuong_z(best.get("run_gains"), c.get("run_gains"))
             best.setdefault("vuong_z", {})[c["effect"]] = z
