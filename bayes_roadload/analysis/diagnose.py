@@ -564,7 +564,8 @@ def write_diagnosis(diag: Diagnosis, out_dir: str | Path,
         verdict = f"`{top}`{form} is the leading supported effect."
     elif ambiguous:
         verdict = ("the model misses something, but " + ", ".join(f"`{e}`" for e in ambiguous)
-                   + f" explain it alike (delta_elpd within {settings.ambiguity_margin:g}): not distinguishable here.")
+                   + f" explain it alike (within {settings.ambiguity_margin:g} of the best's delta_elpd, the same "
+                   "signature, or the best not ahead run by run; section 3 says which): not distinguishable here.")
     else:
         verdict = ("no candidate effect is supported at the stated threshold (delta_elpd >= "
                    f"{settings.support_delta_elpd:g}, identifiable, ahead of the others by {settings.ambiguity_margin:g}).")
