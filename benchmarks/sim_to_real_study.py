@@ -311,7 +311,7 @@ def independent_section(label: str, records: pd.DataFrame, earlier: str | None =
             ("true effect ranked first", f">= {tgt['ranked_first']:g} %", f"{_fmt(c['true_ranked_first_pct'])} %",
              (c["true_ranked_first_pct"] or 0) >= tgt["ranked_first"]),
             ("wrong claims", "0", str(c["wrong_claim"]), c["wrong_claim"] == 0),
-            ("claims on nulls", f"0 of >= 20", f"{c['null_false_claims']} of {c['null_campaigns']}",
+            ("claims on nulls", "0 of >= 20", f"{c['null_false_claims']} of {c['null_campaigns']}",
              c["null_false_claims"] == 0 and c["null_campaigns"] >= 20),
             ("median shrink when claimed", ">= 80 %", f"{_fmt(c['median_trend_shrink_pct_when_correct'])} %",
              (c["median_trend_shrink_pct_when_correct"] or 0) >= 80),
@@ -348,14 +348,28 @@ WHY.update({(e, "tyre_temperature"): "under the rules cb27efa6 the tyre family h
 true effect and claimed effect)."""
 
 WHY_NULL = {
-    "yaw_calibration": "under rules b93d6245 on trucks logged at 1-2 Hz in gusty wind, whose yaw readings' gusts "
-                       "had a lag-1 autocorrelation of 0.20-0.36: the samples do not follow the gusts, and the yaw "
-                       "term misfits as a vane factor would (the same heavy-truck campaign at 20 Hz claims nothing); "
-                       "the later rules report the yaw-term candidates not identifiable on such a reading "
-                       "(`min_input_lag1`)",
+    ("yaw_calibration", "b93d6245"): "under rules b93d6245 on trucks logged at 1-2 Hz in gusty wind, whose yaw readings' "
+                                     "gusts had a lag-1 autocorrelation of 0.20-0.36: the samples do not follow the gusts, "
+                                     "and the yaw term misfits as a vane factor would (the same heavy-truck campaign at "
+                                     "20 Hz claims nothing); the later rules report the yaw-term candidates not "
+                                     "identifiable on such a reading (`min_input_lag1`)",
+    ("yaw_calibration", "4fe5e3a4/4ce3a312"): "a heavy truck logged at 2 Hz (null-s11018), its yaw reading's lag-1 "
+                                              "autocorrelation 0.63, just above `min_input_lag1`; read as a vane factor of 0.88, delta_elpd 6.05 against "
+                                              "the support of 5; the rules before `min_rival_share` claim it too (its "
+                                              "rivals pitch_attitude, 0.72, and track_gradient, 0.03, lose run by run at "
+                                              "Vuong z 2.03 and 2.04: `benchmarks/rival_share_probe.py`, record "
+                                              "`benchmarks/records/sim_to_real/rival_share_probe.jsonl`)",
 }
 """Why a null campaign of the independent design drew a claim, where the study found out (keyed
-by the claimed effect)."""
+by the claimed effect and the rules of the records: the library's SHA-256 prefix, or
+``library/thresholds`` prefixes where one library ran under several thresholds)."""
+
+
+def why_null(top: str, records: pd.DataFrame) -> str | None:
+    """:data:`WHY_NULL`'s reading of a claim of ``top`` on the nulls ``records`` (one rules set)."""
+    lib = str(records["rules_library_sha256"].iloc[0])[:8] if "rules_library_sha256" in records else ""
+    thr = str(records["rules_thresholds_sha256"].iloc[0])[:8] if "rules_thresholds_sha256" in records else ""
+    return WHY_NULL.get((top, f"{lib}/{thr}")) or WHY_NULL.get((top, lib))
 
 
 def reading_lines(records: pd.DataFrame) -> list[str]:
@@ -399,7 +413,7 @@ def reading_lines(records: pd.DataFrame) -> list[str]:
     nulls = ok[(ok["true_effect"] == "null") & (ok["top"] != "none")]
     if len(nulls):
         what = "; ".join(f"`{top}` on {', '.join(sorted(set(g['category'].astype(str))))} ({len(g)})"
-                         + (f": {WHY_NULL[top]}" if top in WHY_NULL else "") for top, g in nulls.groupby("top"))
+                         + (f": {why}" if (why := why_null(top, g)) else "") for top, g in nulls.groupby("top"))
         lines.append(f"- Claims on nulls: {what}.")
     return lines
 
