@@ -353,12 +353,12 @@ WHY_NULL = {
                                      "and the yaw term misfits as a vane factor would (the same heavy-truck campaign at "
                                      "20 Hz claims nothing); the later rules report the yaw-term candidates not "
                                      "identifiable on such a reading (`min_input_lag1`)",
-    ("yaw_calibration", "4fe5e3a4/4ce3a312"): "a heavy truck logged at 2 Hz (null-s11018), its yaw reading's lag-1 "
-                                              "autocorrelation 0.63, just above `min_input_lag1`; read as a vane factor of 0.88, delta_elpd 6.05 against "
-                                              "the support of 5; the rules before `min_rival_share` claim it too (its "
-                                              "rivals pitch_attitude, 0.72, and track_gradient, 0.03, lose run by run at "
-                                              "Vuong z 2.03 and 2.04: `benchmarks/rival_share_probe.py`, record "
-                                              "`benchmarks/records/sim_to_real/rival_share_probe.jsonl`)",
+    ("yaw_calibration", "4fe5e3a4/4ce3a312"): (
+        "a heavy truck logged at 2 Hz (null-s11018), its yaw reading's lag-1 autocorrelation 0.63, just above "
+        "`min_input_lag1`; read as a vane factor of 0.88, delta_elpd 6.05 against the support of 5; the rules "
+        "before `min_rival_share` claim it too (its rivals pitch_attitude, 0.72, and track_gradient, 0.03, lose "
+        "run by run at Vuong z 2.03 and 2.04: `benchmarks/rival_share_probe.py`, record "
+        "`benchmarks/records/sim_to_real/rival_share_probe.jsonl`)"),
 }
 """Why a null campaign of the independent design drew a claim, where the study found out (keyed
 by the claimed effect and the rules of the records: the library's SHA-256 prefix, or
