@@ -1,6 +1,6 @@
 """One proof-suite campaign diagnosed under the shipped rules and with ``min_rival_share`` at 0
 (every rival with a positive gain asked Vuong's test, as before that threshold): which claims
-the threshold made, each tested rival's Vuong z, the best's estimate and the
+the threshold made, each tested rival's Vuong z, the best's estimates and the
 readings' resolution of the gusts (diagnosis.json ``inputs``).  Appends one JSON line per campaign.
 
     python benchmarks/rival_share_probe.py --names null-s11018 --seeds 1001 --nulls 20 --null-seed0 11000 \

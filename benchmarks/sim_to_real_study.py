@@ -53,9 +53,10 @@ OUT = ROOT / "docs" / "sim_to_real"
 FROZEN = OUT / "frozen_rules.json"
 EARLIER = OUT / "earlier_rules"
 """Records of the independent design made under rules other than the shipped ones
-(``records_independent_pP_<library sha256 prefix>.csv``, with ``frozen_rules_<prefix>.json`` when
-those rules were frozen and ``rules_<prefix>.txt`` saying what they were): every seed in them
-counts as seen at the next freeze."""
+(``records_independent_pP_<prefix>.csv``, with ``frozen_rules_<prefix>.json`` when those rules
+were frozen and ``rules_<prefix>.txt`` saying what they were; ``<prefix>``: the library's SHA-256
+prefix, ``<library prefix>-<thresholds prefix>`` where the shipped rules keep that library and
+changed only the thresholds): every seed in them counts as seen at the next freeze."""
 
 
 def records_path(design: str, pairs: int) -> Path:
@@ -233,7 +234,7 @@ def phase_of(records: pd.DataFrame) -> pd.Series:
 def independent_section(label: str, records: pd.DataFrame, earlier: str | None = None) -> list[str]:
     """The independent design at one campaign size: the injections, the frozen rules, the
     summary by phase (design seeds / confirmatory seeds) against the targets, the confusion
-    matrices and every campaign.  ``earlier``: the library SHA-256 prefix of records made under
+    matrices and every campaign.  ``earlier``: the rules prefix (:data:`EARLIER`) of records made under
     rules frozen before the current ones (:data:`EARLIER`; their freeze from
     ``frozen_rules_<prefix>.json`` there, no injection table and no per-campaign table)."""
     ok = records[records["error"].isna()].copy()
@@ -353,7 +354,7 @@ WHY_NULL = {
                                      "and the yaw term misfits as a vane factor would (the same heavy-truck campaign at "
                                      "20 Hz claims nothing); the later rules report the yaw-term candidates not "
                                      "identifiable on such a reading (`min_input_lag1`)",
-    ("yaw_calibration", "4fe5e3a4/4ce3a312"): (
+    ("yaw_calibration", "4fe5e3a4-4ce3a312"): (
         "a heavy truck logged at 2 Hz (null-s11018), its yaw reading's lag-1 autocorrelation 0.63, just above "
         "`min_input_lag1`; read as a vane factor of 0.88, delta_elpd 6.05 against the support of 5; the rules "
         "before `min_rival_share` claim it too (its rivals pitch_attitude, 0.72, and track_gradient, 0.03, lose "
@@ -362,14 +363,14 @@ WHY_NULL = {
 }
 """Why a null campaign of the independent design drew a claim, where the study found out (keyed
 by the claimed effect and the rules of the records: the library's SHA-256 prefix, or
-``library/thresholds`` prefixes where one library ran under several thresholds)."""
+``<library prefix>-<thresholds prefix>`` where one library ran under several thresholds)."""
 
 
 def why_null(top: str, records: pd.DataFrame) -> str | None:
     """:data:`WHY_NULL`'s reading of a claim of ``top`` on the nulls ``records`` (one rules set)."""
     lib = str(records["rules_library_sha256"].iloc[0])[:8] if "rules_library_sha256" in records else ""
     thr = str(records["rules_thresholds_sha256"].iloc[0])[:8] if "rules_thresholds_sha256" in records else ""
-    return WHY_NULL.get((top, f"{lib}/{thr}")) or WHY_NULL.get((top, lib))
+    return WHY_NULL.get((top, f"{lib}-{thr}")) or WHY_NULL.get((top, lib))
 
 
 def reading_lines(records: pd.DataFrame) -> list[str]:
