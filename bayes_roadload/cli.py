@@ -770,32 +770,30 @@ def _cmd_plan(args) -> int:
 
             echo(f"  {floor_hint(floors, load_model_spec(fit_model).uncertainty)}")
         quantities = [q for q in quantities if q not in unreachable]
-    # adaptive in two ways: the sizes that locate each target's smallest size meeting it,
-    # predicted from the half-widths known so far, else by bisection (planning.sizes_to_fit;
-    # --all-sizes: every size), and the simulations at a size in steps,
+    # adaptive in two ways: the sizes by bisection on each target's smallest size meeting it
+    # (planning.sizes_to_fit; --all-sizes: every size), and the simulations at a size in steps,
     # each after the first only where a target's assurance is still undecided
     # (planning.undecided_sizes; --all-simulations: all at once)
     if quantities:   # else every target is below its Type B floor: nothing is refitted
         echo(f"Population: {population.source}; {population.n_draws} draws; refitting {first} simulated campaigns "
              + (f"at each of {pairs} pairs" if args.all_sizes else
-                f"at the sizes among {pairs} pairs that locate each target's smallest passing size (predicted "
-                "from the half-widths known so far: the conditions campaign's fit, then the refits')")
+                f"at the sizes among {pairs} pairs that locate each target's smallest passing size (bisection)")
              + f" with {fit_model} ({population.pooling}, MAP + Laplace)"
              + (f", {first} more at a time up to {args.simulations} where a target stays undecided"
                 if first < args.simulations else "") + " ...")
     progress = not args.no_progress and _output.isEnabledFor(logging.INFO)
     records = pd.DataFrame()
     simulated: list[int] = []
+    rounds = math.ceil(math.log2(len(pairs) + 1))  # bisection over len + 1 outcomes (the last: not reached)
     with batch_client(args.workers, args.scheduler) as client:
         for round_ in range(1, len(pairs) + 1):
-            table = plan_table(records, targets, args.confidence, assurance=args.assurance) if len(records) \
-                else pd.DataFrame()
+            table = plan_table(records, targets, args.confidence) if len(records) else pd.DataFrame()
             todo = [n for n in pairs if n not in simulated] if args.all_sizes else \
-                sizes_to_fit(table, pairs, quantities, args.assurance, simulated, floors=floors)
+                sizes_to_fit(table, pairs, quantities, args.assurance, simulated)
             if not todo:
                 break
             if not args.all_sizes:
-                echo(f"round {round_}: {todo} pairs")
+                echo(f"round {round_} (at most {rounds}): {todo} pairs")
             # the batch door draws a bar on a terminal and plain lines elsewhere; --quiet: neither
             # a new size's programs are compiled by its first refit, then loaded by the other
             # workers from the persistent compilation cache (batch_map's lead)
@@ -806,7 +804,7 @@ def _cmd_plan(args) -> int:
             simulated += todo
             done = first
             while done < args.simulations:
-                new_table = plan_table(new, targets, args.confidence, assurance=args.assurance)
+                new_table = plan_table(new, targets, args.confidence)
                 undecided = undecided_sizes(new_table, args.assurance) if not new_table.empty else []
                 if not undecided:
                     break
@@ -833,7 +831,7 @@ def _cmd_plan(args) -> int:
             return 0
         failed = int(records["error"].notna().sum()) if "error" in records else 0
         not_converged = int((~records["gate_pass"].fillna(False).astype(bool)).sum()) if "gate_pass" in records else 0
-        table = plan_table(records, targets, args.confidence, assurance=args.assurance)
+        table = plan_table(records, targets, args.confidence)
         table.to_csv(out / "plan.csv", index=False)
         rec = recommend(table, args.assurance, floors=floors)
         rec.to_csv(out / "recommendation.csv", index=False)

@@ -370,7 +370,7 @@ def half_widths(records: pd.DataFrame, quantity: str, confidence: float = 0.95, 
 
 
 def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: float = config.PLAN_CONFIDENCE,
-               by: Sequence[str] = (), assurance: float = config.PLAN_ASSURANCE) -> pd.DataFrame:
+               by: Sequence[str] = ()) -> pd.DataFrame:
     """Half-width distribution and assurance against the number of pairs.
 
     Returns one row per (``by`` groups,) target quantity and ``n_pairs``: ``quantity,
@@ -380,9 +380,7 @@ def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: flo
     constrained model costs), ``rmse_pct``, ``gate_pass_frac`` (refits passing their gate: the
     MAP converged and the importance weights are usable; the others are kept, their intervals
     being the best available, and the fraction says how far to trust the row) and
-    ``coverage`` (of the truth by the intervals), ``assured_half_width`` (the half-widths'
-    ``assurance`` quantile: the width that share of the refits meets, from which
-    :func:`sizes_to_fit` predicts other sizes)."""
+    ``coverage`` (of the truth by the intervals)."""
     ok = successful(records)
     rows = []
     groups = ok.groupby(list(by) + ["n_pairs"], sort=True) if by else ok.groupby("n_pairs", sort=True)
@@ -404,8 +402,7 @@ def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: flo
                          "rmse_pct": float(100.0 * np.sqrt(((err / truth) ** 2).mean())),
                          "gate_pass_frac": float(g["gate_pass"].astype(bool).mean()) if "gate_pass" in g else math.nan,
                          "coverage": float(g[f"{t.quantity}_{interval_key(confidence)}"].astype(bool).mean())
-                         if f"{t.quantity}_{interval_key(confidence)}" in g else math.nan,
-                         "assured_half_width": float(hw.quantile(assurance))})
+                         if f"{t.quantity}_{interval_key(confidence)}" in g else math.nan})
     cols = list(by) + ["quantity", "n_pairs", "median_half_width", "assurance"]
     out = pd.DataFrame(rows)
     if out.empty:
@@ -413,11 +410,9 @@ def plan_table(records: pd.DataFrame, targets: Sequence[Target], confidence: flo
     return out[cols + [c for c in out.columns if c not in cols]]
 
 
-FLOOR_FIT_DRAWS = 400
-"""Draws of the Gaussian approximation of the floor's MAP fit: :func:`type_b_floors` takes the
-sensitivities at its mode and, from the draws' spread, the data's half-width at the conditions
-campaign's size (the start of :func:`sizes_to_fit`'s prediction; 400 draws put the spread's
-relative standard error at 1 / sqrt(2 x 399) = 3.5 %)."""
+FLOOR_FIT_DRAWS = 2
+"""Draws of the Gaussian approximation of the floor's MAP fit (:func:`type_b_floors` reads its
+mode only)."""
 
 
 def type_b_floors(population: Population, targets: Sequence[Target], confidence: float = config.PLAN_CONFIDENCE,
@@ -440,10 +435,7 @@ def type_b_floors(population: Population, targets: Sequence[Target], confidence:
 
     Returns one row per target: ``quantity, target, unit, type_b_half_width`` (the target's
     unit), ``reachable`` (the floor is below the target), ``main_source`` and
-    ``main_source_share`` (of the Type B variance), ``data_half_width`` (z times the standard
-    deviation of that fit's Laplace draws of the quantity, the target's unit: the data's share
-    of a refit's half-width at ``conditions_pairs`` pairs, from which :func:`sizes_to_fit`
-    predicts the first sizes; NaN when the MAP failed) and ``conditions_pairs``."""
+    ``main_source_share`` (of the Type B variance)."""
     from statistics import NormalDist
 
     from ..inference.bayes import build_problem
@@ -472,14 +464,9 @@ def type_b_floors(population: Population, targets: Sequence[Target], confidence:
         value = values.get(t.quantity, math.nan)
         floor = 100.0 * half / abs(value) if t.relative else half
         main = max(parts, key=parts.get) if var > 0 else ""
-        data = math.nan
-        if fit is not None and t.quantity in fit.samples:
-            data = z * float(np.std(np.asarray(fit.samples[t.quantity], float)))
-            data = 100.0 * data / abs(value) if t.relative else data
         rows.append({"quantity": t.quantity, "target": t.value, "unit": t.unit, "type_b_half_width": floor,
                      "reachable": not floor >= t.value, "main_source": main,
-                     "main_source_share": parts[main] / var if var > 0 else math.nan,
-                     "data_half_width": data, "conditions_pairs": len(population.conditions.pairs())})
+                     "main_source_share": parts[main] / var if var > 0 else math.nan})
     return pd.DataFrame(rows)
 
 
@@ -529,71 +516,24 @@ def undecided_sizes(table: pd.DataFrame, assurance: float = config.PLAN_ASSURANC
     return sorted(out)
 
 
-def predicted_half_width(pairs: float, ref_pairs: float, ref_half_width: float, floor: float = 0.0) -> float:
-    """A half-width at ``pairs`` pairs from one measured at ``ref_pairs``: the data's variance
-    falls as 1 / pairs and the Type B floor's does not,
-    hw(n)^2 = floor^2 + (hw_ref^2 - floor^2) n_ref / n (:func:`type_b_floors`; the data's part
-    taken as zero where the reference is at or below the floor)."""
-    data2 = max(ref_half_width**2 - floor**2, 0.0) * ref_pairs / pairs
-    return math.sqrt(floor**2 + data2)
-
-
-def _width_reference(rows: pd.DataFrame, quantity: str, sizes: Sequence[int], lo: int, hi: int,
-                     floors: pd.DataFrame | None) -> tuple[float, float, float, float] | None:
-    """(reference pairs, its half-width, floor, target) for predicting ``quantity``'s sizes
-    ``sizes[lo:hi]``: the simulated size nearest to them (in log pairs) with its refits'
-    ``assured_half_width``, else the conditions campaign's fit (``floors``: the data's
-    half-width at its pairs with the floor added); None when neither is known."""
-    floor, target, source = 0.0, math.nan, None
-    if floors is not None and "quantity" in floors and quantity in set(floors["quantity"]):
-        f = floors[floors["quantity"] == quantity].iloc[0]
-        floor, target = float(f["type_b_half_width"]), float(f["target"])
-        data = float(f.get("data_half_width", math.nan))
-        if np.isfinite(data) and int(f.get("conditions_pairs", 0)) > 0:
-            source = (float(f["conditions_pairs"]), math.hypot(floor, data))
-    measured = []
-    if not rows.empty and "assured_half_width" in rows:
-        measured = [(float(n), float(w), float(t)) for n, w, t in
-                    zip(rows["n_pairs"], rows["assured_half_width"], rows["target"]) if np.isfinite(w)]
-    if measured:
-        middle = math.sqrt(sizes[lo] * sizes[hi - 1])
-        n, w, target = min(measured, key=lambda m: abs(math.log(m[0] / middle)))
-        return n, w, floor, target
-    if source is not None and np.isfinite(target):
-        return source[0], source[1], floor, target
-    return None
-
-
 def sizes_to_fit(table: pd.DataFrame, pairs: Sequence[int], quantities: Sequence[str],
-                 assurance: float = config.PLAN_ASSURANCE, simulated: Sequence[int] = (),
-                 floors: pd.DataFrame | None = None) -> list[int]:
+                 assurance: float = config.PLAN_ASSURANCE, simulated: Sequence[int] = ()) -> list[int]:
     """The sizes (of ``pairs``) to simulate next so that each quantity's smallest size meeting
-    its target is located, taking the assurance as increasing with the number of pairs.
-    ``table`` (:func:`plan_table`, possibly empty) holds the sizes simulated so far; ``floors``
-    (:func:`type_b_floors`, optional) each target's Type B floor and the data's half-width on
-    the conditions campaign.
+    its target is located by bisection, taking the assurance as increasing with the number of
+    pairs.  ``table`` (:func:`plan_table`, possibly empty) holds the sizes simulated so far.
 
     For each quantity, P is the smallest simulated size whose assurance reaches ``assurance``
     (none: beyond the largest size) and F the largest simulated size below P that does not;
-    the answer lies in (F, P].  While sizes lie strictly between F and P one or two of them
-    are returned:
-
-    * *predicted*, when a half-width is known (:func:`_width_reference`: the refits'
-      ``assured_half_width`` at the nearest simulated size, else the conditions campaign's
-      fit): the smallest of them whose predicted half-width (:func:`predicted_half_width`)
-      meets the target, with the size just below it when that too lies above F, so that a right
-      prediction locates the answer in one round; the largest of them when none is predicted to
-      meet it;
-    * else by *bisection*: the middle one (the lower of two: a refit costs more the more pairs
-      it has), so that both outcomes at it leave at most half of them.
-
-    When no size lies between F and P the quantity is located: its answer is P, the size
-    :func:`recommend` reads (or "not reached", the largest size having been simulated).  Which
-    sizes are simulated changes the rounds and the cost, never the answer: the answer is read
-    from the simulated assurances alone.  A quantity absent from the table so far (nothing
-    simulated, or not a quantity of the model) starts from the whole range.  Sizes in
-    ``simulated`` are not returned again (a size whose refits all raised has no row), so the
-    sequence ends.  Returns the union, sorted."""
+    the answer lies in (F, P].  While sizes lie strictly between F and P, the middle one of
+    them (the lower of two: a refit costs more the more pairs it has) is returned, so that
+    both outcomes at it leave at most half of them; when none do, the quantity is located:
+    its answer is P, the size :func:`recommend` reads (or "not reached", the largest size
+    having been simulated).  Sizes
+    above P and below F are never needed: at 9 sizes a quantity takes at most 4 of them
+    instead of 9.  A quantity absent from the table so far (nothing simulated, or not a
+    quantity of the model) starts from the whole range.  Sizes in ``simulated`` are not
+    returned again (a size whose refits all raised has no row), so the sequence ends.  Returns
+    the union, sorted."""
     sizes = sorted(set(int(n) for n in pairs))
     out = set()
     for q in quantities:
@@ -603,20 +543,8 @@ def sizes_to_fit(table: pd.DataFrame, pairs: Sequence[int], quantities: Sequence
         hi = passing[0] if passing else len(sizes)          # index of P (len: beyond the range)
         failing = [i for i, n in enumerate(sizes[:hi]) if reached.get(n) is False]
         lo = failing[-1] + 1 if failing else 0              # first index above F
-        if lo >= hi:
-            continue
-        ref = _width_reference(rows, q, sizes, lo, hi, floors)
-        if ref is None:
+        if lo < hi:
             out.add(sizes[(lo + hi - 1) // 2])
-            continue
-        n_ref, w_ref, floor, target = ref
-        meets = [i for i in range(lo, hi) if predicted_half_width(sizes[i], n_ref, w_ref, floor) <= target]
-        if not meets:
-            out.add(sizes[hi - 1])
-            continue
-        out.add(sizes[meets[0]])
-        if meets[0] > lo:
-            out.add(sizes[meets[0] - 1])
     return sorted(out - {int(n) for n in simulated})
 
 

@@ -19,7 +19,6 @@ from bayes_roadload.analysis.planning import (
     pilot_summary_half_widths,
     plan_jobs,
     plan_table,
-    predicted_half_width,
     predictive_half_widths,
     recommend,
     simulate_future,
@@ -244,62 +243,6 @@ def test_bisection_over_sizes_finds_what_every_size_would():
     assert sorted(set(table["n_pairs"])) == [2, 3, 4, 6, 8, 12]
     # a quantity the model never yields ends the sequence once its first size is simulated
     assert sizes_to_fit(pd.DataFrame(columns=["quantity", "n_pairs", "assurance"]), pairs, ["KD"], 0.8, [6]) == []
-
-
-def _locate(pairs, widths, targets, floors=None, assurance=0.8):
-    """Run sizes_to_fit to its end with half-widths known: ``widths`` quantity -> size -> the
-    refits' assured half-width, the assurance 0.9 where it meets the quantity's target and 0.5
-    where not (increasing with pairs when the widths decrease); returns the table and rounds."""
-    rows, simulated = [], []
-    for rounds in range(len(pairs) + 1):
-        todo = sizes_to_fit(pd.DataFrame(rows), pairs, list(widths), assurance, simulated, floors=floors)
-        if not todo:
-            return pd.DataFrame(rows), rounds
-        rows += [{"quantity": q, "n_pairs": n, "assurance": 0.9 if w[n] <= targets[q] else 0.5,
-                  "assured_half_width": w[n], "target": targets[q], "unit": "%", "n_sims": 20}
-                 for n in todo for q, w in widths.items()]
-        simulated += todo
-    raise AssertionError("sizes_to_fit did not end")
-
-
-def _floors(targets, floor, data, pairs0):
-    return pd.DataFrame([{"quantity": q, "target": t, "type_b_half_width": floor[q], "data_half_width": data[q],
-                          "conditions_pairs": pairs0} for q, t in targets.items()])
-
-
-def test_predicted_sizes_locate_each_target_where_every_size_would():
-    """The sizes predicted from known half-widths (``floors``: the conditions campaign's fit;
-    then the refits' ``assured_half_width``) change which sizes are simulated, never the
-    answer: over random decreasing half-width curves and predictions off by a factor 1/4 to 4,
-    the recommendation is that of simulating every size, and the sequence ends.  Where the
-    half-widths follow the law the prediction assumes (:func:`predicted_half_width`, by hand:
-    a floor of 3 and a data part of 4 at 1 pair give 5 at 1 pair, sqrt(9 + 16 / 4) = 3.61 at
-    4) and the conditions' fit reads them right, every target is located in one round, with at
-    most two sizes each."""
-    assert predicted_half_width(1, 1, 5.0, 3.0) == pytest.approx(5.0)
-    assert predicted_half_width(4, 1, 5.0, 3.0) == pytest.approx(math.sqrt(13.0))
-    assert predicted_half_width(4, 1, 2.0, 3.0) == pytest.approx(3.0)   # at the floor: no data part left
-    pairs = list(config.PLAN_PAIRS)
-    rng = np.random.default_rng(7)
-    for _ in range(200):
-        targets = {"AD": 1.0, "CD0": 1.0}
-        widths = {q: dict(zip(pairs, np.sort(rng.uniform(0.2, 3.0, len(pairs)))[::-1])) for q in targets}
-        floors = _floors(targets, {q: 0.0 for q in targets},
-                         {q: widths[q][pairs[2]] * rng.choice([0.25, 0.5, 1.0, 2.0, 4.0]) for q in targets}, pairs[2])
-        table, _ = _locate(pairs, widths, targets, floors)
-        full = pd.DataFrame([{"quantity": q, "n_pairs": n, "assurance": 0.9 if w[n] <= 1.0 else 0.5, "target": 1.0,
-                              "unit": "%"} for q, w in widths.items() for n in pairs])
-        got = recommend(table, 0.8).set_index("quantity")["n_pairs"].fillna(0).to_dict()
-        assert got == recommend(full, 0.8).set_index("quantity")["n_pairs"].fillna(0).to_dict(), widths
-    # half-widths that follow the law: one round, two sizes at most per target
-    targets = {"AD": 4.0, "CD0": 3.5, "F50_N": 5.5}
-    floor, data = {"AD": 3.0, "CD0": 1.0, "F50_N": 5.0}, {"AD": 4.0, "CD0": 6.0, "F50_N": 6.0}
-    widths = {q: {n: predicted_half_width(n, 1, math.hypot(floor[q], data[q]), floor[q]) for n in pairs}
-              for q in targets}
-    table, rounds = _locate(pairs, widths, targets, _floors(targets, floor, data, 1))
-    want = {"AD": 3, "CD0": 4, "F50_N": 8}   # 3.79 <= 4 < 4.12; 3.16 <= 3.5 < 3.61; 5.43 <= 5.5 < 5.57
-    assert recommend(table, 0.8).set_index("quantity")["n_pairs"].to_dict() == want
-    assert rounds == 1 and table["n_pairs"].nunique() <= 2 * len(targets)
 
 
 def test_undecided_sizes_follow_the_wilson_interval_of_the_assurance():
