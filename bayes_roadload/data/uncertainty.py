@@ -121,6 +121,31 @@ def _yaw_factor(c, delta: float):
         c.anemometer, yaw_factor=c.anemometer.yaw_factor * (1.0 + delta)))
 
 
+def _airspeed_yaw_coefficient(c, delta: float):
+    """The airspeed readings times ``1 + delta psi^2``, psi = yaw factor x yaw reading: an
+    anemometer whose calibration factor changes with the yaw as ``factor (1 + e psi^2)``
+    (thesis section 4.7.2, figure 43), read with ``e`` off by ``delta`` (rad^-2).  None without
+    airspeed and yaw readings."""
+    ch = _channels(c)
+    if not ch.vehicle:
+        return None
+    factor = float(c.anemometer.yaw_factor)
+
+    def scale(t: pd.DataFrame) -> pd.DataFrame | None:
+        if "airspeed_mps" not in t or "yaw_rad" not in t:
+            return None
+        t["airspeed_mps"] = t["airspeed_mps"] * (1.0 + delta * (factor * t["yaw_rad"]) ** 2)
+        return t
+    return _with_table(c, scale)
+
+
+AIRSPEED_YAW_COEFFICIENT_BOUND_PER_RAD2 = (1.107 - 1.069) / 1.092 / math.radians(25.0) ** 2
+"""The bound on ``e`` of an airspeed factor ``factor (1 + e psi^2)`` (rad^-2, ~0.18): the thesis'
+anemometer factor ranged 1.069-1.107 (3.5 % of its mean 1.092) over the tunnel's +-25 deg
+(section 4.7.2, figure 43; tests over +-25 deg in steps of 5, section 4.5), read as the whole
+range reached at the range's edge."""
+
+
 def _mass(c, delta: float):
     ch = _channels(c)
     if not ch.vehicle:
@@ -196,6 +221,11 @@ SOURCES: dict[str, UncertaintySource] = {s.key: s for s in (
                       "SAE J2263 yaw +-3 deg, of which a +-1 deg offset", _shift_column("yaw_rad")),
     UncertaintySource("yaw_factor_rel", 0.10 / _SQRT3,
                       "SAE J2263 yaw +-3 deg, of which a +-10 % factor (2.5 deg at 15 deg)", _yaw_factor),
+    UncertaintySource("airspeed_yaw_coefficient_per_rad2", AIRSPEED_YAW_COEFFICIENT_BOUND_PER_RAD2 / _SQRT3,
+                      "the anemometer's airspeed factor changing with the yaw, factor (1 + e psi^2): "
+                      "the thesis' factor spanned 3.5 % over +-25 deg (section 4.7.2), |e| <= 0.18 rad^-2, "
+                      "sign not known for another body or mounting; where the campaign has airspeed and yaw",
+                      _airspeed_yaw_coefficient),
     UncertaintySource("mass_kg", math.sqrt(2.0) * 5.0 / _SQRT3,
                       "SAE J1263 vehicle mass +-5 kg per axle, two axles independent", _mass),
     UncertaintySource("rotating_inertia_rel", 0.10 / _SQRT3,

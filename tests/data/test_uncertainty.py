@@ -100,6 +100,21 @@ def test_the_unlogged_humidity_is_set_above_dry_air_only_where_the_density_is_me
         dataclasses.replace(source, distribution="lognormal")
 
 
+def test_the_yaw_dependent_airspeed_factor_scales_the_airspeed_by_the_calibrated_yaw_squared(campaign):
+    """``airspeed_yaw_coefficient_per_rad2``: readings x (1 + delta psi^2), psi the calibrated
+    yaw (yaw factor x reading); its bound is the thesis' 1.069-1.107 over +-25 deg (3.5 % of
+    1.092 at 0.436 rad), read as a rectangle."""
+    source = SOURCES["airspeed_yaw_coefficient_per_rad2"]
+    bound = (1.107 - 1.069) / 1.092 / math.radians(25.0) ** 2
+    assert 0.17 < bound < 0.19 and source.default == pytest.approx(bound / math.sqrt(3.0))
+    anem = dataclasses.replace(campaign.anemometer, yaw_factor=0.9)
+    c = dataclasses.replace(campaign, anemometer=anem)
+    shifted = source.apply(c, 0.2)
+    psi = 0.9 * c.runs["yaw_rad"].to_numpy()
+    assert (shifted.runs["airspeed_mps"] / c.runs["airspeed_mps"]).to_numpy() == pytest.approx(1 + 0.2 * psi**2)
+    assert (shifted.runs.drop(columns="airspeed_mps")).equals(c.runs.drop(columns="airspeed_mps"))
+    assert source.apply(dataclasses.replace(c, runs=c.runs.drop(columns="yaw_rad")), 0.2) is None
+
 
 def test_every_kind_declares_what_its_sources_act_on():
     """The data contract: each registered campaign class names its measured table, and its
