@@ -326,8 +326,7 @@ def wind_per_run(campaign: Campaign) -> pd.DataFrame:
     (calibrated by the campaign's anemometer factors): head = v_r cos(psi) - v, cross = v_r sin(psi)."""
     rows = []
     for rid, g in campaign.runs.groupby("run", sort=False):
-        vr = g["airspeed_mps"].to_numpy(float) * campaign.anemometer.airspeed_factor
-        psi = g["yaw_rad"].to_numpy(float) * campaign.anemometer.yaw_factor
+        vr, psi = campaign.anemometer.calibrated_air(g["airspeed_mps"], g["yaw_rad"])
         head = vr * np.cos(psi) - g["speed_mps"].to_numpy(float)
         cross = vr * np.sin(psi)
         rows.append({"run": rid, "head_mps": float(head.mean()), "cross_mps": float(np.abs(cross.mean())),

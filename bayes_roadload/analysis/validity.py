@@ -128,8 +128,7 @@ def trace_validity(campaign, limits: str = config.DEFAULT_WIND_LIMITS, k: float 
                "samples": len(g), "speed_spike_fraction": float(flags.mean())}
         reasons = []
         if campaign.has_anemometer:
-            a = campaign.anemometer.airspeed_factor * g["airspeed_mps"].to_numpy(float)
-            psi = campaign.anemometer.yaw_factor * g["yaw_rad"].to_numpy(float)
+            a, psi = campaign.anemometer.calibrated_air(g["airspeed_mps"], g["yaw_rad"])
             head = a * np.cos(psi) - v          # along-track wind met by the vehicle (+ head wind)
             cross = a * np.sin(psi)
             speed = np.hypot(head, cross)

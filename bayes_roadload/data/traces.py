@@ -132,6 +132,15 @@ class Campaign:
         return Campaign(subset_table(self.runs, run_ids), self.vehicle, self.anemometer,
                         self.tunnel, self.truth, dict(self.meta))
 
+    def _airspeed_readings(self, g: pd.DataFrame):
+        """One run's airspeed readings with the anemometer's stated yaw calibration applied
+        (:meth:`~bayes_roadload.data.vehicle.Anemometer.yaw_corrected_airspeed`); None without
+        an airspeed channel."""
+        if "airspeed_mps" not in g:
+            return None
+        a = g["airspeed_mps"].to_numpy(float)
+        return self.anemometer.yaw_corrected_airspeed(a, g["yaw_rad"].to_numpy(float)) if "yaw_rad" in g else a
+
     def to_batch(self):
         """The runs as a padded :class:`~bayes_roadload.physics.RunBatch` (time from each
         run's first sample) and the list of run ids in batch order.  ``meta["pad_to_samples"]``
@@ -153,7 +162,7 @@ class Campaign:
             runs.append(make_run(
                 t - t[0],
                 g["speed_mps"].to_numpy(float),
-                airspeed_mps=g["airspeed_mps"].to_numpy(float) if "airspeed_mps" in g else None,
+                airspeed_mps=self._airspeed_readings(g),
                 yaw_rad=g["yaw_rad"].to_numpy(float) if "yaw_rad" in g else None,
                 driveline_force_n=g["driveline_force_n"].to_numpy(float) if "driveline_force_n" in g else None,
                 air_density_kgpm3=air_density(g),

@@ -28,7 +28,10 @@ from .uncertainty import UNCERTAINTY_TABLE, uncertainty_from_toml
 VEHICLE_FILE = "vehicle.toml"
 VEHICLE_KEYS = ("mass_kg", "effective_mass_kg", "frontal_area_m2", "rolling_radius_m", "rotating_inertia_kgm2",
                 "length_m", "tyres_in_contact", "mass_in_running_order_kg")
-ANEMOMETER_KEYS = ("airspeed_factor", "yaw_factor", "distance_constant_m")
+ANEMOMETER_KEYS = ("airspeed_factor", "yaw_factor", "distance_constant_m", "airspeed_yaw_coefficient_per_rad2")
+AIRSPEED_YAW_COEFFICIENT_RANGE_PER_RAD2 = (-1.0, 1.0)
+"""Accepted ``[anemometer] airspeed_yaw_coefficient_per_rad2`` (rad^-2): +-1 is a factor change
+of 19 % at 25 deg yaw, five times the thesis anemometer's 3.5 % (section 4.7.2)."""
 
 
 @dataclass(frozen=True)
@@ -58,11 +61,32 @@ class Anemometer:
     """``[anemometer]``: true = factor x reading (thesis section 4.7.3); ``distance_constant_m``
     the cup's (or propeller's) distance constant d, first order: d(reading)/dt = (a - reading)
     a / d (thesis 4.7: 1.5 m), 0 when not stated -- then the analysis takes the reading as the
-    airspeed, else it undoes the lag (the ``anemometer_lag`` term, :mod:`bayes_roadload.physics.effects`)."""
+    airspeed, else it undoes the lag (the ``anemometer_lag`` term, :mod:`bayes_roadload.physics.effects`).
+    ``airspeed_yaw_coefficient_per_rad2`` the wind tunnel's change of the airspeed factor with
+    the yaw, factor (1 + e psi^2) with psi = yaw_factor x yaw reading (thesis section 4.7.2,
+    figure 43: 1.069-1.107 over +-25 deg), 0 when not stated; applied to the airspeed readings
+    as they enter a fit (:meth:`yaw_corrected_airspeed`)."""
 
     airspeed_factor: float = 1.0
     yaw_factor: float = 1.0
     distance_constant_m: float = 0.0
+    airspeed_yaw_coefficient_per_rad2: float = 0.0
+
+    def yaw_corrected_airspeed(self, airspeed_reading_mps, yaw_reading_rad):
+        """The airspeed readings times ``1 + e psi^2`` (psi = yaw_factor x yaw reading, e =
+        ``airspeed_yaw_coefficient_per_rad2``): readings on which the constant factor is then
+        right at every yaw.  Returned unchanged when ``e`` is 0."""
+        e = self.airspeed_yaw_coefficient_per_rad2
+        if e == 0.0:
+            return airspeed_reading_mps
+        return airspeed_reading_mps * (1.0 + e * (self.yaw_factor * np.asarray(yaw_reading_rad, float)) ** 2)
+
+    def calibrated_air(self, airspeed_reading_mps, yaw_reading_rad):
+        """(relative airspeed v_r, yaw psi) from the readings: v_r = airspeed_factor x the
+        :meth:`yaw_corrected_airspeed`, psi = yaw_factor x reading (thesis section 4.7.3)."""
+        yaw = np.asarray(yaw_reading_rad, float)
+        return (self.airspeed_factor * self.yaw_corrected_airspeed(np.asarray(airspeed_reading_mps, float), yaw),
+                self.yaw_factor * yaw)
 
 
 def validate_vehicle(v: Vehicle, where: str = VEHICLE_FILE) -> None:
@@ -127,14 +151,22 @@ def vehicle_from_toml(doc: Mapping[str, Any], where: str) -> tuple[Vehicle, Anem
     for k in a:
         if k not in ANEMOMETER_KEYS:
             refuse(where, f"[anemometer] {k}", None, f"unknown key; known: {', '.join(ANEMOMETER_KEYS)}")
+    for k, val in a.items():
+        if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(float(val)):
+            refuse(where, f"[anemometer] {k}", None, f"{val!r} is not a number")
     anem = Anemometer(float(a.get("airspeed_factor", 1.0)), float(a.get("yaw_factor", 1.0)),
-                      float(a.get("distance_constant_m", 0.0)))
+                      float(a.get("distance_constant_m", 0.0)), float(a.get("airspeed_yaw_coefficient_per_rad2", 0.0)))
     for k in ("airspeed_factor", "yaw_factor"):
         if not 0.5 <= getattr(anem, k) <= 2.0:
             refuse(where, f"[anemometer] {k}", None, f"{getattr(anem, k)} is outside [0.5, 2]")
     if not 0.0 <= anem.distance_constant_m <= 20.0:
         refuse(where, "[anemometer] distance_constant_m", None,
                f"{anem.distance_constant_m} is outside [0, 20] m (cup anemometers: 1-5 m)")
+    lo, hi = AIRSPEED_YAW_COEFFICIENT_RANGE_PER_RAD2
+    if not lo <= anem.airspeed_yaw_coefficient_per_rad2 <= hi:
+        refuse(where, "[anemometer] airspeed_yaw_coefficient_per_rad2", None,
+               f"{anem.airspeed_yaw_coefficient_per_rad2} is outside [{lo}, {hi}] rad^-2 (the thesis' anemometer: "
+               "|e| about 0.18, a 3.5 % change over 25 deg)")
     tunnel = doc.get("tunnel")
     if tunnel is not None:
         tunnel = dict(tunnel)
@@ -208,6 +240,8 @@ def vehicle_toml(c) -> str:
               f"yaw_factor = {toml_value(c.anemometer.yaw_factor)}"]
     if c.anemometer.distance_constant_m > 0.0:
         lines.append(f"distance_constant_m = {toml_value(c.anemometer.distance_constant_m)}")
+    if c.anemometer.airspeed_yaw_coefficient_per_rad2 != 0.0:
+        lines.append(f"airspeed_yaw_coefficient_per_rad2 = {toml_value(c.anemometer.airspeed_yaw_coefficient_per_rad2)}")
     meta = {k: v for k, v in c.meta.items() if k not in (UNCERTAINTY_TABLE, CFR1037_TABLE, "conversions")}
     lines += (toml_table("tunnel", c.tunnel) + toml_table("meta", meta)
               + toml_table(UNCERTAINTY_TABLE, c.meta.get(UNCERTAINTY_TABLE))

@@ -164,8 +164,9 @@ def build_steady_problem(campaign, spec: ModelSpec | str = "four_term", *, wind:
     runs = campaign.runs
     n = len(runs)
     v = runs["speed_mps"].to_numpy(float)
-    air_reading = runs["airspeed_mps"].to_numpy(float) if campaign.has_anemometer else v
     yaw_reading = runs["yaw_rad"].to_numpy(float) if campaign.has_anemometer else np.zeros(n)
+    air_reading = (campaign.anemometer.yaw_corrected_airspeed(runs["airspeed_mps"].to_numpy(float), yaw_reading)
+                   if campaign.has_anemometer else v)
     temp = runs["temperature_k"].to_numpy(float) if "temperature_k" in runs else np.full(n, config.REFERENCE_TEMPERATURE_K)
     direction = runs["direction"].to_numpy(float) if "direction" in runs else np.ones(n)
     z = np.zeros(n)

@@ -34,6 +34,9 @@ def runs_frame(n=40, runs=2):
         (VEHICLE_TOML + "colour = 'red'\n", "[vehicle] colour"),
         (VEHICLE_TOML + "mass_in_running_order_kg = 1200.0\n", "the test mass includes the mass in running order"),
         (VEHICLE_TOML + "[anemometer]\nairspeed_factor = 10.8\n", "[anemometer] airspeed_factor"),
+        (VEHICLE_TOML + "[anemometer]\nairspeed_yaw_coefficient_per_rad2 = 1.5\n",
+         "[anemometer] airspeed_yaw_coefficient_per_rad2"),
+        (VEHICLE_TOML + "[anemometer]\nyaw_factor = 'one'\n", "[anemometer] yaw_factor"),
         ("[vehicle\n", "not valid TOML"),
     ],
 )
@@ -78,3 +81,26 @@ def test_mass_in_running_order_reads_back():
     assert vehicle.mass_in_running_order_kg == 1020.0
     c = Campaign(runs_frame(), vehicle, anem, tunnel, meta=meta)
     assert vehicle_from_toml(tomllib.loads(vehicle_toml(c)), "vehicle.toml")[0] == vehicle
+
+
+def test_a_stated_yaw_calibration_reads_back_and_corrects_the_airspeed_as_it_enters_a_fit():
+    """``airspeed_yaw_coefficient_per_rad2`` e: the batch's airspeed is reading x (1 + e psi^2),
+    psi = yaw_factor x yaw reading; the table keeps the readings; absent, nothing changes."""
+    runs = runs_frame().assign(airspeed_mps=lambda d: d["speed_mps"] + 2.0, yaw_rad=np.tile(np.linspace(-0.3, 0.3, 40), 2))
+    doc = tomllib.loads(VEHICLE_TOML + "[anemometer]\nairspeed_factor = 1.05\nyaw_factor = 0.9\n"
+                        "airspeed_yaw_coefficient_per_rad2 = -0.18\n")
+    vehicle, anem, tunnel, meta = vehicle_from_toml(doc, "vehicle.toml")
+    assert anem.airspeed_yaw_coefficient_per_rad2 == -0.18
+    c = Campaign(runs, vehicle, anem, tunnel, meta=meta)
+    assert vehicle_from_toml(tomllib.loads(vehicle_toml(c)), "vehicle.toml")[1] == anem
+    batch, ids = c.to_batch()
+    psi = 0.9 * runs["yaw_rad"].to_numpy().reshape(2, 40)
+    want = runs["airspeed_mps"].to_numpy().reshape(2, 40) * (1.0 - 0.18 * psi**2)
+    np.testing.assert_allclose(np.asarray(batch.airspeed_mps)[:, :40], want, rtol=1e-12)
+    vr, yaw = anem.calibrated_air(runs["airspeed_mps"], runs["yaw_rad"])
+    np.testing.assert_allclose(vr, 1.05 * want.ravel(), rtol=1e-12)
+    np.testing.assert_allclose(yaw, psi.ravel(), rtol=1e-12)
+    plain = Campaign(runs, vehicle, Anemometer(1.05, 0.9), tunnel, meta=meta)
+    assert "airspeed_yaw_coefficient" not in vehicle_toml(plain)
+    np.testing.assert_array_equal(np.asarray(plain.to_batch()[0].airspeed_mps)[:, :40],
+                                  runs["airspeed_mps"].to_numpy().reshape(2, 40))

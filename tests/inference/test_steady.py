@@ -104,3 +104,8 @@ def test_measured_air_is_calibrated_by_the_anemometer_factors():
     aero = q_a * (sample["CD0"] + sample["KD"] * psi**2)
     lift = -q_a * (0.273 + 3.64 * psi**2) * (sample["AD"] + sample["BD"] * c.runs["speed_mps"].to_numpy())
     np.testing.assert_allclose(df, (1.05**2 - 1.0) * (aero + lift), rtol=1e-9)
+    # a stated yaw calibration scales each point's airspeed by (1 + e psi^2): force terms in v_r^2
+    c.anemometer = Anemometer(airspeed_factor=1.0, yaw_factor=1.0, airspeed_yaw_coefficient_per_rad2=0.5)
+    p3 = build_steady_problem(c, "four_term")
+    df = np.asarray(model_force_n(p3, sample)) - np.asarray(model_force_n(p1, sample))
+    np.testing.assert_allclose(df, ((1.0 + 0.5 * psi**2) ** 2 - 1.0) * (aero + lift), rtol=1e-9)
