@@ -248,3 +248,23 @@ def test_humidity_is_logged_on_request_and_leaves_every_other_draw_alone(tmp_pat
     assert "relative_humidity_pct" in back.runs
     dry = simulate_independent(7, pairs=1, withhold=("humidity",), channels=DEFAULT_CHANNELS + ("humidity",))
     assert "relative_humidity_pct" not in dry.runs
+
+
+@pytest.mark.parametrize("effect", ["anemometer_yaw_factor", "humidity", "turbulence", "anemometer_dynamics"])
+def test_a_withheld_effect_leaves_the_campaigns_other_draws_as_they_were(effect):
+    """An ablation's two arms differ by the withheld effect alone in everything drawn per
+    campaign: the withheld effect's draws are made and discarded, so the instruments, the
+    Type B errors, the wind's mean and the first run's start are those of the campaign with it
+    on; and the campaign with every effect on is unchanged by the option."""
+    full = simulate_independent(3001, pairs=1)
+    off = simulate_independent(3001, pairs=1, withhold=(effect,))
+    a, b = full.truth["meta"], off.truth["meta"]
+    assert a["type_b_errors"] == b["type_b_errors"] and a["declared"] == b["declared"]
+    inst_a, inst_b = dict(a["instruments"]), dict(b["instruments"])
+    if effect == "anemometer_yaw_factor":
+        assert inst_a.pop("airspeed_factor_yaw") > 0.0 and inst_b.pop("airspeed_factor_yaw") == 0.0
+    assert inst_a == inst_b
+    assert a["wind"]["mean_speed_mps"] == b["wind"]["mean_speed_mps"]
+    assert a["sample_rate_hz"] == b["sample_rate_hz"]
+    assert effect in a["effects"] and effect not in b["effects"]
+    assert a["hygrometer"] == b["hygrometer"]

@@ -106,7 +106,24 @@ def true_roadload(vehicle: TrueVehicle, gravity_mps2: float) -> dict:
     return out
 
 
-def _random_wind(rng, wind, effects, start_m, end_m, mean_wind_mps=None) -> WindField:
+def _drawn(effect: str, drawn: frozenset, chosen: frozenset, draw, off):
+    """``draw()`` when ``effect`` is chosen; ``off`` when it is not.  A withheld effect
+    (in ``drawn`` but not ``chosen``) still calls ``draw()`` and discards it, so that the
+    random stream -- and with it every later draw of the campaign (instruments, Type B errors,
+    noise) -- is the one of the campaign with the effect on: the two arms of an ablation then
+    differ by the effect alone."""
+    if effect not in drawn:
+        return off
+    value = draw()
+    return value if effect in chosen else off
+
+
+def _random_wind(rng, wind, effects, start_m, end_m, mean_wind_mps=None, drawn=None) -> WindField:
+    """The campaign's wind: mean inside SAE J1263's limits, with the shelter and turbulence
+    of ``effects``; ``drawn`` (default ``effects``) the effects whose draws are made (a
+    withheld one's are made and discarded, :func:`_drawn`)."""
+    effects = frozenset(effects)
+    drawn = effects if drawn is None else frozenset(drawn)
     if isinstance(wind, WindField):
         return wind
     if wind == "calm":
@@ -121,10 +138,12 @@ def _random_wind(rng, wind, effects, start_m, end_m, mean_wind_mps=None) -> Wind
             if math.hypot(along, cross) <= MAX_MEAN_WIND_MPS:
                 break
     speed, direction = math.hypot(along, cross), math.atan2(cross, along)
-    shelter = (random_shelter(rng, start_m, end_m, max_depth=0.4, max_trend=0.2)
-               if "wind_spatial" in effects else Shelter())
-    turbulence = von_karman_turbulence(rng, max(rng.uniform(0.15, 0.4) * speed, 0.2), rng.uniform(10.0, 60.0)) \
-        if "turbulence" in effects else von_karman_turbulence(rng, 0.0, 30.0)
+    shelter = _drawn("wind_spatial", drawn, effects,
+                     lambda: random_shelter(rng, start_m, end_m, max_depth=0.4, max_trend=0.2), Shelter())
+    turbulence = _drawn("turbulence", drawn, effects,
+                        lambda: von_karman_turbulence(rng, max(rng.uniform(0.15, 0.4) * speed, 0.2),
+                                                      rng.uniform(10.0, 60.0)),
+                        von_karman_turbulence(rng, 0.0, 30.0))
     return WindField(speed, direction, shelter, turbulence)
 
 
@@ -190,8 +209,10 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     unknown = (chosen | frozenset(withhold)) - frozenset(EFFECTS)
     if unknown:
         raise ValueError(f"unknown effect(s) {sorted(unknown)}; known: {sorted(EFFECTS)}")
+    drawn = chosen | frozenset(withhold)  # a withheld effect's draws are made and discarded (_drawn)
     if perfect_instruments:
         chosen = frozenset(e for e in chosen if not EFFECTS[e].instrument)
+        drawn = frozenset(e for e in drawn if not EFFECTS[e].instrument)
         type_b = False
     channels = tuple(channels)
     bad = set(channels) - set(CHANNELS)
@@ -208,9 +229,9 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     gravity = float(rng.uniform(9.780, 9.832))            # equator to pole
     temperature0 = float(rng.uniform(278.15, 308.15))
     pressure0 = float(rng.uniform(95e3, 103e3))
-    humidity = float(rng.uniform(0.3, 0.95)) if "humidity" in chosen else 0.0
-    drift_t, drift_p = ((float(rng.uniform(-3, 3)), float(rng.uniform(-300, 300))) if "weather_drift" in chosen
-                        else (0.0, 0.0))
+    humidity = _drawn("humidity", drawn, chosen, lambda: float(rng.uniform(0.3, 0.95)), 0.0)
+    drift_t, drift_p = _drawn("weather_drift", drawn, chosen,
+                              lambda: (float(rng.uniform(-3, 3)), float(rng.uniform(-300, 300))), (0.0, 0.0))
 
     # the track: long enough for the longest coast of this vehicle in still air
     probe = simulate_run(veh, RunConditions(1, 0.0, 33.5, 4.2, gravity_mps2=gravity), np.arange(0.0, 3000.0, 1.0),
@@ -218,20 +239,22 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     length = float(probe.distance_m[-1]) * 1.15 + 100.0
     mean_grade = float(rng.uniform(-sens.GRADE_ACCURACY, sens.GRADE_ACCURACY)) if type_b else 0.0
     mean_grade = float(errors.get("track_mean_grade", mean_grade))
-    undulation = float(rng.uniform(0.0002, 0.001)) if "grade_profile" in chosen else 0.0
+    undulation = _drawn("grade_profile", drawn, chosen, lambda: float(rng.uniform(0.0002, 0.001)), 0.0)
     track = surveyed_track(rng, -400.0, length + 400.0, mean_grade=mean_grade, rms_undulation_grade=undulation)
-    field = _random_wind(rng, wind, chosen, -400.0, length + 400.0, mean_wind_mps)
+    field = _random_wind(rng, wind, chosen, -400.0, length + 400.0, mean_wind_mps, drawn=drawn)
 
     inst = (sens.perfect_instruments(speed_noise_sd_mps if speed_noise_sd_mps is not None else 0.02)
             if perfect_instruments else
-            sens.random_instruments(rng, type_b=type_b, yaw_dependent_factor="anemometer_yaw_factor" in chosen,
+            sens.random_instruments(rng, type_b=type_b, yaw_dependent_factor="anemometer_yaw_factor" in drawn,
                                     speed_noise_sd_mps=speed_noise_sd_mps))
-    dyn = (AnemometerDynamics(distance_constant_m=float(rng.uniform(1.5, 3.0)),
-                              overspeed_ratio=float(rng.uniform(1.2, 2.0)),
-                              vane_damping=float(rng.uniform(0.3, 0.6)),
-                              vane_wavelength_m=float(rng.uniform(4.5, 7.0)))
-           if "anemometer_dynamics" in chosen else None)
-    ahead = float(rng.uniform(1.5, 2.5)) if "anemometer_position" in chosen else None
+    if "anemometer_yaw_factor" not in chosen:  # withheld: drawn above, then discarded (_drawn)
+        inst = dataclasses.replace(inst, airspeed_factor_yaw=0.0)
+    dyn = _drawn("anemometer_dynamics", drawn, chosen,
+                 lambda: AnemometerDynamics(distance_constant_m=float(rng.uniform(1.5, 3.0)),
+                                            overspeed_ratio=float(rng.uniform(1.2, 2.0)),
+                                            vane_damping=float(rng.uniform(0.3, 0.6)),
+                                            vane_wavelength_m=float(rng.uniform(4.5, 7.0))), None)
+    ahead = _drawn("anemometer_position", drawn, chosen, lambda: float(rng.uniform(1.5, 2.5)), None)
     hygrometer_rng = np.random.default_rng([int(seed), HYGROMETER_STREAM])
     hygrometer = sens.random_hygrometer(hygrometer_rng, type_b=type_b and not perfect_instruments)
     if "yaw_offset_rad" in errors:
@@ -267,19 +290,20 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
         direction = first if k % 2 == 0 else -first
         frac = k / max(2 * n_pairs - 1, 1)
         speed, heading = field.mean_speed_mps, field.direction_rad
-        if "wind_drift" in chosen and speed > 0:
-            speed = max(speed * (1.0 + 0.1 * rng.normal()), 0.0)
-            heading = heading + np.deg2rad(8.0) * rng.normal()
+        if speed > 0:
+            speed, heading = _drawn("wind_drift", drawn, chosen,
+                                    lambda: (max(speed * (1.0 + 0.1 * rng.normal()), 0.0),
+                                             heading + np.deg2rad(8.0) * rng.normal()), (speed, heading))
         run_wind = field.with_mean(speed, heading)
-        t_amb = temperature0 + drift_t * frac + (0.2 * rng.normal() if "weather_drift" in chosen else 0.0)
-        p_amb = pressure0 + drift_p * frac + (20.0 * rng.normal() if "weather_drift" in chosen else 0.0)
+        t_amb = temperature0 + drift_t * frac + _drawn("weather_drift", drawn, chosen, lambda: 0.2 * rng.normal(), 0.0)
+        p_amb = pressure0 + drift_p * frac + _drawn("weather_drift", drawn, chosen, lambda: 20.0 * rng.normal(), 0.0)
         tyre_factor, cd_factor = 1.0 + run_to_run_sd * rng.normal(size=2)
         cond = RunConditions(
             direction=direction, start_position_m=0.0 if direction > 0 else length,
             v0_mps=float(rng.uniform(31.3, 33.5)), v_stop_mps=float(rng.uniform(4.2, 5.5)),
             temperature_k=t_amb, pressure_pa=p_amb, relative_humidity=humidity, gravity_mps2=gravity,
             clock_start_s=clock, tyre_factor=float(tyre_factor), cd_factor=float(cd_factor),
-            tyre_initial_excess_k=float(rng.uniform(-4.0, 2.0)) if "tyre_warmup" in chosen else 0.0)
+            tyre_initial_excess_k=_drawn("tyre_warmup", drawn, chosen, lambda: float(rng.uniform(-4.0, 2.0)), 0.0))
         trace = simulate_run(veh, cond, samples, wind=run_wind if speed > 0 or field.turbulence.amp.size else None,
                              track=track, admittance="admittance" in chosen, anemometer=dyn,
                              anemometer_ahead_m=ahead, rtol=rtol)
