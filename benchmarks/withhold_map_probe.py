@@ -6,7 +6,8 @@ effects switched off (``analysis.calibration.calibration_jobs(withhold=...)``: t
 size and Type B errors), or with ``--model`` (``--model-heavy`` above 3500 kg) fitted instead of
 the default (``--withhold`` with no names keeps every effect), or with ``--log`` channels logged
 beside the default ones (``--log humidity``: the hygrometer's reading, which the analysis then
-uses).  Each campaign is fitted by MAP and
+uses), or with ``--state-yaw-calibration`` the anemometer's airspeed factor against yaw stated in
+``vehicle.toml`` (the simulator's own, as a wind-tunnel calibration would give it).  Each campaign is fitted by MAP and
 Laplace.  Prints, per quantity, the mean relative error against the truth of both arms and their
 paired difference with its standard error: the part of the error the withheld physics causes, or
 what the model variant removes of it.  A quick probe of a bias; the NUTS study that confirms it is
@@ -26,6 +27,8 @@ what the model variant removes of it.  A quick probe of a bias; the NUTS study t
         --model-heavy four_term_tyre_lag_admittance_heavy_pitch_shapes --seeds 3000 3015
     python benchmarks/withhold_map_probe.py --withhold --log humidity --seeds 3000 3015 --second-only \
         --records benchmarks/records/withhold_map/humidity_logged_seeds3000_3015.csv
+    python benchmarks/withhold_map_probe.py --withhold --state-yaw-calibration --seeds 3000 3015 --second-only \
+        --records benchmarks/records/withhold_map/yaw_calibration_stated_seeds3000_3015.csv
 """
 
 from __future__ import annotations
@@ -41,11 +44,12 @@ from bayes_roadload.analysis.calibration import QUANTITIES
 
 
 def run(seeds, withhold, lo, hi, model=None, model_heavy=None, arms=("all", "withheld"),
-        base_model=None, base_model_heavy=None, log=()) -> pd.DataFrame:
+        base_model=None, base_model_heavy=None, log=(), state_yaw_calibration=False) -> pd.DataFrame:
     """Records of the ``arms`` (column ``arm``: ``all``, every effect and ``base_model``
     (``base_model_heavy`` above the heavy-duty test mass; default: fit's default), or
     ``withheld``, the named effects off, the ``log`` channels logged too and ``model``,
-    ``model_heavy``), one row per seed and
+    ``model_heavy``, and with ``state_yaw_calibration`` the anemometer's yaw calibration
+    stated in vehicle.toml), one row per seed and
     arm; an arm left out comes from another run's records, which :func:`summary` reads together
     with these."""
     from bayes_roadload.analysis.batch import run_batch
@@ -54,13 +58,15 @@ def run(seeds, withhold, lo, hi, model=None, model_heavy=None, arms=("all", "wit
 
     options = FitOptions(method="laplace")
     frames = []
-    for arm, off, name, heavy, logged in (("all", (), base_model, base_model_heavy, ()),
-                                          ("withheld", tuple(withhold), model, model_heavy, tuple(log))):
+    for arm, off, name, heavy, logged, stated in (
+            ("all", (), base_model, base_model_heavy, (), False),
+            ("withheld", tuple(withhold), model, model_heavy, tuple(log), state_yaw_calibration)):
         if arm in arms:
             df = run_batch(calibration_jobs(seeds, lo, hi, options=options, model=name, withhold=off,
-                                            model_heavy=heavy, log=logged), progress=False)
+                                            model_heavy=heavy, log=logged, state_yaw_calibration=stated),
+                           progress=False)
             frames.append(df.assign(arm=arm, withheld=" ".join(off), arm_model=name or "default",
-                                    arm_logged=" ".join(logged)))
+                                    arm_logged=" ".join(logged), arm_stated="yaw calibration" if stated else ""))
     return pd.concat(frames, ignore_index=True)
 
 
@@ -71,18 +77,20 @@ def summary(records: pd.DataFrame) -> str:
     arm (its withheld effects and model) the records hold."""
     records = records.assign(withheld=records["withheld"].astype(object).fillna("") if "withheld" in records else "",
                              arm_model=records["arm_model"].astype(object).fillna("default") if "arm_model" in records else "default",
-                             arm_logged=records["arm_logged"].astype(object).fillna("") if "arm_logged" in records else "")
+                             arm_logged=records["arm_logged"].astype(object).fillna("") if "arm_logged" in records else "",
+                             arm_stated=records["arm_stated"].astype(object).fillna("") if "arm_stated" in records else "")
     from bayes_roadload.analysis.batch import successful
 
     records = successful(records)  # a failed fit has no interval: it is left out of the pairs
     first = records[records["arm"] == "all"].drop_duplicates("name").set_index("name")
     tables = []
-    for (withheld, model, logged), rows in records[records["arm"] == "withheld"].groupby(
-            ["withheld", "arm_model", "arm_logged"]):
+    for (withheld, model, logged, stated), rows in records[records["arm"] == "withheld"].groupby(
+            ["withheld", "arm_model", "arm_logged", "arm_stated"]):
         second = rows.set_index("name")
         common = first.index.intersection(second.index)
         lines = [f"{len(common)} campaigns ({', '.join(common)}); second arm: withheld {withheld or 'none'}, "
-                 f"model {model}" + (f", also logged: {logged}" if logged else ""), "",
+                 f"model {model}" + (f", also logged: {logged}" if logged else "")
+                 + (f", stated in vehicle.toml: {stated}" if stated else ""), "",
                  "| quantity | mean rel. error %, first arm (every effect) | second arm | paired difference (SE) |",
                  "| --- | --- | --- | --- |"]
         for q in QUANTITIES:
@@ -121,6 +129,9 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", type=int, nargs=2, default=(1, 12), metavar=("MIN", "MAX"))
     ap.add_argument("--log", nargs="+", default=(), metavar="CHANNEL",
                     help="channels the second arm's campaigns log beside the default ones (e.g. humidity)")
+    ap.add_argument("--state-yaw-calibration", action="store_true",
+                    help="the second arm's vehicle.toml states the anemometer's airspeed factor against yaw "
+                         "(the simulator's e, as a wind-tunnel calibration would)")
     ap.add_argument("--records", type=Path, help="write the records here (CSV)")
     ap.add_argument("--second-only", action="store_true", help="fit the second arm alone (the first from another run's records)")
     ap.add_argument("--from-records", type=Path, nargs="+", help="only summarise written records (read together)")
@@ -130,7 +141,8 @@ def main(argv=None) -> int:
     else:
         records = run(range(args.seeds[0], args.seeds[1] + 1), args.withhold, *args.pairs, model=args.model,
                       model_heavy=args.model_heavy, arms=("withheld",) if args.second_only else ("all", "withheld"),
-                      base_model=args.base_model, base_model_heavy=args.base_model_heavy, log=args.log)
+                      base_model=args.base_model, base_model_heavy=args.base_model_heavy, log=args.log,
+                      state_yaw_calibration=args.state_yaw_calibration)
         if args.records:
             args.records.parent.mkdir(parents=True, exist_ok=True)
             records.to_csv(args.records, index=False)

@@ -17,6 +17,7 @@ and each campaign size of :data:`SIZE_BINS`.  Design seeds 100-199, confirmatory
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import Iterable
 
@@ -59,7 +60,7 @@ def pairs_of(seed: int, lo: int, hi: int) -> int:
 def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
                      options: FitOptions | None = None, model: str | None = None,
                      withhold: Iterable[str] = (), model_heavy: str | None = None,
-                     log: Iterable[str] = ()) -> list[FitJob]:
+                     log: Iterable[str] = (), state_yaw_calibration: bool = False) -> list[FitJob]:
     """One fit job per seed, with the default fit options (or ``options``: method, pooling,
     noise, robust, sampler and Type B budget pass through) and ``model`` (unless given,
     ``"auto"``: ``fit``'s default for each campaign, the registry's
@@ -72,7 +73,8 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
     (:attr:`~bayes_roadload.analysis.batch.FitJob.model_heavy`), as ``fit`` routes its default.
     ``log``: channels of :data:`~bayes_roadload.simulate.independent.CHANNELS` logged beside the
     default ones (e.g. ``"humidity"``; their draws come from streams of their own, so every other
-    draw of a seed is unchanged)."""
+    draw of a seed is unchanged).  ``state_yaw_calibration``: each campaign's ``vehicle.toml``
+    states its anemometer's yaw calibration (:func:`simulate_stating_yaw_calibration`)."""
     o = options or FitOptions()
     model = model or "auto"
     withhold = tuple(withhold)
@@ -88,11 +90,24 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
     if log:
         extra["channels"] = DEFAULT_CHANNELS + tuple(c for c in log if c not in DEFAULT_CHANNELS)
         tags["logged"] = " ".join(log)
-    return [FitJob(f"ind-{s}", functools.partial(simulate_independent, s, pairs=pairs_of(s, lo, hi), **extra), model=model,
+    if state_yaw_calibration:
+        tags["stated"] = "yaw calibration"
+    simulate = simulate_stating_yaw_calibration if state_yaw_calibration else simulate_independent
+    return [FitJob(f"ind-{s}", functools.partial(simulate, s, pairs=pairs_of(s, lo, hi), **extra), model=model,
                    method=o.method, pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler,
                    type_b=o.type_b, derived=DERIVED, tags={"seed": s, "pairs": pairs_of(s, lo, hi), **tags},
                    model_heavy=model_heavy)
             for s in seeds]
+
+
+def simulate_stating_yaw_calibration(seed: int, **kwargs):
+    """:func:`~bayes_roadload.simulate.independent.simulate_independent` ``(seed, **kwargs)``
+    whose ``vehicle.toml`` states the anemometer's airspeed factor against yaw as a wind-tunnel
+    calibration would: ``[anemometer] airspeed_yaw_coefficient_per_rad2`` = the simulator's
+    ``e`` (its instruments' ``airspeed_factor_yaw``, 0 when the effect is withheld)."""
+    c = simulate_independent(seed, **kwargs)
+    e = float(c.truth["meta"]["instruments"]["airspeed_factor_yaw"])
+    return dataclasses.replace(c, anemometer=dataclasses.replace(c.anemometer, airspeed_yaw_coefficient_per_rad2=e))
 
 
 def size_bin(pairs: int) -> str:

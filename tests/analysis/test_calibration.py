@@ -224,6 +224,20 @@ def test_a_study_can_log_the_humidity_too():
         calibration_jobs([1], 1, 1, log=["humidty"])
 
 
+def test_a_study_can_state_the_anemometers_yaw_calibration():
+    """``state_yaw_calibration``: the same runs under the same name, whose vehicle.toml states
+    the simulator's own airspeed factor against yaw (0 where the effect is withheld)."""
+    plain = calibration_jobs([3001], 1, 1)[0].campaign()
+    stated = calibration_jobs([3001], 1, 1, state_yaw_calibration=True)[0]
+    c = stated.campaign()
+    assert stated.tags["stated"] == "yaw calibration" and c.runs.equals(plain.runs)
+    e = c.truth["meta"]["instruments"]["airspeed_factor_yaw"]
+    assert e > 0.0 and c.anemometer.airspeed_yaw_coefficient_per_rad2 == e
+    assert plain.anemometer.airspeed_yaw_coefficient_per_rad2 == 0.0
+    off = calibration_jobs([3001], 1, 1, withhold=["anemometer_yaw_factor"], state_yaw_calibration=True)[0].campaign()
+    assert off.anemometer.airspeed_yaw_coefficient_per_rad2 == 0.0
+
+
 def test_campaign_sizes_come_from_the_seed():
     assert [pairs_of(s, 1, 12) for s in range(50)] == [pairs_of(s, 1, 12) for s in range(50)]
     assert {pairs_of(s, 1, 12) for s in range(200)} == set(range(1, 13))
