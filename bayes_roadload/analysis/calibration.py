@@ -168,16 +168,36 @@ def mass_class_table(records: pd.DataFrame) -> pd.DataFrame:
     return _group_coverage(rec, [mass_class(limit), mass_class(limit + 1.0)])
 
 
-def yaw_class_table(records: pd.DataFrame, classes: int = 4) -> pd.DataFrame:
+def quantile_class_table(records: pd.DataFrame, values: pd.Series, label: str = "{lo:.3g}-{hi:.3g}",
+                         classes: int = 4) -> pd.DataFrame:
     """95 % coverage and mean z of every quantity of :data:`QUANTITIES` by the quantile class
-    (``classes`` of equal count) of the campaigns' mean absolute logged yaw
-    (``mean_abs_yaw_rad``), labelled by its range in degrees; fits that failed are left out.
-    Columns ``group``, ``quantity``, ``n``, ``coverage95``, ``z_mean``."""
+    (``classes`` of equal count) of ``values`` (one per record, aligned on its index), each
+    class labelled by ``label`` formatted with its range ``lo``, ``hi``; fits that failed are
+    left out.  Columns ``group``, ``quantity``, ``n``, ``coverage95``, ``z_mean``."""
     rec = successful(records).copy()
-    deg = np.degrees(rec["mean_abs_yaw_rad"].astype(float))
-    bins = pd.qcut(deg, classes)
-    rec["group"] = [f"{b.left:.1f}-{b.right:.1f} deg" for b in bins]
-    return _group_coverage(rec, [f"{b.left:.1f}-{b.right:.1f} deg" for b in bins.cat.categories])
+    bins = pd.qcut(values.loc[rec.index].astype(float), classes)
+    names = [label.format(lo=b.left, hi=b.right) for b in bins.cat.categories]
+    rec["group"] = [label.format(lo=b.left, hi=b.right) for b in bins]
+    return _group_coverage(rec, names)
+
+
+def yaw_class_table(records: pd.DataFrame, classes: int = 4) -> pd.DataFrame:
+    """:func:`quantile_class_table` of the campaigns' mean absolute logged yaw
+    (``mean_abs_yaw_rad``), labelled by its range in degrees."""
+    return quantile_class_table(records, np.degrees(records["mean_abs_yaw_rad"].astype(float)),
+                                "{lo:.1f}-{hi:.1f} deg", classes)
+
+
+ESTIMATE_CLASSES = (("tyre_lag_gain_per_mps", "the fitted tyre-lag gain G_T (posterior mean, 1/(m/s))"),)
+"""Nuisance parameters of the default model by whose fitted value the printout reads the coverage
+(:func:`estimate_class_table`): a reading, chosen after the run of seeds 9000-9158 was seen."""
+
+
+def estimate_class_table(records: pd.DataFrame, parameter: str, classes: int = 4) -> pd.DataFrame:
+    """:func:`quantile_class_table` of the posterior mean of ``parameter`` (column
+    ``{parameter}_mean``): where the fit's estimate of a nuisance parameter and the misses of
+    the reported quantities go together."""
+    return quantile_class_table(records, records[f"{parameter}_mean"], "{lo:.4g} to {hi:.4g}", classes)
 
 
 def campaign_test_mass(seed: int, pairs: int) -> float:
@@ -254,6 +274,17 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
                                        "z_sd_without", "coverage95_without", "z_mean_without"])
 
 
+def _class_rows(table: pd.DataFrame) -> list[str]:
+    """Markdown rows of a :func:`quantile_class_table`: per class, n and every quantity's 95 %
+    coverage with its mean z in brackets."""
+    rows = []
+    for g in dict.fromkeys(table["group"]):
+        part = table[table["group"] == g]
+        rows.append(f"| {g} | {int(part['n'].max())} | "
+                    + " | ".join(f"{c:.2f} ({z:+.2f})" for c, z in zip(part["coverage95"], part["z_mean"])) + " |")
+    return rows
+
+
 def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: float | None = None,
                          split: tuple[str, float] | None = None) -> str:
     """The study's section of ``docs/calibration.md``: counts, gates (and those passed without a
@@ -262,8 +293,9 @@ def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: flo
     (:func:`mass_class_table`, when every record has ``test_mass_kg``), with ``split`` (e.g.
     :data:`DIAGNOSTIC_SPLIT`) the coverage on either side of a true value
     (:func:`truth_split_table`), and the coverage and mean z by the campaigns' mean absolute yaw
-    (:func:`yaw_class_table`, when every fit records it and there are at least 8); the last
-    three marked as readings."""
+    (:func:`yaw_class_table`, when every fit records it and there are at least 8) and by the
+    fitted value of each of :data:`ESTIMATE_CLASSES` (:func:`estimate_class_table`, likewise);
+    the last four marked as readings."""
     ok = successful(records)
     gate = ok["gate_pass"].astype(bool)
     first = f" ({int(passed_first_time(ok).sum())} first time, without a retry)" if "retries" in ok else ""
@@ -305,10 +337,16 @@ def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: flo
         lines += ["", "A reading, not a rule (the classes are the quartiles of this run's campaigns): 95 % coverage "
                   "and, in brackets, the mean z by the campaign's mean absolute logged yaw.", "",
                   "| mean abs. yaw | n | " + " | ".join(QUANTITIES) + " |", "|---|---|" + "---|" * len(QUANTITIES)]
-        for g in dict.fromkeys(yt["group"]):
-            part = yt[yt["group"] == g]
-            lines.append(f"| {g} | {int(part['n'].max())} | "
-                         + " | ".join(f"{c:.2f} ({z:+.2f})" for c, z in zip(part["coverage95"], part["z_mean"])) + " |")
+        lines += _class_rows(yt)
+    for parameter, what in ESTIMATE_CLASSES:
+        column = f"{parameter}_mean"
+        if column not in ok or not ok[column].notna().all() or len(ok) < 8:
+            continue
+        et = estimate_class_table(ok, parameter)
+        lines += ["", f"A reading, not a rule (the classes are the quartiles of this run's campaigns): 95 % coverage "
+                  f"and, in brackets, the mean z by {what}.", "",
+                  f"| {parameter} | n | " + " | ".join(QUANTITIES) + " |", "|---|---|" + "---|" * len(QUANTITIES)]
+        lines += _class_rows(et)
     attribution = budget_attribution(records)
     if not attribution.empty:
         lines += ["", "A reading, not a rule: each quantity's three largest Type B sources (median share of the "

@@ -187,6 +187,32 @@ def test_the_yaw_classes_read_coverage_and_bias_apart():
     assert "by the campaign's mean absolute logged yaw" in text and f"| {groups[-1]} | 10 | 0.00 (" in text
 
 
+def test_the_fitted_nuisance_classes_read_coverage_and_bias_apart():
+    """Quartiles of a fitted nuisance parameter (the tyre-lag gain's posterior mean): misses where
+    it is largest show in that class alone, whatever the order of the records; the section
+    prints the table only when every fit records the parameter."""
+    from bayes_roadload.analysis.calibration import estimate_class_table
+
+    rec = _records(1.0, n=40)
+    rng = np.random.default_rng(3)
+    gain = rng.permutation(np.linspace(0.001, 0.010, 40))
+    rec["tyre_lag_gain_per_mps_mean"] = gain
+    top = gain > np.quantile(gain, 0.75)
+    for q in QUANTITIES:
+        rec.loc[top, f"{q}_mean"] -= 5.0
+        rec.loc[top, f"{q}_in95"] = False
+    t = estimate_class_table(rec, "tyre_lag_gain_per_mps")
+    groups = list(dict.fromkeys(t["group"]))
+    assert len(groups) == 4 and (t["n"] == 10).all()
+    last = t[t["group"] == groups[-1]]
+    assert (last["coverage95"] == 0.0).all() and (last["z_mean"] < -3.0).all()
+    assert (t[t["group"] != groups[-1]]["z_mean"].abs() < 1.5).all()
+    text = calibration_markdown(rec, calibration_table(rec))
+    assert "by the fitted tyre-lag gain" in text and f"| {groups[-1]} | 10 | 0.00 (" in text
+    assert "by the fitted tyre-lag gain" not in calibration_markdown(
+        rec.drop(columns="tyre_lag_gain_per_mps_mean"), calibration_table(rec))
+
+
 def test_jobs_carry_the_model_asked_for():
     """The study fits fit's default model for each campaign unless told otherwise (``--model``):
     "auto", which the batch job resolves for each campaign as ``fit`` does."""
