@@ -13,7 +13,6 @@ from bayes_roadload.data import load_campaign, save_campaign
 from bayes_roadload.simulate.independent import (EFFECTS, TYPE_B, RunConditions, apply_effects,
                                                  random_vehicle, simulate_independent, simulate_run,
                                                  true_roadload)
-from bayes_roadload.simulate.independent import reference as ref
 from bayes_roadload.simulate.independent import sensors as sens
 from bayes_roadload.simulate.independent.dynamics import AnemometerDynamics, anemometer_response, moist_air_density
 from bayes_roadload.simulate.independent.wind import von_karman_turbulence
