@@ -315,8 +315,12 @@ def simulate_future(population: Population, pairs: int, seed: int) -> Campaign:
         rows = runs.index[runs["run"] == rid]
         runs.loc[rows, "speed_mps"] = speed[i][mask[i]]
         if has_air:
-            runs.loc[rows, "airspeed_mps"] = np.asarray(batch.airspeed_mps)[i][mask[i]]
-            runs.loc[rows, "yaw_rad"] = np.asarray(batch.yaw_rad)[i][mask[i]]
+            yaw_i = np.asarray(batch.yaw_rad)[i][mask[i]]
+            # the batch's airspeed carries the stated yaw calibration (Campaign.to_batch): undone,
+            # so that the readings written back are corrected once when fitted
+            runs.loc[rows, "airspeed_mps"] = future.anemometer.yaw_uncorrected_airspeed(
+                np.asarray(batch.airspeed_mps)[i][mask[i]], yaw_i)
+            runs.loc[rows, "yaw_rad"] = yaw_i
     return dataclasses.replace(future, runs=runs)
 
 

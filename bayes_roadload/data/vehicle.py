@@ -81,6 +81,14 @@ class Anemometer:
             return airspeed_reading_mps
         return airspeed_reading_mps * (1.0 + e * (self.yaw_factor * np.asarray(yaw_reading_rad, float)) ** 2)
 
+    def yaw_uncorrected_airspeed(self, airspeed_mps, yaw_reading_rad):
+        """The inverse of :meth:`yaw_corrected_airspeed`: the readings that it turns into
+        ``airspeed_mps`` (for data written back as readings, e.g. a planned campaign's)."""
+        e = self.airspeed_yaw_coefficient_per_rad2
+        if e == 0.0:
+            return airspeed_mps
+        return airspeed_mps / (1.0 + e * (self.yaw_factor * np.asarray(yaw_reading_rad, float)) ** 2)
+
     def calibrated_air(self, airspeed_reading_mps, yaw_reading_rad):
         """(relative airspeed v_r, yaw psi) from the readings: v_r = airspeed_factor x the
         :meth:`yaw_corrected_airspeed`, psi = yaw_factor x reading (thesis section 4.7.3)."""

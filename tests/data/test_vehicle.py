@@ -97,6 +97,8 @@ def test_a_stated_yaw_calibration_reads_back_and_corrects_the_airspeed_as_it_ent
     psi = 0.9 * runs["yaw_rad"].to_numpy().reshape(2, 40)
     want = runs["airspeed_mps"].to_numpy().reshape(2, 40) * (1.0 - 0.18 * psi**2)
     np.testing.assert_allclose(np.asarray(batch.airspeed_mps)[:, :40], want, rtol=1e-12)
+    back = anem.yaw_uncorrected_airspeed(want.ravel(), runs["yaw_rad"].to_numpy())
+    np.testing.assert_allclose(back, runs["airspeed_mps"].to_numpy(), rtol=1e-12)  # the inverse, for written-back data
     vr, yaw = anem.calibrated_air(runs["airspeed_mps"], runs["yaw_rad"])
     np.testing.assert_allclose(vr, 1.05 * want.ravel(), rtol=1e-12)
     np.testing.assert_allclose(yaw, psi.ravel(), rtol=1e-12)
