@@ -62,28 +62,32 @@ def test_the_held_intervals_and_the_sd_ratio_are_counted_per_arm_on_the_paired_s
 
 def test_each_arm_is_fitted_with_its_own_models(probe, monkeypatch):
     """The first arm takes --base-model (--base-model-heavy), every effect on; the second
-    --model (--model-heavy) with the withheld effects off and the --log channels logged; the
-    records name each arm's model and logged channels."""
+    --model (--model-heavy) with the withheld effects off, the --log channels logged and, with
+    --state-yaw-calibration, the anemometer's yaw calibration stated; the records name each
+    arm's model, logged channels and what it states."""
     import bayes_roadload.analysis.batch as batch
     import bayes_roadload.analysis.calibration as calibration
 
     calls = []
 
-    def jobs(seeds, lo, hi, options=None, model=None, withhold=(), model_heavy=None, log=()):
-        calls.append((model, model_heavy, tuple(withhold), tuple(log)))
+    def jobs(seeds, lo, hi, options=None, model=None, withhold=(), model_heavy=None, log=(),
+             state_yaw_calibration=False):
+        calls.append((model, model_heavy, tuple(withhold), tuple(log), state_yaw_calibration))
         return [model]
 
     monkeypatch.setattr(calibration, "calibration_jobs", jobs)
     monkeypatch.setattr(batch, "run_batch", lambda jobs, progress=True: pd.DataFrame({"name": ["ind-1"]}))
     records = probe.run([1], ["pitch"], 1, 2, model="m", model_heavy="mh", base_model="b", base_model_heavy="bh",
-                        log=["humidity"])
-    assert calls == [("b", "bh", (), ()), ("m", "mh", ("pitch",), ("humidity",))]
+                        log=["humidity"], state_yaw_calibration=True)
+    assert calls == [("b", "bh", (), (), False), ("m", "mh", ("pitch",), ("humidity",), True)]
     assert records["arm_model"].tolist() == ["b", "m"] and records["arm"].tolist() == ["all", "withheld"]
     assert records["arm_logged"].tolist() == ["", "humidity"]
+    assert records["arm_stated"].tolist() == ["", "yaw calibration"]
     table = probe.summary(pd.concat([_records("all", [-4.0], names=("ind-1",)),
-                                     _records("withheld", [-2.0], names=("ind-1",)).assign(arm_logged="humidity")],
+                                     _records("withheld", [-2.0], names=("ind-1",)).assign(
+                                         arm_logged="humidity", arm_stated="yaw calibration")],
                                     ignore_index=True))
-    assert "also logged: humidity" in table
+    assert "also logged: humidity" in table and "stated in vehicle.toml: yaw calibration" in table
 
 
 def test_a_failed_fit_is_left_out_of_the_pairs_not_counted_as_held(probe):
