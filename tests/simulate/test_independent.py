@@ -267,3 +267,11 @@ def test_a_withheld_effect_leaves_the_campaigns_other_draws_as_they_were(effect)
     assert a["sample_rate_hz"] == b["sample_rate_hz"]
     assert effect in a["effects"] and effect not in b["effects"]
     assert a["hygrometer"] == b["hygrometer"]
+
+
+def test_withholding_an_effect_that_was_not_asked_for_changes_nothing():
+    """``withhold`` takes effects out of those asked for: withholding one outside ``effects``
+    leaves the campaign of ``effects`` as it is (its draws are not made either)."""
+    asked = simulate_independent(3001, pairs=1, effects=("turbulence",))
+    also = simulate_independent(3001, pairs=1, effects=("turbulence",), withhold=("humidity",))
+    assert also.runs.equals(asked.runs)

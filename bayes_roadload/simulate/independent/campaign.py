@@ -204,12 +204,12 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
         raise ValueError(f"errors: unknown {sorted(set(errors) - set(SETTABLE_ERRORS))}; settable: {SETTABLE_ERRORS}")
     if perfect_instruments and errors:
         raise ValueError("errors: perfect instruments have no Type B errors")
-    chosen = frozenset(EFFECTS) if effects is None else frozenset(effects)
-    chosen = chosen - frozenset(withhold)
+    requested = frozenset(EFFECTS) if effects is None else frozenset(effects)
+    chosen = requested - frozenset(withhold)
     unknown = (chosen | frozenset(withhold)) - frozenset(EFFECTS)
     if unknown:
         raise ValueError(f"unknown effect(s) {sorted(unknown)}; known: {sorted(EFFECTS)}")
-    drawn = chosen | frozenset(withhold)  # a withheld effect's draws are made and discarded (_drawn)
+    drawn = requested & frozenset(EFFECTS)  # a withheld effect's draws are made and discarded (_drawn)
     if perfect_instruments:
         chosen = frozenset(e for e in chosen if not EFFECTS[e].instrument)
         drawn = frozenset(e for e in drawn if not EFFECTS[e].instrument)
