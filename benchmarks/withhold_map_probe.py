@@ -27,8 +27,7 @@ what the model variant removes of it.  A quick probe of a bias; the NUTS study t
         --model-heavy four_term_tyre_lag_admittance_heavy_pitch_shapes --seeds 3000 3015
     python benchmarks/withhold_map_probe.py --withhold --log humidity --seeds 3000 3015 --second-only \
         --records benchmarks/records/withhold_map/humidity_logged_seeds3000_3015.csv
-    python benchmarks/withhold_map_probe.py --withhold --state-yaw-calibration --seeds 3000 3015 --second-only \
-        --records benchmarks/records/withhold_map/yaw_calibration_stated_seeds3000_3015.csv
+    python benchmarks/withhold_map_probe.py --withhold --state-yaw-calibration --seeds 3000 3015 --second-only
 """
 
 from __future__ import annotations

@@ -274,10 +274,13 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
                                        "z_sd_without", "coverage95_without", "z_mean_without"])
 
 
-def _class_rows(table: pd.DataFrame) -> list[str]:
-    """Markdown rows of a :func:`quantile_class_table`: per class, n and every quantity's 95 %
-    coverage with its mean z in brackets."""
-    rows = []
+def _class_section(what: str, head: str, table: pd.DataFrame) -> list[str]:
+    """Markdown lines of a :func:`quantile_class_table` by ``what`` (column ``head``): a caption
+    marking it as a reading and, per class, n and every quantity's 95 % coverage with its mean z
+    in brackets."""
+    rows = ["", "A reading, not a rule (the classes are the quartiles of this run's campaigns): 95 % coverage "
+            f"and, in brackets, the mean z by {what}.", "",
+            f"| {head} | n | " + " | ".join(QUANTITIES) + " |", "|---|---|" + "---|" * len(QUANTITIES)]
     for g in dict.fromkeys(table["group"]):
         part = table[table["group"] == g]
         rows.append(f"| {g} | {int(part['n'].max())} | "
@@ -333,20 +336,11 @@ def calibration_markdown(records: pd.DataFrame, table: pd.DataFrame, wall_s: flo
             lines.append(f"| {g} | {int(part['n'].iloc[0])} | "
                          + " | ".join(f"{c:.2f}" for c in part["coverage95"]) + " |")
     if "mean_abs_yaw_rad" in ok and ok["mean_abs_yaw_rad"].notna().all() and len(ok) >= 8:
-        yt = yaw_class_table(ok)
-        lines += ["", "A reading, not a rule (the classes are the quartiles of this run's campaigns): 95 % coverage "
-                  "and, in brackets, the mean z by the campaign's mean absolute logged yaw.", "",
-                  "| mean abs. yaw | n | " + " | ".join(QUANTITIES) + " |", "|---|---|" + "---|" * len(QUANTITIES)]
-        lines += _class_rows(yt)
+        lines += _class_section("the campaign's mean absolute logged yaw", "mean abs. yaw", yaw_class_table(ok))
     for parameter, what in ESTIMATE_CLASSES:
         column = f"{parameter}_mean"
-        if column not in ok or not ok[column].notna().all() or len(ok) < 8:
-            continue
-        et = estimate_class_table(ok, parameter)
-        lines += ["", f"A reading, not a rule (the classes are the quartiles of this run's campaigns): 95 % coverage "
-                  f"and, in brackets, the mean z by {what}.", "",
-                  f"| {parameter} | n | " + " | ".join(QUANTITIES) + " |", "|---|---|" + "---|" * len(QUANTITIES)]
-        lines += _class_rows(et)
+        if column in ok and ok[column].notna().all() and len(ok) >= 8:
+            lines += _class_section(what, parameter, estimate_class_table(ok, parameter))
     attribution = budget_attribution(records)
     if not attribution.empty:
         lines += ["", "A reading, not a rule: each quantity's three largest Type B sources (median share of the "

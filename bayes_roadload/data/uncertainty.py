@@ -129,12 +129,13 @@ def _airspeed_yaw_coefficient(c, delta: float):
     ch = _channels(c)
     if not ch.vehicle:
         return None
-    factor = float(c.anemometer.yaw_factor)
+    shifted = dataclasses.replace(c.anemometer, airspeed_yaw_coefficient_per_rad2=delta)
 
     def scale(t: pd.DataFrame) -> pd.DataFrame | None:
         if "airspeed_mps" not in t or "yaw_rad" not in t:
             return None
-        t["airspeed_mps"] = t["airspeed_mps"] * (1.0 + delta * (factor * t["yaw_rad"]) ** 2)
+        t["airspeed_mps"] = shifted.yaw_corrected_airspeed(t["airspeed_mps"].to_numpy(float),
+                                                           t["yaw_rad"].to_numpy(float))
         return t
     return _with_table(c, scale)
 

@@ -209,7 +209,7 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     unknown = (chosen | frozenset(withhold)) - frozenset(EFFECTS)
     if unknown:
         raise ValueError(f"unknown effect(s) {sorted(unknown)}; known: {sorted(EFFECTS)}")
-    drawn = requested & frozenset(EFFECTS)  # a withheld effect's draws are made and discarded (_drawn)
+    drawn = requested  # a withheld effect's draws are made and discarded (_drawn)
     if perfect_instruments:
         chosen = frozenset(e for e in chosen if not EFFECTS[e].instrument)
         drawn = frozenset(e for e in drawn if not EFFECTS[e].instrument)
