@@ -7,6 +7,8 @@ given, checked against the records' true C_D0), and prints, as markdown:
 * the mean z and 95 % coverage of C_D0 and F2 by the quartile of the fitted tyre-lag gain G_T
   (posterior mean), of the simulator's own G = k r (its tyre temperature coefficient times its
   steady temperature rise per m/s) and of its tyre time constant (the analysis holds 400 +- 200 s);
+* the same by the simulator's vehicle category, and by category and the calm / gusty half of
+  the campaigns' mean absolute yaw;
 * how well the fit recovers G: the correlation of the fitted with the true value, the gain's own
   95 % coverage and sd(z) against G, and the correlation of its error with C_D0's and F2's z.
 
@@ -35,7 +37,7 @@ def with_true_tyres(records: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for seed in records["seed"]:
         v = random_vehicle(np.random.default_rng(int(seed)))
-        rows.append({"seed": seed, "cd0": v.cd0, "G_true": v.tyre_temp_coeff_per_k * v.tyre_rise_k_per_mps,
+        rows.append({"seed": seed, "cd0": v.cd0, "category": v.category, "G_true": v.tyre_temp_coeff_per_k * v.tyre_rise_k_per_mps,
                      "tau_true_s": v.tyre_tau_s})
     out = records.merge(pd.DataFrame(rows), on="seed")
     if not np.allclose(out["cd0"], out["CD0_truth"], rtol=1e-12):
@@ -57,6 +59,24 @@ def by_quartile(rec: pd.DataFrame, column: str, label: str) -> list[str]:
     return lines
 
 
+def by_category(rec: pd.DataFrame) -> list[str]:
+    """Markdown rows: n, C_D0's and F2's coverage, mean z and mean relative error (%) by the
+    simulator's vehicle category, and by category and the half of mean absolute yaw (split at
+    the median of all campaigns)."""
+    rec = rec.assign(err_CD0=(rec["CD0_mean"] / rec["CD0_truth"] - 1.0) * 100.0,
+                     err_F2=(rec["F2_N_per_kph2_mean"] / rec["F2_N_per_kph2_truth"] - 1.0) * 100.0,
+                     yaw_half=np.where(rec["mean_abs_yaw_rad"] > rec["mean_abs_yaw_rad"].median(), "gusty", "calm"))
+    lines = ["| vehicle category (yaw half) | n | C_D0 coverage | C_D0 mean z | C_D0 mean error % | F2 coverage | "
+             "F2 mean z | F2 mean error % |", "|---|---|---|---|---|---|---|---|"]
+    for keys in (["category"], ["category", "yaw_half"]):
+        for name, part in rec.groupby(keys):
+            label = " ".join(name) if isinstance(name, tuple) else name
+            lines.append(f"| {label} | {len(part)} | {part['CD0_in95'].mean():.2f} | {part['z_CD0'].mean():+.2f} | "
+                         f"{part['err_CD0'].mean():+.2f} | {part['F2_N_per_kph2_in95'].mean():.2f} | "
+                         f"{part['z_F2_N_per_kph2'].mean():+.2f} | {part['err_F2'].mean():+.2f} |")
+    return lines
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("records", help="a calibration study's records (CSV)")
@@ -75,7 +95,8 @@ def main(argv=None) -> int:
     lines += by_quartile(rec, f"{GAIN}_mean", "fitted G_T (1/(m/s))") + [""]
     lines += by_quartile(rec, "G_true", "simulator's G = k r (1/(m/s))") + [""]
     lines += by_quartile(rec, "tau_true_s", "simulator's tyre time constant (s)") + [""]
-    lines += by_quartile(rec.assign(yaw_deg=np.degrees(rec["mean_abs_yaw_rad"])), "yaw_deg", "mean abs. yaw (deg)")
+    lines += by_quartile(rec.assign(yaw_deg=np.degrees(rec["mean_abs_yaw_rad"])), "yaw_deg", "mean abs. yaw (deg)") + [""]
+    lines += by_category(rec)
     sys.stdout.write("\n".join(lines) + "\n")
     return 0
 
