@@ -28,6 +28,8 @@ what the model variant removes of it.  A quick probe of a bias; the NUTS study t
     python benchmarks/withhold_map_probe.py --withhold --log humidity --seeds 3000 3015 --second-only \
         --records benchmarks/records/withhold_map/humidity_logged_seeds3000_3015.csv
     python benchmarks/withhold_map_probe.py --withhold --state-yaw-calibration --seeds 3000 3015 --second-only
+    python benchmarks/withhold_map_probe.py --withhold turbulence --seeds 3000 3015 --second-only \
+        --categories heavy_truck light_truck
 """
 
 from __future__ import annotations
@@ -67,6 +69,20 @@ def run(seeds, withhold, lo, hi, model=None, model_heavy=None, arms=("all", "wit
             frames.append(df.assign(arm=arm, withheld=" ".join(off), arm_model=name or "default",
                                     arm_logged=" ".join(logged), arm_stated="yaw calibration" if stated else ""))
     return pd.concat(frames, ignore_index=True)
+
+
+def of_categories(seeds, categories=None) -> list[int]:
+    """The ``seeds`` whose campaign's vehicle is of one of ``categories`` (all with None): the
+    independent simulator's first draw of a seed is its vehicle
+    (:func:`~bayes_roadload.simulate.independent.vehicles.random_vehicle`)."""
+    if not categories:
+        return list(seeds)
+    from bayes_roadload.simulate.independent.vehicles import CATEGORIES, random_vehicle
+
+    unknown = sorted(set(categories) - set(CATEGORIES))
+    if unknown:
+        raise SystemExit(f"unknown categories {unknown}; the simulator's: {sorted(CATEGORIES)}")
+    return [s for s in seeds if random_vehicle(np.random.default_rng(int(s))).category in categories]
 
 
 def summary(records: pd.DataFrame) -> str:
@@ -131,6 +147,8 @@ def main(argv=None) -> int:
     ap.add_argument("--state-yaw-calibration", action="store_true",
                     help="the second arm's vehicle.toml states the anemometer's airspeed factor against yaw "
                          "(the simulator's e, as a wind-tunnel calibration would)")
+    ap.add_argument("--categories", nargs="+", metavar="CATEGORY",
+                    help="only the seeds whose vehicle is of these categories (e.g. heavy_truck light_truck)")
     ap.add_argument("--records", type=Path, help="write the records here (CSV)")
     ap.add_argument("--second-only", action="store_true", help="fit the second arm alone (the first from another run's records)")
     ap.add_argument("--from-records", type=Path, nargs="+", help="only summarise written records (read together)")
@@ -138,7 +156,8 @@ def main(argv=None) -> int:
     if args.from_records:
         records = pd.concat([pd.read_csv(f) for f in args.from_records], ignore_index=True)
     else:
-        records = run(range(args.seeds[0], args.seeds[1] + 1), args.withhold, *args.pairs, model=args.model,
+        seeds = of_categories(range(args.seeds[0], args.seeds[1] + 1), args.categories)
+        records = run(seeds, args.withhold, *args.pairs, model=args.model,
                       model_heavy=args.model_heavy, arms=("withheld",) if args.second_only else ("all", "withheld"),
                       base_model=args.base_model, base_model_heavy=args.base_model_heavy, log=args.log,
                       state_yaw_calibration=args.state_yaw_calibration)

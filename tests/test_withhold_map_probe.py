@@ -98,3 +98,20 @@ def test_a_failed_fit_is_left_out_of_the_pairs_not_counted_as_held(probe):
         CD0_in95=[True, False], CD0_sd=[0.02, 0.05], error=[None, None])
     table = probe.summary(pd.concat([first, second], ignore_index=True))
     assert "| all | 1 of 1 | 1 of 1 | |" in table and "1 campaigns (ind-1)" in table
+
+
+def test_categories_keep_the_seeds_whose_first_draw_is_of_them(probe):
+    """The seeds kept are those whose campaign vehicle (the seed's first draw) is a truck, every
+    other seed is left out; an unknown category is refused."""
+    import numpy as np
+
+    from bayes_roadload.simulate.independent.vehicles import random_vehicle
+
+    seeds = range(3000, 3016)
+    kept = probe.of_categories(seeds, ["heavy_truck", "light_truck"])
+    drawn = {s: random_vehicle(np.random.default_rng(s)).category for s in seeds}
+    assert kept == [s for s in seeds if drawn[s].endswith("_truck")]
+    assert 0 < len(kept) < len(seeds)
+    assert probe.of_categories(seeds) == list(seeds)
+    with pytest.raises(SystemExit, match="unknown categories"):
+        probe.of_categories(seeds, ["lorry"])
