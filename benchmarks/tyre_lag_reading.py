@@ -7,6 +7,8 @@ given, checked against the records' true C_D0), and prints, as markdown:
 * the mean z and 95 % coverage of C_D0 and F2 by the quartile of the fitted tyre-lag gain G_T
   (posterior mean), of the simulator's own G = k r (its tyre temperature coefficient times its
   steady temperature rise per m/s) and of its tyre time constant (the analysis holds 400 +- 200 s);
+* the same by the simulator's yaw-drag quartic K4 (its levelling at large yaw) and by the
+  campaign's logging rate (the simulator's draw after the vehicle);
 * the same by the simulator's vehicle category, and by category and the calm / gusty half of
   the campaigns' mean absolute yaw;
 * how well the fit recovers G: the correlation of the fitted with the true value, the gain's own
@@ -26,6 +28,7 @@ import sys
 import numpy as np
 import pandas as pd
 
+from bayes_roadload.simulate.independent.campaign import SAMPLE_RATES_HZ
 from bayes_roadload.simulate.independent.vehicles import random_vehicle
 
 GAIN = "tyre_lag_gain_per_mps"
@@ -36,13 +39,16 @@ def with_true_tyres(records: pd.DataFrame) -> pd.DataFrame:
     C_D0, F2 and G_T; refuses records whose rebuilt vehicle is not the one fitted."""
     rows = []
     for seed in records["seed"]:
-        v = random_vehicle(np.random.default_rng(int(seed)))
-        rows.append({"seed": seed, "cd0": v.cd0, "category": v.category, "G_true": v.tyre_temp_coeff_per_k * v.tyre_rise_k_per_mps,
+        rng = np.random.default_rng(int(seed))
+        v = random_vehicle(rng)
+        rate = float(rng.choice(SAMPLE_RATES_HZ))  # the simulator's next draw: the logging rate
+        rows.append({"seed": seed, "cd0": v.cd0, "category": v.category, "k4_per_rad4": v.k4_per_rad4,
+                     "sample_rate_hz": rate, "G_true": v.tyre_temp_coeff_per_k * v.tyre_rise_k_per_mps,
                      "tau_true_s": v.tyre_tau_s})
     out = records.merge(pd.DataFrame(rows), on="seed")
     if not np.allclose(out["cd0"], out["CD0_truth"], rtol=1e-12):
         raise SystemExit("the rebuilt vehicles are not the records' (the simulator's draw order changed)")
-    for q in ("CD0", "F2_N_per_kph2"):
+    for q in ("CD0", "F2_N_per_kph2", "KD"):
         out[f"z_{q}"] = (out[f"{q}_mean"] - out[f"{q}_truth"]) / out[f"{q}_sd"]
     out["z_G"] = (out[f"{GAIN}_mean"] - out["G_true"]) / out[f"{GAIN}_sd"]
     return out
@@ -77,6 +83,22 @@ def by_category(rec: pd.DataFrame) -> list[str]:
     return lines
 
 
+def by_rate(rec: pd.DataFrame) -> list[str]:
+    """Markdown rows by the campaign's logging rate: n, mean pairs, C_D0's coverage, mean z,
+    mean and rms relative error (%) and median relative posterior sd (%), F2's coverage and mean z."""
+    err = (rec["CD0_mean"] / rec["CD0_truth"] - 1.0) * 100.0
+    rsd = rec["CD0_sd"] / rec["CD0_truth"] * 100.0
+    lines = ["| logging rate (Hz) | n | mean pairs | C_D0 coverage | C_D0 mean z | C_D0 mean error % | C_D0 rms error % | "
+             "C_D0 median sd % | F2 coverage | F2 mean z |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for rate, part in rec.groupby("sample_rate_hz"):
+        e = err[part.index]
+        lines.append(f"| {rate:g} | {len(part)} | {part['pairs'].mean():.1f} | {part['CD0_in95'].mean():.2f} | "
+                     f"{part['z_CD0'].mean():+.2f} | {e.mean():+.2f} | {np.sqrt(np.mean(e**2)):.2f} | "
+                     f"{rsd[part.index].median():.2f} | {part['F2_N_per_kph2_in95'].mean():.2f} | "
+                     f"{part['z_F2_N_per_kph2'].mean():+.2f} |")
+    return lines
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("records", help="a calibration study's records (CSV)")
@@ -96,7 +118,9 @@ def main(argv=None) -> int:
     lines += by_quartile(rec, "G_true", "simulator's G = k r (1/(m/s))") + [""]
     lines += by_quartile(rec, "tau_true_s", "simulator's tyre time constant (s)") + [""]
     lines += by_quartile(rec.assign(yaw_deg=np.degrees(rec["mean_abs_yaw_rad"])), "yaw_deg", "mean abs. yaw (deg)") + [""]
-    lines += by_category(rec)
+    lines += by_category(rec) + [""]
+    lines += by_quartile(rec, "k4_per_rad4", "simulator's yaw-drag quartic K4 (rad^-4; more negative: more levelling)") + [""]
+    lines += by_rate(rec)
     sys.stdout.write("\n".join(lines) + "\n")
     return 0
 
