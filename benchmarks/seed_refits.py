@@ -1,0 +1,119 @@
+"""Named campaigns of the independent simulator refitted by MAP + Laplace: thinned, or with a model variant.
+
+The calibration study's campaigns (``analysis.calibration.calibration_jobs``: seed, size and
+every draw as the study made them) are fitted by MAP and Laplace with the Type B step (the
+probe of ``withhold_map_probe.py``, which reproduces NUTS' means and sds on these campaigns to
+a few per cent of the sd), either as logged or keeping every ``--keep-every``-th sample of each
+run (a 20 Hz log read at 4 Hz: the same physics, instruments and noise per sample), and with
+``--model`` (``--model-heavy`` above 3500 kg) instead of the default.  ``--compare`` prints,
+seed by seed, the relative errors (%) of two such record files and their paired mean change.
+
+    python benchmarks/seed_refits.py --seeds 9051 9056 9021 9047 9081 9019 9069 9014 9002 9155 \\
+        --records benchmarks/records/seed_refits/misses_20hz.csv
+    python benchmarks/seed_refits.py --seeds 9051 9056 9021 9047 9081 9019 9069 9014 9002 9155 \\
+        --keep-every 5 --records benchmarks/records/seed_refits/misses_20hz_at_4hz.csv
+    python benchmarks/seed_refits.py --compare benchmarks/records/seed_refits/misses_20hz.csv \\
+        benchmarks/records/seed_refits/misses_20hz_at_4hz.csv
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+QUANTITIES = ("AD", "BD", "CD0", "KD", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
+
+
+def thinned(campaign, keep_every: int):
+    """``campaign`` with every ``keep_every``-th sample of each run kept (the first included)."""
+    if keep_every <= 1:
+        return campaign
+    runs = campaign.runs
+    return dataclasses.replace(campaign, runs=runs[runs.groupby("run").cumcount() % keep_every == 0].reset_index(drop=True))
+
+
+def simulated(seed: int, lo: int, hi: int, keep_every: int):
+    """The calibration study's campaign of ``seed`` (``pairs_of(seed, lo, hi)`` pairs), thinned."""
+    from bayes_roadload.analysis.calibration import pairs_of
+    from bayes_roadload.simulate.independent import simulate_independent
+
+    return thinned(simulate_independent(seed, pairs=pairs_of(seed, lo, hi)), keep_every)
+
+
+def run(seeds, keep_every: int = 1, model: str | None = None, model_heavy: str | None = None,
+        lo: int = 1, hi: int = 12, workers: int = 2) -> pd.DataFrame:
+    """MAP + Laplace records of the ``seeds``' campaigns, one row per seed (column ``keep_every``)."""
+    from bayes_roadload.analysis.batch import FitJob, batch_client, run_batch
+    from bayes_roadload.analysis.calibration import DERIVED, pairs_of
+    from bayes_roadload.inference.kinds import FitOptions
+
+    o = FitOptions(method="laplace")
+    jobs = [FitJob(f"ind-{s}", functools.partial(simulated, s, lo, hi, keep_every), model=model or "auto",
+                   model_heavy=model_heavy, method=o.method, pooling=o.pooling, noise=o.noise, robust=o.robust,
+                   sampler=o.sampler, type_b=o.type_b, derived=DERIVED,
+                   tags={"seed": s, "pairs": pairs_of(s, lo, hi), "keep_every": keep_every})
+            for s in seeds]
+    with batch_client(workers=workers) as client:
+        return run_batch(jobs, client, progress=False)
+
+
+def compare(first: pd.DataFrame, second: pd.DataFrame) -> str:
+    """Markdown: each common seed's relative error (%) of C_D0, K_D, F1, F2 in both record files
+    and C_D0's relative posterior sd, then the mean of each column and the paired mean change
+    (second - first) with its standard error."""
+    a, b = first.set_index("seed"), second.set_index("seed")
+    common = a.index.intersection(b.index)
+    shown = ("CD0", "KD", "F1_N_per_kph", "F2_N_per_kph2")
+    err = {(q, k): (f.loc[common, f"{q}_mean"] / f.loc[common, f"{q}_truth"] - 1.0) * 100.0
+           for q in shown for k, f in (("first", a), ("second", b))}
+    sd = {k: f.loc[common, "CD0_sd"] / f.loc[common, "CD0_truth"] * 100.0 for k, f in (("first", a), ("second", b))}
+    lines = [f"{len(common)} campaigns; relative error %, first / second record file", "",
+             "| seed | pairs | " + " | ".join(shown) + " | C_D0 sd % |", "|---" * (3 + len(shown)) + "|"]
+    for s in common:
+        cells = [f"{err[(q, 'first')][s]:+.2f} / {err[(q, 'second')][s]:+.2f}" for q in shown]
+        lines.append(f"| {s} | {int(a.loc[s, 'pairs'])} | " + " | ".join(cells)
+                     + f" | {sd['first'][s]:.2f} / {sd['second'][s]:.2f} |")
+    cells = [f"{err[(q, 'first')].mean():+.2f} / {err[(q, 'second')].mean():+.2f}" for q in shown]
+    lines.append("| mean | | " + " | ".join(cells) + f" | {sd['first'].mean():.2f} / {sd['second'].mean():.2f} |")
+    changes = []
+    for q in shown:
+        d = err[(q, "second")] - err[(q, "first")]
+        se = d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else float("nan")
+        changes.append(f"{d.mean():+.2f} ({se:.2f})")
+    lines.append("| paired change (SE) | | " + " | ".join(changes) + " | |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="+", help="the campaigns (calibration study seeds)")
+    ap.add_argument("--pairs", type=int, nargs=2, default=(1, 12), metavar=("MIN", "MAX"))
+    ap.add_argument("--keep-every", type=int, default=1, help="keep every k-th sample of each run (default 1: all)")
+    ap.add_argument("--model", default=None, help="the analysis model (default: fit's default)")
+    ap.add_argument("--model-heavy", default=None, help="with --model: the model above 3500 kg test mass")
+    ap.add_argument("--workers", type=int, default=2, help="Dask workers")
+    ap.add_argument("--records", type=Path, help="write the records here (CSV)")
+    ap.add_argument("--compare", type=Path, nargs=2, metavar=("FIRST", "SECOND"), help="only compare two record files")
+    a = ap.parse_args(argv)
+    if a.compare:
+        print(compare(*(pd.read_csv(p) for p in a.compare)))
+        return 0
+    if not a.seeds:
+        ap.error("give --seeds or --compare")
+    records = run(a.seeds, a.keep_every, a.model, a.model_heavy, *a.pairs, workers=a.workers)
+    if a.records:
+        a.records.parent.mkdir(parents=True, exist_ok=True)
+        records.to_csv(a.records, index=False)
+    print(records[["seed", "pairs", "keep_every", "n_samples"]
+                  + [f"{q}_{c}" for q in ("CD0", "KD") for c in ("mean", "truth", "sd")]].to_string(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

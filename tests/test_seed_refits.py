@@ -1,0 +1,43 @@
+"""benchmarks/seed_refits.py: thinning a campaign's runs and the paired comparison of two refits."""
+
+import pandas as pd
+import pytest
+
+from .conftest import benchmark_script
+
+
+@pytest.fixture(scope="module")
+def refits():
+    with benchmark_script("seed_refits") as module:
+        yield module
+
+
+def test_thinning_keeps_every_kth_sample_of_each_run_from_its_first(refits):
+    from bayes_roadload.simulate.independent import simulate_independent
+
+    c = simulate_independent(5, pairs=1, sample_rate_hz=20.0, wind="calm")
+    t = refits.thinned(c, 5)
+    for rid, run in c.runs.groupby("run"):
+        kept = t.runs[t.runs["run"] == rid]
+        assert kept["time_s"].tolist() == run["time_s"].iloc[::5].tolist()
+    assert list(t.runs.columns) == list(c.runs.columns)
+    assert refits.thinned(c, 1) is c
+
+
+def test_compare_reports_each_seed_and_the_paired_change(refits):
+    """C_D0 errors -10 / -4 % in the first file and -8 / -4 % in the second: means -7.00 / -6.00,
+    paired change +1.00 with SE sd(+2, 0) / sqrt 2 = 1.00."""
+    def records(errors):
+        rows = []
+        for seed, e in zip((1, 2), errors):
+            row = {"seed": seed, "pairs": 3, "CD0_truth": 0.5, "CD0_mean": 0.5 * (1 + e / 100), "CD0_sd": 0.02}
+            for q in ("KD", "F1_N_per_kph", "F2_N_per_kph2"):
+                row.update({f"{q}_truth": 1.0, f"{q}_mean": 1.0})
+            rows.append(row)
+        return pd.DataFrame(rows)
+
+    table = refits.compare(records([-10.0, -4.0]), records([-8.0, -4.0]))
+    seed1 = next(x for x in table.splitlines() if x.startswith("| 1 |"))
+    assert "-10.00 / -8.00" in seed1 and "4.00 / 4.00" in seed1
+    assert "-7.00 / -6.00" in next(x for x in table.splitlines() if x.startswith("| mean |"))
+    assert "+1.00 (1.00)" in next(x for x in table.splitlines() if x.startswith("| paired change"))
