@@ -28,8 +28,7 @@ import sys
 import numpy as np
 import pandas as pd
 
-from bayes_roadload.simulate.independent.campaign import SAMPLE_RATES_HZ
-from bayes_roadload.simulate.independent.vehicles import random_vehicle
+from bayes_roadload.simulate.independent import first_draws
 
 GAIN = "tyre_lag_gain_per_mps"
 
@@ -39,9 +38,7 @@ def with_true_tyres(records: pd.DataFrame) -> pd.DataFrame:
     C_D0, F2 and G_T; refuses records whose rebuilt vehicle is not the one fitted."""
     rows = []
     for seed in records["seed"]:
-        rng = np.random.default_rng(int(seed))
-        v = random_vehicle(rng)
-        rate = float(rng.choice(SAMPLE_RATES_HZ))  # the simulator's next draw: the logging rate
+        v, rate = first_draws(int(seed))
         rows.append({"seed": seed, "cd0": v.cd0, "category": v.category, "k4_per_rad4": v.k4_per_rad4,
                      "sample_rate_hz": rate, "G_true": v.tyre_temp_coeff_per_k * v.tyre_rise_k_per_mps,
                      "tau_true_s": v.tyre_tau_s})

@@ -72,17 +72,16 @@ def run(seeds, withhold, lo, hi, model=None, model_heavy=None, arms=("all", "wit
 
 
 def of_categories(seeds, categories=None) -> list[int]:
-    """The ``seeds`` whose campaign's vehicle is of one of ``categories`` (all with None): the
-    independent simulator's first draw of a seed is its vehicle
-    (:func:`~bayes_roadload.simulate.independent.vehicles.random_vehicle`)."""
+    """The ``seeds`` whose campaign's vehicle is of one of ``categories`` (all with None), read
+    from the simulator's first draw (:func:`~bayes_roadload.simulate.independent.first_draws`)."""
     if not categories:
         return list(seeds)
-    from bayes_roadload.simulate.independent.vehicles import CATEGORIES, random_vehicle
+    from bayes_roadload.simulate.independent import CATEGORIES, first_draws
 
     unknown = sorted(set(categories) - set(CATEGORIES))
     if unknown:
         raise SystemExit(f"unknown categories {unknown}; the simulator's: {sorted(CATEGORIES)}")
-    return [s for s in seeds if random_vehicle(np.random.default_rng(int(s))).category in categories]
+    return [s for s in seeds if first_draws(int(s))[0].category in categories]
 
 
 def summary(records: pd.DataFrame) -> str:

@@ -103,13 +103,11 @@ def test_a_failed_fit_is_left_out_of_the_pairs_not_counted_as_held(probe):
 def test_categories_keep_the_seeds_whose_first_draw_is_of_them(probe):
     """The seeds kept are those whose campaign vehicle (the seed's first draw) is a truck, every
     other seed is left out; an unknown category is refused."""
-    import numpy as np
-
-    from bayes_roadload.simulate.independent.vehicles import random_vehicle
+    from bayes_roadload.simulate.independent import first_draws
 
     seeds = range(3000, 3016)
     kept = probe.of_categories(seeds, ["heavy_truck", "light_truck"])
-    drawn = {s: random_vehicle(np.random.default_rng(s)).category for s in seeds}
+    drawn = {s: first_draws(s)[0].category for s in seeds}
     assert kept == [s for s in seeds if drawn[s].endswith("_truck")]
     assert 0 < len(kept) < len(seeds)
     assert probe.of_categories(seeds) == list(seeds)

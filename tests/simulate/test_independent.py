@@ -2,6 +2,7 @@
 Type B draws inside the standards, and recovery by the project's least squares."""
 
 import ast
+import json
 import dataclasses
 import math
 from pathlib import Path
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 from bayes_roadload.data import load_campaign, save_campaign
-from bayes_roadload.simulate.independent import (EFFECTS, TYPE_B, RunConditions, apply_effects,
+from bayes_roadload.simulate.independent import (EFFECTS, TYPE_B, RunConditions, apply_effects, first_draws,
                                                  random_vehicle, simulate_independent, simulate_run,
                                                  true_roadload)
 from bayes_roadload.simulate.independent import sensors as sens
@@ -135,6 +136,16 @@ def test_type_b_draws_inside_the_standards_accuracies():
     assert set(limits) | {"mass_kg"} == set(TYPE_B)
     clean = simulate_independent(0, pairs=1, effects=(), sample_rate_hz=1.0, type_b=False)
     assert all(v == 0.0 for k, v in clean.truth["meta"]["type_b_errors"].items())
+
+
+def test_first_draws_are_the_campaigns_vehicle_and_rate():
+    """What the studies' readings rebuild without simulating is what a campaign of the same seed
+    and a given size draws (its truth's vehicle and its logging rate)."""
+    for seed in (3001, 9020):
+        vehicle, rate = first_draws(seed)
+        meta = simulate_independent(seed, pairs=1).truth["meta"]
+        assert meta["vehicle_true"] == json.loads(json.dumps(vehicle.as_dict()))
+        assert meta["sample_rate_hz"] == rate
 
 
 def test_effect_names_are_checked_and_sourced():

@@ -6,6 +6,7 @@ parameters (:mod:`.reference`); see ``docs/independent_simulator.md``."""
 from .campaign import CHANNELS as CHANNELS
 from .campaign import DEFAULT_CHANNELS as DEFAULT_CHANNELS
 from .campaign import apply_effects as apply_effects
+from .campaign import first_draws as first_draws
 from .campaign import simulate_independent as simulate_independent
 from .campaign import true_roadload as true_roadload
 from .dynamics import AnemometerDynamics as AnemometerDynamics

@@ -159,6 +159,16 @@ def _json_safe(x):
     return x
 
 
+def first_draws(seed: int) -> tuple[TrueVehicle, float]:
+    """The vehicle and the logging rate :func:`simulate_independent` draws first for ``seed``
+    when the campaign size is given and the vehicle, its category and the rate are not (as the
+    studies call it: ``analysis.calibration.calibration_jobs``), without simulating: for
+    reading a study's records against the simulator's own draws."""
+    rng = np.random.default_rng(seed)
+    vehicle = random_vehicle(rng)
+    return vehicle, float(rng.choice(SAMPLE_RATES_HZ))
+
+
 def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVehicle | None = None,
                          category: str | None = None, wind: str | WindField = "random",
                          effects: Iterable[str] | None = None, withhold: Iterable[str] = (),
