@@ -1,4 +1,4 @@
-"""Named campaigns of the independent simulator refitted by MAP + Laplace: thinned, or with a model variant.
+"""Named campaigns of the independent simulator refitted by MAP + Laplace: thinned, with a model variant, or an effect withheld.
 
 The calibration study's campaigns (``analysis.calibration.calibration_jobs``: seed, size and
 every draw as the study made them) are fitted by MAP and Laplace with the Type B step (the
@@ -14,6 +14,12 @@ seed by seed, the relative errors (%) of two such record files and their paired 
         --keep-every 5 --records benchmarks/records/seed_refits/misses_20hz_at_4hz.csv
     python benchmarks/seed_refits.py --compare benchmarks/records/seed_refits/misses_20hz.csv \\
         benchmarks/records/seed_refits/misses_20hz_at_4hz.csv
+    python benchmarks/seed_refits.py --seeds 9056 9051 --each \\
+        --records benchmarks/records/seed_refits/misses_each_effect.csv
+
+``--each`` refits each campaign once with every effect and once with each effect withheld (the
+withheld effect's draws made and discarded: the campaign's pair), and prints the change of the
+errors, seed by seed.
 """
 
 from __future__ import annotations
@@ -38,29 +44,50 @@ def thinned(campaign, keep_every: int):
     return dataclasses.replace(campaign, runs=runs[runs.groupby("run").cumcount() % keep_every == 0].reset_index(drop=True))
 
 
-def simulated(seed: int, lo: int, hi: int, keep_every: int):
-    """The calibration study's campaign of ``seed`` (``pairs_of(seed, lo, hi)`` pairs), thinned."""
+def simulated(seed: int, lo: int, hi: int, keep_every: int, withhold: tuple[str, ...] = ()):
+    """The calibration study's campaign of ``seed`` (``pairs_of(seed, lo, hi)`` pairs), with the
+    ``withhold`` effects off (their draws made and discarded: the campaign's pair), thinned."""
     from bayes_roadload.analysis.calibration import pairs_of
     from bayes_roadload.simulate.independent import simulate_independent
 
-    return thinned(simulate_independent(seed, pairs=pairs_of(seed, lo, hi)), keep_every)
+    return thinned(simulate_independent(seed, pairs=pairs_of(seed, lo, hi), withhold=withhold), keep_every)
 
 
 def run(seeds, keep_every: int = 1, model: str | None = None, model_heavy: str | None = None,
-        lo: int = 1, hi: int = 12, workers: int = 2) -> pd.DataFrame:
-    """MAP + Laplace records of the ``seeds``' campaigns, one row per seed (column ``keep_every``)."""
+        lo: int = 1, hi: int = 12, workers: int = 2, arms=((),)) -> pd.DataFrame:
+    """MAP + Laplace records of the ``seeds``' campaigns, one row per seed and arm (columns
+    ``keep_every`` and ``withheld``, the arm's withheld effects joined by spaces)."""
     from bayes_roadload.analysis.batch import FitJob, batch_client, run_batch
     from bayes_roadload.analysis.calibration import DERIVED, pairs_of
     from bayes_roadload.inference.kinds import FitOptions
 
     o = FitOptions(method="laplace")
-    jobs = [FitJob(f"ind-{s}", functools.partial(simulated, s, lo, hi, keep_every), model=model or "auto",
+    jobs = [FitJob(f"ind-{s}", functools.partial(simulated, s, lo, hi, keep_every, tuple(arm)), model=model or "auto",
                    model_heavy=model_heavy, method=o.method, pooling=o.pooling, noise=o.noise, robust=o.robust,
                    sampler=o.sampler, type_b=o.type_b, derived=DERIVED,
-                   tags={"seed": s, "pairs": pairs_of(s, lo, hi), "keep_every": keep_every})
-            for s in seeds]
+                   tags={"seed": s, "pairs": pairs_of(s, lo, hi), "keep_every": keep_every, "withheld": " ".join(arm)})
+            for arm in arms for s in seeds]
     with batch_client(workers=workers) as client:
         return run_batch(jobs, client, progress=False)
+
+
+def by_effect(records: pd.DataFrame) -> str:
+    """Markdown: for each seed, the relative error (%) of C_D0, F2, F1 and K_D with every effect
+    (the arm withholding none) and the change when each effect is withheld, largest C_D0 change first."""
+    shown = ("CD0", "F2_N_per_kph2", "F1_N_per_kph", "KD")
+    rec = records.assign(withheld=records["withheld"].astype(object).fillna(""))
+    lines = []
+    for seed, rows in rec.groupby("seed"):
+        err = pd.DataFrame({q: (rows[f"{q}_mean"] / rows[f"{q}_truth"] - 1.0) * 100.0 for q in shown})
+        err.index = rows["withheld"].tolist()
+        base = err.loc[""]
+        change = (err.drop(index="") - base).sort_values("CD0", ascending=False)
+        lines += [f"seed {seed} ({int(rows['pairs'].iloc[0])} pairs): every effect " + ", ".join(
+                      f"{q} {base[q]:+.2f} %" for q in shown) + "; change when one effect is withheld:", "",
+                  "| withheld | " + " | ".join(shown) + " |", "|---" * (1 + len(shown)) + "|"]
+        lines += [f"| {name} | " + " | ".join(f"{row[q]:+.2f}" for q in shown) + " |" for name, row in change.iterrows()]
+        lines.append("")
+    return "\n".join(lines).rstrip()
 
 
 def compare(first: pd.DataFrame, second: pd.DataFrame) -> str:
@@ -97,19 +124,33 @@ def main(argv=None) -> int:
     ap.add_argument("--keep-every", type=int, default=1, help="keep every k-th sample of each run (default 1: all)")
     ap.add_argument("--model", default=None, help="the analysis model (default: fit's default)")
     ap.add_argument("--model-heavy", default=None, help="with --model: the model above 3500 kg test mass")
+    ap.add_argument("--each", nargs="*", metavar="EFFECT",
+                    help="one arm with every effect and one per named effect withheld (no names: every effect)")
     ap.add_argument("--workers", type=int, default=2, help="Dask workers")
     ap.add_argument("--records", type=Path, help="write the records here (CSV)")
     ap.add_argument("--compare", type=Path, nargs=2, metavar=("FIRST", "SECOND"), help="only compare two record files")
+    ap.add_argument("--from-records", type=Path, help="only print the --each table of records written before")
     a = ap.parse_args(argv)
     if a.compare:
         print(compare(*(pd.read_csv(p) for p in a.compare)))
         return 0
+    if a.from_records:
+        print(by_effect(pd.read_csv(a.from_records)))
+        return 0
     if not a.seeds:
-        ap.error("give --seeds or --compare")
-    records = run(a.seeds, a.keep_every, a.model, a.model_heavy, *a.pairs, workers=a.workers)
+        ap.error("give --seeds, --compare or --from-records")
+    arms = ((),)
+    if a.each is not None:
+        from bayes_roadload.simulate.independent import EFFECTS
+
+        arms = ((),) + tuple((e,) for e in (a.each or EFFECTS))
+    records = run(a.seeds, a.keep_every, a.model, a.model_heavy, *a.pairs, workers=a.workers, arms=arms)
     if a.records:
         a.records.parent.mkdir(parents=True, exist_ok=True)
         records.to_csv(a.records, index=False)
+    if a.each is not None:
+        print(by_effect(records))
+        return 0
     print(records[["seed", "pairs", "keep_every", "n_samples"]
                   + [f"{q}_{c}" for q in ("CD0", "KD") for c in ("mean", "truth", "sd")]].to_string(index=False))
     return 0

@@ -41,3 +41,20 @@ def test_compare_reports_each_seed_and_the_paired_change(refits):
     assert "-10.00 / -8.00" in seed1 and "4.00 / 4.00" in seed1
     assert "-7.00 / -6.00" in next(x for x in table.splitlines() if x.startswith("| mean |"))
     assert "+1.00 (1.00)" in next(x for x in table.splitlines() if x.startswith("| paired change"))
+
+
+def test_by_effect_lists_each_withheld_effect_against_every_effect(refits):
+    """Seed 7: C_D0 -10 % with every effect, -4 % without turbulence (change +6.00), -11 %
+    without lift (-1.00): turbulence listed first."""
+    rows = []
+    for withheld, err in (("", -10.0), ("lift", -11.0), ("turbulence", -4.0)):
+        row = {"seed": 7, "pairs": 1, "withheld": withheld, "CD0_truth": 0.5, "CD0_mean": 0.5 * (1 + err / 100)}
+        for q in ("F2_N_per_kph2", "F1_N_per_kph", "KD"):
+            row.update({f"{q}_truth": 1.0, f"{q}_mean": 1.0})
+        rows.append(row)
+    table = refits.by_effect(pd.DataFrame(rows))
+    assert "every effect CD0 -10.00 %" in table
+    body = [x for x in table.splitlines() if x.startswith("| ") and not x.startswith("| withheld")]
+    assert [x.split("|")[1].strip() for x in body] == ["turbulence", "lift"]
+    assert body[0].split("|")[2].strip() == "+6.00"
+    assert body[1].split("|")[2].strip() == "-1.00"
