@@ -62,13 +62,14 @@ def run_records(seed: int) -> list[dict]:
         runs.append((veh, kw.get("anemometer"), trace))
         return trace
 
+    pairs = pairs_of(seed, 1, 12)
     campaign.simulate_run = keeping
     try:
-        campaign.simulate_independent(seed, pairs=pairs_of(seed, 1, 12))
+        campaign.simulate_independent(seed, pairs=pairs)
     finally:
         campaign.simulate_run = simulate_run
     rows = []
-    for k, (veh, dyn, tr) in enumerate(runs[1:]):  # the first integration sizes the track
+    for k, (veh, dyn, tr) in enumerate(runs[-2 * pairs:]):  # the campaign's runs (an earlier integration sizes the track)
         t = tr.time_s
         body = tr.airspeed_mps**2 * (veh.cd0 + veh.kd_per_rad2 * tr.yaw_rad**2)
         lagged = tr.cup_mps + (dyn.distance_constant_m / tr.cup_mps * np.gradient(tr.cup_mps, t) if dyn else 0.0)
