@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -90,30 +89,16 @@ def run_records(seed: int) -> list[dict]:
     return rows
 
 
-@dataclass(frozen=True)
-class SeedJob:
-    """One seed's rows (:func:`run_records`) as a batch job."""
-
-    seed: int
-
-    def run(self) -> list[dict]:
-        return run_records(self.seed)
-
-
-def _run(job: SeedJob) -> list[dict]:
-    return job.run()
-
-
 def simulate(seeds, workers: int) -> pd.DataFrame:
     """Rows of every seed, on a Dask ``LocalCluster`` of ``workers`` (0: in this process)."""
     from bayes_roadload.analysis.batch import batch_client, batch_map
 
-    jobs = [SeedJob(int(s)) for s in seeds]
+    seeds = [int(s) for s in seeds]
     if workers:
         with batch_client(workers=workers) as client:
-            out = batch_map(_run, jobs, client, desc="campaigns")
+            out = batch_map(run_records, seeds, client, desc="campaigns")
     else:
-        out = [job.run() for job in jobs]
+        out = [run_records(s) for s in seeds]
     return pd.DataFrame([row for rows in out for row in rows])
 
 
