@@ -33,9 +33,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-QUANTITIES = ("AD", "BD", "CD0", "KD", "F50_N", "F0_N", "F1_N_per_kph", "F2_N_per_kph2")
-
-
 def thinned(campaign, keep_every: int):
     """``campaign`` with every ``keep_every``-th sample of each run kept (the first included)."""
     if keep_every <= 1:
@@ -44,29 +41,26 @@ def thinned(campaign, keep_every: int):
     return dataclasses.replace(campaign, runs=runs[runs.groupby("run").cumcount() % keep_every == 0].reset_index(drop=True))
 
 
-def simulated(seed: int, lo: int, hi: int, keep_every: int, withhold: tuple[str, ...] = ()):
-    """The calibration study's campaign of ``seed`` (``pairs_of(seed, lo, hi)`` pairs), with the
-    ``withhold`` effects off (their draws made and discarded: the campaign's pair), thinned."""
-    from bayes_roadload.analysis.calibration import pairs_of
-    from bayes_roadload.simulate.independent import simulate_independent
-
-    return thinned(simulate_independent(seed, pairs=pairs_of(seed, lo, hi), withhold=withhold), keep_every)
+def thinned_factory(factory, keep_every: int):
+    """The campaign of ``factory`` (a job's ``campaign_factory``), :func:`thinned`."""
+    return thinned(factory(), keep_every)
 
 
 def run(seeds, keep_every: int = 1, model: str | None = None, model_heavy: str | None = None,
         lo: int = 1, hi: int = 12, workers: int = 2, arms=((),)) -> pd.DataFrame:
-    """MAP + Laplace records of the ``seeds``' campaigns, one row per seed and arm (columns
+    """MAP + Laplace records of the ``seeds``' campaigns (the calibration study's jobs,
+    :func:`~bayes_roadload.analysis.calibration.calibration_jobs`, one per seed and arm of
+    withheld effects, their campaigns :func:`thinned`), one row per seed and arm (columns
     ``keep_every`` and ``withheld``, the arm's withheld effects joined by spaces)."""
-    from bayes_roadload.analysis.batch import FitJob, batch_client, run_batch
-    from bayes_roadload.analysis.calibration import DERIVED, pairs_of
+    from bayes_roadload.analysis.batch import batch_client, run_batch
+    from bayes_roadload.analysis.calibration import calibration_jobs
     from bayes_roadload.inference.kinds import FitOptions
 
-    o = FitOptions(method="laplace")
-    jobs = [FitJob(f"ind-{s}", functools.partial(simulated, s, lo, hi, keep_every, tuple(arm)), model=model or "auto",
-                   model_heavy=model_heavy, method=o.method, pooling=o.pooling, noise=o.noise, robust=o.robust,
-                   sampler=o.sampler, type_b=o.type_b, derived=DERIVED,
-                   tags={"seed": s, "pairs": pairs_of(s, lo, hi), "keep_every": keep_every, "withheld": " ".join(arm)})
-            for arm in arms for s in seeds]
+    options = FitOptions(method="laplace")
+    jobs = [dataclasses.replace(job, campaign_factory=functools.partial(thinned_factory, job.campaign_factory, keep_every),
+                                tags={**job.tags, "keep_every": keep_every, "withheld": " ".join(arm)})
+            for arm in arms
+            for job in calibration_jobs(seeds, lo, hi, options=options, model=model, withhold=arm, model_heavy=model_heavy)]
     with batch_client(workers=workers) as client:
         return run_batch(jobs, client, progress=False)
 
