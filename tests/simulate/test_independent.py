@@ -2,8 +2,8 @@
 Type B draws inside the standards, and recovery by the project's least squares."""
 
 import ast
-import json
 import dataclasses
+import json
 import math
 from pathlib import Path
 

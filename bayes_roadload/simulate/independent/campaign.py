@@ -159,14 +159,19 @@ def _json_safe(x):
     return x
 
 
+def _vehicle_and_rate(rng: np.random.Generator, vehicle: TrueVehicle | None = None, category: str | None = None,
+                      sample_rate_hz: float | None = None) -> tuple[TrueVehicle, float]:
+    """The campaign's vehicle and logging rate, each drawn from ``rng`` (in this order) unless given."""
+    base = random_vehicle(rng, category) if vehicle is None else vehicle
+    return base, float(rng.choice(SAMPLE_RATES_HZ)) if sample_rate_hz is None else float(sample_rate_hz)
+
+
 def first_draws(seed: int) -> tuple[TrueVehicle, float]:
     """The vehicle and the logging rate :func:`simulate_independent` draws first for ``seed``
     when the campaign size is given and the vehicle, its category and the rate are not (as the
     studies call it: ``analysis.calibration.calibration_jobs``), without simulating: for
     reading a study's records against the simulator's own draws."""
-    rng = np.random.default_rng(seed)
-    vehicle = random_vehicle(rng)
-    return vehicle, float(rng.choice(SAMPLE_RATES_HZ))
+    return _vehicle_and_rate(np.random.default_rng(seed))
 
 
 def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVehicle | None = None,
@@ -231,9 +236,8 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     n_pairs = int(rng.integers(1, 13)) if pairs is None else int(pairs)
     if n_pairs < 1:
         raise ValueError("pairs must be at least 1")
-    base = random_vehicle(rng, category) if vehicle is None else vehicle
+    base, rate = _vehicle_and_rate(rng, vehicle, category, sample_rate_hz)
     veh = apply_effects(base, chosen)
-    rate = float(rng.choice(SAMPLE_RATES_HZ)) if sample_rate_hz is None else float(sample_rate_hz)
 
     # site and weather: SAE J1263 test window 5-35 C; station pressure of low-lying tracks
     gravity = float(rng.uniform(9.780, 9.832))            # equator to pole
