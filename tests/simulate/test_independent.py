@@ -148,6 +148,66 @@ def test_first_draws_are_the_campaigns_vehicle_and_rate():
         assert meta["sample_rate_hz"] == rate
 
 
+def test_a_realisation_keeps_the_campaign_and_redraws_the_runs():
+    """``realisation``: the campaign-level draws are the seed's (vehicle, rate, instruments,
+    Type B errors, mean wind), the runs' own draws and the gusts are another realisation's."""
+    def runs_meta(c):
+        return [{k: r[k] for k in ("v0_mps", "v_stop_mps", "tyre_factor", "cd_factor", "clock_start_s")}
+                for r in c.truth["meta"]["runs"]]
+
+    legacy, first, again, second = (simulate_independent(9056, pairs=1, sample_rate_hz=2.0, realisation=r)
+                                    for r in (None, 0, 0, 1))
+    for c in (first, second):
+        for key in ("vehicle_true", "declared", "type_b_errors", "instruments", "wind", "track", "gravity_mps2"):
+            assert c.truth["meta"][key] == legacy.truth["meta"][key], key
+        assert c.meta["realisation"] in (0, 1) and "realisation" not in legacy.meta
+    assert runs_meta(first) == runs_meta(again) and first.runs.equals(again.runs)
+    for a, b in ((legacy, first), (first, second)):
+        ra, rb = runs_meta(a), runs_meta(b)
+        assert all(x["v0_mps"] != y["v0_mps"] and x["cd_factor"] != y["cd_factor"] for x, y in zip(ra, rb))
+    # the gusts: the same start speed and noise-free instruments cannot give the same airspeed
+    quiet = dict(pairs=1, sample_rate_hz=2.0, perfect_instruments=True, speed_noise_sd_mps=0.0,
+                 effects=("turbulence",), mean_wind_mps=(3.0, 1.0))
+    a, b = (simulate_independent(9056, realisation=r, **quiet) for r in (0, 1))
+    assert a.truth["meta"]["wind"] == b.truth["meta"]["wind"]
+    n = 20
+    va, vb = (c.runs["airspeed_mps"].to_numpy()[:n] - c.runs["speed_mps"].to_numpy()[:n] for c in (a, b))
+    assert np.max(np.abs(va - vb)) > 0.05
+
+
+def test_a_realisations_runs_keep_their_draws_when_an_effect_is_withheld():
+    """With ``realisation`` each run draws from its own stream: withholding an effect that
+    changes the first run's length leaves the second run's draws as they were; with the one
+    stream of ``realisation=None`` the same ablation shifts them."""
+    def draws(c, run):
+        r = c.truth["meta"]["runs"][run]
+        return (r["v0_mps"], r["v_stop_mps"], r["tyre_factor"], r["cd_factor"], r["tyre_initial_excess_k"])
+
+    kw = dict(pairs=1, category="small_car", sample_rate_hz=20.0)
+    for realisation, same in ((0, True), (None, False)):
+        every, withheld = (simulate_independent(3001, realisation=realisation, withhold=w, **kw)
+                           for w in ((), ("grade_profile",)))
+        assert every.truth["meta"]["runs"][0]["samples"] != withheld.truth["meta"]["runs"][0]["samples"]
+        assert draws(every, 0) == draws(withheld, 0)
+        assert (draws(every, 1) == draws(withheld, 1)) is same
+
+
+def test_withholding_an_effect_keeps_every_other_draw():
+    """Each effect withheld in turn (its draws made and discarded): the vehicle, site, mean wind,
+    Type B errors, declared values and, with ``realisation``, every run's own draws are those of
+    the campaign with every effect."""
+    def fixed(c):
+        m = c.truth["meta"]
+        runs = [{k: r[k] for k in ("direction", "v0_mps", "v_stop_mps", "tyre_factor", "cd_factor")} for r in m["runs"]]
+        return (m["vehicle_true"], m["declared"], m["type_b_errors"], m["gravity_mps2"], m["temperature0_k"],
+                m["wind"]["mean_speed_mps"], m["wind"]["direction_rad"], runs)
+
+    kw = dict(pairs=1, category="small_car", sample_rate_hz=1.0, realisation=0)
+    every = fixed(simulate_independent(11, **kw))
+    for name in EFFECTS:
+        assert fixed(simulate_independent(11, withhold=(name,), **kw)) == every, name
+
+
 def test_effect_names_are_checked_and_sourced():
     with pytest.raises(ValueError, match="unknown effect"):
         simulate_independent(0, pairs=1, withhold=("no_such_effect",))

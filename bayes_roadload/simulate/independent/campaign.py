@@ -21,7 +21,7 @@ from . import reference as ref
 from . import sensors as sens
 from .dynamics import AnemometerDynamics, RunConditions, simulate_run
 from .effects import EFFECTS
-from .track import surveyed_track
+from .track import Track, surveyed_track
 from .vehicles import TrueVehicle, random_vehicle
 from .wind import Shelter, WindField, random_shelter, von_karman_turbulence
 
@@ -35,6 +35,12 @@ not log before it was a channel (their records stay reproducible)."""
 HYGROMETER_STREAM = 0x68756D
 """Second entropy word of the hygrometer's own random stream (``default_rng([seed, this])``),
 so that logging the humidity leaves every other draw of a seed as it was."""
+RUN_STREAM = 0x72756E
+"""Second entropy word of a run's own random stream with ``realisation`` given
+(``default_rng([seed, this, realisation, run index])``)."""
+TURBULENCE_STREAM = 0x747262
+"""Second entropy word of the turbulence's phases and directions with ``realisation`` given
+(``default_rng([seed, this, realisation])``)."""
 SAMPLE_RATES_HZ = (1.0, 2.0, 4.0, 5.0, 10.0, 20.0)
 AXLES_OF = {"small_car": 2, "mid_car": 2, "suv_van": 2, "light_truck": 2, "heavy_truck": 5}
 MAX_MEAN_WIND_MPS = 16.0 / 3.6   # SAE J1263: no test with average wind above 16 km/h ...
@@ -182,7 +188,7 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
                          perfect_instruments: bool = False, speed_noise_sd_mps: float | None = None,
                          mean_wind_mps: tuple[float, float] | None = None,
                          errors: Mapping[str, float] | None = None,
-                         rtol: float = 1e-9) -> Campaign:
+                         realisation: int | None = None, rtol: float = 1e-9) -> Campaign:
     """Simulate a campaign of opposite-direction coastdown pairs.
 
     Parameters
@@ -207,6 +213,18 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
         a draw inside SAE J1263's limits (the shelter and turbulence are still drawn).
     errors : Type B errors set to these values instead of drawn (or zero without ``type_b``),
         named as in ``truth.json`` ``meta.type_b_errors``: one of :data:`SETTABLE_ERRORS`.
+    realisation : ``None`` (default): every draw comes from one stream seeded by ``seed``, in
+        the order the campaign is built, so a change of one run's length (an effect withheld)
+        shifts the draws of every later run.  An integer: the campaign-level draws (vehicle,
+        size, rate, site, weather, track, mean wind, shelter, the turbulence's intensity and
+        length scale, instruments, Type B errors, declared values, first direction) are those
+        of ``seed`` as before, while each run's own draws (start and stop speeds, run-to-run
+        spread, wind and weather drift, tyre warm-up, sensor noise, turn-round) come from its
+        own stream ``[seed, RUN_STREAM, realisation, run]`` and the turbulence's phases and
+        directions (with ``wind="random"``) from ``[seed, TURBULENCE_STREAM, realisation]``:
+        another day's runs of the same vehicle, site and instruments, and an ablation that
+        leaves every run's draws alone (a run still starts when the previous one ended plus
+        its turn-round, so the gusts it meets follow the earlier runs' lengths).
     rtol : relative tolerance of the integrator on the motion.
 
     Returns
@@ -253,9 +271,16 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     length = float(probe.distance_m[-1]) * 1.15 + 100.0
     mean_grade = float(rng.uniform(-sens.GRADE_ACCURACY, sens.GRADE_ACCURACY)) if type_b else 0.0
     mean_grade = float(errors.get("track_mean_grade", mean_grade))
-    undulation = _drawn("grade_profile", drawn, chosen, lambda: float(rng.uniform(0.0002, 0.001)), 0.0)
+    undulation = _drawn("grade_profile", drawn, drawn, lambda: float(rng.uniform(0.0002, 0.001)), 0.0)
     track = surveyed_track(rng, -400.0, length + 400.0, mean_grade=mean_grade, rms_undulation_grade=undulation)
+    if "grade_profile" not in chosen:  # withheld: its undulations drawn above, then discarded
+        undulation, track = 0.0, Track(track.start_m, track.end_m, mean_grade)
     field = _random_wind(rng, wind, chosen, -400.0, length + 400.0, mean_wind_mps, drawn=drawn)
+    if realisation is not None and not isinstance(wind, WindField) and field.turbulence.amp.size:
+        gusts = field.turbulence
+        field = dataclasses.replace(field, turbulence=von_karman_turbulence(
+            np.random.default_rng([int(seed), TURBULENCE_STREAM, int(realisation)]),
+            gusts.sigma_mps, gusts.length_scale_m))
 
     inst = (sens.perfect_instruments(speed_noise_sd_mps if speed_noise_sd_mps is not None else 0.02)
             if perfect_instruments else
@@ -301,44 +326,45 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     samples = np.arange(0.0, 3000.0, 1.0 / rate)
     truth = true_roadload(veh, gravity)
     for k in range(2 * n_pairs):
+        run_rng = rng if realisation is None else np.random.default_rng([int(seed), RUN_STREAM, int(realisation), k])
         direction = first if k % 2 == 0 else -first
         frac = k / max(2 * n_pairs - 1, 1)
         speed, heading = field.mean_speed_mps, field.direction_rad
         if speed > 0:
             speed, heading = _drawn("wind_drift", drawn, chosen,
-                                    lambda: (max(speed * (1.0 + 0.1 * rng.normal()), 0.0),
-                                             heading + np.deg2rad(8.0) * rng.normal()), (speed, heading))
+                                    lambda: (max(speed * (1.0 + 0.1 * run_rng.normal()), 0.0),
+                                             heading + np.deg2rad(8.0) * run_rng.normal()), (speed, heading))
         run_wind = field.with_mean(speed, heading)
-        t_amb = temperature0 + drift_t * frac + _drawn("weather_drift", drawn, chosen, lambda: 0.2 * rng.normal(), 0.0)
-        p_amb = pressure0 + drift_p * frac + _drawn("weather_drift", drawn, chosen, lambda: 20.0 * rng.normal(), 0.0)
-        tyre_factor, cd_factor = 1.0 + run_to_run_sd * rng.normal(size=2)
+        t_amb = temperature0 + drift_t * frac + _drawn("weather_drift", drawn, chosen, lambda: 0.2 * run_rng.normal(), 0.0)
+        p_amb = pressure0 + drift_p * frac + _drawn("weather_drift", drawn, chosen, lambda: 20.0 * run_rng.normal(), 0.0)
+        tyre_factor, cd_factor = 1.0 + run_to_run_sd * run_rng.normal(size=2)
         cond = RunConditions(
             direction=direction, start_position_m=0.0 if direction > 0 else length,
-            v0_mps=float(rng.uniform(31.3, 33.5)), v_stop_mps=float(rng.uniform(4.2, 5.5)),
+            v0_mps=float(run_rng.uniform(31.3, 33.5)), v_stop_mps=float(run_rng.uniform(4.2, 5.5)),
             temperature_k=t_amb, pressure_pa=p_amb, relative_humidity=humidity, gravity_mps2=gravity,
             clock_start_s=clock, tyre_factor=float(tyre_factor), cd_factor=float(cd_factor),
-            tyre_initial_excess_k=_drawn("tyre_warmup", drawn, chosen, lambda: float(rng.uniform(-4.0, 2.0)), 0.0))
+            tyre_initial_excess_k=_drawn("tyre_warmup", drawn, chosen, lambda: float(run_rng.uniform(-4.0, 2.0)), 0.0))
         trace = simulate_run(veh, cond, samples, wind=run_wind if speed > 0 or field.turbulence.amp.size else None,
                              track=track, admittance="admittance" in chosen, anemometer=dyn,
                              anemometer_ahead_m=ahead, rtol=rtol)
         n = trace.time_s.size
         rid = k + 1
         row = {"run": np.full(n, rid), "time_s": trace.time_s,
-               "speed_mps": sens.read_speed(inst, trace.speed_mps, rng),
+               "speed_mps": sens.read_speed(inst, trace.speed_mps, run_rng),
                "direction": np.full(n, direction), "pair": np.full(n, k // 2 + 1)}
         if "anemometer" in channels:
             if perfect_instruments:
                 row["airspeed_mps"], row["yaw_rad"] = trace.airspeed_mps.copy(), trace.yaw_rad.copy()
             else:
-                row["airspeed_mps"], row["yaw_rad"] = sens.read_anemometer(inst, trace.cup_mps, trace.vane_rad, rng)
+                row["airspeed_mps"], row["yaw_rad"] = sens.read_anemometer(inst, trace.cup_mps, trace.vane_rad, run_rng)
         if "weather" in channels:
-            row["temperature_k"], row["pressure_pa"] = sens.read_weather(inst, t_amb, p_amb, n, rng)
+            row["temperature_k"], row["pressure_pa"] = sens.read_weather(inst, t_amb, p_amb, n, run_rng)
         if "humidity" in channels and humidity > 0.0:
             row["relative_humidity_pct"] = sens.read_humidity(hygrometer, humidity, n, hygrometer_rng)
         if "position" in channels:
             row["position_m"], row["distance_m"] = trace.position_m, trace.distance_m
         if "driveline" in channels and has_driveline:
-            row["driveline_force_n"] = sens.read_driveline(inst, trace.driveline_force_n, rng)
+            row["driveline_force_n"] = sens.read_driveline(inst, trace.driveline_force_n, run_rng)
         frame = pd.DataFrame(row)
         beyond = np.abs(trace.yaw_rad) > YAW_LOG_LIMIT_RAD
         if "yaw_rad" in frame:
@@ -355,7 +381,7 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
                          "truncated": kept < n,
                          "air_density_kgpm3": trace.air_density_kgpm3,
                          "mean_abs_yaw_rad": float(np.mean(np.abs(trace.yaw_rad)))})
-        clock += float(trace.time_s[-1]) + float(rng.uniform(120.0, 400.0))   # turn-round
+        clock += float(trace.time_s[-1]) + float(run_rng.uniform(120.0, 400.0))   # turn-round
 
     runs = pd.concat(frames, ignore_index=True)
     survey = track.survey(10.0)
@@ -396,6 +422,8 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     truth.update(case="independent", model="independent simulator", per_run=per_run, meta=_json_safe(meta))
     vmeta = {"simulator": "independent", "seed": int(seed), "pairs": n_pairs, "category": base.category,
              "sample_rate_hz": rate}
+    if realisation is not None:
+        vmeta["realisation"] = int(realisation)
     # the cup's distance constant as its data sheet states it (the speed-up one: the slower
     # slow-down of an over-speeding cup is not on the sheet)
     stated_d = float(dyn.distance_constant_m) if dyn is not None else 0.0
