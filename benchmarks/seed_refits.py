@@ -17,7 +17,14 @@ seed by seed, the relative errors (%) of two such record files and their paired 
     python benchmarks/seed_refits.py --seeds 9056 9051 --each \\
         --records benchmarks/records/seed_refits/misses_each_effect.csv
 
-``--each`` refits each campaign once with every effect and once with each effect withheld (the
+    python benchmarks/seed_refits.py --seeds 9051 9056 9019 9069 --realisations 10 \\
+        --records benchmarks/records/seed_refits/realisations_one_pair.csv
+
+``--realisations N`` refits realisations 0..N-1 of each campaign (the simulator's
+``realisation``: each run's own draws and the gusts anew; the vehicle, site, mean wind,
+instruments and Type B errors the seed's) and prints, seed by seed, the spread of the errors
+between realisations against the posterior sd: the variance a fit of one campaign cannot see
+in its own runs.  ``--each`` refits each campaign once with every effect and once with each effect withheld (the
 withheld effect's draws made and discarded: the campaign's pair), and prints the change of the
 errors, seed by seed.
 """
@@ -47,11 +54,12 @@ def thinned_factory(factory, keep_every: int):
 
 
 def run(seeds, keep_every: int = 1, model: str | None = None, model_heavy: str | None = None,
-        lo: int = 1, hi: int = 12, workers: int = 2, arms=((),)) -> pd.DataFrame:
+        lo: int = 1, hi: int = 12, workers: int = 2, arms=((),), realisations=(None,)) -> pd.DataFrame:
     """MAP + Laplace records of the ``seeds``' campaigns (the calibration study's jobs,
-    :func:`~bayes_roadload.analysis.calibration.calibration_jobs`, one per seed and arm of
-    withheld effects, their campaigns :func:`thinned`), one row per seed and arm (columns
-    ``keep_every`` and ``withheld``, the arm's withheld effects joined by spaces)."""
+    :func:`~bayes_roadload.analysis.calibration.calibration_jobs`, one per seed, arm of
+    withheld effects and realisation, their campaigns :func:`thinned`), one row per seed, arm and
+    realisation (columns ``keep_every``, ``withheld``, the arm's withheld effects joined by
+    spaces, and, for a realisation other than ``None``, ``realisation``)."""
     from bayes_roadload.analysis.batch import batch_client, run_batch
     from bayes_roadload.analysis.calibration import calibration_jobs
     from bayes_roadload.inference.kinds import FitOptions
@@ -59,8 +67,9 @@ def run(seeds, keep_every: int = 1, model: str | None = None, model_heavy: str |
     options = FitOptions(method="laplace")
     jobs = [dataclasses.replace(job, campaign_factory=functools.partial(thinned_factory, job.campaign_factory, keep_every),
                                 tags={**job.tags, "keep_every": keep_every, "withheld": " ".join(arm)})
-            for arm in arms
-            for job in calibration_jobs(seeds, lo, hi, options=options, model=model, withhold=arm, model_heavy=model_heavy)]
+            for r in realisations for arm in arms
+            for job in calibration_jobs(seeds, lo, hi, options=options, model=model, withhold=arm, model_heavy=model_heavy,
+                                        realisation=r)]
     with batch_client(workers=workers) as client:
         return run_batch(jobs, client, progress=False)
 
@@ -82,6 +91,44 @@ def by_effect(records: pd.DataFrame) -> str:
         lines += [f"| {name} | " + " | ".join(f"{row[q]:+.2f}" for q in shown) + " |" for name, row in change.iterrows()]
         lines.append("")
     return "\n".join(lines).rstrip()
+
+
+SPREAD_SHOWN = ("CD0", "F2_N_per_kph2", "F1_N_per_kph", "F0_N", "F50_N", "AD", "KD")
+
+
+def by_realisation(records: pd.DataFrame) -> str:
+    """Markdown: for each seed and quantity of :data:`SPREAD_SHOWN`, over its realisations, the
+    mean relative error (%; the bias a realisation does not change), the sd of the relative
+    errors between realisations (the realisation spread), the mean relative posterior sd and
+    their ratio (above 1: the fit does not see how much another day's runs would move it), the
+    sd(z) and the 95 % intervals holding the truth; then the same pooled over the seeds (the
+    spread as the rms of the seeds' spreads)."""
+    from bayes_roadload.simulate.independent import first_draws
+
+    lines = ["| seed | pairs | rate Hz | quantity | realisations | mean error % | spread % | posterior sd % "
+             "| spread / sd | sd(z) | 95 % hold |", "|---" * 11 + "|"]
+    pooled = {q: [] for q in SPREAD_SHOWN}
+    for seed, rows in records.groupby("seed"):
+        rate = first_draws(int(seed))[1]
+        for q in SPREAD_SHOWN:
+            err = (rows[f"{q}_mean"] / rows[f"{q}_truth"] - 1.0) * 100.0
+            sd = (rows[f"{q}_sd"] / rows[f"{q}_truth"].abs()) * 100.0
+            z = (rows[f"{q}_mean"] - rows[f"{q}_truth"]) / rows[f"{q}_sd"]
+            held = int(rows[f"{q}_in95"].astype(bool).sum())
+            spread = err.std(ddof=1)
+            pooled[q].append((len(rows), err.mean(), spread, sd.mean(), z, held))
+            lines.append(f"| {seed} | {int(rows['pairs'].iloc[0])} | {rate:g} | {q} | {len(rows)} | {err.mean():+.2f} "
+                         f"| {spread:.2f} | {sd.mean():.2f} | {spread / sd.mean():.2f} | {z.std(ddof=1):.2f} "
+                         f"| {held} / {len(rows)} |")
+    lines += ["", "| quantity | campaigns | fits | rms mean error % | rms spread % | rms posterior sd % "
+              "| spread / sd | sd(z) | 95 % hold |", "|---" * 9 + "|"]
+    for q, rows in pooled.items():
+        n = sum(r[0] for r in rows)
+        rms = [float(np.sqrt(np.mean([r[i] ** 2 for r in rows]))) for i in (1, 2, 3)]
+        z = pd.concat([r[4] for r in rows])
+        lines.append(f"| {q} | {len(rows)} | {n} | {rms[0]:.2f} | {rms[1]:.2f} | {rms[2]:.2f} | {rms[1] / rms[2]:.2f} "
+                     f"| {z.std(ddof=1):.2f} | {sum(r[5] for r in rows)} / {n} |")
+    return "\n".join(lines)
 
 
 def compare(first: pd.DataFrame, second: pd.DataFrame) -> str:
@@ -120,16 +167,21 @@ def main(argv=None) -> int:
     ap.add_argument("--model-heavy", default=None, help="with --model: the model above 3500 kg test mass")
     ap.add_argument("--each", nargs="*", metavar="EFFECT",
                     help="one arm with every effect and one per named effect withheld (no names: every effect)")
+    ap.add_argument("--realisations", type=int, default=0, metavar="N",
+                    help="fit realisations 0..N-1 of each campaign (each run's draws and the gusts anew, the "
+                         "campaign's draws kept) and print their spread against the posterior sd")
     ap.add_argument("--workers", type=int, default=2, help="Dask workers")
     ap.add_argument("--records", type=Path, help="write the records here (CSV)")
     ap.add_argument("--compare", type=Path, nargs=2, metavar=("FIRST", "SECOND"), help="only compare two record files")
-    ap.add_argument("--from-records", type=Path, help="only print the --each table of records written before")
+    ap.add_argument("--from-records", type=Path,
+                    help="only print the --each table (or, with --realisations, the spread table) of records written before")
     a = ap.parse_args(argv)
     if a.compare:
         print(compare(*(pd.read_csv(p) for p in a.compare)))
         return 0
     if a.from_records:
-        print(by_effect(pd.read_csv(a.from_records)))
+        records = pd.read_csv(a.from_records)
+        print(by_realisation(records) if a.realisations else by_effect(records))
         return 0
     if not a.seeds:
         ap.error("give --seeds, --compare or --from-records")
@@ -138,12 +190,17 @@ def main(argv=None) -> int:
         from bayes_roadload.simulate.independent import EFFECTS
 
         arms = ((),) + tuple((e,) for e in (a.each or EFFECTS))
-    records = run(a.seeds, a.keep_every, a.model, a.model_heavy, *a.pairs, workers=a.workers, arms=arms)
+    realisations = tuple(range(a.realisations)) if a.realisations else (None,)
+    records = run(a.seeds, a.keep_every, a.model, a.model_heavy, *a.pairs, workers=a.workers, arms=arms,
+                  realisations=realisations)
     if a.records:
         a.records.parent.mkdir(parents=True, exist_ok=True)
         records.to_csv(a.records, index=False)
     if a.each is not None:
         print(by_effect(records))
+        return 0
+    if a.realisations:
+        print(by_realisation(records))
         return 0
     print(records[["seed", "pairs", "keep_every", "n_samples"]
                   + [f"{q}_{c}" for q in ("CD0", "KD") for c in ("mean", "truth", "sd")]].to_string(index=False))

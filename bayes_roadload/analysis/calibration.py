@@ -62,21 +62,26 @@ def pairs_of(seed: int, lo: int, hi: int) -> int:
 def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
                      options: FitOptions | None = None, model: str | None = None,
                      withhold: Iterable[str] = (), model_heavy: str | None = None,
-                     log: Iterable[str] = (), state_yaw_calibration: bool = False) -> list[FitJob]:
+                     log: Iterable[str] = (), state_yaw_calibration: bool = False,
+                     realisation: int | None = None) -> list[FitJob]:
     """One fit job per seed, with the default fit options (or ``options``: method, pooling,
     noise, robust, sampler and Type B budget pass through) and ``model`` (unless given,
     ``"auto"``: ``fit``'s default for each campaign, the registry's
     ``KINDS["traces"].default_model``, resolved in the batch job).  ``withhold``: effects of the independent simulator
     (:data:`~bayes_roadload.simulate.independent.effects.EFFECTS`) left out of every campaign, an
     ablation: a seed draws the same vehicle, campaign size and Type B errors with the named physics
-    off (a run's length shifts the random stream, so the later runs' own draws differ); a
+    off (without ``realisation`` a run's length shifts the random stream, so the later runs' own
+    draws differ); a
     campaign keeps its name ``ind-SEED``, so its records compare seed by seed.  ``model_heavy``:
     with ``model``, the model of the campaigns above the heavy-duty test mass
     (:attr:`~bayes_roadload.analysis.batch.FitJob.model_heavy`), as ``fit`` routes its default.
     ``log``: channels of :data:`~bayes_roadload.simulate.independent.CHANNELS` logged beside the
     default ones (e.g. ``"humidity"``; their draws come from streams of their own, so every other
     draw of a seed is unchanged).  ``state_yaw_calibration``: each campaign's ``vehicle.toml``
-    states its anemometer's yaw calibration (:func:`simulate_stating_yaw_calibration`)."""
+    states its anemometer's yaw calibration (:func:`simulate_stating_yaw_calibration`).
+    ``realisation``: the simulator's ``realisation`` (each run's draws and the gusts from streams
+    of their own, the campaign's draws kept; tag ``realisation``): another day's runs of the same
+    campaign, and an ablation that leaves every run's own draws alone."""
     o = options or FitOptions()
     model = model or "auto"
     withhold = tuple(withhold)
@@ -94,6 +99,9 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
         tags["logged"] = " ".join(log)
     if state_yaw_calibration:
         tags["stated"] = "yaw calibration"
+    if realisation is not None:
+        extra["realisation"] = int(realisation)
+        tags["realisation"] = int(realisation)
     simulate = simulate_stating_yaw_calibration if state_yaw_calibration else simulate_independent
     return [FitJob(f"ind-{s}", functools.partial(simulate, s, pairs=pairs_of(s, lo, hi), **extra), model=model,
                    method=o.method, pooling=o.pooling, noise=o.noise, robust=o.robust, sampler=o.sampler,
