@@ -58,3 +58,22 @@ def test_by_effect_lists_each_withheld_effect_against_every_effect(refits):
     assert [x.split("|")[1].strip() for x in body] == ["turbulence", "lift"]
     assert body[0].split("|")[2].strip() == "+6.00"
     assert body[1].split("|")[2].strip() == "-1.00"
+
+
+def test_by_realisation_sets_the_spread_between_realisations_against_the_posterior_sd(refits):
+    """Seed 3001, three realisations with C_D0 errors -2, 0, +2 % and posterior sd 1 % of the
+    truth: mean error +0.00, spread sd(-2, 0, 2) = 2.00, ratio 2.00, z -2, 0, 2 so sd(z) 2.00,
+    and the +-2 % ones outside the 95 % interval (1 of 3 held)."""
+    rows = []
+    for r, e in enumerate((-2.0, 0.0, 2.0)):
+        row = {"seed": 3001, "pairs": 1, "realisation": r}
+        for q in refits.SPREAD_SHOWN:
+            err = e if q == "CD0" else 0.0
+            row.update({f"{q}_truth": 0.5, f"{q}_mean": 0.5 * (1 + err / 100), f"{q}_sd": 0.005,
+                        f"{q}_in95": abs(err) < 1.96})
+        rows.append(row)
+    table = refits.by_realisation(pd.DataFrame(rows))
+    cd0 = next(x for x in table.splitlines() if x.startswith("| 3001 |") and "| CD0 |" in x).split("|")
+    assert [c.strip() for c in cd0[5:12]] == ["3", "+0.00", "2.00", "1.00", "2.00", "2.00", "1 / 3"]
+    pooled = next(x for x in table.splitlines() if x.startswith("| CD0 |")).split("|")
+    assert [c.strip() for c in pooled[2:10]] == ["1", "3", "0.00", "2.00", "1.00", "2.00", "2.00", "1 / 3"]
