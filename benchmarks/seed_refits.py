@@ -75,17 +75,20 @@ def run(seeds, keep_every: int = 1, model: str | None = None, model_heavy: str |
 
 
 def by_effect(records: pd.DataFrame) -> str:
-    """Markdown: for each seed, the relative error (%) of C_D0, F2, F1 and K_D with every effect
+    """Markdown: for each seed (and realisation, when the records have them), the relative error (%) of C_D0, F2, F1 and K_D with every effect
     (the arm withholding none) and the change when each effect is withheld, largest C_D0 change first."""
     shown = ("CD0", "F2_N_per_kph2", "F1_N_per_kph", "KD")
     rec = records.assign(withheld=records["withheld"].astype(object).fillna(""))
     lines = []
-    for seed, rows in rec.groupby("seed"):
+    if "realisation" not in rec:
+        rec = rec.copy().assign(realisation=None)
+    for (seed, realisation), rows in rec.groupby(["seed", rec["realisation"].astype(object).fillna(-1)]):
         err = pd.DataFrame({q: (rows[f"{q}_mean"] / rows[f"{q}_truth"] - 1.0) * 100.0 for q in shown})
         err.index = rows["withheld"].tolist()
         base = err.loc[""]
         change = (err.drop(index="") - base).sort_values("CD0", ascending=False)
-        lines += [f"seed {seed} ({int(rows['pairs'].iloc[0])} pairs): every effect " + ", ".join(
+        label = f"seed {seed}" + (f", realisation {int(realisation)}" if realisation != -1 else "")
+        lines += [f"{label} ({int(rows['pairs'].iloc[0])} pairs): every effect " + ", ".join(
                       f"{q} {base[q]:+.2f} %" for q in shown) + "; change when one effect is withheld:", "",
                   "| withheld | " + " | ".join(shown) + " |", "|---" * (1 + len(shown)) + "|"]
         lines += [f"| {name} | " + " | ".join(f"{row[q]:+.2f}" for q in shown) + " |" for name, row in change.iterrows()]
