@@ -96,6 +96,36 @@ def by_effect(records: pd.DataFrame) -> str:
     return "\n".join(lines).rstrip()
 
 
+def by_effect_over_realisations(records: pd.DataFrame) -> str:
+    """Markdown: for each seed of ``--each`` records with several realisations, each arm's mean
+    relative error (%) of C_D0, F2, F1 and K_D over the realisations and, for each withheld
+    effect, the mean paired change against every effect with its standard error (the spread of
+    the realisations' changes over the square root of their number), largest C_D0 change first."""
+    shown = ("CD0", "F2_N_per_kph2", "F1_N_per_kph", "KD")
+    rec = records.assign(withheld=records["withheld"].astype(object).fillna(""))
+    lines = []
+    for seed, rows in rec.groupby("seed"):
+        err = pd.DataFrame({q: (rows[f"{q}_mean"] / rows[f"{q}_truth"] - 1.0) * 100.0 for q in shown})
+        err[["withheld", "realisation"]] = rows[["withheld", "realisation"]].to_numpy()
+        base = err[err["withheld"] == ""].set_index("realisation")[list(shown)]
+        n = len(base)
+        lines += [f"seed {seed} ({int(rows['pairs'].iloc[0])} pairs, {n} realisations): every effect "
+                  + ", ".join(f"{q} {base[q].mean():+.2f} %" for q in shown)
+                  + "; mean change (SE) when one effect is withheld, and the arm's mean error:", "",
+                  "| withheld | " + " | ".join(shown) + " | CD0 error | F2 error |", "|---" * (3 + len(shown)) + "|"]
+        arms = []
+        for name, arm in err[err["withheld"] != ""].groupby("withheld"):
+            arm = arm.set_index("realisation")[list(shown)]
+            change = (arm - base.loc[arm.index]).astype(float)
+            se = change.std(ddof=1) / np.sqrt(len(change)) if len(change) > 1 else change.mean() * np.nan
+            arms.append((change["CD0"].mean(), name, change.mean(), se, arm.astype(float).mean()))
+        for _, name, mean, se, level in sorted(arms, key=lambda a: -a[0]):
+            lines.append(f"| {name} | " + " | ".join(f"{mean[q]:+.2f} ({se[q]:.2f})" for q in shown)
+                         + f" | {level['CD0']:+.2f} | {level['F2_N_per_kph2']:+.2f} |")
+        lines.append("")
+    return "\n".join(lines).rstrip()
+
+
 SPREAD_SHOWN = ("CD0", "F2_N_per_kph2", "F1_N_per_kph", "F0_N", "F50_N", "AD", "KD")
 
 
@@ -177,14 +207,18 @@ def main(argv=None) -> int:
     ap.add_argument("--records", type=Path, help="write the records here (CSV)")
     ap.add_argument("--compare", type=Path, nargs=2, metavar=("FIRST", "SECOND"), help="only compare two record files")
     ap.add_argument("--from-records", type=Path,
-                    help="only print the --each table (or, with --realisations, the spread table) of records written before")
+                    help="only print the table of records written before (--each: per realisation, or with "
+                         "--realisations N > 1 their mean change; else the spread between realisations)")
     a = ap.parse_args(argv)
     if a.compare:
         print(compare(*(pd.read_csv(p) for p in a.compare)))
         return 0
     if a.from_records:
         records = pd.read_csv(a.from_records)
-        print(by_realisation(records) if a.realisations else by_effect(records))
+        if "withheld" in records and records["withheld"].notna().any():
+            print(by_effect_over_realisations(records) if a.realisations > 1 else by_effect(records))
+        else:
+            print(by_realisation(records))
         return 0
     if not a.seeds:
         ap.error("give --seeds, --compare or --from-records")
@@ -200,7 +234,7 @@ def main(argv=None) -> int:
         a.records.parent.mkdir(parents=True, exist_ok=True)
         records.to_csv(a.records, index=False)
     if a.each is not None:
-        print(by_effect(records))
+        print(by_effect_over_realisations(records) if a.realisations > 1 else by_effect(records))
         return 0
     if a.realisations:
         print(by_realisation(records))

@@ -77,3 +77,20 @@ def test_by_realisation_sets_the_spread_between_realisations_against_the_posteri
     assert [c.strip() for c in cd0[5:12]] == ["3", "+0.00", "2.00", "1.00", "2.00", "2.00", "1 / 3"]
     pooled = next(x for x in table.splitlines() if x.startswith("| CD0 |")).split("|")
     assert [c.strip() for c in pooled[2:10]] == ["1", "3", "0.00", "2.00", "1.00", "2.00", "2.00", "1 / 3"]
+
+
+def test_by_effect_over_realisations_pairs_each_realisation_with_its_own_every_effect_arm(refits):
+    """Seed 5, two realisations: C_D0 -10 / -6 % with every effect, -7 / -1 % without lift
+    (changes +3, +5: mean +4.00, SE sd(3, 5) / sqrt 2 = 1.00, arm's mean error -4.00)."""
+    rows = []
+    for r, (every, lift) in enumerate(((-10.0, -7.0), (-6.0, -1.0))):
+        for withheld, err in (("", every), ("lift", lift)):
+            row = {"seed": 5, "pairs": 1, "realisation": r, "withheld": withheld,
+                   "CD0_truth": 0.5, "CD0_mean": 0.5 * (1 + err / 100)}
+            for q in ("F2_N_per_kph2", "F1_N_per_kph", "KD"):
+                row.update({f"{q}_truth": 1.0, f"{q}_mean": 1.0})
+            rows.append(row)
+    table = refits.by_effect_over_realisations(pd.DataFrame(rows))
+    assert "2 realisations): every effect CD0 -8.00 %" in table
+    lift = next(x for x in table.splitlines() if x.startswith("| lift |")).split("|")
+    assert lift[2].strip() == "+4.00 (1.00)" and lift[6].strip() == "-4.00"
