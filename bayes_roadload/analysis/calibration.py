@@ -63,7 +63,7 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
                      options: FitOptions | None = None, model: str | None = None,
                      withhold: Iterable[str] = (), model_heavy: str | None = None,
                      log: Iterable[str] = (), state_yaw_calibration: bool = False,
-                     realisation: int | None = None) -> list[FitJob]:
+                     realisation: int | None = None, effects: Iterable[str] | None = None) -> list[FitJob]:
     """One fit job per seed, with the default fit options (or ``options``: method, pooling,
     noise, robust, sampler and Type B budget pass through) and ``model`` (unless given,
     ``"auto"``: ``fit``'s default for each campaign, the registry's
@@ -81,7 +81,9 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
     states its anemometer's yaw calibration (:func:`simulate_stating_yaw_calibration`).
     ``realisation``: the simulator's ``realisation`` (each run's draws and the gusts from streams
     of their own, the campaign's draws kept; tag ``realisation``): another day's runs of the same
-    campaign, and an ablation that leaves every run's own draws alone."""
+    campaign, and an ablation that leaves every run's own draws alone.  ``effects``: the
+    simulator's ``effects`` (only these injected; default every one; tag ``effects``, the names
+    joined by spaces or ``none``): a campaign of its own, not a pair of the full one."""
     o = options or FitOptions()
     model = model or "auto"
     withhold = tuple(withhold)
@@ -99,6 +101,13 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
         tags["logged"] = " ".join(log)
     if state_yaw_calibration:
         tags["stated"] = "yaw calibration"
+    if effects is not None:
+        effects = tuple(effects)
+        unknown = sorted(set(effects) - set(EFFECTS))
+        if unknown:
+            raise ValueError(f"unknown effect(s) {', '.join(unknown)}: the independent simulator's are {', '.join(EFFECTS)}")
+        extra["effects"] = effects
+        tags["effects"] = " ".join(effects) or "none"
     if realisation is not None:
         extra["realisation"] = int(realisation)
         tags["realisation"] = int(realisation)

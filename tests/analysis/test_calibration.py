@@ -264,6 +264,22 @@ def test_a_study_can_state_the_anemometers_yaw_calibration():
     assert off.anemometer.airspeed_yaw_coefficient_per_rad2 == 0.0
 
 
+def test_a_study_can_fit_realisations_and_campaigns_of_chosen_effects():
+    """``realisation``: the seed's vehicle and Type B errors, each run drawn anew (tagged);
+    ``effects=()``: the campaign with no effect injected (tagged ``none``); an unknown effect is
+    refused with the simulator's list."""
+    plain = calibration_jobs([3001], 1, 1)[0]
+    again = calibration_jobs([3001], 1, 1, realisation=2)[0]
+    bare = calibration_jobs([3001], 1, 1, effects=())[0]
+    assert again.tags["realisation"] == 2 and "realisation" not in plain.tags and bare.tags["effects"] == "none"
+    p, r, b = plain.campaign(), again.campaign(), bare.campaign()
+    assert r.truth["meta"]["type_b_errors"] == p.truth["meta"]["type_b_errors"] and r.meta["realisation"] == 2
+    assert r.truth["meta"]["runs"][0]["v0_mps"] != p.truth["meta"]["runs"][0]["v0_mps"]
+    assert b.truth["meta"]["effects"] == [] and p.truth["meta"]["effects"]
+    with pytest.raises(ValueError, match="cd_yaw_shape"):
+        calibration_jobs([1], 1, 1, effects=["cd_yaw_shap"])
+
+
 def test_campaign_sizes_come_from_the_seed():
     assert [pairs_of(s, 1, 12) for s in range(50)] == [pairs_of(s, 1, 12) for s in range(50)]
     assert {pairs_of(s, 1, 12) for s in range(200)} == set(range(1, 13))
