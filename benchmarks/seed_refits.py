@@ -144,7 +144,7 @@ def by_realisation(records: pd.DataFrame) -> str:
              "| spread / sd | sd(z) | 95 % hold |", "|---" * 11 + "|"]
     pooled = {q: [] for q in SPREAD_SHOWN}
     for seed, rows in records.groupby("seed"):
-        rate = first_draws(int(seed))[1]
+        rate = first_draws(int(seed))[1] / (int(rows["keep_every"].iloc[0]) if "keep_every" in rows else 1)
         for q in SPREAD_SHOWN:
             err = (rows[f"{q}_mean"] / rows[f"{q}_truth"] - 1.0) * 100.0
             sd = (rows[f"{q}_sd"] / rows[f"{q}_truth"].abs()) * 100.0
