@@ -76,20 +76,29 @@ def run(seeds, keep_every: int = 1, model: str | None = None, model_heavy: str |
         return run_batch(jobs, client, progress=False)
 
 
+EFFECT_SHOWN = ("CD0", "F2_N_per_kph2", "F1_N_per_kph", "KD")
+"""The quantities of the ``--each`` tables."""
+
+
+def error_pct(frame, q: str):
+    """The relative error (%) of ``q``'s posterior mean against its truth, row by row."""
+    return (frame[f"{q}_mean"] / frame[f"{q}_truth"] - 1.0) * 100.0
+
+
 def by_effect(records: pd.DataFrame) -> str:
     """Markdown: for each seed (and realisation, when the records have them), the relative error (%) of C_D0, F2, F1 and K_D with every effect
     (the arm withholding none) and the change when each effect is withheld, largest C_D0 change first."""
-    shown = ("CD0", "F2_N_per_kph2", "F1_N_per_kph", "KD")
+    shown = EFFECT_SHOWN
     rec = records.assign(withheld=records["withheld"].astype(object).fillna(""))
     lines = []
-    if "realisation" not in rec:
-        rec = rec.copy().assign(realisation=None)
-    for (seed, realisation), rows in rec.groupby(["seed", rec["realisation"].astype(object).fillna(-1)]):
-        err = pd.DataFrame({q: (rows[f"{q}_mean"] / rows[f"{q}_truth"] - 1.0) * 100.0 for q in shown})
+    per_realisation = "realisation" in rec
+    for key, rows in rec.groupby(["seed", "realisation"] if per_realisation else ["seed"]):
+        err = pd.DataFrame({q: error_pct(rows, q) for q in shown})
         err.index = rows["withheld"].tolist()
         base = err.loc[""]
         change = (err.drop(index="") - base).sort_values("CD0", ascending=False)
-        label = f"seed {seed}" + (f", realisation {int(realisation)}" if realisation != -1 else "")
+        seed = key[0]
+        label = f"seed {seed}" + (f", realisation {int(key[1])}" if per_realisation else "")
         lines += [f"{label} ({int(rows['pairs'].iloc[0])} pairs): every effect " + ", ".join(
                       f"{q} {base[q]:+.2f} %" for q in shown) + "; change when one effect is withheld:", "",
                   "| withheld | " + " | ".join(shown) + " |", "|---" * (1 + len(shown)) + "|"]
@@ -103,11 +112,11 @@ def by_effect_over_realisations(records: pd.DataFrame) -> str:
     relative error (%) of C_D0, F2, F1 and K_D over the realisations and, for each withheld
     effect, the mean paired change against every effect with its standard error (the spread of
     the realisations' changes over the square root of their number), largest C_D0 change first."""
-    shown = ("CD0", "F2_N_per_kph2", "F1_N_per_kph", "KD")
+    shown = EFFECT_SHOWN
     rec = records.assign(withheld=records["withheld"].astype(object).fillna(""))
     lines = []
     for seed, rows in rec.groupby("seed"):
-        err = pd.DataFrame({q: (rows[f"{q}_mean"] / rows[f"{q}_truth"] - 1.0) * 100.0 for q in shown})
+        err = pd.DataFrame({q: error_pct(rows, q) for q in shown})
         err[["withheld", "realisation"]] = rows[["withheld", "realisation"]].to_numpy()
         base = err[err["withheld"] == ""].set_index("realisation")[list(shown)]
         n = len(base)
@@ -146,7 +155,7 @@ def by_realisation(records: pd.DataFrame) -> str:
     for seed, rows in records.groupby("seed"):
         rate = first_draws(int(seed))[1] / (int(rows["keep_every"].iloc[0]) if "keep_every" in rows else 1)
         for q in SPREAD_SHOWN:
-            err = (rows[f"{q}_mean"] / rows[f"{q}_truth"] - 1.0) * 100.0
+            err = error_pct(rows, q)
             sd = (rows[f"{q}_sd"] / rows[f"{q}_truth"].abs()) * 100.0
             z = (rows[f"{q}_mean"] - rows[f"{q}_truth"]) / rows[f"{q}_sd"]
             held = int(rows[f"{q}_in95"].astype(bool).sum())
@@ -173,8 +182,7 @@ def compare(first: pd.DataFrame, second: pd.DataFrame) -> str:
     a, b = first.set_index("seed"), second.set_index("seed")
     common = a.index.intersection(b.index)
     shown = ("CD0", "KD", "F1_N_per_kph", "F2_N_per_kph2")
-    err = {(q, k): (f.loc[common, f"{q}_mean"] / f.loc[common, f"{q}_truth"] - 1.0) * 100.0
-           for q in shown for k, f in (("first", a), ("second", b))}
+    err = {(q, k): error_pct(f.loc[common], q) for q in shown for k, f in (("first", a), ("second", b))}
     sd = {k: f.loc[common, "CD0_sd"] / f.loc[common, "CD0_truth"] * 100.0 for k, f in (("first", a), ("second", b))}
     lines = [f"{len(common)} campaigns; relative error %, first / second record file", "",
              "| seed | pairs | " + " | ".join(shown) + " | C_D0 sd % |", "|---" * (3 + len(shown)) + "|"]

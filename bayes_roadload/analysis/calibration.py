@@ -59,6 +59,16 @@ def pairs_of(seed: int, lo: int, hi: int) -> int:
     return int(np.random.default_rng([seed, 7]).integers(lo, hi + 1))
 
 
+def _known(names: Iterable[str], known: Iterable[str], what: str) -> tuple[str, ...]:
+    """``names`` as a tuple, refused with the independent simulator's list when one is not among
+    its ``known`` ones (``what``: ``"effect"`` or ``"channel"``)."""
+    names, known = tuple(names), tuple(known)
+    unknown = sorted(set(names) - set(known))
+    if unknown:
+        raise ValueError(f"unknown {what}(s) {', '.join(unknown)}: the independent simulator's are {', '.join(known)}")
+    return names
+
+
 def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
                      options: FitOptions | None = None, model: str | None = None,
                      withhold: Iterable[str] = (), model_heavy: str | None = None,
@@ -86,14 +96,8 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
     joined by spaces or ``none``): a campaign of its own, not a pair of the full one."""
     o = options or FitOptions()
     model = model or "auto"
-    withhold = tuple(withhold)
-    unknown = sorted(set(withhold) - set(EFFECTS))
-    if unknown:
-        raise ValueError(f"unknown effect(s) {', '.join(unknown)}: the independent simulator's are {', '.join(EFFECTS)}")
-    log = tuple(log)
-    unknown = sorted(set(log) - set(CHANNELS))
-    if unknown:
-        raise ValueError(f"unknown channel(s) {', '.join(unknown)}: the independent simulator's are {', '.join(CHANNELS)}")
+    withhold = _known(withhold, EFFECTS, "effect")
+    log = _known(log, CHANNELS, "channel")
     extra = {"withhold": withhold} if withhold else {}
     tags = {"withheld": " ".join(withhold)} if withhold else {}
     if log:
@@ -102,10 +106,7 @@ def calibration_jobs(seeds: Iterable[int], lo: int = 1, hi: int = 12,
     if state_yaw_calibration:
         tags["stated"] = "yaw calibration"
     if effects is not None:
-        effects = tuple(effects)
-        unknown = sorted(set(effects) - set(EFFECTS))
-        if unknown:
-            raise ValueError(f"unknown effect(s) {', '.join(unknown)}: the independent simulator's are {', '.join(EFFECTS)}")
+        effects = _known(effects, EFFECTS, "effect")
         extra["effects"] = effects
         tags["effects"] = " ".join(effects) or "none"
     if realisation is not None:
