@@ -141,15 +141,23 @@ SPREAD_SHOWN = ("CD0", "F2_N_per_kph2", "F1_N_per_kph", "F0_N", "F50_N", "AD", "
 
 
 def by_realisation(records: pd.DataFrame) -> str:
-    """Markdown: for each seed and quantity of :data:`SPREAD_SHOWN`, over its realisations, the
+    """Markdown: each seed's vehicle category, K_D, turbulence sd (the campaign's draws, which
+    its realisations keep) and mean absolute logged yaw over its realisations; then for each
+    seed and quantity of :data:`SPREAD_SHOWN`, over its realisations, the
     mean relative error (%; the bias a realisation does not change), the sd of the relative
     errors between realisations (the realisation spread), the mean relative posterior sd and
     their ratio (above 1: the fit does not see how much another day's runs would move it), the
     sd(z) and the 95 % intervals holding the truth; then the same pooled over the seeds (the
     spread as the rms of the seeds' spreads)."""
-    from bayes_roadload.simulate.independent import first_draws
+    from bayes_roadload.simulate.independent import first_draws, simulate_independent
 
-    lines = ["| seed | pairs | rate Hz | quantity | realisations | mean error % | spread % | posterior sd % "
+    lines = ["| seed | vehicle | K_D (rad^-2) | turbulence sd (m/s) | mean abs logged yaw (rad) |", "|---" * 5 + "|"]
+    for seed, rows in records.groupby("seed"):
+        # the campaign's own draws, which every realisation keeps (one pair simulated to read them)
+        meta = simulate_independent(int(seed), pairs=1, realisation=0).truth["meta"]
+        lines.append(f"| {seed} | {meta['vehicle_true']['category']} | {rows['KD_truth'].iloc[0]:.2f} | "
+                     f"{meta['wind']['turbulence_sigma_mps']:.2f} | {rows['mean_abs_yaw_rad'].mean():.3f} |")
+    lines += ["", "| seed | pairs | rate Hz | quantity | realisations | mean error % | spread % | posterior sd % "
              "| spread / sd | sd(z) | 95 % hold |", "|---" * 11 + "|"]
     pooled = {q: [] for q in SPREAD_SHOWN}
     for seed, rows in records.groupby("seed"):

@@ -63,10 +63,10 @@ def test_by_effect_lists_each_withheld_effect_against_every_effect(refits):
 def test_by_realisation_sets_the_spread_between_realisations_against_the_posterior_sd(refits):
     """Seed 3001, three realisations with C_D0 errors -2, 0, +2 % and posterior sd 1 % of the
     truth: mean error +0.00, spread sd(-2, 0, 2) = 2.00, ratio 2.00, z -2, 0, 2 so sd(z) 2.00,
-    and the +-2 % ones outside the 95 % interval (1 of 3 held)."""
+    and the +-2 % ones outside the 95 % interval (1 of 3 held); the campaign's conditions first."""
     rows = []
     for r, e in enumerate((-2.0, 0.0, 2.0)):
-        row = {"seed": 3001, "pairs": 1, "realisation": r}
+        row = {"seed": 3001, "pairs": 1, "realisation": r, "mean_abs_yaw_rad": 0.1 * (r + 1)}
         for q in refits.SPREAD_SHOWN:
             err = e if q == "CD0" else 0.0
             row.update({f"{q}_truth": 0.5, f"{q}_mean": 0.5 * (1 + err / 100), f"{q}_sd": 0.005,
@@ -77,6 +77,14 @@ def test_by_realisation_sets_the_spread_between_realisations_against_the_posteri
     assert [c.strip() for c in cd0[5:12]] == ["3", "+0.00", "2.00", "1.00", "2.00", "2.00", "1 / 3"]
     pooled = next(x for x in table.splitlines() if x.startswith("| CD0 |")).split("|")
     assert [c.strip() for c in pooled[2:10]] == ["1", "3", "0.00", "2.00", "1.00", "2.00", "2.00", "1 / 3"]
+    # the campaign's conditions: the seed's own draws (as the campaign the study fitted), the
+    # records' K_D truth and their mean logged yaw (0.1, 0.2, 0.3)
+    from bayes_roadload.simulate.independent import simulate_independent
+
+    meta = simulate_independent(3001, pairs=1).truth["meta"]
+    conditions = next(x for x in table.splitlines() if x.startswith("| 3001 |")).split("|")
+    assert [c.strip() for c in conditions[2:6]] == [meta["vehicle_true"]["category"], "0.50",
+                                                    f"{meta['wind']['turbulence_sigma_mps']:.2f}", "0.200"]
 
 
 def test_by_effect_over_realisations_pairs_each_realisation_with_its_own_every_effect_arm(refits):
