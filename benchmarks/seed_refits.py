@@ -147,7 +147,7 @@ def by_realisation(records: pd.DataFrame) -> str:
     mean relative error (%; the bias a realisation does not change), the sd of the relative
     errors between realisations (the realisation spread), the mean relative posterior sd and
     their ratio (above 1: the fit does not see how much another day's runs would move it), the
-    sd(z) and the 95 % intervals holding the truth; then the same pooled over the seeds (the
+    sd(z), the 95 % intervals holding the truth and the range of the errors; then the same pooled over the seeds (the
     spread as the rms of the seeds' spreads)."""
     from bayes_roadload.simulate.independent import first_draws, simulate_independent
 
@@ -158,7 +158,7 @@ def by_realisation(records: pd.DataFrame) -> str:
         lines.append(f"| {seed} | {meta['vehicle_true']['category']} | {rows['KD_truth'].iloc[0]:.2f} | "
                      f"{meta['wind']['turbulence_sigma_mps']:.2f} | {rows['mean_abs_yaw_rad'].mean():.3f} |")
     lines += ["", "| seed | pairs | rate Hz | quantity | realisations | mean error % | spread % | posterior sd % "
-             "| spread / sd | sd(z) | 95 % hold |", "|---" * 11 + "|"]
+             "| spread / sd | sd(z) | 95 % hold | error range % |", "|---" * 12 + "|"]
     pooled = {q: [] for q in SPREAD_SHOWN}
     for seed, rows in records.groupby("seed"):
         rate = first_draws(int(seed))[1] / (int(rows["keep_every"].iloc[0]) if "keep_every" in rows else 1)
@@ -171,7 +171,7 @@ def by_realisation(records: pd.DataFrame) -> str:
             pooled[q].append((len(rows), err.mean(), spread, sd.mean(), z, held))
             lines.append(f"| {seed} | {int(rows['pairs'].iloc[0])} | {rate:g} | {q} | {len(rows)} | {err.mean():+.2f} "
                          f"| {spread:.2f} | {sd.mean():.2f} | {spread / sd.mean():.2f} | {z.std(ddof=1):.2f} "
-                         f"| {held} / {len(rows)} |")
+                         f"| {held} / {len(rows)} | {err.min():+.1f} to {err.max():+.1f} |")
     lines += ["", "| quantity | campaigns | fits | rms mean error % | rms spread % | rms posterior sd % "
               "| spread / sd | sd(z) | 95 % hold |", "|---" * 9 + "|"]
     for q, rows in pooled.items():

@@ -74,7 +74,7 @@ def test_by_realisation_sets_the_spread_between_realisations_against_the_posteri
         rows.append(row)
     table = refits.by_realisation(pd.DataFrame(rows))
     cd0 = next(x for x in table.splitlines() if x.startswith("| 3001 |") and "| CD0 |" in x).split("|")
-    assert [c.strip() for c in cd0[5:12]] == ["3", "+0.00", "2.00", "1.00", "2.00", "2.00", "1 / 3"]
+    assert [c.strip() for c in cd0[5:13]] == ["3", "+0.00", "2.00", "1.00", "2.00", "2.00", "1 / 3", "-2.0 to +2.0"]
     pooled = next(x for x in table.splitlines() if x.startswith("| CD0 |")).split("|")
     assert [c.strip() for c in pooled[2:10]] == ["1", "3", "0.00", "2.00", "1.00", "2.00", "2.00", "1 / 3"]
     # the campaign's conditions: the seed's own draws (as the campaign the study fitted), the
