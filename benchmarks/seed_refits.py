@@ -55,13 +55,14 @@ def thinned_factory(factory, keep_every: int):
 
 def run(seeds, keep_every: int = 1, model: str | None = None, model_heavy: str | None = None,
         lo: int = 1, hi: int = 12, workers: int = 2, arms=((),), realisations=(None,),
-        effects=None) -> pd.DataFrame:
+        effects=None, log=()) -> pd.DataFrame:
     """MAP + Laplace records of the ``seeds``' campaigns (the calibration study's jobs,
     :func:`~bayes_roadload.analysis.calibration.calibration_jobs`, one per seed, arm of
     withheld effects and realisation, their campaigns :func:`thinned`), one row per seed, arm and
     realisation (columns ``keep_every``, ``withheld``, the arm's withheld effects joined by
     spaces, and, for a realisation other than ``None``, ``realisation``); ``effects``: only these
-    effects injected (default every one; column ``effects``)."""
+    effects injected (default every one; column ``effects``); ``log``: channels logged beside the
+    default ones (column ``logged``)."""
     from bayes_roadload.analysis.batch import batch_client, run_batch
     from bayes_roadload.analysis.calibration import calibration_jobs
     from bayes_roadload.inference.kinds import FitOptions
@@ -71,7 +72,7 @@ def run(seeds, keep_every: int = 1, model: str | None = None, model_heavy: str |
                                 tags={**job.tags, "keep_every": keep_every, "withheld": " ".join(arm)})
             for r in realisations for arm in arms
             for job in calibration_jobs(seeds, lo, hi, options=options, model=model, withhold=arm, model_heavy=model_heavy,
-                                        realisation=r, effects=effects)]
+                                        realisation=r, effects=effects, log=log)]
     with batch_client(workers=workers) as client:
         return run_batch(jobs, client, progress=False)
 
@@ -223,6 +224,8 @@ def main(argv=None) -> int:
                          "campaign's draws kept) and print their spread against the posterior sd")
     ap.add_argument("--effects", nargs="*", metavar="EFFECT",
                     help="inject only these effects (no names: none; default every one)")
+    ap.add_argument("--log", nargs="+", default=(), metavar="CHANNEL",
+                    help="channels logged beside the default ones (e.g. survey: the track's level survey)")
     ap.add_argument("--workers", type=int, default=2, help="Dask workers")
     ap.add_argument("--records", type=Path, help="write the records here (CSV)")
     ap.add_argument("--compare", type=Path, nargs=2, metavar=("FIRST", "SECOND"), help="only compare two record files")
@@ -249,7 +252,7 @@ def main(argv=None) -> int:
         arms = ((),) + tuple((e,) for e in (a.each or EFFECTS))
     realisations = tuple(range(a.realisations)) if a.realisations else (None,)
     records = run(a.seeds, a.keep_every, a.model, a.model_heavy, *a.pairs, workers=a.workers, arms=arms,
-                  realisations=realisations, effects=a.effects)
+                  realisations=realisations, effects=a.effects, log=a.log)
     if a.records:
         a.records.parent.mkdir(parents=True, exist_ok=True)
         records.to_csv(a.records, index=False)

@@ -346,7 +346,7 @@ class WrongEffectiveMass:
         c = self.factory()
         vehicle = dataclasses.replace(c.vehicle, effective_mass_kg=c.vehicle.effective_mass_kg * self.factor)
         meta = dict(c.meta, effective_mass_factor=self.factor)
-        return Campaign(c.runs, vehicle, c.anemometer, c.tunnel, c.truth, meta)
+        return dataclasses.replace(c, vehicle=vehicle, meta=meta)
 
 
 def sbc_jobs(n_campaigns: int, *, seed0: int = 0, pairs: int = 1, model: str = SBC_MODEL,

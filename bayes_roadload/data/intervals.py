@@ -107,6 +107,7 @@ class IntervalCampaign:
 
     has_anemometer = False
     has_driveline = False
+    has_track_survey = False  # band times carry no position along the track
 
     @property
     def run_ids(self) -> list:

@@ -16,6 +16,7 @@ from typing import Any, Protocol
 
 from . import distances, intervals, spindown, steady, traces
 from .checks import TRUTH_FILE, CampaignError, write_atomically
+from .track import TRACK_FILE
 
 
 class CampaignKind(Protocol):
@@ -135,11 +136,11 @@ def save_campaign(campaign: Any, path: str | os.PathLike, fmt: str = "csv") -> P
     fails.
 
     Files are written to a temporary directory beside ``path`` and moved into place; the data
-    files of every other kind (and a ``truth.json`` the campaign no longer has) are removed, so
-    the directory reads back as this campaign.  ``fmt`` is "csv" or, for speed traces,
+    files of every other kind (and a ``truth.json`` or ``track.csv`` the campaign no longer has)
+    are removed, so the directory reads back as this campaign.  ``fmt`` is "csv" or, for speed traces,
     "parquet".
     """
-    return write_atomically(path, kind_of(campaign).files(campaign, fmt), stale=DATA_FILES + (TRUTH_FILE,))
+    return write_atomically(path, kind_of(campaign).files(campaign, fmt), stale=DATA_FILES + (TRUTH_FILE, TRACK_FILE))
 
 
 def campaign_sha256(path: str | os.PathLike) -> str:

@@ -139,6 +139,8 @@ class SteadyCampaign:
         """False: the wheel torque is measured beyond the driveline (thesis section 5.4.1)."""
         return False
 
+    has_track_survey = False  # steady runs read the grade as a per-run force, not a survey
+
     @property
     def has_driveline_loss(self) -> bool:
         """The gearbox input is logged: the on-load driveline loss is measured (section 5.5.2)."""

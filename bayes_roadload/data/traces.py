@@ -1,6 +1,7 @@
 """The speed-trace campaign kind: ``runs.csv`` (or ``runs.parquet``) + ``vehicle.toml``.
 
-A campaign directory holds ``runs.csv`` (or ``runs.parquet``), ``vehicle.toml`` and, for
+A campaign directory holds ``runs.csv`` (or ``runs.parquet``), ``vehicle.toml``, optionally a
+level survey of the track (``track.csv``, :mod:`~bayes_roadload.data.track`) and, for
 simulated campaigns, ``truth.json``.  One row per sample of a coastdown run; the format is in
 ``docs/data-format.md``.  Loading validates everything and raises
 :class:`~bayes_roadload.data.checks.CampaignError` naming the file, the column and the row at
@@ -47,6 +48,7 @@ from .checks import (
     wheel_torque_force_n,
 )
 from .units import check_plausible_road_load, convert_units
+from .track import TRACK_FILE, check_runs_on_track, grade_at, validate_track
 from .uncertainty import TypeBChannels
 from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
 
@@ -87,6 +89,8 @@ class Campaign:
     tunnel : the optional ``[tunnel]`` table (KD, CD0, CL0, KL, yaw_deg, cd).
     truth : the true parameters of a simulated campaign, else None.
     meta : free-form provenance (e.g. the simulation case), saved in vehicle.toml ``[meta]``.
+    track : the level survey of the track (``position_m``, ``elevation_m``; ``track.csv``),
+        else None; with it the runs must log ``position_m`` inside the surveyed stretch.
     """
 
     runs: pd.DataFrame
@@ -95,6 +99,7 @@ class Campaign:
     tunnel: dict[str, Any] | None = None
     truth: dict[str, float] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    track: pd.DataFrame | None = None
 
     kind = KIND
     type_b_channels = TypeBChannels("runs", speed=("speed_mps", "distance_m", "position_m"),
@@ -103,6 +108,9 @@ class Campaign:
     def __post_init__(self):
         self.runs = validate_runs(self.runs, "runs")
         validate_vehicle(self.vehicle, "vehicle")
+        if self.track is not None:
+            self.track = validate_track(self.track, "track")
+            check_runs_on_track(self.runs, self.track, "runs")
 
     @property
     def run_ids(self) -> list:
@@ -117,6 +125,11 @@ class Campaign:
     def has_driveline(self) -> bool:
         return "driveline_force_n" in self.runs
 
+    @property
+    def has_track_survey(self) -> bool:
+        """Whether the campaign states the track's elevation (``track.csv``)."""
+        return self.track is not None
+
     def directions(self) -> dict:
         """run id -> +1/-1 (every run +1 when the column is absent)."""
         return run_directions(self.runs)
@@ -130,7 +143,7 @@ class Campaign:
     def subset(self, run_ids) -> "Campaign":
         """The campaign restricted to some runs (order as given)."""
         return Campaign(subset_table(self.runs, run_ids), self.vehicle, self.anemometer,
-                        self.tunnel, self.truth, dict(self.meta))
+                        self.tunnel, self.truth, dict(self.meta), self.track)
 
     def _airspeed_readings(self, g: pd.DataFrame):
         """One run's airspeed readings with the anemometer's stated yaw calibration applied
@@ -143,7 +156,9 @@ class Campaign:
 
     def to_batch(self):
         """The runs as a padded :class:`~bayes_roadload.physics.RunBatch` (time from each
-        run's first sample) and the list of run ids in batch order.  ``meta["pad_to_samples"]``
+        run's first sample; the surveyed grade at each logged position when the campaign has a
+        track survey, :func:`~bayes_roadload.data.track.grade_at`) and the list of run ids in
+        batch order.  ``meta["pad_to_samples"]``
         pads every run to at least that many samples (studies of many same-sized campaigns then
         share one compiled fit); with ``BAYES_ROADLOAD_SHARE_PROGRAMS=1`` the length is then
         rounded up to the next of :data:`~bayes_roadload.config.PAD_SIZES_PER_OCTAVE` sizes per
@@ -167,6 +182,7 @@ class Campaign:
                 driveline_force_n=g["driveline_force_n"].to_numpy(float) if "driveline_force_n" in g else None,
                 air_density_kgpm3=air_density(g),
                 temperature_k=temp,
+                track_grade_rad=grade_at(self.track, g["position_m"].to_numpy(float)) if self.track is not None else None,
                 direction=direction,
                 start_position_m=start,
                 mass_kg=mass,
@@ -233,7 +249,7 @@ def read_runs(root: str | os.PathLike) -> tuple[pd.DataFrame, Path]:
 
 def load(root: str | os.PathLike, speed_unit: str | None = None, airspeed_unit: str | None = None) -> Campaign:
     """Load and validate a speed-trace campaign directory (``runs.csv`` or ``runs.parquet``,
-    ``vehicle.toml``, optional ``truth.json``).
+    ``vehicle.toml``, optional ``track.csv`` and ``truth.json``).
 
     Columns whose name states a non-SI unit, and the speed / airspeed columns whose unit
     ``speed_unit`` / ``airspeed_unit`` state (``mps``, ``kph``, ``mph``), are converted to SI
@@ -252,13 +268,17 @@ def load(root: str | os.PathLike, speed_unit: str | None = None, airspeed_unit: 
         df["driveline_force_n"] = wheel_torque_force_n(df, vehicle.rolling_radius_m)
     if conversions:
         meta = dict(meta, conversions=[c.record() for c in conversions])
-    return Campaign(df, vehicle, anem, tunnel, read_truth(root), meta)
+    track = None
+    if (root / TRACK_FILE).exists():
+        track = validate_track(read_csv_table(root / TRACK_FILE), str(root / TRACK_FILE))
+        check_runs_on_track(df, track, str(runs_file))
+    return Campaign(df, vehicle, anem, tunnel, read_truth(root), meta, track)
 
 
 def files(c: Campaign, fmt: str = "csv") -> dict[str, str | bytes]:
     """The files of a speed-trace campaign directory (name -> content), validated first:
     ``runs.csv`` (``fmt="csv"``) or ``runs.parquet`` (``fmt="parquet"``), ``vehicle.toml``,
-    ``truth.json`` when the truth is known."""
+    ``track.csv`` with a track survey, ``truth.json`` when the truth is known."""
     c.runs = validate_runs(c.runs, "runs")
     if fmt == "csv":
         out: dict[str, str | bytes] = {"runs.csv": c.runs.to_csv(index=False, float_format="%.10g")}
@@ -266,4 +286,7 @@ def files(c: Campaign, fmt: str = "csv") -> dict[str, str | bytes]:
         out = {"runs.parquet": c.runs.to_parquet(None, index=False)}
     else:
         raise ValueError(f"fmt must be 'csv' or 'parquet', not {fmt!r}")
+    if c.track is not None:
+        c.track = validate_track(c.track, "track")
+        out[TRACK_FILE] = c.track.to_csv(index=False, float_format="%.10g")
     return out | {VEHICLE_FILE: vehicle_toml(c)} | truth_files(c.truth)

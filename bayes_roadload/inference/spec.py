@@ -425,7 +425,8 @@ class ModelSpec:
         ----------
         campaign : :class:`~bayes_roadload.data.Campaign`
             Supplies the logged channels (driveline, anemometer), the anemometer calibration
-            factors and the optional ``[tunnel]`` table.
+            factors, the optional ``[tunnel]`` table and whether the track is surveyed (then
+            the ``surveyed_gradient`` term is added).
 
         Returns
         -------
@@ -458,6 +459,8 @@ class ModelSpec:
         cup_lag = float(campaign.anemometer.distance_constant_m) if air == "measured" else 0.0
         if cup_lag > 0.0 and "anemometer_lag" not in names:
             names.append("anemometer_lag")  # the campaign states its cup's lag: undo it (eq. 2.26, thesis 4.7)
+        if campaign.has_track_survey and "surveyed_gradient" not in names:
+            names.append("surveyed_gradient")  # the campaign surveys its track: the grade force (eq. 2.1)
         model = model_from_names(names, air=air, **options)
 
         used = set(model.parameter_names)

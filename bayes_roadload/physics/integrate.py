@@ -1,7 +1,8 @@
 """RK4 integration of the coastdown equation over the sample grid of each run.
 
 The state is (speed v, distance travelled s).  Between two samples the measured inputs
-(airspeed, yaw, driveline force, air density, temperature, and the airspeed reading's rate for
+(airspeed, yaw, driveline force, air density, temperature, the surveyed track grade at the
+logged position, and the airspeed reading's rate for
 terms that undo an instrument lag) are linearly interpolated, so the
 RK4 stages at the half step see the mean of the two neighbouring samples (thesis section 5.2).
 Runs of unequal length are padded to a common length by repeating their last sample: a padded
@@ -28,7 +29,9 @@ class RunBatch(NamedTuple):
 
     Per-sample channels: ``time_s`` (from the start of the run), ``speed_mps`` (measured),
     ``airspeed_mps`` and ``yaw_rad`` (anemometer readings, uncalibrated), ``driveline_force_n``,
-    ``air_density_kgpm3``, ``temperature_k``, ``mask`` (True on real samples).
+    ``air_density_kgpm3``, ``temperature_k``, ``track_grade_rad`` (the surveyed track's rise in
+    its +x direction at the logged position, 0 without a survey), ``mask`` (True on real
+    samples).
     Per-run constants ([] or [R]): ``direction`` (+1/-1), ``start_position_m``, ``mass_kg``,
     ``effective_mass_kg``, ``frontal_area_m2``.
     """
@@ -40,6 +43,7 @@ class RunBatch(NamedTuple):
     driveline_force_n: Array
     air_density_kgpm3: Array
     temperature_k: Array
+    track_grade_rad: Array
     mask: Array
     direction: Array
     start_position_m: Array
@@ -56,7 +60,8 @@ class RunBatch(NamedTuple):
         return RunBatch(*(jnp.asarray(x)[i] for x in self))
 
 
-_CHANNELS = ("airspeed_mps", "yaw_rad", "driveline_force_n", "air_density_kgpm3", "temperature_k")
+_CHANNELS = ("airspeed_mps", "yaw_rad", "driveline_force_n", "air_density_kgpm3", "temperature_k",
+             "track_grade_rad")
 """The logged channels of a run the forces read, in the order of the inputs' last axis."""
 
 _INPUTS = _CHANNELS + ("airspeed_rate_mps2", "speed_measured_mps", "speed_drop_lagged_mps",
@@ -101,6 +106,7 @@ def _conditions(model: DragModel, p, run: RunBatch, v, s, t, u) -> Conditions:
         direction=run.direction,
         air_density_kgpm3=u[_AT["air_density_kgpm3"]],
         temperature_k=u[_AT["temperature_k"]],
+        track_grade_rad=u[_AT["track_grade_rad"]],
         mass_kg=run.mass_kg,
         frontal_area_m2=run.frontal_area_m2,
         airspeed_rate_mps2=u[_AT["airspeed_rate_mps2"]],
@@ -530,6 +536,7 @@ def make_run(
     driveline_force_n=None,
     air_density_kgpm3=None,
     temperature_k=None,
+    track_grade_rad=None,
     direction=1.0,
     start_position_m=0.0,
     mass_kg,
@@ -556,6 +563,7 @@ def make_run(
         driveline_force_n=full(driveline_force_n, 0.0),
         air_density_kgpm3=full(air_density_kgpm3, REFERENCE_AIR_DENSITY_KGPM3),
         temperature_k=full(temperature_k, config.REFERENCE_TEMPERATURE_K),
+        track_grade_rad=full(track_grade_rad, 0.0),
         mask=np.ones(t.shape, bool),
         direction=np.asarray(direction, float),
         start_position_m=np.asarray(start_position_m, float),

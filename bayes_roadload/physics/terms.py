@@ -43,6 +43,8 @@ class Conditions(NamedTuple):
     frontal_area_m2 : frontal area A.
     airspeed_rate_mps2 : d/dt of the airspeed *reading* (the logged channel, before
         calibration), for terms that undo an instrument lag; 0 where no reading is integrated.
+    track_grade_rad : the track's rise in its +x direction at the logged position, from a
+        level survey of the track (:class:`SurveyedGradient`); 0 where no survey is given.
     felt_airspeed_mps, felt_yaw_rad : the relative air the body feels after an admittance
         filter of the length a model term names (``felt_air_length``;
         :func:`~bayes_roadload.physics.admittance.felt_air`), calibrated as ``airspeed_mps``
@@ -71,6 +73,7 @@ class Conditions(NamedTuple):
     frontal_area_m2: Array
     airspeed_rate_mps2: Array = 0.0
     speed_drop_lagged_mps: Array = 0.0
+    track_grade_rad: Array = 0.0
     speed_measured_mps: Array | None = None
     felt_airspeed_mps: Array | None = None
     felt_yaw_rad: Array | None = None
@@ -454,3 +457,21 @@ class GradientProfile(Term):
     def force_n(self, p: Params, c: Conditions) -> Array:
         theta = jnp.interp(c.position_m, jnp.asarray(self.position_m), jnp.asarray(self.grade_rad))
         return c.weight_n * jnp.sin(c.direction * p["grade_scale"] * theta)
+
+
+@register_term
+@dataclass(frozen=True)
+class SurveyedGradient(Term):
+    """Track gradient from a level survey of the track, read at the vehicle's logged position:
+    M g sin(d theta(x)) (eq. 2.1 with theta(x)), theta the ``track_grade_rad`` channel that the
+    campaign derives from its survey (``track.csv``) and the logged ``position_m``.  A logged
+    channel like the measured driveline force, so the force is affine in the speed and the
+    integrator keeps its parallel solve; no parameter."""
+
+    name: ClassVar[str] = "surveyed_gradient"
+    defaults: ClassVar[Mapping[str, float]] = {}
+    speed_affine: ClassVar[bool] = True
+    equation: ClassVar[str] = "2.1 with theta(x) surveyed"
+
+    def force_n(self, p: Params, c: Conditions) -> Array:
+        return c.weight_n * jnp.sin(c.direction * c.track_grade_rad)

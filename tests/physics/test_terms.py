@@ -68,6 +68,29 @@ def test_gradient_reverses_with_direction_and_profile():
         T.GradientProfile(position_m=(0.0, 0.0), grade_rad=(0.0, 1.0))
 
 
+def test_surveyed_gradient_reads_the_grade_channel():
+    """M g sin(d theta) with theta the surveyed grade at the logged position, reversing with the
+    direction; integrated over a run, a constant surveyed grade moves the vehicle exactly as the
+    constant-grade term."""
+    from bayes_roadload.physics.integrate import integrate_run, make_run
+
+    s = T.SurveyedGradient()
+    assert s.speed_affine and not s.defaults
+    for d in (1.0, -1.0):
+        assert float(s.force_n({}, conditions(direction=d, track_grade_rad=0.003))) == pytest.approx(
+            1100 * G * np.sin(d * 0.003), rel=1e-12)
+    t = np.arange(0.0, 60.0, 0.5)
+    v = 30.0 - 0.3 * t
+    vehicle = {"mass_kg": 1100.0, "effective_mass_kg": 1130.0, "frontal_area_m2": 1.85}
+    p = {"AD": 0.01, "BD": 2e-4, "CD0": 0.4, "KD": 0.6, "grade_rad": 0.004}
+    base = (T.TyreRolling(), T.AeroDrag())
+    constant, _ = integrate_run(DragModel(base + (T.Gradient(),)), p, make_run(t, v, **vehicle))
+    surveyed, _ = integrate_run(DragModel(base + (s,)), p, make_run(t, v, track_grade_rad=0.004, **vehicle))
+    np.testing.assert_allclose(np.asarray(surveyed), np.asarray(constant), rtol=1e-12)
+    level, _ = integrate_run(DragModel(base), p, make_run(t, v, **vehicle))
+    assert float(np.asarray(level)[-1] - np.asarray(surveyed)[-1]) > 0.5   # the grade slows the vehicle
+
+
 def test_saturating_yaw_drag_keeps_the_zero_yaw_curvature_and_levels_off():
     """c_psi = 0 is the quadratic drag; K_D stays the curvature at zero yaw; the yaw term is
     half its ceiling K_D / c_psi at psi = 1 / sqrt(c_psi)."""

@@ -320,6 +320,46 @@ def test_humidity_is_logged_on_request_and_leaves_every_other_draw_alone(tmp_pat
     assert "relative_humidity_pct" not in dry.runs
 
 
+def test_the_track_survey_is_logged_on_request_and_leaves_every_other_draw_alone(tmp_path):
+    """The ``survey`` channel writes ``track.csv``: stations every 10 m over the whole track, the
+    undulations without the mean grade (the Type B ``track_mean_grade``), each station's error
+    inside its drawn sd and the 1 mm rounding; the runs are those of the campaign without it.
+    The grade it puts on each logged position differs from that of the error-free stations by
+    the segment grades' error, two stations' errors over 10 m: rms at most sqrt(2) sqrt(sigma^2
+    + (1 mm)^2 / 6) / 10 m (each station's error and the two roundings), with a margin of 1.25
+    for the rms estimated from a few hundred segments (6 of its standard errors)."""
+    from bayes_roadload.data.track import grade_at
+    from bayes_roadload.simulate.independent import CHANNELS, DEFAULT_CHANNELS
+    from bayes_roadload.simulate.independent.campaign import SURVEY_NOISE_M, SURVEY_SPACING_M
+
+    assert "survey" in CHANNELS and "survey" not in DEFAULT_CHANNELS
+    with pytest.raises(ValueError, match="needs 'position'"):
+        simulate_independent(7, pairs=1, channels=("anemometer", "survey"))
+    plain = simulate_independent(7, pairs=2, effects=("grade_profile",))
+    c = simulate_independent(7, pairs=2, effects=("grade_profile",), channels=DEFAULT_CHANNELS + ("survey",))
+    assert plain.track is None and c.runs.equals(plain.runs)
+    meta = c.truth["meta"]["track"]
+    sigma = meta["surveyed"]["noise_sd_m"]
+    assert SURVEY_NOISE_M[0] <= sigma <= SURVEY_NOISE_M[1]
+    x = c.track["position_m"].to_numpy()
+    np.testing.assert_allclose(np.diff(x), SURVEY_SPACING_M)
+    np.testing.assert_allclose(x, meta["survey_stations_m"])
+    # the true elevation without its mean grade, against the survey: 5 sd of the error and the rounding
+    true_z = np.asarray(meta["survey_elevation_m"]) - meta["mean_grade"] * (x - x[0])
+    assert np.max(np.abs(c.track["elevation_m"].to_numpy() - true_z)) <= 5 * sigma + 1e-3
+    # the grade at the logged positions against the undulations' grade (the mean grade removed)
+    pos = c.runs["position_m"].to_numpy()
+    stations, elevation = np.asarray(meta["survey_stations_m"]), true_z
+    fine = np.interp(pos, 0.5 * (stations[1:] + stations[:-1]), np.diff(elevation) / SURVEY_SPACING_M)
+    rms_undulation = meta["rms_undulation_grade"]
+    bound = 1.25 * np.sqrt(2) * np.hypot(sigma, 1e-3 / np.sqrt(6)) / SURVEY_SPACING_M
+    err = grade_at(c.track, pos) - np.arctan(fine)
+    assert np.sqrt(np.mean(err**2)) <= bound
+    assert np.std(grade_at(c.track, pos)) > 0.5 * rms_undulation   # the survey sees the undulations
+    back = load_campaign(save_campaign(c, tmp_path / "c"))
+    assert back.has_track_survey
+
+
 @pytest.mark.parametrize("effect", ["anemometer_yaw_factor", "humidity", "turbulence", "anemometer_dynamics"])
 def test_a_withheld_effect_leaves_the_campaigns_other_draws_as_they_were(effect):
     """An ablation's two arms differ by the withheld effect alone in everything drawn per

@@ -25,10 +25,11 @@ from .track import Track, surveyed_track
 from .vehicles import TrueVehicle, random_vehicle
 from .wind import Shelter, WindField, random_shelter, von_karman_turbulence
 
-CHANNELS = ("anemometer", "weather", "position", "driveline", "humidity")
+CHANNELS = ("anemometer", "weather", "position", "driveline", "humidity", "survey")
 """Optional logged channels: airspeed_mps + yaw_rad, temperature_k + pressure_pa, position_m
 + distance_m, driveline_force_n (only when the vehicle has a driveline loss),
-relative_humidity_pct (a hygrometer's reading; only when the ``humidity`` effect is on)."""
+relative_humidity_pct (a hygrometer's reading; only when the ``humidity`` effect is on), and a
+level survey of the track (``track.csv``, :func:`level_survey`; needs ``position``)."""
 DEFAULT_CHANNELS = ("anemometer", "weather", "position", "driveline")
 """The channels logged by default: every one but the humidity, which the studies' campaigns did
 not log before it was a channel (their records stay reproducible)."""
@@ -38,6 +39,14 @@ so that logging the humidity leaves every other draw of a seed as it was."""
 RUN_STREAM = 0x72756E
 """Second entropy word of a run's own random stream with ``realisation`` given
 (``default_rng([seed, this, realisation, run index])``)."""
+SURVEY_STREAM = 0x737276
+"""Second entropy word of the track survey's own random stream (``default_rng([seed, this])``),
+so that surveying the track leaves every other draw of a seed as it was."""
+SURVEY_SPACING_M = 10.0
+"""Station spacing of the track survey (m)."""
+SURVEY_NOISE_M = (0.0005, 0.002)
+"""Range of the survey's per-station elevation error (standard deviation, m): digital levelling
+between 10 m stations, 0.5-2 mm per set-up."""
 TURBULENCE_STREAM = 0x747262
 """Second entropy word of the turbulence's phases and directions with ``realisation`` given
 (``default_rng([seed, this, realisation])``)."""
@@ -251,6 +260,8 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     bad = set(channels) - set(CHANNELS)
     if bad:
         raise ValueError(f"unknown channel(s) {sorted(bad)}; known: {CHANNELS}")
+    if "survey" in channels and "position" not in channels:
+        raise ValueError("channel 'survey' needs 'position': the runs are placed on the survey by position_m")
     n_pairs = int(rng.integers(1, 13)) if pairs is None else int(pairs)
     if n_pairs < 1:
         raise ValueError("pairs must be at least 1")
@@ -385,6 +396,7 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
 
     runs = pd.concat(frames, ignore_index=True)
     survey = track.survey(10.0)
+    surveyed = level_survey(track, np.random.default_rng([int(seed), SURVEY_STREAM])) if "survey" in channels else None
     tunnel = {"KD": veh.kd_per_rad2}
     if "lift" in chosen:
         tunnel.update(CL0=veh.cl0, KL=veh.kl_per_rad2)
@@ -416,7 +428,8 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
                  "turbulence_sigma_mps": field.turbulence.sigma_mps,
                  "turbulence_length_scale_m": field.turbulence.length_scale_m},
         "track": {"length_m": length, "mean_grade": mean_grade, "rms_undulation_grade": undulation,
-                  "survey_stations_m": survey[0], "survey_elevation_m": survey[1]},
+                  "survey_stations_m": survey[0], "survey_elevation_m": survey[1],
+                  "surveyed": None if surveyed is None else surveyed.attrs},
         "runs": run_meta,
     }
     truth.update(case="independent", model="independent simulator", per_run=per_run, meta=_json_safe(meta))
@@ -429,4 +442,19 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
     stated_d = float(dyn.distance_constant_m) if dyn is not None else 0.0
     return Campaign(runs, declared, Anemometer(airspeed_factor=declared_air, yaw_factor=declared_yaw,
                                                distance_constant_m=stated_d),
-                    tunnel=tunnel, truth=_json_safe(truth), meta=vmeta)
+                    tunnel=tunnel, truth=_json_safe(truth), meta=vmeta, track=surveyed)
+
+
+def level_survey(track: Track, rng: np.random.Generator) -> pd.DataFrame:
+    """The track as a level survey states it (``track.csv``): stations every
+    :data:`SURVEY_SPACING_M` over the track, each elevation with an independent error of
+    standard deviation drawn from :data:`SURVEY_NOISE_M` and rounded to 1 mm.  The survey levels
+    the stations against each other, not the track against the horizontal: its elevations hold
+    the undulations but not the mean grade, which stays the Type B error ``track_mean_grade``
+    (40 CFR 1066.310's 0.02 %).  ``attrs`` records the spacing and the error's sd."""
+    noise_sd = float(rng.uniform(*SURVEY_NOISE_M))
+    x = np.arange(track.start_m, track.end_m + SURVEY_SPACING_M, SURVEY_SPACING_M)
+    z = track.elevation(x) - track.mean_grade * (x - track.start_m) + rng.normal(0.0, noise_sd, x.size)
+    df = pd.DataFrame({"position_m": x, "elevation_m": np.round(z, 3)})
+    df.attrs = {"spacing_m": SURVEY_SPACING_M, "noise_sd_m": noise_sd}
+    return df

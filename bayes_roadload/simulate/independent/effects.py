@@ -45,7 +45,7 @@ EFFECTS: dict[str, Effect] = {
         "+-3 K and +-300 Pa linear drift, 0.2 K / 20 Pa run-to-run",
         "SAE J1263 test window 5-35 C; a test session of 1-3 h"),
     "grade_profile": Effect(
-        "undulating track elevation (a surveyed series of 10 m stations, spline-interpolated)",
+        "undulating track elevation (six sinusoids; a level survey of it is the channel `survey`)",
         "RMS grade of the undulations 0.02-0.1 %, wavelengths 50-400 m",
         "SAE J1263 (constant grade below 0.5 %), 40 CFR 1066.310 (grade above 0.02 % analysed)"),
     "tyre_speed_law": Effect(

@@ -1,0 +1,102 @@
+"""The track survey (track.csv): round trip, the grade it puts on each logged position, the model
+term it adds, and every refusal names file/column/row."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bayes_roadload.data import Campaign, CampaignError, Vehicle, load_campaign, save_campaign
+from bayes_roadload.data.track import MAX_GRADE, grade_at, segment_grades
+from bayes_roadload.inference.spec import load_model_spec
+
+from .test_traces import VEHICLE_TOML, runs_frame, write
+
+SLOPE = 0.001   # a rise of 1 m per km: 0.1 % grade
+
+
+def runs_with_position(n=40):
+    """Two runs over 0-300 m of the track, the second back the way the first came."""
+    df = runs_frame(n)
+    t = df["time_s"].to_numpy()
+    travelled = 30.0 * t - 0.15 * t**2
+    df["position_m"] = np.where(df["direction"] > 0, travelled, 300.0 - travelled)
+    return df
+
+
+def survey(slope=SLOPE, start=-50.0, end=400.0, spacing=10.0):
+    x = np.arange(start, end + spacing, spacing)
+    return pd.DataFrame({"position_m": x, "elevation_m": 12.0 + slope * x})
+
+
+def test_round_trip_and_the_grade_channel(tmp_path):
+    c = Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85), track=survey())
+    out = save_campaign(c, tmp_path / "c")
+    assert (out / "track.csv").exists()
+    back = load_campaign(out)
+    assert back.has_track_survey
+    pd.testing.assert_frame_equal(back.track, c.track)
+    batch, _ = back.to_batch()
+    np.testing.assert_allclose(np.asarray(batch.track_grade_rad), np.arctan(SLOPE), rtol=1e-12)
+
+
+def test_no_survey_no_grade_and_a_stale_survey_is_removed(tmp_path):
+    out = save_campaign(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85), track=survey()), tmp_path / "c")
+    save_campaign(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85)), out)
+    back = load_campaign(out)
+    assert not (out / "track.csv").exists() and not back.has_track_survey
+    batch, _ = back.to_batch()
+    assert not np.asarray(batch.track_grade_rad).any()
+
+
+def test_grade_between_segment_middles():
+    """Each segment's rise over run sits at its middle; between middles the grade is linear."""
+    track = pd.DataFrame({"position_m": [0.0, 10.0, 20.0], "elevation_m": [0.0, 0.01, 0.0]})
+    middle, theta = segment_grades(track)
+    np.testing.assert_allclose(middle, [5.0, 15.0])
+    np.testing.assert_allclose(theta, np.arctan([0.001, -0.001]))
+    np.testing.assert_allclose(grade_at(track, [0.0, 5.0, 10.0, 15.0, 20.0]),
+                               np.arctan([0.001, 0.001, 0.0, -0.001, -0.001]), atol=1e-15)
+
+
+def test_the_model_adds_the_surveyed_gradient_only_with_a_survey():
+    spec = load_model_spec("four_term")
+    with_survey = Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85), track=survey())
+    model, _, _ = spec.build(with_survey)
+    assert "surveyed_gradient" in model.term_names
+    model, _, _ = spec.build(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85)))
+    assert "surveyed_gradient" not in model.term_names
+
+
+def test_subset_keeps_the_survey():
+    c = Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85), track=survey())
+    assert c.subset([2]).has_track_survey
+
+
+@pytest.mark.parametrize(
+    "track, expected",
+    [
+        (survey().rename(columns={"elevation_m": "elevation"}), "column 'elevation': unknown column; did you mean elevation_m"),
+        (survey().drop(columns="elevation_m"), "column 'elevation_m': required column is missing"),
+        (survey().iloc[:1], "1 station; a survey needs at least 2"),
+        (survey().assign(position_m=lambda d: d["position_m"].where(d.index != 4, 5.0)),
+         "column 'position_m', row 6: position 0 m does not increase on the station before it (5 m)"),
+        (survey().assign(elevation_m=lambda d: d["elevation_m"].where(d.index != 7, np.nan)),
+         "column 'elevation_m', row 8: an empty cell"),
+        (survey(slope=1000 * SLOPE * 0.06), f"steeper than {100 * MAX_GRADE:g} %"),
+        (survey(start=10.0), "row 1: run 1 at 0 m, outside the surveyed stretch 10 to 400 m"),
+    ],
+)
+def test_refusals_name_file_column_row(tmp_path, track, expected):
+    d = write(tmp_path, runs_with_position(), VEHICLE_TOML)
+    track.to_csv(d / "track.csv", index=False)
+    with pytest.raises(CampaignError) as e:
+        load_campaign(d)
+    assert expected in str(e.value)
+    assert ("track.csv" in str(e.value)) or ("runs.csv" in str(e.value))
+
+
+def test_a_survey_needs_the_runs_positions(tmp_path):
+    d = write(tmp_path, runs_frame(), VEHICLE_TOML)
+    survey().to_csv(d / "track.csv", index=False)
+    with pytest.raises(CampaignError, match="runs.csv, column 'position_m': track.csv surveys the track"):
+        load_campaign(d)
