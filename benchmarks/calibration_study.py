@@ -27,6 +27,11 @@ not fitted again), prints the summary as JSON and, with ``--docs``, regenerates 
 its markers.
 
     python benchmarks/calibration_study.py --n 200 --seed0 9000 --workers 2 --docs
+
+The confirmatory run of the current default (from seed 10000) logs each campaign's track survey:
+
+    python benchmarks/calibration_study.py --n 200 --seed0 10000 --log survey --workers 2 \
+        --records docs/calibration/survey_records.csv
 """
 
 from __future__ import annotations
@@ -115,6 +120,9 @@ def main(argv=None) -> int:
                     help="with --model: the variant for campaigns above the heavy-duty test mass (3500 kg)")
     ap.add_argument("--withhold", nargs="+", default=(), metavar="EFFECT",
                     help="an ablation: these effects of the independent simulator left out of every campaign")
+    ap.add_argument("--log", nargs="+", default=(), metavar="CHANNEL",
+                    help="channels of the independent simulator logged beside the default ones (e.g. survey: "
+                         "each campaign's level survey of its track, track.csv)")
     ap.add_argument("--noise-scaled-metric", action=argparse.BooleanOptionalAction,
                     default=DEFAULT_SAMPLER.noise_scaled_metric,
                     help="the sampler's coordinates scaled with the integrated noise (SamplerConfig.noise_scaled_metric; "
@@ -136,7 +144,7 @@ def main(argv=None) -> int:
     else:
         options = FitOptions(sampler=dataclasses.replace(DEFAULT_SAMPLER, noise_scaled_metric=args.noise_scaled_metric))
         jobs = calibration_jobs(range(args.seed0, args.seed0 + args.n), *args.pairs, options=options,
-                                model=args.model, withhold=args.withhold, model_heavy=args.model_heavy)
+                                model=args.model, withhold=args.withhold, model_heavy=args.model_heavy, log=args.log)
         args.records.parent.mkdir(parents=True, exist_ok=True)
         partial = args.records.with_suffix(".partial.csv")
         before, jobs = resume_from(partial, jobs)

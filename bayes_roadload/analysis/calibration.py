@@ -38,7 +38,10 @@ SIZE_BINS = ((1, 2), (3, 5), (6, 12))
 CONFIRMATORY_SEED0 = 10000
 """First confirmatory seed of the current default analysis: the default model with the unlogged
 humidity (since 2026-12-06) and the anemometer's airspeed factor against yaw (since 2026-12-07)
-in its Type B budget; never fitted before.  Seeds 1000-1059 (``four_term_tyre_lag``), 3000-3032
+in its Type B budget, on campaigns that log a level survey of their track (``log=("survey",)``,
+since 2026-12-07: 40 CFR 1066.310 has a grade above 0.02 % enter the analysis, and the
+simulator's undulations are 0.02-0.1 %; the fit then adds the ``surveyed_gradient`` term);
+never fitted before.  Seeds 1000-1059 (``four_term_tyre_lag``), 3000-3032
 (``four_term_tyre_lag_j2452_typeb``), 4000-4052 (``four_term_tyre_lag_admittance``), 5000-5073
 (``four_term_tyre_lag_admittance_pitch``), 6000-6199 (the current default model before the
 humidity's budget) and 9000-9158 (with the humidity's budget, stopped when its verdict was
