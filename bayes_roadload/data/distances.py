@@ -99,7 +99,7 @@ class DistanceCampaign:
     type_b_channels = TypeBChannels("markers")  # surveyed markers and a clock: no speed sensor
     has_anemometer = False
     has_driveline = False
-    has_track_survey = False  # the model's markers are on a level floor
+    has_track_survey = False  # track.csv is read with speed traces only
 
     def __post_init__(self):
         self.markers = validate_distances(self.markers, "distances")

@@ -107,7 +107,7 @@ class IntervalCampaign:
 
     has_anemometer = False
     has_driveline = False
-    has_track_survey = False  # band times carry no position along the track
+    has_track_survey = False  # track.csv is read with speed traces only
 
     @property
     def run_ids(self) -> list:

@@ -139,7 +139,7 @@ class SteadyCampaign:
         """False: the wheel torque is measured beyond the driveline (thesis section 5.4.1)."""
         return False
 
-    has_track_survey = False  # steady runs read the grade as a per-run force, not a survey
+    has_track_survey = False  # track.csv is read with speed traces only
 
     @property
     def has_driveline_loss(self) -> bool:

@@ -102,8 +102,9 @@ class Campaign:
     track: pd.DataFrame | None = None
 
     kind = KIND
-    type_b_channels = TypeBChannels("runs", speed=("speed_mps", "distance_m", "position_m"),
-                                    force=("driveline_force_n",))
+    # the position along the track is a GNSS or surveyed coordinate, which a speed sensor's scale
+    # error does not move (nor the surveyed grade read at it)
+    type_b_channels = TypeBChannels("runs", speed=("speed_mps", "distance_m"), force=("driveline_force_n",))
 
     def __post_init__(self):
         self.runs = validate_runs(self.runs, "runs")

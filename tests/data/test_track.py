@@ -100,3 +100,21 @@ def test_a_survey_needs_the_runs_positions(tmp_path):
     survey().to_csv(d / "track.csv", index=False)
     with pytest.raises(CampaignError, match="runs.csv, column 'position_m': track.csv surveys the track"):
         load_campaign(d)
+
+
+def test_every_type_b_source_applies_to_a_survey_that_ends_where_the_runs_end():
+    """A survey covering exactly the logged stretch stays valid under every Type B shift: the
+    speed sensor's scale error moves the speeds and the distance travelled, not the position
+    along the track (a GNSS or surveyed coordinate), so the grade read at it is unchanged."""
+    from bayes_roadload.data.uncertainty import SOURCES
+
+    runs = runs_with_position()
+    c = Campaign(runs, Vehicle(1100.0, 1130.0, 1.85),
+                 track=survey(start=float(runs["position_m"].min()), end=float(runs["position_m"].max()),
+                              spacing=float(runs["position_m"].max() - runs["position_m"].min()) / 20))
+    for name, source in SOURCES.items():
+        shifted = source.apply(c, 3 * source.default)
+        assert shifted is None or shifted.has_track_survey, name
+    s = SOURCES["speed_scale_rel"].apply(c, 0.01)
+    pd.testing.assert_series_equal(s.runs["position_m"], c.runs["position_m"])
+    np.testing.assert_array_equal(np.asarray(s.to_batch()[0].track_grade_rad), np.asarray(c.to_batch()[0].track_grade_rad))
