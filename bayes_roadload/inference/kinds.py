@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
+import numpy as np
 import pandas as pd
 
 from .. import config
@@ -353,6 +354,23 @@ def _air_notes(fit, campaign, extras) -> list[str]:
     return [ambient_line(ambient_record(campaign))]
 
 
+def _traces_preamble(campaign) -> list[str]:
+    """The track survey the fit reads (``track.csv``: stations, stretch, the RMS grade at the
+    logged positions), or, for runs that log their position without one, that the grade is not
+    in the model."""
+    if campaign.has_track_survey:
+        from ..data.track import grade_at
+
+        t = campaign.track
+        rms = float(np.sqrt(np.mean(grade_at(t, campaign.runs["position_m"].to_numpy(float)) ** 2)))
+        return [f"track survey: {len(t)} stations over {t['position_m'].iloc[0]:g} to {t['position_m'].iloc[-1]:g} m, "
+                f"RMS grade {100 * rms:.3f} % at the logged positions: the fit adds its force (surveyed_gradient, eq. 2.1)"]
+    if "position_m" in campaign.runs:
+        return ["no track survey (track.csv): the grade along the track is not in the model "
+                "(40 CFR 1066.310 has a grade above 0.02 % enter the analysis)"]
+    return []
+
+
 def _distance_preamble(campaign) -> list[str]:
     masses = sorted(set(campaign.masses_kg().values()))
     return [f"{len(campaign.run_ids)} runs at {', '.join(f'{m:g}' for m in masses)} kg, "
@@ -395,7 +413,7 @@ KINDS: dict[str, KindEntry] = {e.name: e for e in (
     KindEntry("traces", "speed-trace", Campaign, traces_default_model, _check_traces, _fit_traces,
               trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
               diagnosis_model="three_term", type_b=_traces_type_b, default_pooling=traces_default_pooling,
-              lagged_speed_drop=True, notes=_air_notes,
+              lagged_speed_drop=True, notes=_air_notes, preamble=_traces_preamble,
               default_models={"four_term_tyre_lag_admittance_pitch_shapes":
                                   f"Bayesian fit up to {config.HEAVY_DUTY_MASS_KG:g} kg test mass",
                               "four_term_tyre_lag_admittance_heavy_pitch_shapes":

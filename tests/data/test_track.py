@@ -118,3 +118,16 @@ def test_every_type_b_source_applies_to_a_survey_that_ends_where_the_runs_end():
     s = SOURCES["speed_scale_rel"].apply(c, 0.01)
     pd.testing.assert_series_equal(s.runs["position_m"], c.runs["position_m"])
     np.testing.assert_array_equal(np.asarray(s.to_batch()[0].track_grade_rad), np.asarray(c.to_batch()[0].track_grade_rad))
+
+
+def test_fit_says_which_grade_it_reads():
+    """``fit``'s speed-trace preamble names the survey and its RMS grade at the logged positions
+    (here the constant 0.1 %), says the grade is left out when the runs log positions without a
+    survey, and says nothing when they log none."""
+    from bayes_roadload.inference.kinds import KINDS
+
+    preamble = KINDS["traces"].preamble
+    surveyed = preamble(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85), track=survey()))
+    assert len(surveyed) == 1 and "46 stations over -50 to 400 m, RMS grade 0.100 %" in surveyed[0]
+    assert "not in the model" in preamble(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85)))[0]
+    assert preamble(Campaign(runs_frame(), Vehicle(1100.0, 1130.0, 1.85))) == []
