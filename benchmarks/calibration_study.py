@@ -97,10 +97,27 @@ def comparison_markdown(first: pd.DataFrame, second: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
+ARM_OPTIONS = {"logged": "--log", "withheld": "--withhold"}
+"""The record tags of a run's campaign design and the option that sets each."""
+
+
+def _arm(tags) -> dict[str, str]:
+    """A run's design from its jobs' or records' tags: ``--log`` / ``--withhold`` -> the names
+    (joined by spaces), the options not given left out."""
+    return {opt: str(tags[tag]) for tag, opt in ARM_OPTIONS.items() if tag in tags and isinstance(tags[tag], str) and tags[tag]}
+
+
 def resume_from(partial: Path, jobs: list) -> tuple[pd.DataFrame, list]:
     """The records of an interrupted run (``partial``, empty when it does not exist) and the
-    jobs whose campaign (``name``) they do not hold yet."""
+    jobs whose campaign (``name``) they do not hold yet; refused when the partial records were
+    fitted with another design (logged channels, withheld effects) than the jobs ask for."""
     before = pd.read_csv(partial) if partial.exists() else pd.DataFrame({"name": []})
+    if len(before) and jobs:
+        had, asked = _arm(before.iloc[0].to_dict()), _arm(jobs[0].tags)
+        if had != asked:
+            shown = lambda arm: " ".join(f"{k} {v}" for k, v in arm.items()) or "no --log / --withhold"  # noqa: E731
+            raise SystemExit(f"{partial}: its campaigns were fitted with {shown(had)}, this run asks for "
+                             f"{shown(asked)}: resume with the same options, or write to other --records")
     finished = set(before["name"])
     return before, [j for j in jobs if j.name not in finished]
 
@@ -176,8 +193,9 @@ def main(argv=None) -> int:
     if args.from_records and args.records.name.endswith(".partial.csv"):
         final = args.records.resolve().with_name(args.records.name.replace(".partial.csv", ".csv"))
         shown = final.relative_to(ROOT) if final.is_relative_to(ROOT) else final
+        arm = "".join(f" {k} {v}" for k, v in _arm(records.iloc[0].to_dict()).items())
         text = (f"**Partial run: {len(records)} of the {args.n} campaigns** (stopped, resumable: `python "
-                f"benchmarks/calibration_study.py --n {args.n} --seed0 {int(records['seed'].min())} --records {shown}` "
+                f"benchmarks/calibration_study.py --n {args.n} --seed0 {int(records['seed'].min())}{arm} --records {shown}` "
                 "fits only the campaigns the partial file lacks); every verdict below is on these campaigns "
                 "alone.\n\n" + text)
     print(text, file=sys.stderr)

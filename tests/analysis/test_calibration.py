@@ -322,6 +322,12 @@ def test_the_study_resumes_from_its_partial_records(tmp_path, monkeypatch):
         pd.DataFrame({"name": ["ind-1001"], "AD_mean": [0.01]}).to_csv(partial, index=False)
         before, pending = study.resume_from(partial, jobs)
         assert list(before["name"]) == ["ind-1001"] and [j.name for j in pending] == ["ind-1000", "ind-1002"]
+        # records of another design (here a logged survey) are not resumed by a run without it
+        pd.DataFrame({"name": ["ind-1001"], "logged": ["survey"]}).to_csv(partial, index=False)
+        with pytest.raises(SystemExit, match="fitted with --log survey, this run asks for no --log"):
+            study.resume_from(partial, jobs)
+        before, pending = study.resume_from(partial, calibration_jobs([1000, 1001, 1002], 1, 3, log=("survey",)))
+        assert [j.name for j in pending] == ["ind-1000", "ind-1002"]
 
 
 def test_the_comparison_counts_held_intervals_and_first_time_gates(monkeypatch):
@@ -389,6 +395,10 @@ def test_a_partial_records_summary_names_the_command_that_resumes_it(tmp_path, m
     err = capsys.readouterr().err
     assert "**Partial run: 20 of the 200 campaigns**" in err and "--seed0 4000 " in err
     assert "20 campaigns (seeds 4000-4019)" in err and "| mean z |" in err
+    rec.assign(logged="survey").to_csv(partial, index=False)   # a run that logged the track survey
+    with benchmark_script("calibration_study") as study:
+        assert study.main(["--from-records", "--records", str(partial)]) == 0
+    assert "--seed0 4000 --log survey --records" in capsys.readouterr().err
 
 
 def test_fill_test_mass_writes_the_campaigns_masses_back_and_the_section_reads_them(tmp_path, monkeypatch, capsys):
