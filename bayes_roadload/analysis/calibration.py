@@ -256,7 +256,9 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
     ``n``, the source's median share of the interval's variance (sd_s^2 / sd^2), and sd(z) and 95 %
     coverage with the source left out, read in the normal approximation: z = (mean - shift_s -
     truth) / sqrt(sd^2 - sd_s^2), covered when |z| <= 1.96 (``shift_s``: the source's mean shift,
-    0 for a normal source).  Beside them the same with every source in (``z_sd``,
+    0 for a normal source); ``data only`` divides by the posterior's own recorded sd
+    (``{q}_sd_data``), which the first-order sources' sum can exceed the interval's variance
+    without.  Beside them the same with every source in (``z_sd``,
     ``coverage95``), so the change is the source's alone.  A reading: the sources' sds are first
     order and the normal approximation is not the recorded interval."""
     rows = []
@@ -277,8 +279,9 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
             col = f"{q}_mean_shift_{source}"
             return rec[col].fillna(0.0).to_numpy(float) if col in rec else np.zeros(len(rec))
 
-        def row(label: str, var_out: np.ndarray, shift: np.ndarray) -> dict:
-            sd_wo = np.sqrt(np.maximum(sd**2 - var_out, 1e-300))
+        def row(label: str, var_out: np.ndarray, shift: np.ndarray, sd_wo: np.ndarray | None = None) -> dict:
+            if sd_wo is None:
+                sd_wo = np.sqrt(np.maximum(sd**2 - var_out, 1e-300))
             z = (mean - shift - truth) / sd_wo
             return {"quantity": q, "source": label, "n": len(rec),
                     "median_share": float(np.median(var_out / sd**2)),
@@ -290,7 +293,8 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
         for src in sorted(sources, key=lambda x: -float(np.median(var[x]))):
             rows.append(row(src, var[src], shift_of(src)))
         if sources:
-            rows.append(row("data only", sum(var.values()), sum(shift_of(src) for src in sources)))
+            rows.append(row("data only", sum(var.values()), sum(shift_of(src) for src in sources),
+                            sd_wo=rec[f"{q}_sd_data"].astype(float).to_numpy()))
     return pd.DataFrame(rows, columns=["quantity", "source", "n", "median_share", "z_sd", "coverage95",
                                        "z_sd_without", "coverage95_without", "z_mean_without"])
 

@@ -98,6 +98,11 @@ def test_the_budget_attribution_finds_the_source_that_widens_the_intervals():
     text = calibration_markdown(full, calibration_table(full))
     assert "| CD0 | 40 | spurious | 0.64 |" in text and "| CD0 | 40 | data only | 0.64 |" in text
     assert budget_attribution(rec.drop(columns=[c for c in rec if "_typeb_" in c or "_sd_data" in c])).empty
+    # sources whose first-order sds add up beyond the interval's variance (correlated, or the
+    # interval narrower than the sum): data only reads the posterior's own sd, not a difference
+    over = rec.assign(CD0_sd_typeb_spurious=10.0)
+    assert over.pipe(budget_attribution, quantities=("CD0",)).set_index("source").loc[
+        "data only", "z_sd_without"] == pytest.approx(np.sqrt(2), abs=0.06)
 
 
 def test_the_gates_are_read_apart_by_the_code_that_fitted_them():
