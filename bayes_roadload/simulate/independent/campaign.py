@@ -31,8 +31,8 @@ CHANNELS = ("anemometer", "weather", "position", "driveline", "humidity", "surve
 relative_humidity_pct (a hygrometer's reading; only when the ``humidity`` effect is on), and a
 level survey of the track (``track.csv``, :func:`level_survey`; needs ``position``)."""
 DEFAULT_CHANNELS = ("anemometer", "weather", "position", "driveline")
-"""The channels logged by default: every one but the humidity, which the studies' campaigns did
-not log before it was a channel (their records stay reproducible)."""
+"""The channels logged by default: every one but the humidity and the track survey, which the
+studies' campaigns did not log before they were channels (their records stay reproducible)."""
 HYGROMETER_STREAM = 0x68756D
 """Second entropy word of the hygrometer's own random stream (``default_rng([seed, this])``),
 so that logging the humidity leaves every other draw of a seed as it was."""
