@@ -404,8 +404,6 @@ def _cmd_fit(args) -> int:
         pooling_note = (f"note: --pooling auto fitted these {n_fitted} runs pooled (over "
                         f"{config.AUTO_HIERARCHICAL_MAX_RUNS} runs): the run-to-run spread is not in the intervals; "
                         "--pooling hierarchical adds it at several times the fit time (docs/calibration.md)")
-    for line in entry.preamble(campaign):
-        echo(line)
     if args.method == "lsq":
         if args.pooling == "hierarchical":
             raise SystemExit("error: least squares has no hierarchical model; use --method nuts --pooling "
@@ -420,6 +418,8 @@ def _cmd_fit(args) -> int:
         echo(f"\nwrote {out / 'summary.csv'}, per_group.csv, fit.json")
         _after_fit(args, out, campaign)
         return 0
+    for line in entry.preamble(campaign):
+        echo(line)
     fit, report, tables, written, _, table = _fit_and_write(entry, campaign, spec,
                                                             dataclasses.replace(options, runs=runs), out,
                                                             args.campaign, _provenance(args, campaign, args.campaign),

@@ -354,8 +354,8 @@ def _air_notes(fit, campaign, extras) -> list[str]:
     return [ambient_line(ambient_record(campaign))]
 
 
-def _traces_preamble(campaign) -> list[str]:
-    """The track survey the fit reads (``track.csv``: stations, stretch, the RMS grade at the
+def _survey_lines(campaign) -> list[str]:
+    """The track survey the fit read (``track.csv``: stations, stretch, the RMS grade at the
     logged positions), or, for runs that log their position without one, that the grade is not
     in the model."""
     if campaign.has_track_survey:
@@ -413,7 +413,7 @@ KINDS: dict[str, KindEntry] = {e.name: e for e in (
     KindEntry("traces", "speed-trace", Campaign, traces_default_model, _check_traces, _fit_traces,
               trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
               diagnosis_model="three_term", type_b=_traces_type_b, default_pooling=traces_default_pooling,
-              lagged_speed_drop=True, notes=_air_notes, preamble=_traces_preamble,
+              lagged_speed_drop=True, notes=lambda f, c, e: _air_notes(f, c, e) + _survey_lines(c),
               default_models={"four_term_tyre_lag_admittance_pitch_shapes":
                                   f"Bayesian fit up to {config.HEAVY_DUTY_MASS_KG:g} kg test mass",
                               "four_term_tyre_lag_admittance_heavy_pitch_shapes":

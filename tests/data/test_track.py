@@ -121,13 +121,13 @@ def test_every_type_b_source_applies_to_a_survey_that_ends_where_the_runs_end():
 
 
 def test_fit_says_which_grade_it_reads():
-    """``fit``'s speed-trace preamble names the survey and its RMS grade at the logged positions
-    (here the constant 0.1 %), says the grade is left out when the runs log positions without a
-    survey, and says nothing when they log none."""
-    from bayes_roadload.inference.kinds import KINDS
+    """``fit``'s speed-trace notes (after the posterior table, whose first line is a failed gate)
+    name the survey and its RMS grade at the logged positions (here the constant 0.1 %), say the
+    grade is left out when the runs log positions without a survey, and say nothing of it when
+    they log none."""
+    from bayes_roadload.inference.kinds import _survey_lines
 
-    preamble = KINDS["traces"].preamble
-    surveyed = preamble(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85), track=survey()))
+    surveyed = _survey_lines(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85), track=survey()))
     assert len(surveyed) == 1 and "46 stations over -50 to 400 m, RMS grade 0.100 %" in surveyed[0]
-    assert "not in the model" in preamble(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85)))[0]
-    assert preamble(Campaign(runs_frame(), Vehicle(1100.0, 1130.0, 1.85))) == []
+    assert "not in the model" in _survey_lines(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85)))[0]
+    assert _survey_lines(Campaign(runs_frame(), Vehicle(1100.0, 1130.0, 1.85))) == []
