@@ -415,6 +415,8 @@ def _cmd_fit(args) -> int:
         with stage("output"):
             write_lsq_fit_dir(result, out, provenance=_provenance(args, campaign, args.campaign))
         echo(format_lsq_table(result, campaign.truth))
+        for line in entry.input_notes(campaign, spec):
+            echo(line)
         echo(f"\nwrote {out / 'summary.csv'}, per_group.csv, fit.json")
         _after_fit(args, out, campaign)
         return 0
@@ -429,7 +431,7 @@ def _cmd_fit(args) -> int:
         logging.getLogger("bayes_roadload").warning("the NUTS fit FAILED its diagnostic gates (%s): see %s",
                                                     ", ".join(report.diagnostics.get("failed", [])),
                                                     out / "diagnostics.json")
-    for line in entry.notes(fit, campaign, tables):
+    for line in [*entry.notes(fit, campaign, tables), *entry.input_notes(campaign, spec)]:
         echo(line)
     if pooling_note:
         echo(pooling_note)

@@ -52,6 +52,7 @@ KIND = "distances"
 FILES = ("distances.csv",)
 DESCRIPTION = "distance-time records"
 OPTIONS: tuple[str, ...] = ()
+OPTIONAL_FILES: tuple[str, ...] = ()
 
 DISTANCE_REQUIRED = ("run", "distance_m", "time_s")
 DISTANCE_RUN_CONSTANT = ("direction", "pair", "mass_kg", "temperature_k", "pressure_pa", "relative_humidity_pct")

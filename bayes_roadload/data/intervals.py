@@ -50,6 +50,7 @@ KIND = "intervals"
 FILES = ("intervals.csv",)
 DESCRIPTION = "speed-gate interval times"
 OPTIONS: tuple[str, ...] = ()
+OPTIONAL_FILES: tuple[str, ...] = ()
 
 INTERVAL_REQUIRED = ("run", "speed_start_mps", "speed_end_mps", "interval_s")
 RUN_CONSTANT_COLUMNS = ("direction", "pair", "window", "valid", "run_distance_m", "start_time_of_day_s",

@@ -16,7 +16,6 @@ from typing import Any, Protocol
 
 from . import distances, intervals, spindown, steady, traces
 from .checks import TRUTH_FILE, CampaignError, write_atomically
-from .track import TRACK_FILE
 
 
 class CampaignKind(Protocol):
@@ -36,12 +35,17 @@ class CampaignKind(Protocol):
         Names of the keyword arguments :meth:`load` takes beyond the directory (measured
         constants that may stand in for the file's), e.g. ``("wheel_inertia_kgm2",
         "rolling_radius_m")``; empty for most kinds.
+    OPTIONAL_FILES : tuple of str
+        Files beside the data file that the kind reads when present (speed traces: the track
+        survey ``track.csv``); another kind's directory holding one is refused, as its data
+        would be silently ignored.  Empty for most kinds.
     """
 
     KIND: str
     FILES: tuple[str, ...]
     DESCRIPTION: str
     OPTIONS: tuple[str, ...]
+    OPTIONAL_FILES: tuple[str, ...]
 
     def load(self, root: str | os.PathLike, **options: Any) -> Any:
         """The validated campaign of a directory holding one of :attr:`FILES`; refusals are
@@ -66,6 +70,9 @@ _BY_NAME: dict[str, CampaignKind] = {k.KIND: k for k in DATA_KINDS}
 
 DATA_FILES: tuple[str, ...] = tuple(f for k in DATA_KINDS for f in k.FILES)
 """Every file name that identifies a kind: a saved directory keeps only its own."""
+
+OPTIONAL_FILES: tuple[str, ...] = tuple(dict.fromkeys(f for k in DATA_KINDS for f in k.OPTIONAL_FILES))
+"""Every optional file some kind reads beside its data file (:attr:`CampaignKind.OPTIONAL_FILES`)."""
 
 
 def data_kind(kind: str) -> CampaignKind:
@@ -99,7 +106,14 @@ def find_kind(root: str | os.PathLike) -> CampaignKind:
         first, *others = DATA_KINDS
         alternatives = list(first.FILES[1:]) + [f"{f} for {k.DESCRIPTION}" for k in others for f in k.FILES]
         raise CampaignError(f"{root}: {first.FILES[0]} (or {', or '.join(alternatives)}) is missing")
-    return found[0]
+    kind = found[0]
+    foreign = [f for f in OPTIONAL_FILES if f not in kind.OPTIONAL_FILES and (root / f).exists()]
+    if foreign:
+        readers = [k for k in DATA_KINDS if foreign[0] in k.OPTIONAL_FILES]
+        raise CampaignError(f"{root / foreign[0]}: read with {' and '.join(k.DESCRIPTION for k in readers)} "
+                            f"({', '.join(f for k in readers for f in k.FILES)}) only; "
+                            f"the {kind.DESCRIPTION} of {kind.FILES[0]} would ignore it: remove it")
+    return kind
 
 
 def load_campaign(path: str | os.PathLike, **options: Any) -> Any:
@@ -140,7 +154,7 @@ def save_campaign(campaign: Any, path: str | os.PathLike, fmt: str = "csv") -> P
     are removed, so the directory reads back as this campaign.  ``fmt`` is "csv" or, for speed traces,
     "parquet".
     """
-    return write_atomically(path, kind_of(campaign).files(campaign, fmt), stale=DATA_FILES + (TRUTH_FILE, TRACK_FILE))
+    return write_atomically(path, kind_of(campaign).files(campaign, fmt), stale=DATA_FILES + (TRUTH_FILE,) + OPTIONAL_FILES)
 
 
 def campaign_sha256(path: str | os.PathLike) -> str:

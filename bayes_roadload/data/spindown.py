@@ -61,6 +61,7 @@ KIND = "spindown"
 FILES = ("spindown.csv",)
 DESCRIPTION = "spin-down campaigns"
 OPTIONS = ("wheel_inertia_kgm2", "rolling_radius_m")
+OPTIONAL_FILES: tuple[str, ...] = ()
 
 SPEED_COLUMNS = ("wheel_speed_radps", "wheel_speed_mps")
 KNOWN_COLUMNS = ("run", "time_s", "wheel") + SPEED_COLUMNS

@@ -76,6 +76,7 @@ KIND = "steady"
 FILES = ("steady.csv",)
 DESCRIPTION = "steady-state torque tests"
 OPTIONS: tuple[str, ...] = ()
+OPTIONAL_FILES: tuple[str, ...] = ()
 
 FORCE_COLUMNS = ("tractive_force_n",)
 TORQUE_COLUMNS = WHEEL_TORQUE_COLUMNS

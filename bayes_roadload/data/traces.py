@@ -56,6 +56,7 @@ KIND = "traces"
 FILES = ("runs.csv", "runs.parquet")
 DESCRIPTION = "speed traces"
 OPTIONS: tuple[str, ...] = ("speed_unit", "airspeed_unit")
+OPTIONAL_FILES: tuple[str, ...] = (TRACK_FILE,)
 
 REQUIRED_COLUMNS = ("run", "time_s", "speed_mps")
 OPTIONAL_COLUMNS = (
@@ -289,5 +290,6 @@ def files(c: Campaign, fmt: str = "csv") -> dict[str, str | bytes]:
         raise ValueError(f"fmt must be 'csv' or 'parquet', not {fmt!r}")
     if c.track is not None:
         c.track = validate_track(c.track, "track")
+        check_runs_on_track(c.runs, c.track, "runs")
         out[TRACK_FILE] = c.track.to_csv(index=False, float_format="%.10g")
     return out | {VEHICLE_FILE: vehicle_toml(c)} | truth_files(c.truth)

@@ -76,8 +76,11 @@ def grade_at(track: pd.DataFrame, position_m) -> np.ndarray:
 
 
 def check_runs_on_track(runs: pd.DataFrame, track: pd.DataFrame, where: str) -> None:
-    """Refuse a survey the runs cannot be placed on: runs without ``position_m``, or a logged
-    position outside the surveyed stretch (naming the run and the row of ``where``)."""
+    """Refuse a survey the runs cannot be placed on: runs without ``position_m``, a logged
+    position outside the surveyed stretch, or a run whose ``direction`` (+1: ``position_m``
+    increases, every run +1 without the column) disagrees with the way its logged position
+    moves, which would give it the grade of the other direction (naming the run and the row of
+    ``where``)."""
     if "position_m" not in runs:
         refuse(where, "position_m", None, f"{TRACK_FILE} surveys the track but the runs do not log "
                "their position along it; add position_m (the same frame as the survey's stations)")
@@ -88,3 +91,19 @@ def check_runs_on_track(runs: pd.DataFrame, track: pd.DataFrame, where: str) -> 
         i = int(np.flatnonzero(out)[0])
         refuse(where, "position_m", i + 1, f"run {plain_value(runs['run'].iloc[i])!r} at {x[i]:g} m, outside the "
                f"surveyed stretch {lo:g} to {hi:g} m of {TRACK_FILE}")
+    run_of = runs["run"].to_numpy()
+    for rid in pd.unique(run_of):
+        rows = np.flatnonzero(run_of == rid)
+        travel = np.sign(x[rows[-1]] - x[rows[0]])
+        d = float(runs["direction"].iloc[rows[0]]) if "direction" in runs else 1.0
+        if travel != 0 and travel != np.sign(d):
+            way = "increases" if travel > 0 else "decreases"
+            if "direction" in runs:
+                refuse(where, "direction", int(rows[0]) + 1,
+                       f"run {plain_value(rid)!r} has direction {d:+g} but its position_m {way} "
+                       f"({x[rows[0]]:g} to {x[rows[-1]]:g} m); with {TRACK_FILE} direction +1 means position_m "
+                       "increases, -1 that it decreases (the grade's sign in the run's direction)")
+            refuse(where, "position_m", int(rows[0]) + 1,
+                   f"run {plain_value(rid)!r}'s position_m decreases ({x[rows[0]]:g} to {x[rows[-1]]:g} m) "
+                   f"and the runs have no direction column (every run +1); with {TRACK_FILE} add direction: "
+                   "+1 where position_m increases, -1 where it decreases")

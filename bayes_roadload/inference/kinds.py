@@ -81,6 +81,9 @@ class KindEntry:
     report : (fit, campaign) -> :class:`~bayes_roadload.inference.results.FitReport`.
     extras : (fit, campaign, summary, options) -> {file name: table} written beside it.
     preamble, notes : lines printed before / after the posterior table.
+    input_notes : (campaign, spec) -> lines on the inputs the model reads from the campaign
+        beyond its data file (a track survey), printed after the table of either method
+        (NUTS after ``notes``, least squares after its table).
     validity_default : the ``--validity`` mode without the option ("reject"), None when no
         run validity check applies unless asked for.
     lsq : the classical least-squares fit applies (``--method lsq``).
@@ -123,6 +126,7 @@ class KindEntry:
         lambda fit, campaign, summary, options: {}
     preamble: Callable[[Any], list[str]] = lambda campaign: []
     notes: Callable[[NutsFit, Any, dict], list[str]] = lambda fit, campaign, extras: []
+    input_notes: Callable[[Any, ModelSpec], list[str]] = lambda campaign, spec: []
     validity_default: str | None = None
     lsq: bool = False
     driveline_channel: Callable[[Any], Any] | None = None
@@ -354,10 +358,14 @@ def _air_notes(fit, campaign, extras) -> list[str]:
     return [ambient_line(ambient_record(campaign))]
 
 
-def _survey_lines(campaign) -> list[str]:
+GRADE_TERMS = ("gradient", "gradient_profile")
+"""Terms of a model file that carry the track's grade themselves (fitted, not surveyed)."""
+
+
+def _survey_lines(campaign, spec: ModelSpec) -> list[str]:
     """The track survey the fit read (``track.csv``: stations, stretch, the RMS grade at the
-    logged positions), or, for runs that log their position without one, that the grade is not
-    in the model."""
+    logged positions), or, for runs that log their position without one and a model without a
+    grade term of its own (:data:`GRADE_TERMS`), that the grade is not in the model."""
     if campaign.has_track_survey:
         from ..data.track import grade_at
 
@@ -365,7 +373,7 @@ def _survey_lines(campaign) -> list[str]:
         rms = float(np.sqrt(np.mean(grade_at(t, campaign.runs["position_m"].to_numpy(float)) ** 2)))
         return [f"track survey: {len(t)} stations over {t['position_m'].iloc[0]:g} to {t['position_m'].iloc[-1]:g} m, "
                 f"RMS grade {100 * rms:.3f} % at the logged positions: the fit adds its force (surveyed_gradient, eq. 2.1)"]
-    if "position_m" in campaign.runs:
+    if "position_m" in campaign.runs and not any(t in spec.terms for t in GRADE_TERMS):
         return ["no track survey (track.csv): the grade along the track is not in the model "
                 "(40 CFR 1066.310 has a grade above 0.02 % enter the analysis)"]
     return []
@@ -413,7 +421,7 @@ KINDS: dict[str, KindEntry] = {e.name: e for e in (
     KindEntry("traces", "speed-trace", Campaign, traces_default_model, _check_traces, _fit_traces,
               trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
               diagnosis_model="three_term", type_b=_traces_type_b, default_pooling=traces_default_pooling,
-              lagged_speed_drop=True, notes=lambda f, c, e: _air_notes(f, c, e) + _survey_lines(c),
+              lagged_speed_drop=True, notes=_air_notes, input_notes=_survey_lines,
               default_models={"four_term_tyre_lag_admittance_pitch_shapes":
                                   f"Bayesian fit up to {config.HEAVY_DUTY_MASS_KG:g} kg test mass",
                               "four_term_tyre_lag_admittance_heavy_pitch_shapes":

@@ -108,6 +108,11 @@ _SWITCHED_TERMS = {
     "driveline_measured": "driveline",
     "driveline_polynomial": "driveline",
 }
+_DATA_TERMS = {
+    "surveyed_gradient": "the campaign's track survey (track.csv)",
+}
+"""Terms a campaign's data add (:meth:`ModelSpec.build`); listed in a model file they would read
+zeros without those data."""
 _MODEL_KEYS = ("name", "description", "terms", "driveline", "lift", "air", "admittance")
 _PARAMETER_KEYS = ("free", "fixed", "fallback", "initial", "prior", "uncertainty")
 _AIR_PARAMETERS = tuple(
@@ -514,6 +519,9 @@ def _validate(spec: ModelSpec, where: str) -> None:
         if t in _SWITCHED_TERMS:
             raise ModelSpecError(f"{where}: [model] terms: {t!r} is controlled by "
                                  f"[model] {_SWITCHED_TERMS[t]}, do not list it")
+        if t in _DATA_TERMS:
+            raise ModelSpecError(f"{where}: [model] terms: {t!r} is added by {_DATA_TERMS[t]}, "
+                                 "do not list it")
         if t not in TERMS:
             raise ModelSpecError(f"{where}: [model] terms: unknown drag term {t!r}; "
                                  f"known: {', '.join(sorted(TERMS))}")

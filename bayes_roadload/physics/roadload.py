@@ -35,6 +35,7 @@ PART_OF_TERM = {
     "undriven_wheels": "undriven",
     "gradient": None,
     "gradient_profile": None,
+    "surveyed_gradient": None,
 }
 """Which part of the 50 mph breakdown each term belongs to.  ``None``: not road load (the
 track's gradient); a term not listed counts in the total as "other"."""

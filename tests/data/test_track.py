@@ -1,6 +1,10 @@
 """The track survey (track.csv): round trip, the grade it puts on each logged position, the model
 term it adds, and every refusal names file/column/row."""
 
+import dataclasses
+import re
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -12,6 +16,18 @@ from bayes_roadload.inference.spec import load_model_spec
 from .test_traces import VEHICLE_TOML, runs_frame, write
 
 SLOPE = 0.001   # a rise of 1 m per km: 0.1 % grade
+MODELS = Path(__file__).resolve().parents[2] / "models"
+
+
+def _campaign_dirs():
+    """A valid campaign directory of each other data kind (from the kinds' own test tables)."""
+    from . import test_distances, test_intervals, test_steady
+
+    return {
+        "intervals": lambda tmp: save_campaign(test_intervals.split_campaign(), tmp / "c"),
+        "distances": lambda tmp: test_distances.write(tmp, test_distances.markers_table()),
+        "steady": lambda tmp: test_steady.write(tmp / "c", test_steady.table(tractive_force_n=200.0)),
+    }
 
 
 def runs_with_position(n=40):
@@ -121,13 +137,78 @@ def test_every_type_b_source_applies_to_a_survey_that_ends_where_the_runs_end():
 
 
 def test_fit_says_which_grade_it_reads():
-    """``fit``'s speed-trace notes (after the posterior table, whose first line is a failed gate)
+    """The speed-trace kind's input notes (printed after the table of NUTS and of least squares)
     name the survey and its RMS grade at the logged positions (here the constant 0.1 %), say the
-    grade is left out when the runs log positions without a survey, and say nothing of it when
-    they log none."""
-    from bayes_roadload.inference.kinds import _survey_lines
+    grade is left out when the runs log positions without a survey and the model has no grade
+    term of its own, and say nothing of it when they log none."""
+    from bayes_roadload.inference.kinds import KINDS
 
-    surveyed = _survey_lines(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85), track=survey()))
+    notes = KINDS["traces"].input_notes
+    spec = load_model_spec("four_term")
+    surveyed = notes(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85), track=survey()), spec)
     assert len(surveyed) == 1 and "46 stations over -50 to 400 m, RMS grade 0.100 %" in surveyed[0]
-    assert "not in the model" in _survey_lines(Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85)))[0]
-    assert _survey_lines(Campaign(runs_frame(), Vehicle(1100.0, 1130.0, 1.85))) == []
+    unsurveyed = Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85))
+    assert "not in the model" in notes(unsurveyed, spec)[0]
+    graded = dataclasses.replace(spec, terms=(*spec.terms, "gradient"))
+    assert notes(unsurveyed, graded) == []
+    assert notes(Campaign(runs_frame(), Vehicle(1100.0, 1130.0, 1.85)), spec) == []
+
+
+def test_lsq_prints_the_survey(tmp_path, capsys):
+    """``fit --method lsq`` prints the survey line after its table, as the NUTS fit does."""
+    from bayes_roadload.cli import main
+
+    c = Campaign(runs_with_position(), Vehicle(1100.0, 1130.0, 1.85), track=survey())
+    d = save_campaign(c, tmp_path / "c")
+    assert main(["fit", str(d), "--method", "lsq", "--model", "three_term", "--no-report", "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert "track survey: 46 stations" in out
+    assert out.index("track survey:") > out.index("AD")
+
+
+@pytest.mark.parametrize("column", [True, False])
+def test_a_run_whose_direction_disagrees_with_its_positions_is_refused(tmp_path, column):
+    """With a survey the grade's sign in a run is d theta(x), d = +1 where position_m
+    increases: a run coded +1 whose position decreases (or every run +1 when the direction
+    column is absent) would take the other direction's grade, and is refused at its first row."""
+    df = runs_with_position()
+    back = df["direction"] < 0
+    first_back = int(np.flatnonzero(back.to_numpy())[0]) + 1
+    if column:
+        df.loc[back, "direction"] = 1
+        expected = f"column 'direction', row {first_back}: run 2 has direction +1 but its position_m decreases"
+    else:
+        df = df.drop(columns="direction")
+        expected = f"column 'position_m', row {first_back}: run 2's position_m decreases"
+    d = write(tmp_path, df, VEHICLE_TOML)
+    survey().to_csv(d / "track.csv", index=False)
+    with pytest.raises(CampaignError) as e:
+        load_campaign(d)
+    assert expected in str(e.value) and "runs.csv" in str(e.value)
+    with pytest.raises(CampaignError, match=re.escape(expected.split(": ", 1)[1])):
+        Campaign(df, Vehicle(1100.0, 1130.0, 1.85), track=survey())
+
+
+def test_a_model_file_may_not_list_the_surveyed_gradient(tmp_path):
+    """The term reads the survey's channel; listed in a model file without a survey it would
+    add a zero force silently, so the spec refuses it (the survey adds it)."""
+    from bayes_roadload.inference.spec import ModelSpecError
+
+    text = (MODELS / "four_term.toml").read_text()
+    path = tmp_path / "graded.toml"
+    path.write_text(text.replace('terms = [', 'terms = ["surveyed_gradient", ', 1))
+    with pytest.raises(ModelSpecError, match="'surveyed_gradient' is added by the campaign's track survey"):
+        load_model_spec(path)
+
+
+@pytest.mark.parametrize("kind", ["intervals", "distances", "steady"])
+def test_other_kinds_refuse_a_survey_beside_their_data(tmp_path, kind):
+    """Only speed traces read track.csv; another kind's directory holding one is refused (its
+    grade would be silently ignored), naming the file."""
+    from bayes_roadload.data.io import data_kind
+
+    src = _campaign_dirs()[kind](tmp_path)
+    survey().to_csv(src / "track.csv", index=False)
+    with pytest.raises(CampaignError, match=rf"track.csv: read with speed traces \(runs.csv, runs.parquet\) only; "
+                                            rf"the {data_kind(kind).DESCRIPTION} of"):
+        load_campaign(src)
