@@ -67,6 +67,7 @@ def test_every_registered_kind_follows_the_protocol():
     assert len(DATA_FILES) == len(set(DATA_FILES))  # a file name identifies one kind
     for kind in DATA_KINDS:
         assert isinstance(kind.DESCRIPTION, str) and kind.FILES and isinstance(kind.OPTIONS, tuple)
+        assert isinstance(kind.OPTIONAL_FILES, tuple) and not set(kind.OPTIONAL_FILES) & set(DATA_FILES)
         assert callable(kind.load) and callable(kind.files)
         assert data_kind(kind.KIND) is kind and kind_of(CAMPAIGNS[kind.KIND]()) is kind
 

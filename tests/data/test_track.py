@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from bayes_roadload.data import Campaign, CampaignError, Vehicle, load_campaign, save_campaign
+from bayes_roadload.data.io import DATA_KINDS
 from bayes_roadload.data.track import MAX_GRADE, grade_at, segment_grades
 from bayes_roadload.inference.spec import load_model_spec
 
@@ -17,17 +18,6 @@ from .test_traces import VEHICLE_TOML, runs_frame, write
 
 SLOPE = 0.001   # a rise of 1 m per km: 0.1 % grade
 MODELS = Path(__file__).resolve().parents[2] / "models"
-
-
-def _campaign_dirs():
-    """A valid campaign directory of each other data kind (from the kinds' own test tables)."""
-    from . import test_distances, test_intervals, test_steady
-
-    return {
-        "intervals": lambda tmp: save_campaign(test_intervals.split_campaign(), tmp / "c"),
-        "distances": lambda tmp: test_distances.write(tmp, test_distances.markers_table()),
-        "steady": lambda tmp: test_steady.write(tmp / "c", test_steady.table(tractive_force_n=200.0)),
-    }
 
 
 def runs_with_position(n=40):
@@ -201,14 +191,15 @@ def test_a_model_file_may_not_list_the_surveyed_gradient(tmp_path):
         load_model_spec(path)
 
 
-@pytest.mark.parametrize("kind", ["intervals", "distances", "steady"])
+@pytest.mark.parametrize("kind", [k for k in DATA_KINDS if "track.csv" not in k.OPTIONAL_FILES], ids=lambda k: k.KIND)
 def test_other_kinds_refuse_a_survey_beside_their_data(tmp_path, kind):
     """Only speed traces read track.csv; another kind's directory holding one is refused (its
     grade would be silently ignored), naming the file."""
-    from bayes_roadload.data.io import data_kind
+    from .test_io import CAMPAIGNS
 
-    src = _campaign_dirs()[kind](tmp_path)
+    src = save_campaign(CAMPAIGNS[kind.KIND](), tmp_path / "c")
     survey().to_csv(src / "track.csv", index=False)
     with pytest.raises(CampaignError, match=rf"track.csv: read with speed traces \(runs.csv, runs.parquet\) only; "
-                                            rf"the {data_kind(kind).DESCRIPTION} of"):
+                                            rf"the {kind.DESCRIPTION} of"):
         load_campaign(src)
+    assert not (save_campaign(CAMPAIGNS[kind.KIND](), src) / "track.csv").exists()  # saving removes it
