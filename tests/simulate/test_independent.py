@@ -338,6 +338,7 @@ def test_the_track_survey_is_logged_on_request_and_leaves_every_other_draw_alone
     plain = simulate_independent(7, pairs=2, effects=("grade_profile",))
     c = simulate_independent(7, pairs=2, effects=("grade_profile",), channels=DEFAULT_CHANNELS + ("survey",))
     assert plain.track is None and c.runs.equals(plain.runs)
+    assert "surveyed" not in plain.truth["meta"]["track"]   # a campaign without it writes the truth it wrote before
     meta = c.truth["meta"]["track"]
     sigma = meta["surveyed"]["noise_sd_m"]
     assert SURVEY_NOISE_M[0] <= sigma <= SURVEY_NOISE_M[1]

@@ -429,7 +429,7 @@ def simulate_independent(seed: int, *, pairs: int | None = None, vehicle: TrueVe
                  "turbulence_length_scale_m": field.turbulence.length_scale_m},
         "track": {"length_m": length, "mean_grade": mean_grade, "rms_undulation_grade": undulation,
                   "survey_stations_m": survey[0], "survey_elevation_m": survey[1],
-                  "surveyed": None if surveyed is None else surveyed.attrs},
+                  **({} if surveyed is None else {"surveyed": surveyed.attrs})},
         "runs": run_meta,
     }
     truth.update(case="independent", model="independent simulator", per_run=per_run, meta=_json_safe(meta))
