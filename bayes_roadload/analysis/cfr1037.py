@@ -224,7 +224,9 @@ def segment_drag_areas(campaign: Campaign, tyres_in_contact: int, *, delta_f_spi
     any size: split segments of both directions), else :meth:`Campaign.pairs`; a run without a
     pair is its own.  High ranges of a pair without a low range are left out.  Air temperature
     and pressure come from ``temperature_k`` / ``pressure_pa`` when logged, else the project's
-    reference conditions are taken."""
+    reference conditions are taken.  The airspeed and yaw are the readings calibrated by the
+    campaign's anemometer factors (:meth:`~bayes_roadload.data.vehicle.Anemometer.calibrated_air`,
+    as every other use of them), then Hampel-filtered with the speed."""
     if not campaign.has_anemometer:
         raise ValueError("40 CFR 1037.528 needs the on-board airspeed and yaw ((f)); the campaign has none")
     inputs = campaign.meta.get(CFR1037_TABLE) or {}
@@ -247,7 +249,9 @@ def segment_drag_areas(campaign: Campaign, tyres_in_contact: int, *, delta_f_spi
     for rid, g in runs.groupby("run", sort=False):
         pair = pair_of.get(rid, f"unpaired {rid}")
         t = g["time_s"].to_numpy(float)
-        filt = {c: hampel_filter(t, g[c].to_numpy(float)) for c in ("speed_mps", "airspeed_mps", "yaw_rad")}
+        air, yaw = campaign.anemometer.calibrated_air(g["airspeed_mps"], g["yaw_rad"])
+        filt = {c: hampel_filter(t, x) for c, x in
+                (("speed_mps", g["speed_mps"].to_numpy(float)), ("airspeed_mps", air), ("yaw_rad", yaw))}
         hi = _range(g, filt, m_e, campaign.vehicle.mass_kg, HIGH_RANGE_MPH, ambient)
         lo = _range(g, filt, m_e, campaign.vehicle.mass_kg, LOW_RANGE_MPH, ambient)
         if lo is not None:

@@ -9,7 +9,7 @@ import pytest
 
 from bayes_roadload.analysis import cfr1037
 from bayes_roadload.analysis.standards import run_standard, standard_checks, standard_result
-from bayes_roadload.data.campaign import Campaign, Vehicle
+from bayes_roadload.data.campaign import Anemometer, Campaign, Vehicle
 
 MPH = 0.44704
 
@@ -125,6 +125,22 @@ def test_segment_method_recovers_the_drag_area_of_exact_coastdowns(tractor):
     assert final["n_points"] >= 24
     assert abs(final["CdA_m2"] - CDA) <= 4 * final["CdA_se_m2"] + 0.005 * CDA
     assert final["effective_yaw_deg"] == pytest.approx(round(np.mean(seg["yaw_deg"][final["segments"]["kept"]]), 1))
+
+
+def test_segment_method_reads_the_calibrated_airspeed_and_yaw(tractor):
+    """The ranges' airspeed and yaw are the readings times the campaign's declared factors (as
+    in every other use of the anemometer): readings written as the truth over the thesis'
+    factors (1.0806, 0.869) with those factors declared give the same drag areas and yaw as the
+    true readings (the Hampel filter and the means are scale-equivariant, so equal to rounding),
+    and the same readings without the factors a drag area 1.0806^2 times as large."""
+    af, yf = 1.0806, 0.869
+    raw = tractor.runs.assign(airspeed_mps=tractor.runs["airspeed_mps"] / af, yaw_rad=tractor.runs["yaw_rad"] / yf)
+    declared = Campaign(raw, tractor.vehicle, anemometer=Anemometer(airspeed_factor=af, yaw_factor=yf))
+    truth, read = cfr1037.segment_drag_areas(tractor, TYRES), cfr1037.segment_drag_areas(declared, TYRES)
+    np.testing.assert_allclose(read["CdA_m2"], truth["CdA_m2"], rtol=1e-9)
+    np.testing.assert_allclose(read["yaw_deg"], truth["yaw_deg"], rtol=1e-9)
+    undeclared = cfr1037.segment_drag_areas(Campaign(raw, tractor.vehicle), TYRES)
+    np.testing.assert_allclose(undeclared["CdA_m2"], truth["CdA_m2"] * af**2, rtol=1e-9)
 
 
 def test_cfr1037_through_run_standard(tractor, tmp_path):
