@@ -181,7 +181,10 @@ def adjust_dyno(target, run_coastdown: Callable[[np.ndarray], pd.DataFrame], ine
     """The iterative adjustment (module docstring): ``run_coastdown(set)`` performs a
     dynamometer coastdown with set coefficients ``set`` and returns its ``time_s, speed_mps``
     table (a rig, or :func:`bayes_roadload.simulate.dyno.simulate_dyno_coastdown`).  Starts
-    from ``initial_set`` (default: the target itself, i.e. no parasitic loss assumed)."""
+    from ``initial_set`` (default: the target itself, i.e. no parasitic loss assumed).  The
+    parasitic loss is the last coastdowns' measured load less the setting they ran at; the set
+    coefficients returned are that setting when it converged, else the next one to run,
+    target - parasitic (the same in both cases up to the tolerance)."""
     tgt, draws = _target(target)
     current = tgt.copy() if initial_set is None else np.asarray(initial_set, float)
     rows = []
@@ -199,10 +202,11 @@ def adjust_dyno(target, run_coastdown: Callable[[np.ndarray], pd.DataFrame], ine
             converged = bool(checks["pass"].all())
         rows.append({"iteration": k, "set_a": current[0], "set_b": current[1], "set_c": current[2],
                      "coastdowns": len(runs), "max_abs_error_n": float(np.abs(checks["error_n"]).max())})
+        measured_at = current
         if converged:
             break
         current = current - (meas - tgt)
-    parasitic = meas - current
+    parasitic = meas - measured_at   # the loss at the setting of the last coastdowns
     return DynoResult(current, parasitic, pd.DataFrame(rows), checks, converged,
                       carry_posterior(draws, parasitic) if draws is not None else None,
                       coastdowns=int(rows[-1]["coastdowns"]))

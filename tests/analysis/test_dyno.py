@@ -59,6 +59,25 @@ def test_iterative_adjustment_recovers_the_parasitic_losses():
     np.testing.assert_allclose(res.set_coefficients, np.subtract(TARGET, PARASITIC), atol=1e-3)
 
 
+@pytest.mark.parametrize("iterations", [0, 1])
+def test_an_adjustment_that_stops_unconverged_reports_the_loss_at_the_setting_it_measured(iterations):
+    """Stopped before the tolerance is met (here after ``iterations`` corrections of a
+    tolerance no rig meets), the parasitic loss is the last coastdown's load less the setting
+    it ran at (not less the next setting), the returned setting is the next one to run,
+    target - parasitic, and the set draws carried from the target agree with it."""
+    draws = {k: np.full(50, v) for k, v in zip(("F0_N", "F1_N_per_kph", "F2_N_per_kph2"), TARGET)}
+    res = adjust_dyno(draws, lambda s: simulate_dyno_coastdown(s, PARASITIC, INERTIA, dt_s=DT), INERTIA,
+                      tolerance_n=1e-9, max_iterations=iterations)
+    assert not res.converged and len(res.iterations) == iterations + 1
+    speeds = np.arange(20.0, 121.0, 10.0)
+    got = res.parasitic_coefficients
+    load_err = (got[0] - PARASITIC[0]) + (got[1] - PARASITIC[1]) * speeds + (got[2] - PARASITIC[2]) * speeds**2
+    assert np.abs(load_err).max() <= _truncation_bound_n(np.add(TARGET, PARASITIC))
+    np.testing.assert_allclose(res.set_coefficients, np.subtract(TARGET, got), rtol=1e-12)
+    summary = res.summary().set_index("quantity")
+    np.testing.assert_allclose(summary.loc[["set_a", "set_b", "set_c"], "mean"], res.set_coefficients, rtol=1e-12)
+
+
 def test_one_step_from_a_measured_coastdown_and_posterior_carried():
     """Run with set = (50, 0.2, 0.02): measured = set + losses; new set = target - losses."""
     used = (50.0, 0.2, 0.02)
