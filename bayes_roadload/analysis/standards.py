@@ -275,10 +275,12 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
         yaws.update(extra_yaw_deg or {})
         if yaws and frontal_area_m2 is not None and "CD0" in samples and "KD" in samples:
             for label, deg in yaws.items():
-                # C_D(psi) = CD0 + KD psi^2 (eq. 2.31) is even in psi: the mean over +-psi is its value at psi
+                # C_D(psi) = CD0 + KD psi^2 (eq. 2.31) is even in psi: the mean over +-psi is its value at psi;
+                # a fitted force scales with the effective mass it was fitted at, so CdA(psi) takes the
+                # standard's mass convention as CdA_zero_yaw does (``scale``)
                 psi = math.radians(deg)
-                cda = frontal_area_m2 * (np.asarray(samples["CD0"], float)
-                                         + np.asarray(samples["KD"], float) * psi**2)
+                cda = scale * frontal_area_m2 * (np.asarray(samples["CD0"], float)
+                                                 + np.asarray(samples["KD"], float) * psi**2)
                 rows.append(_row(f"CdA_yaw_{label}", "m^2", cda))
     out = pd.DataFrame(rows)
     out.insert(0, "standard", std.name)
