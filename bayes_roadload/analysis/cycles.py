@@ -12,7 +12,12 @@ shared among the coefficients by their Shapley effects (:func:`variance_shares`)
 shares that sum to one even though f0, f1 and f2 are strongly correlated.
 
 The positive tractive work ``sum_i max(F(v_i) + M_e a_i, 0) v_i dt_i`` (with inertia, the
-energy the wheels must deliver) is reported beside it when an effective mass is given.
+energy the wheels must deliver; a_i the central difference of the trace at sample i) is
+reported beside it when an effective mass is given, and so is the cycle energy demand in the
+per-step form of UN GTR 15 Annex 7 section 5 (:func:`cycle_energy_demand_j`): each step
+between two samples at its mean speed, its acceleration the step's difference, its force kept
+where positive.  The two differ by up to about 1.4 % on the standard cycles (the central
+difference smooths the acceleration peaks before the positive part is taken).
 """
 
 from __future__ import annotations
@@ -154,6 +159,22 @@ def variance_shares(coef: np.ndarray, draws: np.ndarray) -> np.ndarray:
     return phi / phi.sum()
 
 
+def cycle_energy_demand_j(draws: np.ndarray, cycle: Cycle, effective_mass_kg: float) -> np.ndarray:
+    """Cycle energy demand per draw (J), step by step as UN GTR 15 Annex 7 section 5 states it
+    (the form as the project recalls it: its text is not among the references checked)::
+
+        E = sum_i max(F_i, 0) d_i,   F_i = f0 + f1 vm_i + f2 vm_i^2 + M_e a_i,
+        vm_i = (v_i + v_(i-1)) / 2,  a_i = (v_i - v_(i-1)) / (3.6 dt_i),  d_i = vm_i / 3.6 dt_i
+
+    (v in km/h, ``draws`` rows (f0, f1, f2); GTR 15 takes M_e = 1.03 x the test mass)."""
+    v = np.asarray(cycle.speed_kph, float)
+    dt = np.diff(np.asarray(cycle.time_s, float))
+    vm = 0.5 * (v[1:] + v[:-1])
+    accel = np.diff(v) * config.KPH_TO_MPS / dt
+    force = draws[:, :1] + draws[:, 1:2] * vm + draws[:, 2:3] * vm**2 + effective_mass_kg * accel
+    return np.maximum(force, 0.0) @ (vm * config.KPH_TO_MPS * dt)
+
+
 def cycle_work(samples: Mapping[str, np.ndarray], cycle: Cycle | str, *,
                effective_mass_kg: float | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Posterior of the road-load work over ``cycle`` (module docstring).
@@ -162,12 +183,13 @@ def cycle_work(samples: Mapping[str, np.ndarray], cycle: Cycle | str, *,
     ----------
     samples : posterior draws of ``F0_N``, ``F1_N_per_kph``, ``F2_N_per_kph2`` (any shape).
     cycle : a :class:`Cycle` or a name / path for :func:`load_cycle`.
-    effective_mass_kg : M_e; when given, the positive tractive work is reported too.
+    effective_mass_kg : M_e; when given, the positive tractive work and the cycle energy
+        demand are reported too.
 
     Returns
     -------
     (work, shares): ``work`` rows ``road_load_work`` (kJ), ``road_load_work_per_km`` (kJ/km)
-    [, ``tractive_work_positive`` (kJ)] with ``mean, sd, q2.5, q50, q97.5``; ``shares`` rows
+    [, ``tractive_work_positive`` (kJ), ``cycle_energy_demand`` (kJ, :func:`cycle_energy_demand_j`)] with ``mean, sd, q2.5, q50, q97.5``; ``shares`` rows
     per coefficient with ``variance_share`` of the road-load work.
     """
     cyc = cycle if isinstance(cycle, Cycle) else load_cycle(cycle)
@@ -181,6 +203,7 @@ def cycle_work(samples: Mapping[str, np.ndarray], cycle: Cycle | str, *,
         force = f[:, :1] + f[:, 1:2] * v + f[:, 2:3] * v**2 + effective_mass_kg * accel
         power = np.maximum(force, 0.0) * v * config.KPH_TO_MPS
         rows.append(_row("tractive_work_positive", "kJ", power @ _weights(cyc) / 1000.0))
+        rows.append(_row("cycle_energy_demand", "kJ", cycle_energy_demand_j(f, cyc, effective_mass_kg) / 1000.0))
     work = pd.DataFrame(rows)
     work.insert(0, "cycle", cyc.name)
     shares = pd.DataFrame({"cycle": cyc.name, "parameter": COEFFICIENTS,

@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bayes_roadload.analysis.cycles import (COEFFICIENTS, Cycle, cycle_work, load_cycle, predict_speed_trace,
+from bayes_roadload.analysis.cycles import (COEFFICIENTS, Cycle, cycle_energy_demand_j, cycle_work, load_cycle, predict_speed_trace,
                                             variance_shares, work_coefficients_j)
 
 MILE_KM = 1.609344
@@ -45,8 +45,21 @@ def test_work_at_constant_speed_by_hand():
     assert w.loc["road_load_work_per_km", "mean"] == pytest.approx(200.0, rel=1e-12)
     # no acceleration: the positive tractive work is the road-load work
     assert w.loc["tractive_work_positive", "mean"] == pytest.approx(w.loc["road_load_work", "mean"], rel=1e-12)
+    assert w.loc["cycle_energy_demand", "mean"] == pytest.approx(w.loc["road_load_work", "mean"], rel=1e-12)
     # only f0 varies: it carries the whole variance
     np.testing.assert_allclose(shares["variance_share"], [1.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_cycle_energy_demand_by_hand():
+    """Trace 0, 36, 36, 18 km/h at 1 s, f = (100, 0.5, 0.03), M_e = 1000 kg.  Steps: mean speeds
+    18, 36, 27 km/h (d = 5, 10, 7.5 m), accelerations +10, 0, -5 m/s^2; forces 100 + 9 + 9.72 +
+    10000 = 10118.72 N, 100 + 18 + 38.88 = 156.88 N and 100 + 13.5 + 21.87 - 5000 < 0 (left out):
+    E = 10118.72 * 5 + 156.88 * 10 = 52162.4 J."""
+    c = Cycle("t", np.arange(4.0), np.array([0.0, 36.0, 36.0, 18.0]))
+    f = np.array([[100.0, 0.5, 0.03]])
+    np.testing.assert_allclose(cycle_energy_demand_j(f, c, 1000.0), [52162.4], rtol=1e-12)
+    work, _ = cycle_work({k: f[:, i] for i, k in enumerate(COEFFICIENTS)}, c, effective_mass_kg=1000.0)
+    assert work.set_index("quantity").loc["cycle_energy_demand", "mean"] == pytest.approx(52.1624, rel=1e-12)
 
 
 def test_work_coefficients_by_hand():
