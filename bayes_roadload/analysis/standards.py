@@ -209,6 +209,32 @@ def _row(quantity, unit, x) -> dict:
             "q2.5": float(np.quantile(x, 0.025)), "q97.5": float(np.quantile(x, 0.975))}
 
 
+def mass_scale(std: "Standard", *, mass_kg: float | None, effective_mass_kg: float | None,
+               rotating_inertia_known: bool = False, tyres_in_contact: int | None = None,
+               mass_in_running_order_kg: float | None = None) -> float:
+    """The factor M_e(standard) / M_e(fit) by which a fitted force is rescaled to the standard's
+    mass convention (1 where the fit's M_e stands): ``mass_factor`` x M, M + ``mass_per_tyre_kg``
+    per tyre in contact, or GTR 15's :func:`standard_effective_mass_kg`."""
+    scale = 1.0
+    if std.mass_factor is not None and not rotating_inertia_known:
+        if mass_kg is None or effective_mass_kg is None:
+            raise ValueError(f"{std.name}: the mass convention M_e = {std.mass_factor} x M needs mass_kg "
+                             "and the fit's effective_mass_kg (or rotating_inertia_known=True)")
+        scale = std.mass_factor * mass_kg / effective_mass_kg
+    if std.mass_per_tyre_kg is not None and not rotating_inertia_known:
+        if mass_kg is None or effective_mass_kg is None or tyres_in_contact is None:
+            raise ValueError(f"{std.name}: the effective mass M + {std.mass_per_tyre_kg} kg per tyre in contact needs "
+                             "the number of tyres: [vehicle] tyres_in_contact in vehicle.toml or --tyres-in-contact N "
+                             "(or --rotating-inertia-known to keep the fit's effective mass)")
+        scale = (mass_kg + std.mass_per_tyre_kg * int(tyres_in_contact)) / effective_mass_kg
+    me = standard_effective_mass_kg(std, mass_kg, mass_in_running_order_kg, rotating_inertia_known)
+    if me is not None:
+        if effective_mass_kg is None:
+            raise ValueError(f"{std.name}: rescaling to its effective mass needs the fit's effective_mass_kg")
+        scale = me / effective_mass_kg
+    return scale
+
+
 def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard, *,
                     mass_kg: float | None = None, effective_mass_kg: float | None = None,
                     rotating_inertia_known: bool = False, frontal_area_m2: float | None = None,
@@ -237,23 +263,9 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
     DataFrame ``standard, quantity, unit, mean, sd, q2.5, q97.5``.
     """
     std = get_standard(standard)
-    scale = 1.0
-    if std.mass_factor is not None and not rotating_inertia_known:
-        if mass_kg is None or effective_mass_kg is None:
-            raise ValueError(f"{std.name}: the mass convention M_e = {std.mass_factor} x M needs mass_kg "
-                             "and the fit's effective_mass_kg (or rotating_inertia_known=True)")
-        scale = std.mass_factor * mass_kg / effective_mass_kg
-    if std.mass_per_tyre_kg is not None and not rotating_inertia_known:
-        if mass_kg is None or effective_mass_kg is None or tyres_in_contact is None:
-            raise ValueError(f"{std.name}: the effective mass M + {std.mass_per_tyre_kg} kg per tyre in contact needs "
-                             "the number of tyres: [vehicle] tyres_in_contact in vehicle.toml or --tyres-in-contact N "
-                             "(or --rotating-inertia-known to keep the fit's effective mass)")
-        scale = (mass_kg + std.mass_per_tyre_kg * int(tyres_in_contact)) / effective_mass_kg
-    me = standard_effective_mass_kg(std, mass_kg, mass_in_running_order_kg, rotating_inertia_known)
-    if me is not None:
-        if effective_mass_kg is None:
-            raise ValueError(f"{std.name}: rescaling to its effective mass needs the fit's effective_mass_kg")
-        scale = me / effective_mass_kg
+    scale = mass_scale(std, mass_kg=mass_kg, effective_mass_kg=effective_mass_kg,
+                       rotating_inertia_known=rotating_inertia_known, tyres_in_contact=tyres_in_contact,
+                       mass_in_running_order_kg=mass_in_running_order_kg)
     c = to_conditions(samples, std.temperature_k, std.pressure_pa, mass_scale=scale,
                       air_density_kgpm3=std.density_kgpm3)
     yaw_deg = std.cda_yaw_deg if yaw_deg is None else yaw_deg
@@ -476,6 +488,10 @@ def run_standard(source: str | Path | Mapping[str, np.ndarray], standard: str | 
                   "mass_in_running_order_kg": mass_in_running_order_kg,
                   "effective_mass_kg_standard": standard_effective_mass_kg(std, mass_kg, mass_in_running_order_kg,
                                                                            rotating_inertia_known),
+                  "effective_mass_kg_of_result": None if effective_mass_kg is None else effective_mass_kg * mass_scale(
+                      std, mass_kg=mass_kg, effective_mass_kg=effective_mass_kg,
+                      rotating_inertia_known=rotating_inertia_known, tyres_in_contact=tyres_in_contact,
+                      mass_in_running_order_kg=mass_in_running_order_kg),
                   "pass": bool(checks["pass"].all())}
         if segment is not None:
             segment["segments"].to_csv(out / "standard_segments.csv", index=False)

@@ -1,6 +1,7 @@
 """40 CFR 1037.528's own drag-area arithmetic: each clause by hand, the regulation's worked
 example, and the whole method recovering a known drag area from exact coastdowns."""
 
+import json
 import math
 
 import numpy as np
@@ -154,6 +155,8 @@ def test_cfr1037_through_run_standard(tractor, tmp_path):
     res, chk = run_standard(draws, "cfr1037", campaign=tractor, out_dir=tmp_path)
     res, chk = res.set_index("quantity"), chk.set_index("rule")
     scale = (M + 56.7 * TYRES) / (M + 1000.0)
+    record = json.loads((tmp_path / "standard.json").read_text())
+    assert record["effective_mass_kg_of_result"] == pytest.approx(M + 56.7 * TYRES, rel=1e-12)
     assert res.loc["A", "mean"] == pytest.approx(
         draws["F0_N"].mean() * (1 - 0.0086 * (293.15 - 293.2)) * scale / 4.44822, rel=1e-12)
     assert np.isfinite(res.loc["CdA_1037.528_segments", "mean"]) and np.isnan(res.loc["CdA_1037.528_segments", "q2.5"])
