@@ -1271,6 +1271,18 @@ def _files_under(out: Path) -> set[str]:
     return {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()} if out.is_dir() else set()
 
 
+def _input_paths(args) -> list[Path]:
+    """The existing files and directories a command's arguments name (other than ``--out``)."""
+    found = []
+    for key, value in vars(args).items():
+        if key == "out":
+            continue
+        for v in value if isinstance(value, (list, tuple)) else [value]:
+            if isinstance(v, (str, Path)) and str(v) and Path(v).exists():
+                found.append(Path(v))
+    return found
+
+
 def _claim_out(args) -> tuple[Path, set[str]] | None:
     """Check a command's ``--out`` before it runs (:data:`WRITES_OUT`): a non-empty directory
     is refused unless ``--force``; with ``--force`` the files an earlier command wrote there
@@ -1282,6 +1294,11 @@ def _claim_out(args) -> tuple[Path, set[str]] | None:
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out}: a file, not a directory")
+    for given in _input_paths(args):   # --force removes the files an earlier command wrote in --out
+        a, b = out.resolve(), given.resolve()
+        if b.is_relative_to(a):
+            raise ValueError(f"--out {out} {'is' if a == b else 'holds'} the input {given}: give an output "
+                             "directory that does not hold the inputs (a subdirectory of an input is fine)")
     present = _files_under(out)
     if present:
         if not args.force:

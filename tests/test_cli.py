@@ -55,6 +55,24 @@ def test_fit_refuses_bad_campaign_and_writes_nothing(tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("where", ["same", "parent"])
+def test_force_never_touches_the_input(campaign_dir, tmp_path, capsys, where):
+    """``--out`` on the campaign itself or on a directory holding it is refused (exit 2), with
+    or without ``--force``, before anything is removed: ``simulate`` leaves its marker of
+    written files in the campaign, which ``--force`` would otherwise delete."""
+    import shutil
+
+    root = tmp_path / "root"
+    c = root / "c14"
+    shutil.copytree(campaign_dir, c)
+    before = sorted(p.name for p in c.iterdir())
+    out = {"same": c, "parent": root}[where]
+    for force in ([], ["--force"]):
+        assert main(["fit", str(c), "--method", "lsq", "--model", "three_term", "--out", str(out), *force]) == 2
+        assert "does not hold the inputs" in capsys.readouterr().err
+        assert sorted(p.name for p in c.iterdir()) == before
+
+
 def test_unknown_model_is_refused(campaign_dir, tmp_path, capsys):
     assert main(["fit", str(campaign_dir), "--model", "five_term", "--out", str(tmp_path / "o")]) == 2
     assert "five_term" in capsys.readouterr().err
