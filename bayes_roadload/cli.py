@@ -191,6 +191,10 @@ SIMULATIONS = {"coastdown": _simulate_coastdown, "spindown": _simulate_spindown,
 
 
 def _cmd_simulate(args) -> int:
+    from .simulate.cases import CASES
+
+    if args.case is not None and args.case not in CASES:   # refused (exit 2), not an internal error
+        raise ValueError(f"--case {args.case}: the thesis cases (table 6.7) are numbered {min(CASES)}-{max(CASES)}")
     return SIMULATIONS[args.kind](args)
 
 
@@ -382,9 +386,12 @@ def _cmd_fit(args) -> int:
     from . import config
     from .inference.kinds import check_model, kind_of, resolve_pooling
     from .errors import stage
-    from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table
+    from .inference.lsq import LsqSettings, fit_lsq, format_lsq_table, lsq_groups
     from .output import write_lsq_fit_dir
 
+    if args.method == "lsq" and args.pooling == "hierarchical":
+        raise ValueError("least squares has no hierarchical model; use --method nuts --pooling "
+                         "hierarchical, or --method lsq --grouping run for one classical fit per run")
     stages = Stages()
     with stages("load"):
         campaign = _load_for_fit(args)
@@ -405,13 +412,12 @@ def _cmd_fit(args) -> int:
                         f"{config.AUTO_HIERARCHICAL_MAX_RUNS} runs): the run-to-run spread is not in the intervals; "
                         "--pooling hierarchical adds it at several times the fit time (docs/calibration.md)")
     if args.method == "lsq":
-        if args.pooling == "hierarchical":
-            raise SystemExit("error: least squares has no hierarchical model; use --method nuts --pooling "
-                             "hierarchical, or --method lsq --grouping run for one classical fit per run")
         if runs is not None and runs != list(campaign.run_ids):
             campaign = campaign.subset(runs)
-        result = fit_lsq(campaign, spec, grouping=args.grouping,
-                         settings=LsqSettings(initial_speed=args.initial_speed))
+        lsq_groups(campaign, args.grouping)   # a grouping the campaign cannot take is refused (exit 2)
+        with stage("lsq_start"):   # a numerical failure of accepted input: exit 4, not a refusal
+            result = fit_lsq(campaign, spec, grouping=args.grouping,
+                             settings=LsqSettings(initial_speed=args.initial_speed))
         with stage("output"):
             write_lsq_fit_dir(result, out, provenance=_provenance(args, campaign, args.campaign))
         echo(format_lsq_table(result, campaign.truth))

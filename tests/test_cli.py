@@ -73,6 +73,21 @@ def test_force_never_touches_the_input(campaign_dir, tmp_path, capsys, where):
         assert sorted(p.name for p in c.iterdir()) == before
 
 
+def test_refusals_of_options_exit_2(campaign_dir, tmp_path, capsys):
+    """An unknown thesis case and a grouping the campaign cannot take are refusals (exit 2,
+    named), not internal errors; nothing is written."""
+    assert main(["simulate", "--case", "99", "--out", str(tmp_path / "s")]) == 2
+    assert "--case 99" in capsys.readouterr().err and not (tmp_path / "s").exists()
+    import shutil
+
+    one = tmp_path / "one"
+    shutil.copytree(campaign_dir, one)
+    runs = pd.read_csv(one / "runs.csv")
+    runs[runs["run"] == 1].to_csv(one / "runs.csv", index=False)   # one run: no pair
+    assert main(["fit", str(one), "--method", "lsq", "--grouping", "pair", "--out", str(tmp_path / "g")]) == 2
+    assert "--grouping pair" in capsys.readouterr().err
+
+
 def test_unknown_model_is_refused(campaign_dir, tmp_path, capsys):
     assert main(["fit", str(campaign_dir), "--model", "five_term", "--out", str(tmp_path / "o")]) == 2
     assert "five_term" in capsys.readouterr().err
@@ -188,7 +203,7 @@ def test_fit_hierarchical_writes_tau_rows_and_run_rows(campaign_dir, tmp_path, c
     assert {f"{k}_run[{r}]" for k in ("AD", "BD", "CD0") for r in (1, 2, 3, 4)} <= runs
 
 
-def test_pooling_option_reaches_the_fit(campaign_dir, tmp_path, monkeypatch):
+def test_pooling_option_reaches_the_fit(campaign_dir, tmp_path, monkeypatch, capsys):
     """``--pooling hierarchical`` (and the noise options) are handed to the NUTS fit; least
     squares refuses the option instead of ignoring it."""
     import bayes_roadload.inference.kinds as kinds
@@ -206,8 +221,10 @@ def test_pooling_option_reaches_the_fit(campaign_dir, tmp_path, monkeypatch):
     assert code == EXIT_FIT_FAILED
     assert "stop here" in (tmp_path / "h" / "error.log").read_text()
     assert seen["pooling"] == "hierarchical" and seen["noise"] == "white"
-    with pytest.raises(SystemExit, match="no hierarchical model"):
-        main(["fit", str(campaign_dir), "--method", "lsq", "--pooling", "hierarchical", "--out", str(tmp_path / "l")])
+    # refused before anything is loaded or written: exit 2
+    assert main(["fit", str(campaign_dir), "--method", "lsq", "--pooling", "hierarchical", "--validity", "report",
+                 "--out", str(tmp_path / "l")]) == 2
+    assert "no hierarchical model" in capsys.readouterr().err and not (tmp_path / "l").exists()
 
 def test_import_vbox_and_fit_an_interval_campaign(tmp_path, capsys):
     """import-vbox on synthetic VBOX exports (high and low window, one run the operator turned

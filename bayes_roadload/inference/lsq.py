@@ -300,14 +300,20 @@ def _select(batch: RunBatch, idx) -> RunBatch:
     return RunBatch(*(jnp.asarray(x)[idx] for x in batch))
 
 
+def lsq_groups(campaign, grouping: str) -> list[tuple[str, tuple]]:
+    """The groups of runs :func:`fit_lsq` fits one by one for ``grouping`` ("run", "pair",
+    "all"): (label, run ids); refused (ValueError) when the campaign cannot be grouped so."""
+    return _groups(campaign, grouping, list(campaign.run_ids))
+
+
 def _groups(campaign, grouping: str, run_ids: list) -> list[tuple[str, tuple]]:
     if grouping == "run":
         return [(str(r), (r,)) for r in run_ids]
     if grouping == "pair":
         pairs = campaign.pairs()
         if not pairs:
-            raise ValueError("grouping='pair': the campaign has no opposite-direction pairs "
-                             "(use grouping='run' or 'all')")
+            raise ValueError("grouping 'pair' (--grouping pair): the campaign has no opposite-direction pairs "
+                             "(use grouping 'run' or 'all')")
         return [("+".join(str(r) for r in p), tuple(p)) for p in pairs]
     if grouping == "all":
         return [("all", tuple(run_ids))]
