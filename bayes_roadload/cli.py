@@ -476,10 +476,21 @@ def _cmd_fit_driveline(args) -> int:
     return 0 if report.diagnostics["pass"] else EXIT_GATES_FAILED
 
 
+def _warn_failed_fit(fit_dir) -> None:
+    """Print, before any figure drawn from it, that a fit directory's fit failed its gates
+    (``diagnostics.json`` ``pass``)."""
+    f = Path(fit_dir) / "diagnostics.json"
+    diag = json.loads(f.read_text()) if f.is_file() else {}
+    if not diag.get("pass", True):
+        echo(f"!! the fit {fit_dir} FAILED its diagnostic gates ({', '.join(diag.get('failed', [])) or 'see diagnostics.json'}): "
+             "the figures below come from draws that are not trustworthy; refit with more draws (see `fit`)")
+
+
 def _cmd_report(args) -> int:
     from .output.report import render_report
 
     fit_dir = Path(args.fit_dir)
+    _warn_failed_fit(fit_dir)
     if args.standard:
         from .analysis.standards import format_standard, run_standard
         from .data import load_campaign
@@ -509,6 +520,7 @@ def _campaign_of_fit(fit_dir: Path):
 def _cmd_dyno(args) -> int:
     from .analysis.dyno import format_dyno, run_dyno
 
+    _warn_failed_fit(args.target_fit_dir)
     result = run_dyno(args.target_fit_dir, args.dyno_coastdown, tolerance_n=args.tolerance_n, out_dir=args.out)
     echo(format_dyno(result))
     echo(f"\nwrote {Path(args.out) / 'dyno_set.csv'}, dyno_checks.csv, dyno.json")
@@ -518,6 +530,7 @@ def _cmd_dyno(args) -> int:
 def _cmd_predict(args) -> int:
     from .analysis.predict import format_cycle_work, run_predict
 
+    _warn_failed_fit(args.fit_dir)
     campaign = _campaign_of_fit(Path(args.fit_dir))
     work, shares, _ = run_predict(args.fit_dir, args.cycle, effective_mass_kg=campaign.vehicle.effective_mass_kg,
                                   temperature_k=args.temperature_k, pressure_pa=args.pressure_pa,

@@ -146,6 +146,36 @@ def test_fit_nuts_writes_outputs_and_flags_gates(cli_nuts_fit):
 
 
 
+def test_commands_on_a_failed_fit_say_so_first(cli_nuts_fit, tmp_path, capsys):
+    """``predict`` and ``report`` on a fit directory whose fit failed its gates print that first,
+    before any figure drawn from it (a copy of the shared fit, its diagnostics marked failed);
+    on a passed fit they say nothing of it; an lsq fit directory is named as such."""
+    import shutil
+
+    failed = tmp_path / "failed"
+    shutil.copytree(cli_nuts_fit.fit_dir, failed)
+    diag = json.loads((failed / "diagnostics.json").read_text())
+    (failed / "diagnostics.json").write_text(json.dumps(dict(diag, **{"pass": False, "failed": ["rhat"]})))
+    assert main(["predict", str(failed), "--cycle", "wltc3b", "--out", str(tmp_path / "p")]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"!! the fit {failed} FAILED its diagnostic gates (rhat)")
+    assert main(["report", str(failed)]) == 0
+    assert capsys.readouterr().out.startswith("!! the fit")
+    passed = tmp_path / "passed"
+    shutil.copytree(cli_nuts_fit.fit_dir, passed)
+    (passed / "diagnostics.json").write_text(json.dumps(dict(diag, **{"pass": True})))
+    assert main(["report", str(passed)]) == 0
+    assert "FAILED" not in capsys.readouterr().out
+
+
+def test_predict_on_an_lsq_fit_names_it(campaign_dir, tmp_path, capsys):
+    assert main(["fit", str(campaign_dir), "--method", "lsq", "--model", "three_term", "--no-report",
+                 "--out", str(tmp_path / "l")]) == 0
+    capsys.readouterr()
+    assert main(["predict", str(tmp_path / "l"), "--out", str(tmp_path / "p")]) == 2
+    assert "least-squares fit (--method lsq) has no posterior draws" in capsys.readouterr().err
+
+
 def test_every_stage_of_a_fit_is_timed(cli_nuts_fit):
     """``diagnostics.json`` ``stages_s`` names every stage of a speed-trace fit: the command's
     (imports, load, fit, summaries and predictive, Type B, writing, report), the fit's own

@@ -190,6 +190,9 @@ def read_fit_dir(path: str | os.PathLike) -> FitDir:
         raise ValueError(f"{src}: a fit directory needs the fit.json written by `bayes-roadload fit` (model, "
                          "campaign); refit the campaign or give the campaign directory")
     record = json.loads(meta_file.read_text())
+    if record.get("method") == "lsq":
+        raise ValueError(f"{src}: a least-squares fit (--method lsq) has no posterior draws; this command "
+                         "needs a fit of `bayes-roadload fit` with --method nuts (the default)")
     if not record.get("campaign"):
         raise ValueError(f"{meta_file}: no campaign path recorded; give the campaign directory instead")
     post = az.from_netcdf(str(src / "posterior.nc")).posterior
