@@ -306,6 +306,22 @@ def _model_for(args, default: str):
     return spec
 
 
+def _add_unit_options(p) -> None:
+    """``--speed-unit`` / ``--airspeed-unit`` of a command that loads a speed-trace campaign."""
+    p.add_argument("--speed-unit", choices=("mps", "kph", "mph"), default=None,
+                   help="speed traces: the unit of the speed column whatever its name says (converted on load and "
+                        "recorded in fit.json); default: the column name's (speed_mps, speed_kph, speed_mph)")
+    p.add_argument("--airspeed-unit", choices=("mps", "kph", "mph"), default=None,
+                   help="speed traces: the unit of the airspeed column, as --speed-unit")
+
+
+def _load_with_units(path, args):
+    """A campaign loaded with the command's ``--speed-unit`` / ``--airspeed-unit``."""
+    from .data import load_campaign
+
+    return load_campaign(path, speed_unit=args.speed_unit, airspeed_unit=args.airspeed_unit)
+
+
 def _load_for_fit(args):
     """The campaign of ``fit``: the spin-down options go to a spin-down campaign only
     (:func:`~bayes_roadload.data.load_campaign` refuses them for other kinds)."""
@@ -451,14 +467,13 @@ def _cmd_fit(args) -> int:
 
 
 def _cmd_fit_driveline(args) -> int:
-    from .data import load_campaign
     from .errors import stage
     from .inference.driveline import driveline_report, fit_driveline_nuts
     from .inference.kinds import kind_of
     from .inference.results import format_posterior_table
     from .output import fit_record, write_fit_dir
 
-    campaign = load_campaign(args.campaign)
+    campaign = _load_with_units(args.campaign, args)
     if kind_of(campaign).driveline_channel is None:
         raise ValueError(f"{args.campaign}: fit-driveline needs a speed-trace campaign (runs.csv) that logs "
                          "driveline_force_n or the two wheel torques (off-load), or a steady-state campaign "
@@ -493,11 +508,10 @@ def _cmd_report(args) -> int:
     _warn_failed_fit(fit_dir)
     if args.standard:
         from .analysis.standards import format_standard, run_standard
-        from .data import load_campaign
-        from .output import read_fit_dir
+        from .output import fit_campaign, read_fit_dir
 
         source = read_fit_dir(fit_dir)
-        campaign = load_campaign(source.record["campaign"]) if source.record.get("campaign") else None
+        campaign = fit_campaign(source.record) if source.record.get("campaign") else None
         result, checks = run_standard(fit_dir, args.standard, campaign=campaign, out_dir=fit_dir,
                                       **_standard_options(args))
         echo(format_standard(result, checks))
@@ -507,14 +521,13 @@ def _cmd_report(args) -> int:
 
 
 def _campaign_of_fit(fit_dir: Path):
-    """The campaign a fit directory's ``fit.json`` names."""
-    from .data import load_campaign
-    from .output import read_fit_dir
+    """The campaign a fit directory's ``fit.json`` names (with the units the fit was told)."""
+    from .output import fit_campaign, read_fit_dir
 
     record = read_fit_dir(fit_dir).record
     if not record.get("campaign"):
         raise ValueError(f"{fit_dir / 'fit.json'}: no campaign path recorded; refit the campaign with `fit`")
-    return load_campaign(record["campaign"])
+    return fit_campaign(record)
 
 
 def _cmd_dyno(args) -> int:
@@ -581,11 +594,10 @@ DIAGNOSES = {"traces": _diagnose_traces, "band_times": _diagnose_band_times}
 
 
 def _cmd_diagnose(args) -> int:
-    from .data import load_campaign
     from .inference.kinds import kind_of
     from .inference.spec import load_model_spec
 
-    campaign = load_campaign(args.campaign)
+    campaign = _load_with_units(args.campaign, args)
     entry = kind_of(campaign)
     if entry.diagnosis is None:
         raise ValueError(f"{args.campaign}: the sim-to-real diagnosis works on coastdowns (speed traces, interval "
@@ -669,21 +681,20 @@ def _cmd_demo(args) -> int:
 def _plan_population(args, out: Path):
     """The population a plan draws from: a fit directory's posterior, or a NUTS fit of a campaign."""
     from .analysis.planning import population_from_fit, population_from_samples
-    from .data import load_campaign
     from .inference.nuts import fit_nuts
     from .inference.results import trace_report
-    from .output import fit_record, is_fit_dir, read_fit_dir, write_fit_dir
+    from .output import fit_campaign, fit_record, is_fit_dir, read_fit_dir, write_fit_dir
 
     src = Path(args.source)
     if is_fit_dir(src):
         source = read_fit_dir(src)
-        campaign = load_campaign(source.record["campaign"])
+        campaign = fit_campaign(source.record)
         if not source.passed:
             echo(f"!! the source fit {src} FAILED its diagnostic gates: the plan draws from a posterior that is "
                   "not trustworthy; refit with more draws (see `fit`)")
         return population_from_samples(source.samples, source.record["free"], source.model, campaign,
                                        source=f"{source.record['pooling']} fit {src}"), campaign
-    campaign = load_campaign(src)
+    campaign = _load_with_units(src, args)
     echo(f"Fitting {src} ({campaign.runs['run'].nunique()} runs) with model {args.model}, {args.pooling} "
           "pooling, to draw the future campaigns from ...")
     fit = fit_nuts(campaign, args.model, pooling=args.pooling, sampler=_sampler(args))
@@ -706,13 +717,12 @@ def _cmd_plan_identify(args) -> int:
 
     from . import config
     from .analysis.design_identify import DesignChange, identify_designs
-    from .data import load_campaign
     from .output import is_fit_dir
 
     src = Path(args.source)
     if is_fit_dir(src):
         raise ValueError(f"{src}: --identify scores a design on a campaign (it fits --model itself); give the campaign")
-    campaign = load_campaign(src)
+    campaign = _load_with_units(src, args)
     texts = args.design or list(DEFAULT_DESIGNS)
     changes = [DesignChange.parse(t) for t in texts]
     out = Path(args.out)
@@ -1124,11 +1134,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "fit.json (docs/standards.md)")
     _add_standard_options(f)
     f.add_argument("--no-report", action="store_true", help="do not render report.html / report.md")
-    f.add_argument("--speed-unit", choices=("mps", "kph", "mph"), default=None,
-                   help="speed traces: the unit of the speed column whatever its name says (converted on load and "
-                        "recorded in fit.json); default: the column name's (speed_mps, speed_kph, speed_mph)")
-    f.add_argument("--airspeed-unit", choices=("mps", "kph", "mph"), default=None,
-                   help="speed traces: the unit of the airspeed column, as --speed-unit")
+    _add_unit_options(f)
     f.add_argument("--no-type-b", action="store_true",
                    help="leave the Type B uncertainty of the declared values and instruments (vehicle.toml "
                         "[uncertainty], docs/calibration.md) out of the intervals and write no budget.csv "
@@ -1146,6 +1152,7 @@ def build_parser() -> argparse.ArgumentParser:
     fd.add_argument("--model", default="four_term_driveline",
                     help="model variant whose At, Bt, Ct priors are used (default four_term_driveline)")
     fd.add_argument("--out", required=True)
+    _add_unit_options(fd)
     _add_nuts_options(fd, seed=0)
     fd.add_argument("--no-report", action="store_true", help="do not render report.html / report.md")
     fd.set_defaults(func=_cmd_fit_driveline, standard=None, rotating_inertia_known=False, tyres_in_contact=None,
@@ -1190,6 +1197,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "campaigns refitted by MAP + Laplace")
     pl.add_argument("source", metavar="CAMPAIGN_OR_FIT_DIR",
                     help="a campaign (fitted first with --model, --pooling) or a `fit` output directory")
+    _add_unit_options(pl)
     pl.add_argument("--target", action="append", metavar="QUANTITY=VALUE[%]",
                     help="half-width target, repeatable: CD0=1%% (percent of the mean) or F50_N=2 (SI units); "
                          "quantities AD BD CD0 KD At Bt Ct F50_N F50_tyre_N F0_N F2_N_per_kph2 "
@@ -1245,6 +1253,7 @@ def build_parser() -> argparse.ArgumentParser:
                                         "one MAP fit, candidates linearised; interval times: candidates refitted "
                                         "with NUTS (--warmup 500 --draws 1000) and compared by PSIS-LOO)")
     g.add_argument("campaign")
+    _add_unit_options(g)
     g.add_argument("--model", default=None, help="a name in models/ or a TOML path (see `models`); default "
                                                  "three_term (speed traces), split_f0_f2 (interval times)")
     g.add_argument("--out", required=True, help="directory for diagnosis.json, refit.json, report.md and plots")

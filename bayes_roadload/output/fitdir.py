@@ -176,6 +176,20 @@ class FitDir:
         return f if f and Path(f).is_file() else self.record["model"]
 
 
+def fit_campaign(record: dict):
+    """The campaign a fit record (``fit.json``) names, loaded with the unit options its
+    provenance records: a ``--speed-unit`` / ``--airspeed-unit`` the fit was given
+    (``provenance.conversions``, ``stated_by``), so that later commands read the same data."""
+    from ..data import load_campaign
+    from ..data.units import SPEED_CHANNELS, SPEED_UNIT_NAMES
+
+    code = {name: unit for unit, name in SPEED_UNIT_NAMES.items()}
+    options = {f"{stem}_unit": code[c["unit"]]
+               for c in (record.get("provenance") or {}).get("conversions", [])
+               for stem in SPEED_CHANNELS if c.get("stated_by") == f"--{stem}-unit"}
+    return load_campaign(record["campaign"], **options)
+
+
 def is_fit_dir(path: str | os.PathLike) -> bool:
     """``path`` holds a ``posterior.nc``."""
     return (Path(path) / "posterior.nc").is_file()

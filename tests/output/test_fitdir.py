@@ -64,3 +64,26 @@ def test_read_fit_dir_refuses_a_directory_without_fit_json(tmp_path):
     write_fit_dir(_report(True), out)
     with pytest.raises(ValueError, match="fit.json"):
         read_fit_dir(out)
+
+
+def test_fit_campaign_loads_with_the_units_the_fit_was_told(tmp_path):
+    """A campaign whose speed column names no unit loads only with ``--speed-unit``; a fit record
+    of it holds that option in its conversions, and ``fit_campaign`` (what ``predict``,
+    ``report --standard``, ``plan`` read) loads it with the same unit."""
+    from bayes_roadload.data import CampaignError, load_campaign
+    from bayes_roadload.output import fit_campaign
+
+    from ..data.test_traces import runs_frame, write
+
+    df = runs_frame()
+    df = df.assign(speed=df.pop("speed_mps") * 3.6)          # km/h in a column that names no unit
+    d = write(tmp_path, df)
+    with pytest.raises(CampaignError, match="--speed-unit"):
+        load_campaign(d)
+    told = load_campaign(d, speed_unit="kph")
+    record = {"campaign": str(d), "provenance": {"conversions": told.meta["conversions"]}}
+    back = fit_campaign(record)
+    np.testing.assert_allclose(back.runs["speed_mps"], told.runs["speed_mps"])
+    np.testing.assert_allclose(back.runs["speed_mps"].iloc[0], 30.0)
+    with pytest.raises(CampaignError, match="--speed-unit"):
+        fit_campaign({"campaign": str(d), "provenance": {"conversions": []}})
