@@ -63,11 +63,13 @@ def _check(name: str, table: pd.DataFrame) -> Cycle:
     for col in ("time_s", "speed_kph"):
         if col not in table:
             raise ValueError(f"{name}: a cycle table needs columns time_s, speed_kph (missing {col})")
-    t = table["time_s"].to_numpy(float)
-    v = table["speed_kph"].to_numpy(float)
-    bad = np.flatnonzero(~np.isfinite(t) | ~np.isfinite(v))
-    if bad.size:
-        raise ValueError(f"{name}: non-finite value in row {int(bad[0]) + 1}")
+    cols = {c: pd.to_numeric(table[c], errors="coerce").to_numpy(float) for c in ("time_s", "speed_kph")}
+    for col, x in cols.items():
+        bad = np.flatnonzero(~np.isfinite(x))
+        if bad.size:
+            raise ValueError(f"{name}, column {col}, row {int(bad[0]) + 1}: {table[col].iloc[bad[0]]!r} is not a "
+                             "finite number")
+    t, v = cols["time_s"], cols["speed_kph"]
     back = np.flatnonzero(np.diff(t) <= 0)
     if back.size:
         raise ValueError(f"{name}: column time_s does not increase at row {int(back[0]) + 2}")

@@ -121,3 +121,10 @@ def test_variance_shares_of_correlated_coefficients_by_hand():
     # sample covariances of 4e5 draws: relative error ~ sqrt(2 / 4e5) ~ 0.002 per entry
     np.testing.assert_allclose(s, [0.34375 / 2, 1.65625 / 2], atol=0.01)
     assert (s >= 0).all() and s.sum() == pytest.approx(1.0, abs=1e-12)
+
+
+def test_a_cycle_table_with_text_is_refused_naming_column_and_row(tmp_path):
+    path = tmp_path / "c.csv"
+    pd.DataFrame({"time_s": [0.0, 1.0, 2.0], "speed_kph": ["0", "abc", "3"]}).to_csv(path, index=False)
+    with pytest.raises(ValueError, match=r"c.csv, column speed_kph, row 2: 'abc' is not a finite number"):
+        load_cycle(path)
