@@ -1113,7 +1113,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run validity (wind limits, Hampel outliers, partner rejection): reject the flagged runs "
                         "with their partners, or only report them (validity.csv); default: reject for interval "
                         "campaigns, no check for speed traces")
-    f.add_argument("--wind-limits", default="gtr_onboard", help="eec | gtr_stationary | gtr_onboard (config.WIND_LIMITS)")
+    f.add_argument("--wind-limits", default="gtr_onboard", choices=tuple(config.WIND_LIMITS),
+                   help="the wind limits of --validity (config.WIND_LIMITS)")
     f.add_argument("--steady-wind", choices=("auto", "measured", "pair", "still"), default="auto",
                    help="steady state: relative air from the anemometers, a latent along-track wind per "
                         "opposite-direction pair, or still air (auto: measured if logged, else pair)")
