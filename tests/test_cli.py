@@ -42,6 +42,22 @@ def test_fit_lsq_writes_summary(campaign_dir, tmp_path, capsys):
     assert "CD0" in capsys.readouterr().out
 
 
+def test_lsq_without_airspeed_says_it_takes_still_air(campaign_dir, tmp_path, capsys):
+    """Paired least squares on runs without an anemometer assumes still air: it says so (and
+    names --grouping run and NUTS); with the anemometer, or per run, it does not."""
+    import shutil
+
+    bare = tmp_path / "bare"
+    shutil.copytree(campaign_dir, bare)
+    runs = pd.read_csv(bare / "runs.csv")
+    runs.drop(columns=["airspeed_mps", "yaw_rad"]).to_csv(bare / "runs.csv", index=False)
+    for camp, grouping, said in ((bare, "pair", True), (bare, "run", False), (campaign_dir, "pair", False)):
+        out = tmp_path / f"o_{camp.name}_{grouping}"
+        assert main(["fit", str(camp), "--method", "lsq", "--model", "three_term", "--grouping", grouping,
+                     "--no-report", "--out", str(out)]) == 0
+        assert ("takes still air" in capsys.readouterr().out) == said
+
+
 def test_fit_refuses_bad_campaign_and_writes_nothing(tmp_path, capsys):
     bad = tmp_path / "bad"
     bad.mkdir()
