@@ -121,6 +121,22 @@ def check_no_missing(df: pd.DataFrame, column: str, what: str, where: str) -> No
         refuse(where, column, int(np.flatnonzero(missing)[0]) + 1, what)
 
 
+def numeric_and_text_ids(df: pd.DataFrame, columns, ids, where: str) -> list:
+    """The columns of ``columns`` to check as numbers: all but the id columns ``ids`` held as text
+    (``run``, ``pair``: an id is an integer or text).  A text id column is refused with its row
+    where a cell is empty; a numeric one is left to :func:`check_numeric` (whose refusal of an
+    empty cell names the row too)."""
+    out = []
+    for c in columns:
+        if c in ids and not pd.api.types.is_numeric_dtype(df[c]):
+            check_no_missing(df, c, f"missing {c} id", where)
+            if isinstance(df[c].dtype, pd.CategoricalDtype):
+                df[c] = df[c].astype(object)
+        else:
+            out.append(c)
+    return out
+
+
 def check_numeric(df: pd.DataFrame, columns, limits: Mapping[str, tuple], where: str) -> None:
     """Convert ``columns`` of ``df`` to float in place, refusing a value that is not a finite
     number and one outside its ``limits[column] = (low, high, what it probably is)``, naming

@@ -33,6 +33,7 @@ from .checks import (
     check_no_missing,
     check_not_empty,
     check_numeric,
+    numeric_and_text_ids,
     check_run_constants,
     check_time_increases,
     check_wheel_torque_pair,
@@ -205,7 +206,8 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
     cols = check_columns(df, KNOWN_COLUMNS, REQUIRED_COLUMNS, UNIT_HINTS, "the contract", where)
     check_not_empty(df, "samples", where)
     check_no_missing(df, "run", "missing run id", where)
-    check_numeric(df, [c for c in cols if c != "run"], CHANNEL_LIMITS, where)
+    check_numeric(df, numeric_and_text_ids(df, [c for c in cols if c != "run"], ("pair",), where), CHANNEL_LIMITS,
+                  where)
     check_humidity_percent(df, where)
     check_direction_codes(df, where)
     if check_wheel_torque_pair(cols, where) and "driveline_force_n" in cols:

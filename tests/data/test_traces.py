@@ -117,3 +117,26 @@ def test_parquet_round_trip(tmp_path):
     out = save_campaign(c, tmp_path / "pq", fmt="parquet")
     assert (out / "runs.parquet").exists() and not (out / "runs.csv").exists()
     pd.testing.assert_frame_equal(load_campaign(out).runs, c.runs)
+
+
+def test_text_pair_ids_are_ids(tmp_path):
+    """``pair`` is an id as in the other kinds: text pair ids load from CSV and parquet, pair the
+    runs, survive a subset and a save/load round trip."""
+    df = runs_frame(runs=4)
+    df["pair"] = np.repeat(["A", "B", "B", "A"], 40)
+    c = load_campaign(write(tmp_path, df))
+    assert c.pairs() == [(1, 4), (2, 3)]
+    assert c.subset([3, 2]).pairs() == [(3, 2)]
+    pytest.importorskip("pyarrow")
+    for fmt in ("csv", "parquet"):
+        back = load_campaign(save_campaign(c, tmp_path / fmt, fmt=fmt))
+        assert back.pairs() == [(1, 4), (2, 3)]
+        assert list(back.runs["pair"]) == list(c.runs["pair"])
+
+
+def test_missing_text_pair_id_names_its_row(tmp_path):
+    df = runs_frame(runs=2)
+    df["pair"] = "A"
+    df.loc[45, "pair"] = None
+    with pytest.raises(CampaignError, match=r"runs.csv, column 'pair', row 46: missing pair id"):
+        load_campaign(write(tmp_path, df))
