@@ -226,6 +226,47 @@ def check_run_constants(df: pd.DataFrame, rows: np.ndarray, columns, rid, where:
                 refuse(where, c, int(rows[np.flatnonzero(vals != vals[0])[0]]) + 1, f"{c} changes within run {rid!r}")
 
 
+def check_pair_groups(df: pd.DataFrame, where: str, split_segments: bool = False) -> None:
+    """Refuse ``pair`` ids that do not pair two opposite-direction runs (when the column is
+    present; call after :func:`check_run_constants`, so that a run has one pair id).
+
+    Refused: a pair id held by more than two runs, naming the first row of its third run (in
+    file order); a pair id held by two runs of the same ``direction`` (when that column is
+    present), naming both runs at the first row of the second.  A pair id held by one run is
+    accepted: a run without a partner (the VBOX import gives one an id of its own, and a subset of
+    a campaign can leave one); :func:`pairs_by_column` leaves it out of the pairs.
+
+    ``split_segments`` (speed traces: the split runs of 40 CFR 1037.528 (d)(2), a high- and a
+    low-speed segment logged as runs of their own in each direction under one pair id,
+    :mod:`bayes_roadload.analysis.cfr1037`): a pair id on more than two runs is accepted when the
+    ``direction`` column is present and the id holds as many runs of each direction; it is then
+    not a pair of :func:`pairs_by_column` either.
+    """
+    if "pair" not in df:
+        return
+    runs_of: dict = {}  # pair id -> [(run id, position of its first row)] in file order
+    pair = df["pair"].to_numpy()
+    for rid, rows in run_rows(df):
+        runs_of.setdefault(plain_value(pair[rows[0]]), []).append((rid, int(rows[0])))
+    directions = run_directions(df) if "direction" in df else None
+    for pid, runs in runs_of.items():
+        ids = [r for r, _ in runs]
+        if isinstance(pid, float) and pid.is_integer():
+            pid = int(pid)  # a numeric id column is read as float
+        if len(runs) > 2:
+            if split_segments and directions is not None and sum(directions[r] for r in ids) == 0:
+                continue
+            split = (" (40 CFR 1037 split runs: as many segments of each direction, with a direction column)"
+                     if split_segments else "")
+            refuse(where, "pair", runs[2][1] + 1,
+                   f"pair id {pid!r} is held by {len(runs)} runs ({', '.join(repr(r) for r in ids)}): a pair is "
+                   f"two opposite-direction runs{split}; give each pair its own id")
+        if len(runs) == 2 and directions is not None and directions[ids[0]] == directions[ids[1]]:
+            refuse(where, "pair", runs[1][1] + 1,
+                   f"pair id {pid!r}: runs {ids[0]!r} and {ids[1]!r} both have direction {directions[ids[0]]:+d}: "
+                   "a pair is two opposite-direction runs")
+
+
 # --------------------------------------------------------------------------- run tables
 # What every kind of campaign asks of its table of runs: one row per sample, band or marker
 # with a ``run`` column.
@@ -243,7 +284,9 @@ def run_directions(table: pd.DataFrame) -> dict:
 
 
 def pairs_by_column(table: pd.DataFrame) -> list[tuple] | None:
-    """Pairs of run ids by the ``pair`` column (groups of two runs), None without it."""
+    """Pairs of run ids by the ``pair`` column, None without it: the ids held by two runs (a
+    run alone under its id is left out, and so is a group of split segments, which
+    :func:`check_pair_groups` accepts in speed traces only)."""
     if "pair" not in table:
         return None
     groups = table.groupby("pair", sort=False)["run"].unique()

@@ -33,6 +33,7 @@ from .checks import (
     check_no_missing,
     check_not_empty,
     check_numeric,
+    check_pair_groups,
     numeric_and_text_ids,
     check_run_constants,
     check_time_increases,
@@ -139,7 +140,8 @@ class Campaign:
 
     def pairs(self) -> list[tuple]:
         """Opposite-direction pairs of run ids: by the ``pair`` column when present, else
-        consecutive runs in file order.  A run left without a partner is dropped."""
+        consecutive runs in file order.  A run left without a partner is dropped, and so is a
+        ``pair`` group of 40 CFR 1037 split segments (:func:`~.checks.check_pair_groups`)."""
         by_column = pairs_by_column(self.runs)
         return by_column if by_column is not None else consecutive_pairs(self.run_ids)
 
@@ -219,6 +221,7 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
         check_time_increases(df["time_s"].to_numpy()[rows], rows, rid, where)
         check_run_constants(df, rows, RUN_CONSTANT_COLUMNS, rid, where)
         check_moving(df["speed_mps"].to_numpy(float)[rows], rows, rid, where)
+    check_pair_groups(df, where, split_segments=True)
     return df.reset_index(drop=True)
 
 
