@@ -140,8 +140,12 @@ def numeric_and_text_ids(df: pd.DataFrame, columns, ids, where: str) -> list:
 def check_numeric(df: pd.DataFrame, columns, limits: Mapping[str, tuple], where: str) -> None:
     """Convert ``columns`` of ``df`` to float in place, refusing a value that is not a finite
     number and one outside its ``limits[column] = (low, high, what it probably is)``, naming
-    the row."""
+    the row.  A datetime or timedelta column (parquet) is refused at row 1: pandas would read it
+    as integer nanoseconds."""
     for c in columns:
+        if pd.api.types.is_datetime64_any_dtype(df[c]) or pd.api.types.is_timedelta64_dtype(df[c]):
+            refuse(where, c, 1, f"a {df[c].dtype} column, not a number: give "
+                   + ("the seconds from the run's start as a number" if c == "time_s" else "a number in the column's unit"))
         values = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
         bad = ~np.isfinite(values)
         if bad.any():

@@ -140,3 +140,18 @@ def test_missing_text_pair_id_names_its_row(tmp_path):
     df.loc[45, "pair"] = None
     with pytest.raises(CampaignError, match=r"runs.csv, column 'pair', row 46: missing pair id"):
         load_campaign(write(tmp_path, df))
+
+
+@pytest.mark.parametrize("as_time", [lambda t: pd.Timestamp("2024-05-01 10:00") + pd.to_timedelta(t, unit="s"),
+                                     lambda t: pd.to_timedelta(t, unit="s")], ids=["datetime", "timedelta"])
+def test_datetime_or_timedelta_time_is_refused(tmp_path, as_time):
+    """A parquet time column of datetimes or timedeltas would be read as integer nanoseconds."""
+    pytest.importorskip("pyarrow")
+    df = runs_frame().assign(time_s=lambda d: as_time(d["time_s"]))
+    d = tmp_path / "camp"
+    d.mkdir()
+    df.to_parquet(d / "runs.parquet", index=False)
+    (d / "vehicle.toml").write_text(VEHICLE_TOML)
+    with pytest.raises(CampaignError, match=r"runs.parquet, column 'time_s', row 1: a (datetime|timedelta)64.* column, "
+                       r"not a number: give the seconds from the run's start as a number"):
+        load_campaign(d)
