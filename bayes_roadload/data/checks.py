@@ -334,10 +334,22 @@ def read_csv_table(path: str | os.PathLike, **kwargs) -> pd.DataFrame:
         raise CampaignError(f"{path}: not a readable CSV table ({str(e).strip()})") from None
 
 
+def read_json_object(path: str | os.PathLike) -> dict[str, Any]:
+    """A JSON file holding an object, as a dict (a UTF-8 byte-order mark is skipped, as the CSV
+    readers do); refused naming the file when it is not UTF-8 JSON or holds no object."""
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8-sig"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise CampaignError(f"{path}: not valid JSON ({e})") from None
+    if not isinstance(doc, dict):
+        raise CampaignError(f"{path}: holds a JSON {type(doc).__name__}, not an object of names and values")
+    return doc
+
+
 def read_truth(root: str | os.PathLike) -> dict[str, Any] | None:
-    """The ``truth.json`` of a campaign directory, None when there is none."""
+    """The ``truth.json`` of a campaign directory (:func:`read_json_object`), None when there is none."""
     f = Path(root) / TRUTH_FILE
-    return json.loads(f.read_text()) if f.exists() else None
+    return read_json_object(f) if f.exists() else None
 
 
 def truth_files(truth: Mapping[str, Any] | None) -> dict[str, str]:

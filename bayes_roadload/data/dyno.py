@@ -14,7 +14,6 @@
 from __future__ import annotations
 
 import os
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from .checks import read_csv_table, write_atomically
+from .vehicle import read_toml_file
 
 
 @dataclass
@@ -56,7 +56,7 @@ def load_dyno(root: str | os.PathLike) -> DynoCoastdown:
         bad = np.flatnonzero(~np.isfinite(runs[col].to_numpy(float)))
         if bad.size:
             raise ValueError(f"{csv}: column {col}, row {int(bad[0]) + 1}: not a finite number")
-    doc = tomllib.loads(toml.read_text())
+    doc = read_toml_file(toml)
     dyno = doc.get("dyno")
     if not isinstance(dyno, dict) or "inertia_kg" not in dyno or "set_coefficients" not in dyno:
         raise ValueError(f"{toml}: needs a [dyno] table with inertia_kg and set_coefficients")

@@ -22,3 +22,16 @@ def test_missing_set_coefficients_are_refused(tmp_path):
     (tmp_path / "dyno.toml").write_text("[dyno]\ninertia_kg = 1150.0\n")
     with pytest.raises(ValueError, match="set_coefficients"):
         load_dyno(tmp_path)
+
+
+def test_dyno_toml_with_a_byte_order_mark_reads_and_bad_toml_names_the_file(tmp_path):
+    from bayes_roadload.data import CampaignError
+
+    d = simulate_dyno((100.0, 0.8, 0.025), (35.0, 0.25, 0.003), 1150.0)
+    save_dyno(d, tmp_path)
+    text = (tmp_path / "dyno.toml").read_text()
+    (tmp_path / "dyno.toml").write_text("\ufeff" + text, encoding="utf-8")
+    assert load_dyno(tmp_path).inertia_kg == 1150.0
+    (tmp_path / "dyno.toml").write_text("[dyno\n")
+    with pytest.raises(CampaignError, match="dyno.toml: not valid TOML"):
+        load_dyno(tmp_path)
