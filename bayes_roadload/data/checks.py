@@ -38,6 +38,7 @@ UNIT_HINTS = {
     "velocity": "speed_mps (m/s)",
     "time": "time_s (seconds)",
     "t": "time_s (seconds)",
+    "time_ms": "time_s (seconds): divide ms by 1000 (a runs table's time_ms is converted on load)",
     "airspeed": "airspeed_mps (m/s)",
     "yaw": "yaw_rad (radians)",
     "yaw_deg": "yaw_rad (radians): multiply degrees by pi/180",

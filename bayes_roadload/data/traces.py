@@ -262,7 +262,8 @@ def load(root: str | os.PathLike, speed_unit: str | None = None, airspeed_unit: 
     ``speed_unit`` / ``airspeed_unit`` state (``mps``, ``kph``, ``mph``), are converted to SI
     (:func:`~bayes_roadload.data.units.convert_units`; recorded in ``meta["conversions"]``);
     speeds whose implied road load says they were logged in km/h or mph are refused
-    (:func:`~bayes_roadload.data.units.check_plausible_road_load`).  Wheel torques become
+    (:func:`~bayes_roadload.data.units.check_plausible_road_load`), and so are times whose implied
+    road load says they were logged in milliseconds (``time_ms`` is converted).  Wheel torques become
     ``driveline_force_n`` = (left + right) / R_r.
     """
     root = Path(root)
@@ -270,7 +271,9 @@ def load(root: str | os.PathLike, speed_unit: str | None = None, airspeed_unit: 
     vehicle, anem, tunnel, meta = read_vehicle_file(root / VEHICLE_FILE)
     df, conversions = convert_units(df, str(runs_file), speed_unit, airspeed_unit)
     df = validate_runs(df, str(runs_file))
-    check_plausible_road_load(df, str(runs_file), vehicle.effective_mass_kg, vehicle.mass_kg, mean_air_density(df))
+    time_column = next((c.column for c in conversions if c.to == "time_s"), "time_s")
+    check_plausible_road_load(df, str(runs_file), vehicle.effective_mass_kg, vehicle.mass_kg, mean_air_density(df),
+                              time_column)
     if "wheel_torque_left_nm" in df:
         df["driveline_force_n"] = wheel_torque_force_n(df, vehicle.rolling_radius_m)
     if conversions:

@@ -155,3 +155,33 @@ def test_datetime_or_timedelta_time_is_refused(tmp_path, as_time):
     with pytest.raises(CampaignError, match=r"runs.parquet, column 'time_s', row 1: a (datetime|timedelta)64.* column, "
                        r"not a number: give the seconds from the run's start as a number"):
         load_campaign(d)
+
+
+def coastdown_frame(runs=2, n=160, dt=0.25, c0=0.115, c2=4.2e-4, v0=30.0):
+    """Exact coastdowns of -dv/dt = c0 + c2 v^2 (rolling coefficient ~0.012, drag area ~0.8 m^2
+    for the 1100 kg car at the reference density)."""
+    t = np.arange(n) * dt
+    k = np.sqrt(c0 * c2)
+    v = np.sqrt(c0 / c2) * np.tan(np.arctan(v0 * np.sqrt(c2 / c0)) - k * t)
+    return pd.DataFrame({"run": np.repeat(np.arange(1, runs + 1), n), "time_s": np.tile(t, runs),
+                         "speed_mps": np.tile(v, runs),
+                         "direction": np.repeat([1 if i % 2 == 0 else -1 for i in range(runs)], n)})
+
+
+def test_time_in_milliseconds(tmp_path):
+    """A ``time_ms`` column is converted to seconds and recorded; milliseconds in ``time_s`` (the
+    implied road load 1000-fold too small) and seconds in ``time_ms`` (1000-fold too large) are
+    refused naming the column."""
+    df = coastdown_frame()
+    for name in "abcd":
+        (tmp_path / name).mkdir()
+    load_campaign(write(tmp_path / "a", df))
+    ms = df.rename(columns={"time_s": "time_ms"}).assign(time_ms=lambda d: d["time_ms"] * 1000.0)
+    c = load_campaign(write(tmp_path / "b", ms))
+    np.testing.assert_allclose(c.runs["time_s"], df["time_s"])
+    assert [(x["column"], x["to"], x["scale"]) for x in c.meta["conversions"]] == [("time_ms", "time_s", 0.001)]
+    with pytest.raises(CampaignError, match=r"runs.csv, column 'time_s': the times look logged in milliseconds: "
+                       r"rename the column time_ms"):
+        load_campaign(write(tmp_path / "c", df.assign(time_s=df["time_s"] * 1000.0)))
+    with pytest.raises(CampaignError, match=r"runs.csv, column 'time_ms': the times look logged in seconds"):
+        load_campaign(write(tmp_path / "d", df.rename(columns={"time_s": "time_ms"})))
