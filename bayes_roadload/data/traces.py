@@ -49,7 +49,7 @@ from .checks import (
     truth_files,
     wheel_torque_force_n,
 )
-from .units import check_plausible_road_load, convert_units
+from .units import check_plausible_airspeed, check_plausible_road_load, convert_units
 from .track import TRACK_FILE, check_runs_on_track, grade_at, validate_track
 from .uncertainty import TypeBChannels
 from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
@@ -263,7 +263,9 @@ def load(root: str | os.PathLike, speed_unit: str | None = None, airspeed_unit: 
     (:func:`~bayes_roadload.data.units.convert_units`; recorded in ``meta["conversions"]``);
     speeds whose implied road load says they were logged in km/h or mph are refused
     (:func:`~bayes_roadload.data.units.check_plausible_road_load`), and so are times whose implied
-    road load says they were logged in milliseconds (``time_ms`` is converted).  Wheel torques become
+    road load says they were logged in milliseconds (``time_ms`` is converted), and airspeeds
+    exceeding the speeds by more than any admitted wind and plausible in km/h or mph
+    (:func:`~bayes_roadload.data.units.check_plausible_airspeed`).  Wheel torques become
     ``driveline_force_n`` = (left + right) / R_r.
     """
     root = Path(root)
@@ -271,6 +273,7 @@ def load(root: str | os.PathLike, speed_unit: str | None = None, airspeed_unit: 
     vehicle, anem, tunnel, meta = read_vehicle_file(root / VEHICLE_FILE)
     df, conversions = convert_units(df, str(runs_file), speed_unit, airspeed_unit)
     df = validate_runs(df, str(runs_file))
+    check_plausible_airspeed(df, str(runs_file), anem.airspeed_factor)
     time_column = next((c.column for c in conversions if c.to == "time_s"), "time_s")
     check_plausible_road_load(df, str(runs_file), vehicle.effective_mass_kg, vehicle.mass_kg, mean_air_density(df),
                               time_column)

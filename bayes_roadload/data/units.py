@@ -180,6 +180,50 @@ def _plausible(rolling: float, drag_area: float) -> bool:
             and PLAUSIBLE_DRAG_AREA_M2[0] <= drag_area <= PLAUSIBLE_DRAG_AREA_M2[1])
 
 
+MAX_WIND_MPS = max(limits["peak_wind_mps"] for limits in config.WIND_LIMITS.values())
+"""The strongest wind a coastdown may meet (m/s): the largest peak wind the standards admit
+(GTR 15 with on-board anemometry, 10 m/s; :data:`~bayes_roadload.config.WIND_LIMITS`)."""
+
+
+def check_plausible_airspeed(df: pd.DataFrame, where: str, airspeed_factor: float = 1.0) -> float | None:
+    """Refuse airspeeds logged in km/h or mph but read as m/s (``airspeed_mps`` below the
+    100 m/s range check); returns the campaign's median excess airspeed (m/s), None without an
+    airspeed channel.
+
+    The band comes from the physics: the relative air is the vehicle's motion plus the wind, so
+    at every sample the true airspeed exceeds the ground speed by at most the wind speed (the
+    triangle inequality; the ratio airspeed / speed is at most 1 + w / v).  The coastdown's
+    wind is bounded by the standards, whose largest peak wind is :data:`MAX_WIND_MPS` (10 m/s;
+    the mean winds they admit are 3-7 m/s), so the median over the campaign's samples of the
+    excess airspeed ``airspeed_factor x airspeed_mps - speed_mps`` (the reading calibrated by
+    ``[anemometer] airspeed_factor``) stays below it even in a campaign of one direction, and
+    near zero over opposite-direction pairs (a ratio near 1).  Read in km/h an airspeed is 3.6
+    x (v + w), its excess 2.6 v + 3.6 w: 30-90 m/s at the 15-40 m/s of a coastdown (a ratio near
+    3.6); in mph 2.237 x (v + w), an excess of 1.24 v + 2.24 w, 10-50 m/s (a ratio near 2.24).
+    A median excess above :data:`MAX_WIND_MPS` that the km/h (or mph) reading brings within it
+    is refused naming the file, ``airspeed_mps`` and the first row beyond the wind limit, with
+    the unit (the one of the two whose reading leaves the smaller median excess) to state.
+    """
+    if "airspeed_mps" not in df:
+        return None
+    a = df["airspeed_mps"].to_numpy(float) * airspeed_factor
+    v = df["speed_mps"].to_numpy(float)
+    excess = float(np.median(a - v))
+    if excess <= MAX_WIND_MPS:
+        return excess
+    read_as = {u: float(np.median(a * SPEED_UNITS[u] - v)) for u in ("kph", "mph")}
+    unit = min(read_as, key=lambda u: abs(read_as[u]))
+    if abs(read_as[unit]) > MAX_WIND_MPS:
+        return excess
+    row = int(np.flatnonzero(a - v > MAX_WIND_MPS)[0]) + 1
+    name = SPEED_UNIT_NAMES[unit]
+    refuse(where, "airspeed_mps", row,
+           f"the airspeeds look logged in {name}: give --airspeed-unit {unit} or rename the column airspeed_{unit} "
+           f"(the median airspeed exceeds the speed by {excess:.1f} m/s, median ratio "
+           f"{float(np.median(a / v)):.2f}: beyond the {MAX_WIND_MPS:g} m/s peak wind the standards admit; read in "
+           f"{name} it is {read_as[unit]:+.1f} m/s)")
+
+
 MS_PER_S = 1000.0
 
 

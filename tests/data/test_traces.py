@@ -185,3 +185,17 @@ def test_time_in_milliseconds(tmp_path):
         load_campaign(write(tmp_path / "c", df.assign(time_s=df["time_s"] * 1000.0)))
     with pytest.raises(CampaignError, match=r"runs.csv, column 'time_ms': the times look logged in seconds"):
         load_campaign(write(tmp_path / "d", df.rename(columns={"time_s": "time_ms"})))
+
+
+@pytest.mark.parametrize("unit, scale", [("kph", 3.6), ("mph", 1.0 / 0.44704)])
+def test_airspeed_in_kph_or_mph_below_the_range_check_is_refused(tmp_path, unit, scale):
+    """Airspeeds read in km/h or mph exceed the speeds by far more than any wind the standards
+    admit (10 m/s peak); in m/s with a 7 m/s head wind in every run (one direction) they pass."""
+    df = coastdown_frame()
+    df = df[df["speed_mps"] < 25.0].reset_index(drop=True)  # km/h readings stay below 100 "m/s"
+    (tmp_path / "ok").mkdir()
+    load_campaign(write(tmp_path / "ok", df.assign(airspeed_mps=df["speed_mps"] + 7.0)))
+    (tmp_path / unit).mkdir()
+    with pytest.raises(CampaignError, match=rf"runs.csv, column 'airspeed_mps', row 1: the airspeeds look logged in "
+                       rf".*: give --airspeed-unit {unit} or rename the column airspeed_{unit}"):
+        load_campaign(write(tmp_path / unit, df.assign(airspeed_mps=(df["speed_mps"] + 2.0) * scale)))
