@@ -119,7 +119,10 @@ def designed_campaign(campaign: Campaign, fit_values: Mapping[str, Any], free: S
     add = future.runs.copy()
     obs["run"] = obs["run"].astype(str)
     add["run"] = "d" + add["run"].astype(str)
-    add["pair"] = add["pair"] + int(obs["pair"].max())
+    if pd.api.types.is_numeric_dtype(obs["pair"]):
+        add["pair"] = add["pair"] + int(obs["pair"].max())
+    else:  # text pair ids: the added pairs prefixed ``d``, as their runs
+        add["pair"] = "d" + add["pair"].astype(str)
     if "mass_kg" in add and "mass_kg" not in obs:
         obs["mass_kg"] = campaign.vehicle.mass_kg
     runs = pd.concat([obs, add], ignore_index=True)

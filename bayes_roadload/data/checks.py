@@ -38,6 +38,7 @@ UNIT_HINTS = {
     "velocity": "speed_mps (m/s)",
     "time": "time_s (seconds)",
     "t": "time_s (seconds)",
+    "time_ms": "time_s (seconds): divide ms by 1000 (a runs table's time_ms is converted on load)",
     "airspeed": "airspeed_mps (m/s)",
     "yaw": "yaw_rad (radians)",
     "yaw_deg": "yaw_rad (radians): multiply degrees by pi/180",
@@ -121,11 +122,31 @@ def check_no_missing(df: pd.DataFrame, column: str, what: str, where: str) -> No
         refuse(where, column, int(np.flatnonzero(missing)[0]) + 1, what)
 
 
+def numeric_and_text_ids(df: pd.DataFrame, columns, ids, where: str) -> list:
+    """The columns of ``columns`` to check as numbers: all but the id columns ``ids`` held as text
+    (``run``, ``pair``: an id is an integer or text).  A text id column is refused with its row
+    where a cell is empty; a numeric one is left to :func:`check_numeric` (whose refusal of an
+    empty cell names the row too)."""
+    out = []
+    for c in columns:
+        if c in ids and not pd.api.types.is_numeric_dtype(df[c]):
+            check_no_missing(df, c, f"missing {c} id", where)
+            if isinstance(df[c].dtype, pd.CategoricalDtype):
+                df[c] = df[c].astype(object)
+        else:
+            out.append(c)
+    return out
+
+
 def check_numeric(df: pd.DataFrame, columns, limits: Mapping[str, tuple], where: str) -> None:
     """Convert ``columns`` of ``df`` to float in place, refusing a value that is not a finite
     number and one outside its ``limits[column] = (low, high, what it probably is)``, naming
-    the row."""
+    the row.  A datetime or timedelta column (parquet) is refused at row 1: pandas would read it
+    as integer nanoseconds."""
     for c in columns:
+        if pd.api.types.is_datetime64_any_dtype(df[c]) or pd.api.types.is_timedelta64_dtype(df[c]):
+            refuse(where, c, 1, f"a {df[c].dtype} column, not a number: give "
+                   + ("the seconds from the run's start as a number" if c == "time_s" else "a number in the column's unit"))
         values = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
         bad = ~np.isfinite(values)
         if bad.any():
@@ -210,6 +231,47 @@ def check_run_constants(df: pd.DataFrame, rows: np.ndarray, columns, rid, where:
                 refuse(where, c, int(rows[np.flatnonzero(vals != vals[0])[0]]) + 1, f"{c} changes within run {rid!r}")
 
 
+def check_pair_groups(df: pd.DataFrame, where: str, split_segments: bool = False) -> None:
+    """Refuse ``pair`` ids that do not pair two opposite-direction runs (when the column is
+    present; call after :func:`check_run_constants`, so that a run has one pair id).
+
+    Refused: a pair id held by more than two runs, naming the first row of its third run (in
+    file order); a pair id held by two runs of the same ``direction`` (when that column is
+    present), naming both runs at the first row of the second.  A pair id held by one run is
+    accepted: a run without a partner (the VBOX import gives one an id of its own, and a subset of
+    a campaign can leave one); :func:`pairs_by_column` leaves it out of the pairs.
+
+    ``split_segments`` (speed traces: the split runs of 40 CFR 1037.528 (d)(2), a high- and a
+    low-speed segment logged as runs of their own in each direction under one pair id,
+    :mod:`bayes_roadload.analysis.cfr1037`): a pair id on more than two runs is accepted when the
+    ``direction`` column is present and the id holds as many runs of each direction; it is then
+    not a pair of :func:`pairs_by_column` either.
+    """
+    if "pair" not in df:
+        return
+    runs_of: dict = {}  # pair id -> [(run id, position of its first row)] in file order
+    pair = df["pair"].to_numpy()
+    for rid, rows in run_rows(df):
+        runs_of.setdefault(plain_value(pair[rows[0]]), []).append((rid, int(rows[0])))
+    directions = run_directions(df) if "direction" in df else None
+    for pid, runs in runs_of.items():
+        ids = [r for r, _ in runs]
+        if isinstance(pid, float) and pid.is_integer():
+            pid = int(pid)  # a numeric id column is read as float
+        if len(runs) > 2:
+            if split_segments and directions is not None and sum(directions[r] for r in ids) == 0:
+                continue
+            split = (" (40 CFR 1037 split runs: as many segments of each direction, with a direction column)"
+                     if split_segments else "")
+            refuse(where, "pair", runs[2][1] + 1,
+                   f"pair id {pid!r} is held by {len(runs)} runs ({', '.join(repr(r) for r in ids)}): a pair is "
+                   f"two opposite-direction runs{split}; give each pair its own id")
+        if len(runs) == 2 and directions is not None and directions[ids[0]] == directions[ids[1]]:
+            refuse(where, "pair", runs[1][1] + 1,
+                   f"pair id {pid!r}: runs {ids[0]!r} and {ids[1]!r} both have direction {directions[ids[0]]:+d}: "
+                   "a pair is two opposite-direction runs")
+
+
 # --------------------------------------------------------------------------- run tables
 # What every kind of campaign asks of its table of runs: one row per sample, band or marker
 # with a ``run`` column.
@@ -227,7 +289,9 @@ def run_directions(table: pd.DataFrame) -> dict:
 
 
 def pairs_by_column(table: pd.DataFrame) -> list[tuple] | None:
-    """Pairs of run ids by the ``pair`` column (groups of two runs), None without it."""
+    """Pairs of run ids by the ``pair`` column, None without it: the ids held by two runs (a
+    run alone under its id is left out, and so is a group of split segments, which
+    :func:`check_pair_groups` accepts in speed traces only)."""
     if "pair" not in table:
         return None
     groups = table.groupby("pair", sort=False)["run"].unique()
@@ -271,10 +335,22 @@ def read_csv_table(path: str | os.PathLike, **kwargs) -> pd.DataFrame:
         raise CampaignError(f"{path}: not a readable CSV table ({str(e).strip()})") from None
 
 
+def read_json_object(path: str | os.PathLike) -> dict[str, Any]:
+    """A JSON file holding an object, as a dict (a UTF-8 byte-order mark is skipped, as the CSV
+    readers do); refused naming the file when it is not UTF-8 JSON or holds no object."""
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8-sig"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise CampaignError(f"{path}: not valid JSON ({e})") from None
+    if not isinstance(doc, dict):
+        raise CampaignError(f"{path}: holds a JSON {type(doc).__name__}, not an object of names and values")
+    return doc
+
+
 def read_truth(root: str | os.PathLike) -> dict[str, Any] | None:
-    """The ``truth.json`` of a campaign directory, None when there is none."""
+    """The ``truth.json`` of a campaign directory (:func:`read_json_object`), None when there is none."""
     f = Path(root) / TRUTH_FILE
-    return json.loads(f.read_text()) if f.exists() else None
+    return read_json_object(f) if f.exists() else None
 
 
 def truth_files(truth: Mapping[str, Any] | None) -> dict[str, str]:

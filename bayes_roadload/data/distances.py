@@ -32,6 +32,7 @@ from .checks import (
     check_no_missing,
     check_not_empty,
     check_numeric,
+    check_pair_groups,
     check_run_constants,
     consecutive_pairs,
     data_file,
@@ -183,6 +184,7 @@ def validate_distances(df: pd.DataFrame, where: str = "distances.csv") -> pd.Dat
             refuse(where, "time_s", i + 1, f"run {rid!r}: mean speed {speed[out][0]:g} m/s since the previous marker "
                   f"is outside [{lo_v:g}, {hi_v:g}] m/s (km or mm in distance_m, or ms in time_s?)")
         check_run_constants(df, rows, DISTANCE_RUN_CONSTANT, rid, where)
+    check_pair_groups(df, where)
     return df.reset_index(drop=True)
 
 

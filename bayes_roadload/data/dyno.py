@@ -1,6 +1,8 @@
 """A chassis-dynamometer coastdown directory: ``dyno_coastdown.csv`` + ``dyno.toml``.
 
-``dyno_coastdown.csv``: ``time_s, speed_mps`` (optionally ``run``; one coastdown per run id).
+``dyno_coastdown.csv``: ``time_s, speed_mps`` (optionally ``run``; one coastdown per run id);
+``speed_kph`` / ``speed_mph`` / ``time_ms`` are converted, and the table is checked as speed
+traces are (:func:`validate_dyno_runs`: file, column and row named in a refusal).
 ``dyno.toml``::
 
     [dyno]
@@ -14,14 +16,30 @@
 from __future__ import annotations
 
 import os
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
-from .checks import read_csv_table, write_atomically
+from .. import config
+from .checks import (
+    CHANNEL_LIMITS,
+    UNIT_HINTS,
+    check_columns,
+    check_contiguous,
+    check_no_missing,
+    check_not_empty,
+    check_numeric,
+    check_time_increases,
+    read_csv_table,
+    run_rows,
+    write_atomically,
+)
+from .units import check_plausible_road_load, convert_units
+from .vehicle import read_toml_file
+
+DYNO_COLUMNS = ("run", "time_s", "speed_mps")
+DYNO_REQUIRED = ("time_s", "speed_mps")
 
 
 @dataclass
@@ -33,6 +51,9 @@ class DynoCoastdown:
     inertia_kg: float
     set_coefficients: tuple[float, float, float]
     parasitic_truth: tuple[float, float, float] | None = None
+    conversions: tuple[dict, ...] = ()
+    """Columns converted to SI on load (``speed_kph`` -> ``speed_mps``, ...), as
+    :meth:`~bayes_roadload.data.units.Conversion.record`."""
 
 
 def _three(value, where: str, key: str) -> tuple[float, float, float]:
@@ -48,15 +69,7 @@ def load_dyno(root: str | os.PathLike) -> DynoCoastdown:
     for f in (csv, toml):
         if not f.is_file():
             raise ValueError(f"{root}: a dynamometer coastdown needs {f.name} (docs/standards.md)")
-    runs = read_csv_table(csv)
-    for col in ("time_s", "speed_mps"):
-        if col not in runs:
-            raise ValueError(f"{csv}: missing column {col}")
-    for col in ("time_s", "speed_mps"):
-        bad = np.flatnonzero(~np.isfinite(runs[col].to_numpy(float)))
-        if bad.size:
-            raise ValueError(f"{csv}: column {col}, row {int(bad[0]) + 1}: not a finite number")
-    doc = tomllib.loads(toml.read_text())
+    doc = read_toml_file(toml)
     dyno = doc.get("dyno")
     if not isinstance(dyno, dict) or "inertia_kg" not in dyno or "set_coefficients" not in dyno:
         raise ValueError(f"{toml}: needs a [dyno] table with inertia_kg and set_coefficients")
@@ -64,8 +77,39 @@ def load_dyno(root: str | os.PathLike) -> DynoCoastdown:
     if not inertia > 0:
         raise ValueError(f"{toml}: [dyno] inertia_kg must be positive, got {inertia}")
     truth = doc.get("truth", {}).get("parasitic_coefficients")
+    runs, conversions = validate_dyno_runs(read_csv_table(csv), str(csv), inertia)
     return DynoCoastdown(runs, inertia, _three(dyno["set_coefficients"], str(toml), "set_coefficients"),
-                         None if truth is None else _three(truth, str(toml), "[truth] parasitic_coefficients"))
+                         None if truth is None else _three(truth, str(toml), "[truth] parasitic_coefficients"),
+                         tuple(c.record() for c in conversions))
+
+
+def validate_dyno_runs(df: pd.DataFrame, where: str, inertia_kg: float) -> tuple[pd.DataFrame, list]:
+    """Check a dynamometer coastdown table with the speed traces' checks; returns the table in SI
+    and the conversions made.
+
+    Columns whose name states a unit (``speed_kph``, ``speed_mph``, ``time_ms``) are converted
+    (:func:`~bayes_roadload.data.units.convert_units`); unknown or unit-ambiguous columns, a
+    missing ``time_s`` / ``speed_mps``, values that are not finite numbers, speeds outside
+    [0, 100] m/s, the rows of a run not contiguous and time not strictly increasing within a run
+    are refused naming the file, column and 1-based row; so are speeds or times whose implied
+    road load, read on the inertia setting as the mass at the reference air density, says they
+    were logged in km/h or mph, or in milliseconds
+    (:func:`~bayes_roadload.data.units.check_plausible_road_load`).
+    """
+    df, conversions = convert_units(df, where)
+    cols = check_columns(df, DYNO_COLUMNS, DYNO_REQUIRED, UNIT_HINTS, "a dynamometer coastdown", where)
+    check_not_empty(df, "samples", where)
+    if "run" in cols:
+        check_no_missing(df, "run", "missing run id", where)
+    check_numeric(df, DYNO_REQUIRED, CHANNEL_LIMITS, where)
+    table = df if "run" in cols else df.assign(run=1)
+    for rid, rows in run_rows(table):
+        check_contiguous(rows, rid, "samples", where)
+        check_time_increases(df["time_s"].to_numpy()[rows], rows, rid, where)
+    time_column = next((c.column for c in conversions if c.to == "time_s"), "time_s")
+    rho = config.REFERENCE_PRESSURE_PA / (config.GAS_CONSTANT_AIR_J_PER_KG_K * config.REFERENCE_TEMPERATURE_K)
+    check_plausible_road_load(table, where, inertia_kg, inertia_kg, rho, time_column)
+    return df.reset_index(drop=True), conversions
 
 
 def save_dyno(d: DynoCoastdown, path: str | os.PathLike) -> Path:

@@ -31,6 +31,7 @@ from .checks import (
     check_no_missing,
     check_not_empty,
     check_numeric,
+    check_pair_groups,
     check_run_constants,
     data_file,
     pairs_by_column,
@@ -194,6 +195,7 @@ def validate_intervals(df: pd.DataFrame, where: str = "intervals.csv") -> pd.Dat
             refuse(where, "speed_start_mps", i + 1, f"run {rid!r}: a band does not start where the previous one "
                   "ended (bands must be consecutive, in falling speed)")
         check_run_constants(df, rows, RUN_CONSTANT_COLUMNS, rid, where)
+    check_pair_groups(df, where)
     return df.reset_index(drop=True)
 
 

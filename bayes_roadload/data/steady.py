@@ -55,6 +55,7 @@ from .checks import (
     check_no_missing,
     check_not_empty,
     check_numeric,
+    check_pair_groups,
     check_run_constants,
     check_time_increases,
     check_wheel_torque_pair,
@@ -204,6 +205,7 @@ def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_
             if "accel_mps2" not in cols and rows.size >= 3:
                 accel[rows] = polynomial_acceleration(t, df["speed_mps"].to_numpy()[rows])
                 sources.add("polynomial (time_s)")
+    check_pair_groups(df, where)
     if "accel_mps2" in cols:
         source = "logged"
     else:

@@ -33,6 +33,8 @@ from .checks import (
     check_no_missing,
     check_not_empty,
     check_numeric,
+    check_pair_groups,
+    numeric_and_text_ids,
     check_run_constants,
     check_time_increases,
     check_wheel_torque_pair,
@@ -47,7 +49,7 @@ from .checks import (
     truth_files,
     wheel_torque_force_n,
 )
-from .units import check_plausible_road_load, convert_units
+from .units import check_plausible_airspeed, check_plausible_road_load, convert_units
 from .track import TRACK_FILE, check_runs_on_track, grade_at, validate_track
 from .uncertainty import TypeBChannels
 from .vehicle import VEHICLE_FILE, Anemometer, Vehicle, read_vehicle_file, validate_vehicle, vehicle_toml
@@ -138,7 +140,8 @@ class Campaign:
 
     def pairs(self) -> list[tuple]:
         """Opposite-direction pairs of run ids: by the ``pair`` column when present, else
-        consecutive runs in file order.  A run left without a partner is dropped."""
+        consecutive runs in file order.  A run left without a partner is dropped, and so is a
+        ``pair`` group of 40 CFR 1037 split segments (:func:`~.checks.check_pair_groups`)."""
         by_column = pairs_by_column(self.runs)
         return by_column if by_column is not None else consecutive_pairs(self.run_ids)
 
@@ -205,7 +208,8 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
     cols = check_columns(df, KNOWN_COLUMNS, REQUIRED_COLUMNS, UNIT_HINTS, "the contract", where)
     check_not_empty(df, "samples", where)
     check_no_missing(df, "run", "missing run id", where)
-    check_numeric(df, [c for c in cols if c != "run"], CHANNEL_LIMITS, where)
+    check_numeric(df, numeric_and_text_ids(df, [c for c in cols if c != "run"], ("pair",), where), CHANNEL_LIMITS,
+                  where)
     check_humidity_percent(df, where)
     check_direction_codes(df, where)
     if check_wheel_torque_pair(cols, where) and "driveline_force_n" in cols:
@@ -217,6 +221,7 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
         check_time_increases(df["time_s"].to_numpy()[rows], rows, rid, where)
         check_run_constants(df, rows, RUN_CONSTANT_COLUMNS, rid, where)
         check_moving(df["speed_mps"].to_numpy(float)[rows], rows, rid, where)
+    check_pair_groups(df, where, split_segments=True)
     return df.reset_index(drop=True)
 
 
@@ -257,7 +262,10 @@ def load(root: str | os.PathLike, speed_unit: str | None = None, airspeed_unit: 
     ``speed_unit`` / ``airspeed_unit`` state (``mps``, ``kph``, ``mph``), are converted to SI
     (:func:`~bayes_roadload.data.units.convert_units`; recorded in ``meta["conversions"]``);
     speeds whose implied road load says they were logged in km/h or mph are refused
-    (:func:`~bayes_roadload.data.units.check_plausible_road_load`).  Wheel torques become
+    (:func:`~bayes_roadload.data.units.check_plausible_road_load`), and so are times whose implied
+    road load says they were logged in milliseconds (``time_ms`` is converted), and airspeeds
+    exceeding the speeds by more than any admitted wind and plausible in km/h or mph
+    (:func:`~bayes_roadload.data.units.check_plausible_airspeed`).  Wheel torques become
     ``driveline_force_n`` = (left + right) / R_r.
     """
     root = Path(root)
@@ -265,7 +273,10 @@ def load(root: str | os.PathLike, speed_unit: str | None = None, airspeed_unit: 
     vehicle, anem, tunnel, meta = read_vehicle_file(root / VEHICLE_FILE)
     df, conversions = convert_units(df, str(runs_file), speed_unit, airspeed_unit)
     df = validate_runs(df, str(runs_file))
-    check_plausible_road_load(df, str(runs_file), vehicle.effective_mass_kg, vehicle.mass_kg, mean_air_density(df))
+    check_plausible_airspeed(df, str(runs_file), anem.airspeed_factor)
+    time_column = next((c.column for c in conversions if c.to == "time_s"), "time_s")
+    check_plausible_road_load(df, str(runs_file), vehicle.effective_mass_kg, vehicle.mass_kg, mean_air_density(df),
+                              time_column)
     if "wheel_torque_left_nm" in df:
         df["driveline_force_n"] = wheel_torque_force_n(df, vehicle.rolling_radius_m)
     if conversions:

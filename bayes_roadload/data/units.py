@@ -19,7 +19,11 @@ same time.  A campaign is refused with the conversion to make when its implied r
 plausible once read in km/h (or mph) and, read in m/s, either implausible in exactly that way,
 or implausible in any way while its speeds exceed :data:`COASTDOWN_TOP_SPEED_MPS` (a large
 vehicle's drag area read 3.6-fold too small can stay above the plausible minimum, but its
-speeds then reach 80-100 "m/s").
+speeds then reach 80-100 "m/s").  Times logged in milliseconds but read as seconds divide the
+decelerations, so c0 and c2, by 1000: the rolling coefficient and the drag area both come out
+below their ranges (a car: 1e-5 and 0.001 m^2); a campaign implausible that way and plausible
+with its times read in ms is refused naming ``time_s`` (a ``time_ms`` column is converted), and
+one whose ``time_ms`` column holds seconds (both 1000-fold too large) naming ``time_ms``.
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ STATED_UNIT_COLUMNS = {
     "pressure_kpa": ("pressure_pa", 1000.0, 0.0, "kPa"),
     "pressure_hpa": ("pressure_pa", 100.0, 0.0, "hPa"),
     "pressure_mbar": ("pressure_pa", 100.0, 0.0, "mbar"),
+    "time_ms": ("time_s", 0.001, 0.0, "ms"),
 }
 """Non-speed columns whose name states a unit: SI value = scale * value + offset."""
 
@@ -175,18 +180,80 @@ def _plausible(rolling: float, drag_area: float) -> bool:
             and PLAUSIBLE_DRAG_AREA_M2[0] <= drag_area <= PLAUSIBLE_DRAG_AREA_M2[1])
 
 
+MAX_WIND_MPS = max(limits["peak_wind_mps"] for limits in config.WIND_LIMITS.values())
+"""The strongest wind a coastdown may meet (m/s): the largest peak wind the standards admit
+(GTR 15 with on-board anemometry, 10 m/s; :data:`~bayes_roadload.config.WIND_LIMITS`)."""
+
+
+def check_plausible_airspeed(df: pd.DataFrame, where: str, airspeed_factor: float = 1.0) -> float | None:
+    """Refuse airspeeds logged in km/h or mph but read as m/s (``airspeed_mps`` below the
+    100 m/s range check); returns the campaign's median excess airspeed (m/s), None without an
+    airspeed channel.
+
+    The band comes from the physics: the relative air is the vehicle's motion plus the wind, so
+    at every sample the true airspeed exceeds the ground speed by at most the wind speed (the
+    triangle inequality; the ratio airspeed / speed is at most 1 + w / v).  The coastdown's
+    wind is bounded by the standards, whose largest peak wind is :data:`MAX_WIND_MPS` (10 m/s;
+    the mean winds they admit are 3-7 m/s), so the median over the campaign's samples of the
+    excess airspeed ``airspeed_factor x airspeed_mps - speed_mps`` (the reading calibrated by
+    ``[anemometer] airspeed_factor``) stays below it even in a campaign of one direction, and
+    near zero over opposite-direction pairs (a ratio near 1).  Read in km/h an airspeed is 3.6
+    x (v + w), its excess 2.6 v + 3.6 w: 30-90 m/s at the 15-40 m/s of a coastdown (a ratio near
+    3.6); in mph 2.237 x (v + w), an excess of 1.24 v + 2.24 w, 10-50 m/s (a ratio near 2.24).
+    A median excess above :data:`MAX_WIND_MPS` that the km/h (or mph) reading brings within it
+    is refused naming the file, ``airspeed_mps`` and the first row beyond the wind limit, with
+    the unit (the one of the two whose reading leaves the smaller median excess) to state.
+    """
+    if "airspeed_mps" not in df:
+        return None
+    a = df["airspeed_mps"].to_numpy(float) * airspeed_factor
+    v = df["speed_mps"].to_numpy(float)
+    excess = float(np.median(a - v))
+    if excess <= MAX_WIND_MPS:
+        return excess
+    read_as = {u: float(np.median(a * SPEED_UNITS[u] - v)) for u in ("kph", "mph")}
+    unit = min(read_as, key=lambda u: abs(read_as[u]))
+    if abs(read_as[unit]) > MAX_WIND_MPS:
+        return excess
+    row = int(np.flatnonzero(a - v > MAX_WIND_MPS)[0]) + 1
+    name = SPEED_UNIT_NAMES[unit]
+    refuse(where, "airspeed_mps", row,
+           f"the airspeeds look logged in {name}: give --airspeed-unit {unit} or rename the column airspeed_{unit} "
+           f"(the median airspeed exceeds the speed by {excess:.1f} m/s, median ratio "
+           f"{float(np.median(a / v)):.2f}: beyond the {MAX_WIND_MPS:g} m/s peak wind the standards admit; read in "
+           f"{name} it is {read_as[unit]:+.1f} m/s)")
+
+
+MS_PER_S = 1000.0
+
+
 def check_plausible_road_load(df: pd.DataFrame, where: str, effective_mass_kg: float, mass_kg: float,
-                              air_density_kgpm3: float) -> dict | None:
+                              air_density_kgpm3: float, time_column: str = "time_s") -> dict | None:
     """Refuse speed traces whose implied road load (:func:`implied_road_load`) is implausible
     the way a speed logged in km/h or mph but read as m/s makes it (rolling coefficient above
     :data:`PLAUSIBLE_ROLLING` and drag area below :data:`PLAUSIBLE_DRAG_AREA_M2` at once, or
     either outside its range while the top speed exceeds :data:`COASTDOWN_TOP_SPEED_MPS`) and
     plausible when the speeds are read in that unit; the message names the file, the column
-    and the conversion.  Returns the implied road load (None when the data cannot say)."""
+    and the conversion.  Likewise times 1000-fold off (both below their ranges and plausible
+    with the decelerations x 1000: milliseconds in ``time_s``; both above and plausible / 1000:
+    seconds in a ``time_ms`` column, ``time_column`` being the time column as logged).  Returns
+    the implied road load (None when the data cannot say)."""
     implied = implied_road_load(df, effective_mass_kg, mass_kg, air_density_kgpm3)
     if implied is None:
         return None
     rolling, area = implied["rolling"], implied["drag_area_m2"]
+    implied_text = (f"the road load they imply, rolling coefficient {rolling:.3g} and drag area {area:.3g} m^2, is "
+                    "not a road vehicle's")
+    if rolling < PLAUSIBLE_ROLLING[0] and area < PLAUSIBLE_DRAG_AREA_M2[0] and \
+            _plausible(rolling * MS_PER_S, area * MS_PER_S):
+        refuse(where, time_column, None,
+               f"the times look logged in milliseconds: rename the column time_ms (converted to seconds on load) "
+               f"({implied_text}; read in ms it is {rolling * MS_PER_S:.4f} and {area * MS_PER_S:.2f} m^2)")
+    if time_column == "time_ms" and rolling > PLAUSIBLE_ROLLING[1] and area > PLAUSIBLE_DRAG_AREA_M2[1] and \
+            _plausible(rolling / MS_PER_S, area / MS_PER_S):
+        refuse(where, time_column, None,
+               f"the times look logged in seconds: rename the column time_s ({implied_text}; read in s it is "
+               f"{rolling / MS_PER_S:.4f} and {area / MS_PER_S:.2f} m^2)")
     unit_error_shape = rolling > PLAUSIBLE_ROLLING[1] and area < PLAUSIBLE_DRAG_AREA_M2[0]
     too_fast = implied["top_speed"] > COASTDOWN_TOP_SPEED_MPS and not _plausible(rolling, area)
     if not (unit_error_shape or too_fast):

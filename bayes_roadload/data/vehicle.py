@@ -124,10 +124,17 @@ def vehicle_from_toml(doc: Mapping[str, Any], where: str) -> tuple[Vehicle, Anem
     names the file in refusals."""
     if "vehicle" not in doc:
         refuse(where, "[vehicle]", None, "table is missing")
+    for name in ("vehicle", "anemometer", "tunnel", "meta"):
+        if name in doc and not isinstance(doc[name], dict):
+            refuse(where, f"[{name}]", None, f"is {doc[name]!r}, not a table ([{name}] followed by key = value lines)")
     t = dict(doc["vehicle"])
     for k in t:
         if k not in VEHICLE_KEYS:
             refuse(where, f"[vehicle] {k}", None, f"unknown key; known: {', '.join(sorted(VEHICLE_KEYS))}")
+    for k, val in t.items():  # a quoted value ("1100", "1,85", "1100 kg") is text, not a number
+        if isinstance(val, bool) or not isinstance(val, (int, float)):
+            refuse(where, f"[vehicle] {k}", None, f"{val!r} is not a number (give it unquoted, in the key's unit, "
+                   "with a decimal point)")
     for k in ("mass_kg", "frontal_area_m2"):
         if k not in t:
             refuse(where, f"[vehicle] {k}", None, "required key is missing")
@@ -189,10 +196,11 @@ def vehicle_from_toml(doc: Mapping[str, Any], where: str) -> tuple[Vehicle, Anem
 
 
 def read_toml_file(path: str | os.PathLike) -> dict:
-    """A TOML file as a dict, refused with the file's name when it is not valid TOML."""
+    """A TOML file as a dict (a UTF-8 byte-order mark is skipped, as the CSV readers do),
+    refused with the file's name when it is not UTF-8 TOML."""
     try:
-        return tomllib.loads(Path(path).read_text())
-    except tomllib.TOMLDecodeError as e:
+        return tomllib.loads(Path(path).read_text(encoding="utf-8-sig"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise CampaignError(f"{path}: not valid TOML ({e})") from e
 
 

@@ -54,6 +54,19 @@ def test_designed_campaign_keeps_the_runs_as_tested_and_adds_the_design(one_pair
     np.testing.assert_allclose(obs["mass_kg"], c.vehicle.mass_kg)
 
 
+def test_designed_campaign_of_text_pair_ids(one_pair):
+    """Text pair ids (accepted as in every kind): the added pairs get ids of their own."""
+    import dataclasses
+
+    c, model = one_pair
+    c = dataclasses.replace(c, runs=c.runs.assign(pair="P" + c.runs["pair"].astype(str)))
+    values = {"AD": 0.01, "BD": 1e-4, "CD0": 0.35, "sigma_mps": 0.02, "q_mps_per_sqrt_s": 0.001}
+    d = designed_campaign(c, values, ("AD", "BD", "CD0"), model, DesignChange(add_pairs=2))
+    added = d.runs[d.runs["run"].str.startswith("d")]
+    assert added["pair"].nunique() == 2 and set(added["pair"]).isdisjoint(set(c.runs["pair"]))
+    assert len(d.pairs()) == 3
+
+
 @pytest.mark.slow  # the outcome of a planning study (refits of designed campaigns), ~30 s
 def test_plan_identify_finds_that_a_ballast_identifies_a_mass_error(one_pair, tmp_path):
     """With A_D, B_D, C_D0 free, an effective-mass error dM dv/dt rescales every force alike

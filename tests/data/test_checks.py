@@ -6,7 +6,9 @@ import pytest
 
 from bayes_roadload.data.checks import (
     CampaignError,
+    check_pair_groups,
     check_wheel_torque_pair,
+    pairs_by_column,
     read_truth,
     refuse,
     run_rows,
@@ -60,3 +62,63 @@ def test_truth_round_trips_and_is_optional(tmp_path):
     assert truth_files(None) == {} and read_truth(tmp_path) is None
     write_atomically(tmp_path, truth_files({"CD0": 0.4, "AD": 1.5}))
     assert read_truth(tmp_path) == {"CD0": 0.4, "AD": 1.5}
+
+
+# --------------------------------------------------------------------------- pair ids
+
+def _pair_table(pairs, directions):
+    return pd.DataFrame({"run": np.repeat(np.arange(1, len(pairs) + 1), 3), "pair": np.repeat(pairs, 3),
+                         "direction": np.repeat(directions, 3)})
+
+
+def test_pair_id_of_three_runs_is_refused_at_its_third_run():
+    with pytest.raises(CampaignError, match=r"^f.csv, column 'pair', row 7: pair id 1 is held by 3 runs \(1, 2, 3\)"):
+        check_pair_groups(_pair_table([1, 1, 1, 2], [1, -1, 1, -1]), "f.csv")
+
+
+def test_pair_of_one_direction_is_refused_naming_both_runs():
+    with pytest.raises(CampaignError, match=r"^f.csv, column 'pair', row 7: pair id 'A': runs 1 and 3 both have "
+                       r"direction \+1"):
+        check_pair_groups(_pair_table(["A", "B", "A", "B"], [1, -1, 1, -1]), "f.csv")
+
+
+def test_pair_ids_accepted():
+    """Opposite-direction pairs; a run alone under its id (left out of the pairs); without a
+    direction column only the count is checked; split segments where the kind allows them."""
+    check_pair_groups(_pair_table([1, 1, 2, 3], [1, -1, 1, -1]), "f.csv")
+    assert pairs_by_column(_pair_table([1, 1, 2, 3], [1, -1, 1, -1])) == [(1, 2)]
+    check_pair_groups(_pair_table([1, 1], [1, 1]).drop(columns="direction"), "f.csv")
+    split = _pair_table([1, 1, 1, 1], [1, 1, -1, -1])
+    check_pair_groups(split, "f.csv", split_segments=True)
+    assert pairs_by_column(split) == []
+    with pytest.raises(CampaignError, match="row 7: pair id 1 is held by 4 runs"):
+        check_pair_groups(split, "f.csv")
+    with pytest.raises(CampaignError, match="row 7: pair id 1 is held by 3 runs"):
+        check_pair_groups(_pair_table([1, 1, 1], [1, -1, -1]), "f.csv", split_segments=True)
+
+
+@pytest.mark.parametrize("kind", ["traces", "intervals", "distances", "steady"])
+def test_every_kind_with_a_pair_column_checks_its_pairs(kind):
+    """The same refusal in every kind that has a ``pair`` column (its validation calls
+    :func:`check_pair_groups`)."""
+    from bayes_roadload.data.distances import validate_distances
+    from bayes_roadload.data.intervals import validate_intervals
+    from bayes_roadload.data.steady import validate_steady
+    from bayes_roadload.data.traces import validate_runs
+
+    rows = []
+    for r, (p, d) in enumerate(zip([1, 2, 1, 2], [1, -1, 1, -1]), start=1):
+        for k in range(10):
+            rows.append({"run": r, "pair": p, "direction": d, "time_s": 2.0 * k, "speed_mps": 30.0 - k,
+                         "distance_m": 60.0 * k, "interval_s": 1.0, "speed_start_mps": 30.0 - k,
+                         "speed_end_mps": 29.0 - k, "tractive_force_n": 500.0})
+    df = pd.DataFrame(rows)
+    validate = {"traces": lambda: validate_runs(df[["run", "pair", "direction", "time_s", "speed_mps"]], "f.csv"),
+                "intervals": lambda: validate_intervals(df[["run", "pair", "direction", "interval_s", "speed_start_mps",
+                                                            "speed_end_mps"]], "f.csv"),
+                "distances": lambda: validate_distances(df[["run", "pair", "direction", "distance_m", "time_s"]],
+                                                        "f.csv"),
+                "steady": lambda: validate_steady(df[["run", "pair", "direction", "speed_mps", "tractive_force_n"]],
+                                                  "f.csv")}[kind]
+    with pytest.raises(CampaignError, match=r"f.csv, column 'pair', row 21: pair id 1: runs 1 and 3 both have"):
+        validate()

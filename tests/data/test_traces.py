@@ -117,3 +117,85 @@ def test_parquet_round_trip(tmp_path):
     out = save_campaign(c, tmp_path / "pq", fmt="parquet")
     assert (out / "runs.parquet").exists() and not (out / "runs.csv").exists()
     pd.testing.assert_frame_equal(load_campaign(out).runs, c.runs)
+
+
+def test_text_pair_ids_are_ids(tmp_path):
+    """``pair`` is an id as in the other kinds: text pair ids load from CSV and parquet, pair the
+    runs, survive a subset and a save/load round trip."""
+    df = runs_frame(runs=4)
+    df["pair"] = np.repeat(["A", "B", "B", "A"], 40)
+    c = load_campaign(write(tmp_path, df))
+    assert c.pairs() == [(1, 4), (2, 3)]
+    assert c.subset([3, 2]).pairs() == [(3, 2)]
+    pytest.importorskip("pyarrow")
+    for fmt in ("csv", "parquet"):
+        back = load_campaign(save_campaign(c, tmp_path / fmt, fmt=fmt))
+        assert back.pairs() == [(1, 4), (2, 3)]
+        assert list(back.runs["pair"]) == list(c.runs["pair"])
+
+
+def test_missing_text_pair_id_names_its_row(tmp_path):
+    df = runs_frame(runs=2)
+    df["pair"] = "A"
+    df.loc[45, "pair"] = None
+    with pytest.raises(CampaignError, match=r"runs.csv, column 'pair', row 46: missing pair id"):
+        load_campaign(write(tmp_path, df))
+
+
+@pytest.mark.parametrize("as_time", [lambda t: pd.Timestamp("2024-05-01 10:00") + pd.to_timedelta(t, unit="s"),
+                                     lambda t: pd.to_timedelta(t, unit="s")], ids=["datetime", "timedelta"])
+def test_datetime_or_timedelta_time_is_refused(tmp_path, as_time):
+    """A parquet time column of datetimes or timedeltas would be read as integer nanoseconds."""
+    pytest.importorskip("pyarrow")
+    df = runs_frame().assign(time_s=lambda d: as_time(d["time_s"]))
+    d = tmp_path / "camp"
+    d.mkdir()
+    df.to_parquet(d / "runs.parquet", index=False)
+    (d / "vehicle.toml").write_text(VEHICLE_TOML)
+    with pytest.raises(CampaignError, match=r"runs.parquet, column 'time_s', row 1: a (datetime|timedelta)64.* column, "
+                       r"not a number: give the seconds from the run's start as a number"):
+        load_campaign(d)
+
+
+def coastdown_frame(runs=2, n=160, dt=0.25, c0=0.115, c2=4.2e-4, v0=30.0):
+    """Exact coastdowns of -dv/dt = c0 + c2 v^2 (rolling coefficient ~0.012, drag area ~0.8 m^2
+    for the 1100 kg car at the reference density)."""
+    t = np.arange(n) * dt
+    k = np.sqrt(c0 * c2)
+    v = np.sqrt(c0 / c2) * np.tan(np.arctan(v0 * np.sqrt(c2 / c0)) - k * t)
+    return pd.DataFrame({"run": np.repeat(np.arange(1, runs + 1), n), "time_s": np.tile(t, runs),
+                         "speed_mps": np.tile(v, runs),
+                         "direction": np.repeat([1 if i % 2 == 0 else -1 for i in range(runs)], n)})
+
+
+def test_time_in_milliseconds(tmp_path):
+    """A ``time_ms`` column is converted to seconds and recorded; milliseconds in ``time_s`` (the
+    implied road load 1000-fold too small) and seconds in ``time_ms`` (1000-fold too large) are
+    refused naming the column."""
+    df = coastdown_frame()
+    for name in "abcd":
+        (tmp_path / name).mkdir()
+    load_campaign(write(tmp_path / "a", df))
+    ms = df.rename(columns={"time_s": "time_ms"}).assign(time_ms=lambda d: d["time_ms"] * 1000.0)
+    c = load_campaign(write(tmp_path / "b", ms))
+    np.testing.assert_allclose(c.runs["time_s"], df["time_s"])
+    assert [(x["column"], x["to"], x["scale"]) for x in c.meta["conversions"]] == [("time_ms", "time_s", 0.001)]
+    with pytest.raises(CampaignError, match=r"runs.csv, column 'time_s': the times look logged in milliseconds: "
+                       r"rename the column time_ms"):
+        load_campaign(write(tmp_path / "c", df.assign(time_s=df["time_s"] * 1000.0)))
+    with pytest.raises(CampaignError, match=r"runs.csv, column 'time_ms': the times look logged in seconds"):
+        load_campaign(write(tmp_path / "d", df.rename(columns={"time_s": "time_ms"})))
+
+
+@pytest.mark.parametrize("unit, scale", [("kph", 3.6), ("mph", 1.0 / 0.44704)])
+def test_airspeed_in_kph_or_mph_below_the_range_check_is_refused(tmp_path, unit, scale):
+    """Airspeeds read in km/h or mph exceed the speeds by far more than any wind the standards
+    admit (10 m/s peak); in m/s with a 7 m/s head wind in every run (one direction) they pass."""
+    df = coastdown_frame()
+    df = df[df["speed_mps"] < 25.0].reset_index(drop=True)  # km/h readings stay below 100 "m/s"
+    (tmp_path / "ok").mkdir()
+    load_campaign(write(tmp_path / "ok", df.assign(airspeed_mps=df["speed_mps"] + 7.0)))
+    (tmp_path / unit).mkdir()
+    with pytest.raises(CampaignError, match=rf"runs.csv, column 'airspeed_mps', row 1: the airspeeds look logged in "
+                       rf".*: give --airspeed-unit {unit} or rename the column airspeed_{unit}"):
+        load_campaign(write(tmp_path / unit, df.assign(airspeed_mps=(df["speed_mps"] + 2.0) * scale)))

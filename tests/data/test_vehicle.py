@@ -38,6 +38,12 @@ def runs_frame(n=40, runs=2):
          "[anemometer] airspeed_yaw_coefficient_per_rad2"),
         (VEHICLE_TOML + "[anemometer]\nyaw_factor = 'one'\n", "[anemometer] yaw_factor"),
         ("[vehicle\n", "not valid TOML"),
+        (VEHICLE_TOML.replace("1100.0", '"1100 kg"'), "column '[vehicle] mass_kg': '1100 kg' is not a number"),
+        (VEHICLE_TOML.replace("1100.0", '"1100"'), "column '[vehicle] mass_kg': '1100' is not a number"),
+        (VEHICLE_TOML.replace("1.85", '"1,85"'), "column '[vehicle] frontal_area_m2': '1,85' is not a number"),
+        (VEHICLE_TOML.replace("0.28", "true"), "column '[vehicle] rolling_radius_m': True is not a number"),
+        ("vehicle = 3\n", "column '[vehicle]': is 3, not a table"),
+        (VEHICLE_TOML.replace("[vehicle]", "anemometer = 2\n[vehicle]"), "column '[anemometer]': is 2, not a table"),
     ],
 )
 def test_vehicle_refusals(tmp_path, toml, expected):
@@ -106,3 +112,20 @@ def test_a_stated_yaw_calibration_reads_back_and_corrects_the_airspeed_as_it_ent
     assert "airspeed_yaw_coefficient" not in vehicle_toml(plain)
     np.testing.assert_array_equal(np.asarray(plain.to_batch()[0].airspeed_mps)[:, :40],
                                   runs["airspeed_mps"].to_numpy().reshape(2, 40))
+
+
+def test_a_byte_order_mark_is_skipped_in_toml_and_json_and_bad_json_names_its_file(tmp_path):
+    """TOML and JSON written with a UTF-8 byte-order mark read as the CSV files do; a
+    truth.json that is not JSON, or holds no object, is refused naming it."""
+    root = tmp_path / "c"
+    root.mkdir()
+    runs_frame().to_csv(root / "runs.csv", index=False)
+    (root / "vehicle.toml").write_text("\ufeff" + VEHICLE_TOML, encoding="utf-8")
+    (root / "truth.json").write_text("\ufeff" + json.dumps({"AD": 0.01}), encoding="utf-8")
+    c = load_campaign(root)
+    assert c.vehicle.mass_kg == 1100.0 and c.truth == {"AD": 0.01}
+    for text, expected in (("{'AD': 0.01}", r"truth.json: not valid JSON \(Expecting property name"),
+                           ("[0.01]", "truth.json: holds a JSON list, not an object")):
+        (root / "truth.json").write_text(text)
+        with pytest.raises(CampaignError, match=expected):
+            load_campaign(root)
