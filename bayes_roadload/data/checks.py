@@ -298,9 +298,28 @@ def pairs_by_column(table: pd.DataFrame) -> list[tuple] | None:
     return [tuple(plain_value(r) for r in g) for g in groups if len(g) == 2]
 
 
-def consecutive_pairs(ids: list) -> list[tuple]:
-    """Consecutive runs in file order; a run left without a partner is dropped."""
-    return [(ids[i], ids[i + 1]) for i in range(0, len(ids) - 1, 2)]
+def consecutive_pairs(ids: list, directions: dict | None = None) -> list[tuple]:
+    """Consecutive runs in file order; a run left without a partner is dropped.  With
+    ``directions`` (run id -> +1/-1) a run pairs only with the next run of the other direction:
+    of two consecutive runs the same way, the first is left without a partner."""
+    pairs, i = [], 0
+    while i < len(ids) - 1:
+        if directions is not None and directions[ids[i]] == directions[ids[i + 1]]:
+            i += 1
+            continue
+        pairs.append((ids[i], ids[i + 1]))
+        i += 2
+    return pairs
+
+
+def table_pairs(table: pd.DataFrame, ids: list) -> list[tuple]:
+    """A run table's opposite-direction pairs: by its ``pair`` column (:func:`pairs_by_column`),
+    else consecutive runs in file order, of opposite directions when it logs ``direction``
+    (:func:`consecutive_pairs`)."""
+    by_column = pairs_by_column(table)
+    if by_column is not None:
+        return by_column
+    return consecutive_pairs(ids, run_directions(table) if "direction" in table else None)
 
 
 def subset_table(table: pd.DataFrame, run_ids) -> pd.DataFrame:

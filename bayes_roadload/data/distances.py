@@ -34,9 +34,7 @@ from .checks import (
     check_numeric,
     check_pair_groups,
     check_run_constants,
-    consecutive_pairs,
     data_file,
-    pairs_by_column,
     plain_value,
     read_truth,
     refuse,
@@ -44,6 +42,7 @@ from .checks import (
     run_ids_of,
     run_rows,
     subset_table,
+    table_pairs,
     truth_files,
 )
 from .uncertainty import TypeBChannels
@@ -136,8 +135,7 @@ class DistanceCampaign:
 
     def pairs(self) -> list[tuple]:
         """Opposite-direction pairs: by the ``pair`` column, else consecutive runs in file order."""
-        by_column = pairs_by_column(self.markers)
-        return by_column if by_column is not None else consecutive_pairs(self.run_ids)
+        return table_pairs(self.markers, self.run_ids)
 
     def subset(self, run_ids) -> "DistanceCampaign":
         """The campaign restricted to some runs (order as given)."""

@@ -59,9 +59,8 @@ from .checks import (
     check_run_constants,
     check_time_increases,
     check_wheel_torque_pair,
-    consecutive_pairs,
     data_file,
-    pairs_by_column,
+    table_pairs,
     read_truth,
     refuse,
     run_directions,
@@ -161,8 +160,7 @@ class SteadyCampaign:
 
     def pairs(self) -> list[tuple]:
         """Opposite-direction pairs: the ``pair`` column, else consecutive runs; unpaired runs dropped."""
-        by_column = pairs_by_column(self.runs)
-        return by_column if by_column is not None else consecutive_pairs(self.run_ids)
+        return table_pairs(self.runs, self.run_ids)
 
 
 def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_m: float | None = None

@@ -38,14 +38,13 @@ from .checks import (
     check_run_constants,
     check_time_increases,
     check_wheel_torque_pair,
-    consecutive_pairs,
-    pairs_by_column,
     read_truth,
     refuse,
     run_directions,
     run_ids_of,
     run_rows,
     subset_table,
+    table_pairs,
     truth_files,
     wheel_torque_force_n,
 )
@@ -142,8 +141,7 @@ class Campaign:
         """Opposite-direction pairs of run ids: by the ``pair`` column when present, else
         consecutive runs in file order.  A run left without a partner is dropped, and so is a
         ``pair`` group of 40 CFR 1037 split segments (:func:`~.checks.check_pair_groups`)."""
-        by_column = pairs_by_column(self.runs)
-        return by_column if by_column is not None else consecutive_pairs(self.run_ids)
+        return table_pairs(self.runs, self.run_ids)
 
     def subset(self, run_ids) -> "Campaign":
         """The campaign restricted to some runs (order as given)."""

@@ -122,3 +122,27 @@ def test_every_kind_with_a_pair_column_checks_its_pairs(kind):
                                                   "f.csv")}[kind]
     with pytest.raises(CampaignError, match=r"f.csv, column 'pair', row 21: pair id 1: runs 1 and 3 both have"):
         validate()
+
+
+def test_consecutive_pairs_follow_the_directions_when_logged():
+    """Without a pair column, runs pair with the next run in file order; when the direction is
+    logged only with the next run of the other direction (of two the same way, the first is left
+    without a partner); without it (every run +1) consecutive runs as before."""
+    from bayes_roadload.data.checks import consecutive_pairs
+
+    ids = [1, 2, 3, 4, 5]
+    assert consecutive_pairs(ids) == [(1, 2), (3, 4)]
+    assert consecutive_pairs(ids, {1: 1, 2: 1, 3: -1, 4: -1, 5: 1}) == [(2, 3), (4, 5)]
+    assert consecutive_pairs([1, 2], {1: 1, 2: 1}) == []
+
+
+def test_a_campaign_without_a_pair_column_pairs_opposite_directions():
+    from bayes_roadload.data import Campaign, Vehicle
+
+    from .test_traces import runs_frame
+
+    df = runs_frame(runs=4)
+    df["direction"] = df["run"].map({1: 1, 2: 1, 3: -1, 4: 1})
+    c = Campaign(df, Vehicle(1100.0, 1130.0, 1.85))
+    assert c.pairs() == [(2, 3)]
+    assert Campaign(df.drop(columns="direction"), Vehicle(1100.0, 1130.0, 1.85)).pairs() == [(1, 2), (3, 4)]
