@@ -16,8 +16,8 @@ energy the wheels must deliver; a_i the central difference of the trace at sampl
 reported beside it when an effective mass is given, and so is the cycle energy demand in the
 per-step form of UN GTR 15 Annex 7 section 5 (:func:`cycle_energy_demand_j`): each step
 between two samples at its mean speed, its acceleration the step's difference, its force kept
-where positive.  The two differ by up to about 1.4 % on the standard cycles (the central
-difference smooths the acceleration peaks before the positive part is taken).
+where positive.  The per-step form is a little above the central-difference one on the standard
+cycles (the central difference smooths the acceleration peaks before the positive part is taken).
 """
 
 from __future__ import annotations
