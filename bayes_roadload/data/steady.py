@@ -43,6 +43,7 @@ import pandas as pd
 
 from .. import config
 from .ambient import check_humidity_percent
+from .units import check_plausible_airspeed
 from .checks import (
     read_csv_table,
     CHANNEL_LIMITS,
@@ -222,11 +223,13 @@ def polynomial_acceleration(time_s, speed_mps) -> np.ndarray:
 
 def load(root: str | os.PathLike) -> SteadyCampaign:
     """Load and validate a steady-state campaign directory (``steady.csv``, ``vehicle.toml``,
-    optional ``truth.json``)."""
+    optional ``truth.json``); airspeeds logged in km/h or mph under ``airspeed_mps`` are refused
+    as for coastdowns (:func:`~bayes_roadload.data.units.check_plausible_airspeed`)."""
     root = Path(root)
     f = data_file(root, "steady.csv")
     vehicle, anem, tunnel, meta = read_vehicle_file(root / VEHICLE_FILE)
     df, source = validate_steady(read_csv_table(f), str(f), vehicle.rolling_radius_m)
+    check_plausible_airspeed(df, str(f), anem.airspeed_factor, convertible=False)
     return SteadyCampaign(df, vehicle, anem, tunnel, read_truth(root), meta, accel_source=source)
 
 

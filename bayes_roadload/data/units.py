@@ -185,7 +185,8 @@ MAX_WIND_MPS = max(limits["peak_wind_mps"] for limits in config.WIND_LIMITS.valu
 (GTR 15 with on-board anemometry, 10 m/s; :data:`~bayes_roadload.config.WIND_LIMITS`)."""
 
 
-def check_plausible_airspeed(df: pd.DataFrame, where: str, airspeed_factor: float = 1.0) -> float | None:
+def check_plausible_airspeed(df: pd.DataFrame, where: str, airspeed_factor: float = 1.0,
+                             convertible: bool = True) -> float | None:
     """Refuse airspeeds logged in km/h or mph but read as m/s (``airspeed_mps`` below the
     100 m/s range check); returns the campaign's median excess airspeed (m/s), None without an
     airspeed channel.
@@ -202,7 +203,9 @@ def check_plausible_airspeed(df: pd.DataFrame, where: str, airspeed_factor: floa
     3.6); in mph 2.237 x (v + w), an excess of 1.24 v + 2.24 w, 10-50 m/s (a ratio near 2.24).
     A median excess above :data:`MAX_WIND_MPS` that the km/h (or mph) reading brings within it
     is refused naming the file, ``airspeed_mps`` and the first row beyond the wind limit, with
-    the unit (the one of the two whose reading leaves the smaller median excess) to state.
+    the unit (the one of the two whose reading leaves the smaller median excess) to state
+    (``convertible``: the kind converts ``airspeed_kph`` / ``--airspeed-unit``), or, for a kind
+    that reads m/s only, the factor to convert the column by.
     """
     if "airspeed_mps" not in df:
         return None
@@ -217,8 +220,10 @@ def check_plausible_airspeed(df: pd.DataFrame, where: str, airspeed_factor: floa
         return excess
     row = int(np.flatnonzero(a - v > MAX_WIND_MPS)[0]) + 1
     name = SPEED_UNIT_NAMES[unit]
+    remedy = (f"give --airspeed-unit {unit} or rename the column airspeed_{unit}" if convertible
+              else f"convert them to m/s (multiply {name} by {SPEED_UNITS[unit]:.6g})")
     refuse(where, "airspeed_mps", row,
-           f"the airspeeds look logged in {name}: give --airspeed-unit {unit} or rename the column airspeed_{unit} "
+           f"the airspeeds look logged in {name}: {remedy} "
            f"(the median airspeed exceeds the speed by {excess:.1f} m/s, median ratio "
            f"{float(np.median(a / v)):.2f}: beyond the {MAX_WIND_MPS:g} m/s peak wind the standards admit; read in "
            f"{name} it is {read_as[unit]:+.1f} m/s)")

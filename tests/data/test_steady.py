@@ -58,3 +58,19 @@ def test_a_simulated_campaign_round_trips(tmp_path):
     back = load_campaign(save_steady(c, tmp_path / "ss"))
     np.testing.assert_allclose(back.runs["tractive_force_n"], c.runs["tractive_force_n"], rtol=1e-9)
     assert back.truth["CD0"] == 0.4 and back.tunnel["CL0"] == pytest.approx(0.273)
+
+
+@pytest.mark.parametrize("unit, scale", [("kph", 3.6), ("mph", 1.0 / 0.44704)])
+def test_airspeed_in_kph_or_mph_is_refused_as_for_coastdowns(tmp_path, unit, scale):
+    """A steady-state table's airspeeds are the vehicle's speed plus at most the wind: read in
+    km/h or mph they exceed the speeds by far more than the 10 m/s peak wind the standards admit
+    (a simulated campaign's own airspeeds load)."""
+    c = simulate_steady(9, pairs=1, seed=0, settings=SteadySettings(duration_s=5.0))
+    df = c.runs[c.runs["speed_mps"] < 25.0].reset_index(drop=True)  # km/h readings stay below 100 "m/s"
+    (tmp_path / "ok").mkdir()
+    df.to_csv(tmp_path / "ok" / "steady.csv", index=False)
+    (tmp_path / "ok" / "vehicle.toml").write_text(VEHICLE)
+    assert load_campaign(tmp_path / "ok").has_anemometer
+    with pytest.raises(CampaignError, match=rf"steady.csv, column 'airspeed_mps', row 1: the airspeeds look logged in "
+                       rf".*: convert them to m/s \(multiply .* by {1.0 / scale:.6g}\)"):
+        load_campaign(write(tmp_path / unit, df.assign(airspeed_mps=df["airspeed_mps"] * scale)))
