@@ -345,13 +345,23 @@ def data_file(root: str | os.PathLike, name: str) -> Path:
 
 def read_csv_table(path: str | os.PathLike, **kwargs) -> pd.DataFrame:
     """``pd.read_csv`` of a campaign file; an empty or unparsable file is a
-    :class:`CampaignError` naming it."""
+    :class:`CampaignError` naming it, and so is a table separated by semicolons or tabs (read
+    as one column whose name holds the separator: the file names the separator, and the decimal
+    comma that often comes with semicolons, to change)."""
     try:
-        return pd.read_csv(path, **kwargs)
+        df = pd.read_csv(path, **kwargs)
     except pd.errors.EmptyDataError:
         raise CampaignError(f"{path}: the file is empty (no header, no samples)") from None
     except (pd.errors.ParserError, UnicodeDecodeError) as e:
         raise CampaignError(f"{path}: not a readable CSV table ({str(e).strip()})") from None
+    if df.shape[1] == 1:
+        header = str(df.columns[0])
+        for sep, name in ((";", "semicolons"), ("\t", "tabs")):
+            if sep in header:
+                raise CampaignError(
+                    f"{path}: the columns are separated by {name} ({header[:60]!r}): save the table "
+                    "comma-separated, with decimal points (not decimal commas)")
+    return df
 
 
 def read_json_object(path: str | os.PathLike) -> dict[str, Any]:

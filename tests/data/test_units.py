@@ -158,3 +158,18 @@ def test_empty_file_and_empty_cell_are_named(tmp_path):
         load_campaign(d)
     assert "column 'speed_mps', row 5: an empty cell is not a finite number" in str(e.value)
     assert "np.float64" not in str(e.value)
+
+
+@pytest.mark.parametrize("sep, decimal, name", [(";", ",", "semicolons"), ("\t", ".", "tabs")])
+def test_a_table_separated_by_semicolons_or_tabs_is_named(tmp_path, sep, decimal, name):
+    """A European spreadsheet's export (semicolons and decimal commas) or a tab-separated table
+    reads as one column: refused naming the file and the separator, where the comma-separated
+    table of the same samples loads."""
+    df = coastdown_frame()
+    d = write(tmp_path, df)
+    assert len(load_campaign(d).runs) == len(df)
+    (d / "runs.csv").unlink()
+    df.to_csv(d / "runs.csv", index=False, sep=sep, decimal=decimal)
+    with pytest.raises(CampaignError, match=rf"runs\.csv: the columns are separated by {name} .*: save the table "
+                       r"comma-separated, with decimal points"):
+        load_campaign(d)
