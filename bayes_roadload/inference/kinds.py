@@ -379,6 +379,27 @@ def _survey_lines(campaign, spec: ModelSpec) -> list[str]:
     return []
 
 
+def _speed_coverage_lines(campaign) -> list[str]:
+    """When the 50 mph of ``F50_N`` (:data:`~bayes_roadload.config.SPEED_50MPH_MPS`) lies outside
+    the speeds the runs logged, a note that the figure is the model's speed law carried beyond
+    the data (its interval says how far the data constrain it; the coefficients' split between
+    speed-independent and v^2 terms rests on the speed range the runs span)."""
+    v = campaign.runs["speed_mps"].to_numpy(float)
+    low, high = float(np.min(v)), float(np.max(v))
+    ref = config.SPEED_50MPH_MPS
+    if low <= ref <= high:
+        return []
+    kph = 1.0 / config.KPH_TO_MPS
+    return [f"note: the runs logged {low * kph:.0f}-{high * kph:.0f} km/h: F50_N's {ref * kph:.1f} km/h lies outside "
+            "them, its value is the model's speed law extrapolated"]
+
+
+def _trace_input_lines(campaign, spec: ModelSpec) -> list[str]:
+    """The inputs' notes of a speed-trace fit: the track survey (:func:`_survey_lines`) and the
+    speed coverage (:func:`_speed_coverage_lines`)."""
+    return [*_survey_lines(campaign, spec), *_speed_coverage_lines(campaign)]
+
+
 def _distance_preamble(campaign) -> list[str]:
     masses = sorted(set(campaign.masses_kg().values()))
     return [f"{len(campaign.run_ids)} runs at {', '.join(f'{m:g}' for m in masses)} kg, "
@@ -421,7 +442,7 @@ KINDS: dict[str, KindEntry] = {e.name: e for e in (
     KindEntry("traces", "speed-trace", Campaign, traces_default_model, _check_traces, _fit_traces,
               trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
               diagnosis_model="three_term", type_b=_traces_type_b, default_pooling=traces_default_pooling,
-              lagged_speed_drop=True, notes=_air_notes, input_notes=_survey_lines,
+              lagged_speed_drop=True, notes=_air_notes, input_notes=_trace_input_lines,
               default_models={"four_term_tyre_lag_admittance_pitch_shapes":
                                   f"Bayesian fit up to {config.HEAVY_DUTY_MASS_KG:g} kg test mass",
                               "four_term_tyre_lag_admittance_heavy_pitch_shapes":
