@@ -32,6 +32,12 @@ The confirmatory run of the current default (from seed 10000) logs each campaign
 
     python benchmarks/calibration_study.py --n 200 --seed0 10000 --log survey --workers 2 \
         --records docs/calibration/survey_records.csv
+
+A reading for designing a budget (``analysis.calibration.budget_rescaled``): the records' intervals
+with one Type B source's uncertainty scaled, printed as a markdown table, nothing fitted:
+
+    python benchmarks/calibration_study.py --from-records --records RECORDS \
+        --rescale tyre_quadratic_s2_per_m2=1,0.75,0.54
 """
 
 from __future__ import annotations
@@ -49,13 +55,13 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_roadload.analysis.batch import batch_client, passed_first_time, run_batch  # noqa: E402
+from bayes_roadload.analysis.batch import batch_client, passed_first_time, run_batch, successful  # noqa: E402
 from bayes_roadload.inference.kinds import FitOptions  # noqa: E402
 from bayes_roadload.config import DEFAULT_SAMPLER  # noqa: E402
 from doc_sections import replace_section  # noqa: E402
 from gradient_cost import commit_of  # noqa: E402
 from bayes_roadload.analysis.calibration import (CONFIRMATORY_SEED0, DIAGNOSTIC_SPLIT, QUANTITIES,  # noqa: E402
-                                                 calibration_jobs, calibration_markdown, calibration_table,
+                                                 budget_rescaled, calibration_jobs, calibration_markdown, calibration_table,
                                                  with_test_mass)
 
 RECORDS = ROOT / "docs" / "calibration" / "independent_records.csv"
@@ -122,6 +128,26 @@ def resume_from(partial: Path, jobs: list) -> tuple[pd.DataFrame, list]:
     return before, [j for j in jobs if j.name not in finished]
 
 
+def rescaled_markdown(records: pd.DataFrame, spec: str) -> str:
+    """``--rescale SOURCE=F,F,...``: :func:`budget_rescaled` of the records as a markdown table."""
+    source, _, factors = spec.partition("=")
+    try:
+        values = [float(f) for f in factors.split(",")]
+    except ValueError:
+        raise SystemExit(f"--rescale {spec!r}: give SOURCE=F,F,... (factors as numbers)") from None
+    table = budget_rescaled(records, source, values)
+    if table.empty:
+        raise SystemExit(f"--rescale: the records carry no budget column for the source {source!r}")
+    lines = [f"The records' intervals with the Type B source `{source}` scaled (a reading in the normal "
+             f"approximation, `analysis.calibration.budget_rescaled`; {len(successful(records))} fits):", "",
+             "| quantity | campaigns | source's median share | factor | 95 % coverage | sd(z) | mean z |",
+             "|---|---|---|---|---|---|---|"]
+    for r in table.itertuples():
+        lines.append(f"| {r.quantity} | {r.n} | {r.median_share:.2f} | {r.factor:g} | {r.coverage95:.2f} | "
+                     f"{r.z_sd:.2f} | {r.z_mean:+.2f} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=200, help="campaigns (default 200)")
@@ -147,6 +173,9 @@ def main(argv=None) -> int:
     ap.add_argument("--compare", type=Path, default=None, metavar="RECORDS",
                     help="with --from-records: a table of --records beside these records on the seeds both hold")
     ap.add_argument("--from-records", action="store_true", help="summarise --records without fitting")
+    ap.add_argument("--rescale", default=None, metavar="SOURCE=F,F,...",
+                    help="with --from-records: only the intervals with the Type B source's uncertainty scaled by "
+                         "each factor (analysis.calibration.budget_rescaled), as a markdown table")
     ap.add_argument("--fill-test-mass", action="store_true",
                     help="with --from-records: add the declared test mass (test_mass_kg) to the records that lack it, "
                          "by simulating those campaigns again, and write it back to --records")
@@ -185,6 +214,9 @@ def main(argv=None) -> int:
         partial.unlink(missing_ok=True)
     if args.compare is not None:
         print(comparison_markdown(pd.read_csv(args.compare), records))
+        return 0
+    if args.rescale is not None:
+        print(rescaled_markdown(records, args.rescale))
         return 0
     if "error" not in records:
         records["error"] = np.nan

@@ -299,6 +299,38 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
                                        "z_sd_without", "coverage95_without", "z_mean_without"])
 
 
+def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float],
+                    quantities: Iterable[str] = QUANTITIES) -> pd.DataFrame:
+    """What the intervals would be with one Type B source's standard uncertainty scaled by each
+    of ``factors`` (1: as fitted), read from the budget columns of the records as
+    :func:`budget_attribution` reads a source left out: the interval's sd becomes
+    sqrt(sd^2 - (1 - f^2) sd_s^2) (the source's first-order share, exact where the source
+    enters the quantity linearly and the fit holds it at its prior mean), z = (mean - truth) /
+    that sd, covered when |z| <= 1.96.  Per quantity and factor: campaigns ``n``, the source's
+    median share of the variance as fitted, ``coverage95``, ``z_sd`` and ``z_mean``.  Quantities
+    whose records lack the source's column are left out.  A reading for designing a budget (on
+    design seeds), not a verdict: a fit with the scaled budget is what a confirmatory run scores."""
+    q975 = 1.959963984540054
+    rows = []
+    for q in quantities:
+        col = f"{q}_sd_typeb_{source}"
+        if col not in records:
+            continue
+        rec = successful(records)
+        rec = rec[rec[col].notna() & rec[f"{q}_truth"].notna()]
+        if rec.empty:
+            continue
+        mean, sd, truth = (rec[f"{q}_{c}"].astype(float).to_numpy() for c in ("mean", "sd", "truth"))
+        var_s = rec[col].to_numpy(float) ** 2
+        for f in factors:
+            z = (mean - truth) / np.sqrt(np.maximum(sd**2 - (1.0 - f * f) * var_s, 1e-300))
+            rows.append({"quantity": q, "factor": float(f), "n": len(rec),
+                         "median_share": float(np.median(var_s / sd**2)),
+                         "coverage95": float(np.mean(np.abs(z) <= q975)), "z_sd": float(np.std(z, ddof=1)),
+                         "z_mean": float(np.mean(z))})
+    return pd.DataFrame(rows, columns=["quantity", "factor", "n", "median_share", "coverage95", "z_sd", "z_mean"])
+
+
 def _class_section(what: str, head: str, table: pd.DataFrame) -> list[str]:
     """Markdown lines of a :func:`quantile_class_table` by ``what`` (column ``head``): a caption
     marking it as a reading and, per class, n and every quantity's 95 % coverage with its mean z

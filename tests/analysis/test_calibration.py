@@ -10,7 +10,8 @@ from scipy.stats import norm
 
 from bayes_roadload import config
 from bayes_roadload.analysis.batch import run_batch
-from bayes_roadload.analysis.calibration import (COVERAGE_TARGET, QUANTITIES, budget_attribution, calibration_jobs,
+from bayes_roadload.analysis.calibration import (COVERAGE_TARGET, QUANTITIES, budget_attribution, budget_rescaled,
+                                                  calibration_jobs,
                                                  calibration_markdown, calibration_table, mass_class, mass_class_table,
                                                  pairs_of, size_bin, with_test_mass)
 from bayes_roadload.inference.kinds import KINDS, FitOptions
@@ -103,6 +104,26 @@ def test_the_budget_attribution_finds_the_source_that_widens_the_intervals():
     over = rec.assign(CD0_sd_typeb_spurious=10.0)
     assert over.pipe(budget_attribution, quantities=("CD0",)).set_index("source").loc[
         "data only", "z_sd_without"] == pytest.approx(np.sqrt(2), abs=0.06)
+
+
+def test_a_source_scaled_to_its_true_size_brings_sd_z_to_one():
+    """Errors N(0, 1) from the data plus N(0, 0.5^2) from a Type B source whose budget states sd
+    1: the intervals are too wide (sd(z) sqrt(1.25 / 2) = 0.79); at factor 0.5 the budget is
+    the truth's and sd(z) is 1 and the coverage 95 %; at factor 1 the reading equals the
+    records' own z.  4000 campaigns: sd(z)'s standard error ~0.011, the coverage's ~0.004."""
+    rng = np.random.default_rng(11)
+    n = 4000
+    err = rng.standard_normal(n) + 0.5 * rng.standard_normal(n)
+    rec = pd.DataFrame({"seed": np.arange(n), "pairs": 3, "error": np.nan, "gate_pass": True,
+                        "CD0_truth": 1.0, "CD0_mean": 1.0 + err, "CD0_sd": np.sqrt(2.0), "CD0_sd_data": 1.0,
+                        "CD0_sd_typeb_tyre": 1.0, "AD_truth": 0.0, "AD_mean": err, "AD_sd": 1.0})
+    r = budget_rescaled(rec, "tyre", (1.0, 0.5), quantities=("CD0", "AD")).set_index("factor")
+    assert list(r["quantity"].unique()) == ["CD0"]  # AD's records carry no such source
+    assert r.loc[1.0, "z_sd"] == pytest.approx(np.std(err / np.sqrt(2.0), ddof=1))
+    assert r.loc[1.0, "z_sd"] == pytest.approx(np.sqrt(1.25 / 2.0), abs=0.05)
+    assert r.loc[0.5, "z_sd"] == pytest.approx(1.0, abs=0.05)
+    assert r.loc[0.5, "coverage95"] == pytest.approx(0.95, abs=0.02)
+    assert r.loc[1.0, "median_share"] == pytest.approx(0.5)
 
 
 def test_the_gates_are_read_apart_by_the_code_that_fitted_them():
