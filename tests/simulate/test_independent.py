@@ -74,6 +74,23 @@ def test_still_air_coastdown_matches_the_closed_form():
     assert abs(trace.distance_m[-1] - np.trapezoid(trace.speed_mps, trace.time_s)) < 1e-2
 
 
+def test_a_run_that_never_reaches_its_stop_speed_ends_where_it_leaves_the_track():
+    """On a 3 % downhill grade the car's rolling loss (about 1 % of its weight) no longer
+    balances the slope below ~20 m/s: the speed settles above the stop speed.  The logging ends
+    at the track's end (every kept sample on the track, the next one off it); on a track longer
+    than the sample times reach the run is refused as before."""
+    from bayes_roadload.simulate.independent.track import Track
+
+    veh = _quadratic_vehicle(np.random.default_rng(0))
+    cond = RunConditions(direction=1, start_position_m=0.0, v0_mps=32.0, v_stop_mps=5.0, gravity_mps2=9.80665)
+    samples = np.arange(0.0, 500.0, 0.25)
+    trace = simulate_run(veh, cond, samples, track=Track(start_m=-400.0, end_m=3000.0, mean_grade=-0.03))
+    assert trace.position_m[-1] <= 3000.0 < trace.position_m[-1] + trace.speed_mps[-1] * 0.25
+    assert trace.speed_mps[-1] > 15.0 and trace.time_s.size < samples.size
+    with pytest.raises(RuntimeError, match="did not reach its stop speed .* nor leave the track"):
+        simulate_run(veh, cond, samples, track=Track(start_m=-400.0, end_m=1e6, mean_grade=-0.03))
+
+
 def test_truth_of_a_linear_tyre_law_is_exact():
     rng = np.random.default_rng(1)
     veh = _quadratic_vehicle(rng)

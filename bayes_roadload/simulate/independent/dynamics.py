@@ -154,11 +154,34 @@ def _tyre_temperature_factor(veh: TrueVehicle, ambient_k: float, excess_k):
     return np.exp(-veh.tyre_temp_coeff_per_k * dt)
 
 
+MIN_RUN_SAMPLES = 10
+"""Fewest samples of a run cut at the track's end (:func:`_cut_at_track_end`; the data layer
+refuses runs of fewer)."""
+
+
+def _cut_at_track_end(t: np.ndarray, y: np.ndarray, cond: RunConditions, track: Track | None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """A run whose road load balances above its stop speed (a heavy vehicle of low rolling
+    resistance on a downhill mean grade) never reaches it: the logging ends where the vehicle
+    leaves the track (``track.start_m``-``track.end_m``), as the driver's would at the end of the
+    straight, and the samples on the track are kept.  Raised when there is no track, or when
+    the vehicle stays on it to the last sample time or leaves it within
+    :data:`MIN_RUN_SAMPLES` samples."""
+    if track is None:
+        raise RuntimeError("the run did not reach its stop speed within the sample times")
+    x = cond.start_position_m + float(cond.direction) * y[0]
+    off = np.flatnonzero((x < track.start_m) | (x > track.end_m))
+    if off.size == 0 or off[0] < MIN_RUN_SAMPLES:
+        raise RuntimeError("the run did not reach its stop speed within the sample times, nor leave the track")
+    return t[:off[0]], y[:, :off[0]]
+
+
 def simulate_run(vehicle: TrueVehicle, cond: RunConditions, sample_times_s: np.ndarray, *,
                  wind: WindField | None = None, track: Track | None = None, admittance: bool = False,
                  anemometer: AnemometerDynamics | None = None, anemometer_ahead_m: float | None = None,
                  rtol: float = 1e-9) -> RunTrace:
-    """Integrate one coastdown from ``v0_mps`` until the speed falls to ``v_stop_mps``.
+    """Integrate one coastdown from ``v0_mps`` until the speed falls to ``v_stop_mps`` (or, when
+    its road load balances above that speed, until it leaves the track: :func:`_cut_at_track_end`).
 
     Parameters
     ----------
@@ -240,9 +263,9 @@ def simulate_run(vehicle: TrueVehicle, cond: RunConditions, sample_times_s: np.n
                         t_eval=ts, events=stop, dense_output=anemometer is not None)
     if sol.status < 0:
         raise RuntimeError(f"coastdown integration failed: {sol.message}")
-    if sol.status == 0:
-        raise RuntimeError("the run did not reach its stop speed within the sample times")
     t, y = sol.t, sol.y
+    if sol.status == 0:
+        t, y = _cut_at_track_end(t, y, cond, track)
     out = np.array([forces(ti, yi) for ti, yi in zip(t, y.T)])
     vr, psi, x, drv = out[:, 1], out[:, 2], out[:, 3], out[:, 4]
     anem = np.array([_relative_air(yi[1], d, *wind_at(xi + d * ahead, ti)) for ti, yi, xi in zip(t, y.T, x)])
