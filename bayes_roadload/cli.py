@@ -551,7 +551,7 @@ def _cmd_predict(args) -> int:
     campaign = _campaign_of_fit(Path(args.fit_dir))
     work, shares, _ = run_predict(args.fit_dir, args.cycle, effective_mass_kg=campaign.vehicle.effective_mass_kg,
                                   temperature_k=args.temperature_k, pressure_pa=args.pressure_pa,
-                                  mass_kg_change=args.mass_change_kg, v0_kph=args.v0_kph, power_w=args.power_w,
+                                  mass_kg_change=args.mass_change_kg, mass_kg=campaign.vehicle.mass_kg, v0_kph=args.v0_kph, power_w=args.power_w,
                                   out_dir=args.out)
     echo(format_cycle_work(work, shares))
     echo(f"\nwrote the cycle work and the predicted trace in {args.out}")

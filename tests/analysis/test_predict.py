@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from bayes_roadload.analysis.predict import format_cycle_work, run_predict
+from bayes_roadload.analysis.predict import format_cycle_work, mass_changed, run_predict
 
 
 def _draws():
@@ -24,3 +24,20 @@ def test_coastdown_at_other_temperature_and_mass_by_hand(tmp_path):
     assert (tmp_path / "predicted_trace.csv").is_file()
     assert "hwfet road-load work" in format_cycle_work(work, shares)
     assert shares["variance_share"].isna().all()  # constant draws: no variance to share
+
+
+def test_a_heavier_vehicle_adds_rolling_loss_from_the_tyre_coefficients():
+    """F0 = 300 N of which A_D M g = 0.01 x 1500 x 9.81 = 147.15 N is rolling and the rest
+    driveline: 150 kg more add 0.01 x 150 x 9.81 = 14.715 N to F0 (the driveline unchanged),
+    B_D 2e-4 s/m adds 150 x 9.81 x 2e-4 / 3.6 N per km/h to F1, F2 unchanged; scaling the whole
+    of F0 by the mass ratio would have added 30 N.  Without A_D and B_D the test mass ratio scales
+    F0 and F1."""
+    draws = dict(_draws(), AD=np.full(6, 0.01), BD=np.full(6, 2e-4), F2_N_per_kph2=np.full(6, 0.03))
+    heavier = mass_changed(draws, 150.0, mass_kg=1500.0, effective_mass_kg=1540.0)
+    np.testing.assert_allclose(heavier["F0_N"], 300.0 + 14.715)
+    np.testing.assert_allclose(heavier["F1_N_per_kph"], 150.0 * 9.81 * 2e-4 / 3.6)
+    np.testing.assert_allclose(heavier["F2_N_per_kph2"], 0.03)
+    scaled = mass_changed(_draws(), 150.0, mass_kg=1500.0, effective_mass_kg=1540.0)
+    np.testing.assert_allclose(scaled["F0_N"], 300.0 * 1650.0 / 1500.0)
+    np.testing.assert_array_equal(mass_changed(draws, 0.0, mass_kg=1500.0, effective_mass_kg=1540.0)["F0_N"],
+                                  draws["F0_N"])
