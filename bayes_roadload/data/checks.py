@@ -184,6 +184,22 @@ def check_wheel_torque_pair(columns, where: str) -> list[str]:
     return given
 
 
+ANEMOMETER_COLUMNS = ("airspeed_mps", "yaw_rad")
+"""The on-board anemometer's two channels, which the model reads together (eq. 2.48: the
+relative air's speed and its angle)."""
+
+
+def check_anemometer_pair(columns, where: str) -> None:
+    """Refuse one anemometer channel without the other (naming the missing one): the fit reads
+    the relative air as speed and yaw angle together, and would otherwise drop the one given."""
+    given = [c for c in ANEMOMETER_COLUMNS if c in columns]
+    if len(given) == 1:
+        missing = next(c for c in ANEMOMETER_COLUMNS if c not in columns)
+        refuse(where, missing, None, f"{given[0]} without {missing}: the anemometer enters the model as the relative "
+               f"air's speed and yaw angle together; add {missing}, or remove {given[0]} to fit without the "
+               "anemometer (the wind then a latent of each pair)")
+
+
 def wheel_torque_force_n(df: pd.DataFrame, rolling_radius_m: float) -> pd.Series:
     """Remove the two wheel torque columns (N m) from ``df`` and return the force they make at
     the tread, (left + right) / R_r (N)."""

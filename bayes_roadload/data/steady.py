@@ -59,6 +59,7 @@ from .checks import (
     check_pair_groups,
     check_run_constants,
     check_time_increases,
+    check_anemometer_pair,
     check_wheel_torque_pair,
     data_file,
     table_pairs,
@@ -174,6 +175,7 @@ def validate_steady(df: pd.DataFrame, where: str = "steady.csv", rolling_radius_
     if "tractive_force_n" in cols and torques:
         refuse(where, "tractive_force_n", None, "give tractive_force_n or the wheel torques, not both (ambiguous)")
     check_wheel_torque_pair(cols, where)
+    check_anemometer_pair(cols, where)
     if "tractive_force_n" not in cols and not torques:
         refuse(where, "tractive_force_n", None, "required: tractive_force_n (N) or the two wheel torques (N m)")
     check_not_empty(df, "samples", where)

@@ -37,6 +37,7 @@ from .checks import (
     numeric_and_text_ids,
     check_run_constants,
     check_time_increases,
+    check_anemometer_pair,
     check_wheel_torque_pair,
     read_truth,
     refuse,
@@ -204,6 +205,7 @@ def validate_runs(df: pd.DataFrame, where: str = "runs.csv") -> pd.DataFrame:
     """
     df = df.copy()
     cols = check_columns(df, KNOWN_COLUMNS, REQUIRED_COLUMNS, UNIT_HINTS, "the contract", where)
+    check_anemometer_pair(cols, where)
     check_not_empty(df, "samples", where)
     check_no_missing(df, "run", "missing run id", where)
     check_numeric(df, numeric_and_text_ids(df, [c for c in cols if c != "run"], ("pair",), where), CHANNEL_LIMITS,

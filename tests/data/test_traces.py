@@ -74,8 +74,10 @@ def test_wheel_torque_and_rotating_inertia(tmp_path):
         (lambda d: d.iloc[:45], "run 2 has 5 samples"),
         (lambda d: d.assign(temperature_k=20.0), "column 'temperature_k', row 1"),
         (lambda d: d.assign(pressure_pa=101.3), "column 'pressure_pa', row 1"),
-        (lambda d: d.assign(yaw_rad=5.0), "column 'yaw_rad'"),
-        (lambda d: d.assign(airspeed_mps=np.inf), "not a finite number"),
+        (lambda d: d.assign(airspeed_mps=d["speed_mps"], yaw_rad=5.0), "column 'yaw_rad', row 1"),
+        (lambda d: d.assign(airspeed_mps=np.inf, yaw_rad=0.0), "not a finite number"),
+        (lambda d: d.assign(airspeed_mps=d["speed_mps"]), "column 'yaw_rad': airspeed_mps without yaw_rad"),
+        (lambda d: d.assign(yaw_rad=0.0), "column 'airspeed_mps': yaw_rad without airspeed_mps"),
     ],
 )
 def test_refusals_name_file_column_row(tmp_path, mutate, expected):
@@ -194,8 +196,8 @@ def test_airspeed_in_kph_or_mph_below_the_range_check_is_refused(tmp_path, unit,
     df = coastdown_frame()
     df = df[df["speed_mps"] < 25.0].reset_index(drop=True)  # km/h readings stay below 100 "m/s"
     (tmp_path / "ok").mkdir()
-    load_campaign(write(tmp_path / "ok", df.assign(airspeed_mps=df["speed_mps"] + 7.0)))
+    load_campaign(write(tmp_path / "ok", df.assign(airspeed_mps=df["speed_mps"] + 7.0, yaw_rad=0.0)))
     (tmp_path / unit).mkdir()
     with pytest.raises(CampaignError, match=rf"runs.csv, column 'airspeed_mps', row 1: the airspeeds look logged in "
                        rf".*: give --airspeed-unit {unit} or rename the column airspeed_{unit}"):
-        load_campaign(write(tmp_path / unit, df.assign(airspeed_mps=(df["speed_mps"] + 2.0) * scale)))
+        load_campaign(write(tmp_path / unit, df.assign(airspeed_mps=(df["speed_mps"] + 2.0) * scale, yaw_rad=0.0)))
