@@ -197,7 +197,7 @@ def check_anemometer_pair(columns, where: str) -> None:
         missing = next(c for c in ANEMOMETER_COLUMNS if c not in columns)
         refuse(where, missing, None, f"{given[0]} without {missing}: the anemometer enters the model as the relative "
                f"air's speed and yaw angle together; add {missing}, or remove {given[0]} to fit without the "
-               "anemometer (the wind then a latent of each pair)")
+               "anemometer")
 
 
 def wheel_torque_force_n(df: pd.DataFrame, rolling_radius_m: float) -> pd.Series:
@@ -361,23 +361,31 @@ def data_file(root: str | os.PathLike, name: str) -> Path:
 
 def read_csv_table(path: str | os.PathLike, **kwargs) -> pd.DataFrame:
     """``pd.read_csv`` of a campaign file; an empty or unparsable file is a
-    :class:`CampaignError` naming it, and so is a table separated by semicolons or tabs (read
-    as one column whose name holds the separator: the file names the separator, and the decimal
-    comma that often comes with semicolons, to change)."""
+    :class:`CampaignError` naming it, and so is a table whose header is separated by semicolons
+    or tabs rather than commas (the file names the separator, and the decimal comma that often
+    comes with semicolons, to change), whether or not pandas could parse its rows."""
+    _check_separator(path)
     try:
-        df = pd.read_csv(path, **kwargs)
+        return pd.read_csv(path, **kwargs)
     except pd.errors.EmptyDataError:
         raise CampaignError(f"{path}: the file is empty (no header, no samples)") from None
     except (pd.errors.ParserError, UnicodeDecodeError) as e:
         raise CampaignError(f"{path}: not a readable CSV table ({str(e).strip()})") from None
-    if df.shape[1] == 1:
-        header = str(df.columns[0])
-        for sep, name in ((";", "semicolons"), ("\t", "tabs")):
-            if sep in header:
-                raise CampaignError(
-                    f"{path}: the columns are separated by {name} ({header[:60]!r}): save the table "
-                    "comma-separated, with decimal points (not decimal commas)")
-    return df
+
+
+def _check_separator(path: str | os.PathLike) -> None:
+    """Refuse a CSV file whose header line holds semicolons or tabs and no comma."""
+    try:
+        with open(path, encoding="utf-8-sig", errors="replace") as f:
+            header = f.readline()
+    except (OSError, TypeError):  # not a plain file (a buffer, ...): pandas reports what it finds
+        return
+    if "," in header:
+        return
+    for sep, name in ((";", "semicolons"), ("\t", "tabs")):
+        if sep in header:
+            raise CampaignError(f"{path}: the columns are separated by {name} ({header.strip()[:60]!r}): save the "
+                                "table comma-separated, with decimal points (not decimal commas)")
 
 
 def read_json_object(path: str | os.PathLike) -> dict[str, Any]:

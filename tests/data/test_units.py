@@ -173,3 +173,10 @@ def test_a_table_separated_by_semicolons_or_tabs_is_named(tmp_path, sep, decimal
     with pytest.raises(CampaignError, match=rf"runs\.csv: the columns are separated by {name} .*: save the table "
                        r"comma-separated, with decimal points"):
         load_campaign(d)
+    # a first row of whole numbers has fewer decimal commas than the rows after it: pandas
+    # cannot tokenise such a file at all, and the header still names the separator
+    text = (d / "runs.csv").read_text().splitlines()
+    first = sep.join(["1", "0", "31"] + text[1].split(sep)[3:])
+    (d / "runs.csv").write_text("\n".join([text[0], first, *text[2:]]) + "\n")
+    with pytest.raises(CampaignError, match=rf"separated by {name}"):
+        load_campaign(d)
