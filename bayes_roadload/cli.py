@@ -524,14 +524,13 @@ def _cmd_report(args) -> int:
     return 0
 
 
-def _campaign_of_fit(fit_dir: Path):
-    """The campaign a fit directory's ``fit.json`` names (with the units the fit was told)."""
-    from .output import fit_campaign, read_fit_dir
+def _campaign_of_fit(fd):
+    """The campaign a read fit directory's ``fit.json`` names (with the units the fit was told)."""
+    from .output import fit_campaign
 
-    record = read_fit_dir(fit_dir).record
-    if not record.get("campaign"):
-        raise ValueError(f"{fit_dir / 'fit.json'}: no campaign path recorded; refit the campaign with `fit`")
-    return fit_campaign(record)
+    if not fd.record.get("campaign"):
+        raise ValueError(f"{fd.path / 'fit.json'}: no campaign path recorded; refit the campaign with `fit`")
+    return fit_campaign(fd.record)
 
 
 def _cmd_dyno(args) -> int:
@@ -547,11 +546,16 @@ def _cmd_dyno(args) -> int:
 def _cmd_predict(args) -> int:
     from .analysis.predict import format_cycle_work, run_predict
 
+    from .inference.spec import load_model_spec
+    from .output import read_fit_dir
+
     _warn_failed_fit(args.fit_dir)
-    campaign = _campaign_of_fit(Path(args.fit_dir))
+    fd = read_fit_dir(args.fit_dir)
+    campaign = _campaign_of_fit(fd)
+    fixed = load_model_spec(fd.model).fixed
     work, shares, _ = run_predict(args.fit_dir, args.cycle, effective_mass_kg=campaign.vehicle.effective_mass_kg,
                                   temperature_k=args.temperature_k, pressure_pa=args.pressure_pa,
-                                  mass_kg_change=args.mass_change_kg, mass_kg=campaign.vehicle.mass_kg, v0_kph=args.v0_kph, power_w=args.power_w,
+                                  mass_kg_change=args.mass_change_kg, mass_kg=campaign.vehicle.mass_kg, fixed=fixed, v0_kph=args.v0_kph, power_w=args.power_w,
                                   out_dir=args.out)
     echo(format_cycle_work(work, shares))
     echo(f"\nwrote the cycle work and the predicted trace in {args.out}")

@@ -16,46 +16,69 @@ from .cycles import cycle_work, predict_speed_trace
 from .standards import load_draws, to_conditions
 
 
+def _coefficient(draws: Mapping[str, np.ndarray], fixed: Mapping[str, object], name: str):
+    """A parameter's draws, else the model's fixed number, else None."""
+    if name in draws:
+        return np.asarray(draws[name], float).reshape(-1)
+    value = fixed.get(name)
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+
+
 def mass_changed(draws: Mapping[str, np.ndarray], mass_kg_change: float, *,
-                 mass_kg: float | None = None, effective_mass_kg: float) -> dict[str, np.ndarray]:
+                 mass_kg: float | None = None, effective_mass_kg: float,
+                 fixed: Mapping[str, object] | None = None) -> dict[str, np.ndarray]:
     """The F0/F1/F2 draws (reference conditions) of the vehicle ``mass_kg_change`` kg heavier.
 
-    Only the tyres' rolling loss carries the weight: with the fit's tyre coefficients in the
-    draws (``AD``, ``BD``: the rolling loss M g (A_D + B_D v), eq. 2.38), F0 gains
-    dM g A_D and F1 gains dM g B_D / 3.6 (per km/h), the driveline loss and the aerodynamic
-    F2 unchanged (a model's tyre v^2 term, C_R, adds dM g C_R / 3.6^2 to F2: not added, 0.6 %
-    of a car's F2 for 300 kg at C_R 1e-6).  Draws without them (a kind that fits F0-F2 directly) scale F0 and F1 by
-    the test mass ratio (M + dM) / M (``mass_kg``; the effective mass's ratio without it), the
-    whole of F0 and F1 then taken as rolling loss."""
+    Only the tyres' rolling loss carries the weight.  With the fit's tyre coefficients (``AD``
+    and, where the model has them, ``BD`` and the v^2 coefficient C_R
+    ``tyre_quadratic_s2_per_m2``, from the draws or the model's ``fixed`` values), the added
+    load dM g adds its rolling loss dM g [A_D + B_D v + C_R (v^2 - a - b v)] (eq. 2.38 with the
+    SAE J2452 speed law; a + b v :data:`~bayes_roadload.physics.terms.TYRE_QUADRATIC_LINE`),
+    v = V / 3.6 for V in km/h: F0 gains dM g (A_D - C_R a), F1 dM g (B_D - C_R b) / 3.6, F2
+    dM g C_R / 3.6^2; the driveline loss and the aerodynamic drag are unchanged.  Draws without
+    ``AD`` (a kind that fits F0-F2 directly) scale F0 and F1 by the test mass ratio
+    (M + dM) / M (``mass_kg``; the effective mass's ratio without it), the whole of F0 and F1
+    then taken as rolling loss."""
+    from ..physics.terms import TYRE_QUADRATIC_LINE
+
+    fixed = fixed or {}
     f0, f1, f2 = (np.asarray(draws[k], float).reshape(-1) for k in ("F0_N", "F1_N_per_kph", "F2_N_per_kph2"))
     if mass_kg_change == 0.0:
         return {"F0_N": f0, "F1_N_per_kph": f1, "F2_N_per_kph2": f2}
-    if "AD" in draws and "BD" in draws:
-        weight = mass_kg_change * config.GRAVITY_MPS2
-        ad, bd = (np.asarray(draws[k], float).reshape(-1) for k in ("AD", "BD"))
-        return {"F0_N": f0 + weight * ad, "F1_N_per_kph": f1 + weight * bd * config.KPH_TO_MPS, "F2_N_per_kph2": f2}
-    base = mass_kg if mass_kg is not None else effective_mass_kg
-    ratio = (base + mass_kg_change) / base
-    return {"F0_N": f0 * ratio, "F1_N_per_kph": f1 * ratio, "F2_N_per_kph2": f2}
+    ad = _coefficient(draws, fixed, "AD")
+    if ad is None:
+        base = mass_kg if mass_kg is not None else effective_mass_kg
+        ratio = (base + mass_kg_change) / base
+        return {"F0_N": f0 * ratio, "F1_N_per_kph": f1 * ratio, "F2_N_per_kph2": f2}
+    bd = _coefficient(draws, fixed, "BD")
+    cr = _coefficient(draws, fixed, "tyre_quadratic_s2_per_m2")
+    bd = 0.0 if bd is None else bd
+    cr = 0.0 if cr is None else cr
+    a, b = (float(x) for x in TYRE_QUADRATIC_LINE)
+    weight = mass_kg_change * config.GRAVITY_MPS2
+    kph = config.KPH_TO_MPS
+    return {"F0_N": f0 + weight * (ad - cr * a), "F1_N_per_kph": f1 + weight * (bd - cr * b) * kph,
+            "F2_N_per_kph2": f2 + weight * cr * kph**2}
 
 
 def run_predict(source: str | os.PathLike | Mapping[str, np.ndarray], cycle: str, *, effective_mass_kg: float,
                 temperature_k: float = config.REFERENCE_TEMPERATURE_K,
                 pressure_pa: float = config.REFERENCE_PRESSURE_PA, mass_kg_change: float = 0.0,
-                mass_kg: float | None = None, v0_kph: float = 120.0, duration_s: float = 300.0,
-                power_w: float = 0.0, out_dir: str | os.PathLike | None = None
-                ) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+                mass_kg: float | None = None, fixed: Mapping[str, object] | None = None,
+                v0_kph: float = 120.0, duration_s: float = 300.0, power_w: float = 0.0,
+                out_dir: str | os.PathLike | None = None) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     """Cycle work (at reference conditions, :func:`~.cycles.cycle_work`) and a predicted trace
     of a coastdown (``power_w`` 0) or constant-power run at ``temperature_k`` / ``pressure_pa``
     of the vehicle ``mass_kg_change`` kg heavier (:func:`mass_changed`: the rolling loss
     carries the weight; the effective mass, which the trace decelerates, gains the same kg, the
-    rotating inertia unchanged).  ``mass_kg``: the fit's test mass.  With ``out_dir``:
+    rotating inertia unchanged).  ``mass_kg``: the fit's test mass; ``fixed``: the fit's model's
+    fixed parameter values (its tyre coefficients where they are not sampled).  With ``out_dir``:
     ``cycle_work.csv``, ``cycle_work_shares.csv``, ``predicted_trace.csv``.
 
     Returns (work, shares, trace)."""
     draws = load_draws(source) if isinstance(source, (str, os.PathLike)) else source
     work, shares = cycle_work(draws, cycle, effective_mass_kg=effective_mass_kg)
-    heavier = mass_changed(draws, mass_kg_change, mass_kg=mass_kg, effective_mass_kg=effective_mass_kg)
+    heavier = mass_changed(draws, mass_kg_change, mass_kg=mass_kg, effective_mass_kg=effective_mass_kg, fixed=fixed)
     cond = to_conditions(heavier, temperature_k, pressure_pa)
     trace = predict_speed_trace(cond, effective_mass_kg + mass_kg_change, v0_kph=v0_kph, duration_s=duration_s,
                                 power_w=power_w)

@@ -41,3 +41,23 @@ def test_a_heavier_vehicle_adds_rolling_loss_from_the_tyre_coefficients():
     np.testing.assert_allclose(scaled["F0_N"], 300.0 * 1650.0 / 1500.0)
     np.testing.assert_array_equal(mass_changed(draws, 0.0, mass_kg=1500.0, effective_mass_kg=1540.0)["F0_N"],
                                   draws["F0_N"])
+
+
+def test_the_tyre_v2_coefficient_and_a_fixed_b_d_move_the_heavier_vehicle_s_curve():
+    """With C_R (here fixed by the model, as the default holds it) the added rolling loss
+    dM g [A_D + B_D v + C_R (v^2 - a - b v)] is the quadratic in V = 3.6 v that F0 + F1 V + F2 V^2
+    gains: checked against that loss evaluated at 20-130 km/h.  A model without a sampled B_D
+    takes it from ``fixed`` (0 when it has none)."""
+    from bayes_roadload.physics.terms import TYRE_QUADRATIC_LINE
+
+    draws = dict(_draws(), AD=np.full(6, 0.01), F2_N_per_kph2=np.full(6, 0.03))
+    fixed = {"BD": 2e-4, "tyre_quadratic_s2_per_m2": 1e-6, "CL0": "tunnel"}
+    heavier = mass_changed(draws, 300.0, mass_kg=1500.0, effective_mass_kg=1540.0, fixed=fixed)
+    V = np.linspace(20.0, 130.0, 12)
+    v = V / 3.6
+    a, b = TYRE_QUADRATIC_LINE
+    added = 300.0 * 9.81 * (0.01 + 2e-4 * v + 1e-6 * (v**2 - a - b * v))
+    curve = heavier["F0_N"][0] + heavier["F1_N_per_kph"][0] * V + heavier["F2_N_per_kph2"][0] * V**2
+    np.testing.assert_allclose(curve - (300.0 + 0.03 * V**2), added, rtol=1e-12)
+    without_bd = mass_changed(draws, 300.0, mass_kg=1500.0, effective_mass_kg=1540.0)
+    np.testing.assert_allclose(without_bd["F1_N_per_kph"], 0.0)
