@@ -139,7 +139,8 @@ def rescaled_markdown(records: pd.DataFrame, spec: str) -> str:
     if table.empty:
         raise SystemExit(f"--rescale: the records carry no budget column for the source {source!r}")
     lines = [f"The records' intervals with the Type B source `{source}` scaled (a reading in the normal "
-             f"approximation, `analysis.calibration.budget_rescaled`; {len(successful(records))} fits):", "",
+             f"approximation, `analysis.calibration.budget_rescaled`; the {int(table['n'].max())} of the "
+             f"{len(successful(records))} fits whose records carry the source):", "",
              "| quantity | campaigns | source's median share | factor | 95 % coverage | sd(z) | mean z |",
              "|---|---|---|---|---|---|---|"]
     for r in table.itertuples():
@@ -180,6 +181,8 @@ def main(argv=None) -> int:
                     help="with --from-records: add the declared test mass (test_mass_kg) to the records that lack it, "
                          "by simulating those campaigns again, and write it back to --records")
     args = ap.parse_args(argv)
+    if args.rescale is not None and not args.from_records:
+        ap.error("--rescale reads the records without fitting: give --from-records")
     t0 = time.perf_counter()
     wall = None
     if args.from_records:

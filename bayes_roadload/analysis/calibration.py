@@ -249,6 +249,24 @@ def truth_split_table(records: pd.DataFrame, quantity: str, threshold: float) ->
     return _group_coverage(rec, labels)
 
 
+Z975 = 1.959963984540054
+"""The standard normal's 97.5 % quantile: a z within it is a 95 % interval holding the truth
+(in the normal approximation of the budget readings)."""
+
+
+def _scored(records: pd.DataFrame, quantity: str, column: str) -> pd.DataFrame:
+    """The successful fits whose records carry ``column`` and ``quantity``'s truth."""
+    rec = successful(records)
+    return rec[rec[column].notna() & rec[f"{quantity}_truth"].notna()]
+
+
+def _mean_shift(rec: pd.DataFrame, quantity: str, source: str) -> np.ndarray:
+    """A Type B source's shift of ``quantity``'s mean (``{q}_mean_shift_{source}``; 0 for a
+    source centred on the declared value, or records without the column)."""
+    col = f"{quantity}_mean_shift_{source}"
+    return rec[col].fillna(0.0).to_numpy(float) if col in rec else np.zeros(len(rec))
+
+
 def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTITIES) -> pd.DataFrame:
     """Which Type B source makes the intervals too wide or too narrow, from the budget columns of
     the records (:func:`~bayes_roadload.analysis.budget.budget_record`; fits without them are left
@@ -262,12 +280,10 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
     ``coverage95``), so the change is the source's alone.  A reading: the sources' sds are first
     order and the normal approximation is not the recorded interval."""
     rows = []
-    q975 = 1.959963984540054
     for q in quantities:
         if f"{q}_sd_data" not in records:
             continue
-        rec = successful(records)
-        rec = rec[rec[f"{q}_sd_data"].notna() & rec[f"{q}_truth"].notna()]
+        rec = _scored(records, q, f"{q}_sd_data")
         if rec.empty:
             continue
         mean, sd, truth = (rec[f"{q}_{c}"].astype(float).to_numpy() for c in ("mean", "sd", "truth"))
@@ -276,8 +292,7 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
         sources = [c[len(prefix):] for c in rec.columns if c.startswith(prefix) and rec[c].notna().any()]
 
         def shift_of(source: str) -> np.ndarray:
-            col = f"{q}_mean_shift_{source}"
-            return rec[col].fillna(0.0).to_numpy(float) if col in rec else np.zeros(len(rec))
+            return _mean_shift(rec, q, source)
 
         def row(label: str, var_out: np.ndarray, shift: np.ndarray, sd_wo: np.ndarray | None = None) -> dict:
             if sd_wo is None:
@@ -285,8 +300,8 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
             z = (mean - shift - truth) / sd_wo
             return {"quantity": q, "source": label, "n": len(rec),
                     "median_share": float(np.median(var_out / sd**2)),
-                    "z_sd": float(np.std(z_all, ddof=1)), "coverage95": float(np.mean(np.abs(z_all) <= q975)),
-                    "z_sd_without": float(np.std(z, ddof=1)), "coverage95_without": float(np.mean(np.abs(z) <= q975)),
+                    "z_sd": float(np.std(z_all, ddof=1)), "coverage95": float(np.mean(np.abs(z_all) <= Z975)),
+                    "z_sd_without": float(np.std(z, ddof=1)), "coverage95_without": float(np.mean(np.abs(z) <= Z975)),
                     "z_mean_without": float(np.mean(z))}
 
         var = {src: rec[prefix + src].fillna(0.0).to_numpy(float) ** 2 for src in sources}
@@ -301,32 +316,33 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
 
 def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float],
                     quantities: Iterable[str] = QUANTITIES) -> pd.DataFrame:
-    """What the intervals would be with one Type B source's standard uncertainty scaled by each
-    of ``factors`` (1: as fitted), read from the budget columns of the records as
-    :func:`budget_attribution` reads a source left out: the interval's sd becomes
-    sqrt(sd^2 - (1 - f^2) sd_s^2) (the source's first-order share, exact where the source
-    enters the quantity linearly and the fit holds it at its prior mean), z = (mean - truth) /
-    that sd, covered when |z| <= 1.96.  Per quantity and factor: campaigns ``n``, the source's
-    median share of the variance as fitted, ``coverage95``, ``z_sd`` and ``z_mean``.  Quantities
-    whose records lack the source's column are left out.  A reading for designing a budget (on
-    design seeds), not a verdict: a fit with the scaled budget is what a confirmatory run scores."""
-    q975 = 1.959963984540054
+    """What the intervals would be with one Type B source's distribution scaled about the
+    declared value by each of ``factors`` (1: as fitted), read from the budget columns of the
+    records as :func:`budget_attribution` reads a source left out: the interval's sd becomes
+    sqrt(sd^2 - (1 - f^2) sd_s^2) and its mean moves by -(1 - f) shift_s (the source's
+    first-order share and mean shift, exact where the source enters the quantity linearly and
+    the fit holds it at its declared value), z = (mean - truth) / that sd, covered when |z| <=
+    1.96.  Per quantity and factor: the campaigns ``n`` whose records carry the source, the
+    source's median share of the variance as fitted, ``coverage95``, ``z_sd`` and ``z_mean``.
+    A reading for designing a budget (on design seeds), not a verdict: a fit with the scaled
+    budget is what a confirmatory run scores."""
     rows = []
     for q in quantities:
         col = f"{q}_sd_typeb_{source}"
         if col not in records:
             continue
-        rec = successful(records)
-        rec = rec[rec[col].notna() & rec[f"{q}_truth"].notna()]
+        rec = _scored(records, q, col)
         if rec.empty:
             continue
         mean, sd, truth = (rec[f"{q}_{c}"].astype(float).to_numpy() for c in ("mean", "sd", "truth"))
         var_s = rec[col].to_numpy(float) ** 2
+        shift = _mean_shift(rec, q, source)
         for f in factors:
-            z = (mean - truth) / np.sqrt(np.maximum(sd**2 - (1.0 - f * f) * var_s, 1e-300))
+            sd_f = np.sqrt(np.maximum(sd**2 - (1.0 - f * f) * var_s, 1e-300))
+            z = (mean - (1.0 - f) * shift - truth) / sd_f
             rows.append({"quantity": q, "factor": float(f), "n": len(rec),
                          "median_share": float(np.median(var_s / sd**2)),
-                         "coverage95": float(np.mean(np.abs(z) <= q975)), "z_sd": float(np.std(z, ddof=1)),
+                         "coverage95": float(np.mean(np.abs(z) <= Z975)), "z_sd": float(np.std(z, ddof=1)),
                          "z_mean": float(np.mean(z))})
     return pd.DataFrame(rows, columns=["quantity", "factor", "n", "median_share", "coverage95", "z_sd", "z_mean"])
 

@@ -124,6 +124,12 @@ def test_a_source_scaled_to_its_true_size_brings_sd_z_to_one():
     assert r.loc[0.5, "z_sd"] == pytest.approx(1.0, abs=0.05)
     assert r.loc[0.5, "coverage95"] == pytest.approx(0.95, abs=0.02)
     assert r.loc[1.0, "median_share"] == pytest.approx(0.5)
+    # a one-sided source shifts the mean by +0.6 without moving the truth: scaled to 0 it takes
+    # its shift with it (mean z 0), at factor 1 the mean z is 0.6 / sqrt(2)
+    shifted = rec.assign(CD0_mean=rec["CD0_mean"] + 0.6, CD0_mean_shift_tyre=0.6)
+    r = budget_rescaled(shifted, "tyre", (1.0, 0.0), quantities=("CD0",)).set_index("factor")
+    assert r.loc[1.0, "z_mean"] == pytest.approx(0.6 / np.sqrt(2.0), abs=0.04)
+    assert r.loc[0.0, "z_mean"] == pytest.approx(0.0, abs=0.04)
 
 
 def test_the_gates_are_read_apart_by_the_code_that_fitted_them():
