@@ -457,7 +457,8 @@ def _cmd_fit(args) -> int:
         logging.getLogger("bayes_roadload").warning("the NUTS fit FAILED its diagnostic gates (%s): see %s",
                                                     ", ".join(report.diagnostics.get("failed", [])),
                                                     out / "diagnostics.json")
-    for line in [*entry.notes(fit, campaign, tables), *entry.input_notes(campaign, spec)]:
+    fitted = campaign if runs is None else campaign.subset(runs)
+    for line in [*entry.notes(fit, campaign, tables), *entry.input_notes(fitted, spec)]:
         echo(line)
     if pooling_note:
         echo(pooling_note)

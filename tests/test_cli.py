@@ -58,10 +58,11 @@ def test_lsq_without_airspeed_says_it_takes_still_air(campaign_dir, tmp_path, ca
         assert ("takes still air" in capsys.readouterr().out) == said
 
 
-def test_lsq_says_when_f50_lies_outside_the_logged_speeds(campaign_dir, tmp_path, capsys):
+def test_lsq_says_when_no_run_passes_through_f50s_speed(campaign_dir, tmp_path, capsys):
     """F50_N is read at 50 mph (80.5 km/h): runs cut to their part above it carry the figure by
-    the model's speed law alone, and the fit says so; the whole runs (which pass through 50 mph)
-    do not get the note."""
+    the model's speed law alone, and the fit says so, as it does for runs cut on either side of
+    it (the campaign spans 50 mph, no run does); the whole runs (which pass through 50 mph) do
+    not get the note."""
     import shutil
 
     fast = tmp_path / "fast"
@@ -70,11 +71,16 @@ def test_lsq_says_when_f50_lies_outside_the_logged_speeds(campaign_dir, tmp_path
     above = runs[runs["speed_mps"] > config.SPEED_50MPH_MPS + 2.0]
     assert above.groupby("run").size().min() >= 10 and runs["speed_mps"].min() < config.SPEED_50MPH_MPS
     above.to_csv(fast / "runs.csv", index=False)
-    for camp, said in ((fast, True), (campaign_dir, False)):
+    split = tmp_path / "split"
+    shutil.copytree(campaign_dir, split)
+    below = runs[runs["speed_mps"] < config.SPEED_50MPH_MPS - 2.0]
+    assert below.groupby("run").size().min() >= 10
+    pd.concat([above[above["pair"] == 1], below[below["pair"] == 2]]).to_csv(split / "runs.csv", index=False)
+    for camp, said in ((fast, True), (split, True), (campaign_dir, False)):
         assert main(["fit", str(camp), "--method", "lsq", "--model", "three_term", "--no-report",
                      "--out", str(tmp_path / f"o_{camp.name}")]) == 0
         out = capsys.readouterr().out
-        assert ("F50_N's 80.5 km/h lies outside them" in out) == said, out
+        assert ("no run passes through F50_N's 80.5 km/h" in out) == said, out
 
 
 def test_fit_refuses_bad_campaign_and_writes_nothing(tmp_path, capsys):

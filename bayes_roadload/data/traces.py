@@ -152,11 +152,10 @@ class Campaign:
     def _airspeed_readings(self, g: pd.DataFrame):
         """One run's airspeed readings with the anemometer's stated yaw calibration applied
         (:meth:`~bayes_roadload.data.vehicle.Anemometer.yaw_corrected_airspeed`); None without
-        an airspeed channel."""
+        the anemometer (its two channels come together: :func:`~.checks.check_anemometer_pair`)."""
         if "airspeed_mps" not in g:
             return None
-        a = g["airspeed_mps"].to_numpy(float)
-        return self.anemometer.yaw_corrected_airspeed(a, g["yaw_rad"].to_numpy(float)) if "yaw_rad" in g else a
+        return self.anemometer.yaw_corrected_airspeed(g["airspeed_mps"].to_numpy(float), g["yaw_rad"].to_numpy(float))
 
     def to_batch(self):
         """The runs as a padded :class:`~bayes_roadload.physics.RunBatch` (time from each

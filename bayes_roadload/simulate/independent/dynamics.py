@@ -155,8 +155,9 @@ def _tyre_temperature_factor(veh: TrueVehicle, ambient_k: float, excess_k):
 
 
 MIN_RUN_SAMPLES = 10
-"""Fewest samples of a run cut at the track's end (:func:`_cut_at_track_end`; the data layer
-refuses runs of fewer)."""
+"""Fewest samples of a run cut at the track's end (:func:`_cut_at_track_end`): the data
+contract's minimum run length, restated here because this simulator imports nothing of the
+analysis."""
 
 
 def _cut_at_track_end(t: np.ndarray, y: np.ndarray, cond: RunConditions, track: Track | None
@@ -171,8 +172,11 @@ def _cut_at_track_end(t: np.ndarray, y: np.ndarray, cond: RunConditions, track: 
         raise RuntimeError("the run did not reach its stop speed within the sample times")
     x = cond.start_position_m + float(cond.direction) * y[0]
     off = np.flatnonzero((x < track.start_m) | (x > track.end_m))
-    if off.size == 0 or off[0] < MIN_RUN_SAMPLES:
+    if off.size == 0:
         raise RuntimeError("the run did not reach its stop speed within the sample times, nor leave the track")
+    if off[0] < MIN_RUN_SAMPLES:
+        raise RuntimeError(f"the run did not reach its stop speed and left the track after {off[0]} samples "
+                           f"(fewer than {MIN_RUN_SAMPLES})")
     return t[:off[0]], y[:, :off[0]]
 
 
