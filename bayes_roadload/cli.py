@@ -553,7 +553,7 @@ def _cmd_predict(args) -> int:
     _warn_failed_fit(args.fit_dir)
     fd = read_fit_dir(args.fit_dir)
     campaign = _campaign_of_fit(fd)
-    fixed = load_model_spec(fd.model).fixed
+    fixed = load_model_spec(fd.model).fixed if args.mass_change_kg else {}  # the tyre terms it holds fixed
     work, shares, _ = run_predict(args.fit_dir, args.cycle, effective_mass_kg=campaign.vehicle.effective_mass_kg,
                                   temperature_k=args.temperature_k, pressure_pa=args.pressure_pa,
                                   mass_kg_change=args.mass_change_kg, mass_kg=campaign.vehicle.mass_kg, fixed=fixed, v0_kph=args.v0_kph, power_w=args.power_w,
