@@ -190,7 +190,8 @@ def test_fit_nuts_writes_outputs_and_flags_gates(cli_nuts_fit):
 def test_commands_on_a_failed_fit_say_so_first(cli_nuts_fit, tmp_path, capsys):
     """``predict`` and ``report`` on a fit directory whose fit failed its gates print that first,
     before any figure drawn from it (a copy of the shared fit, its diagnostics marked failed);
-    on a passed fit they say nothing of it; an lsq fit directory is named as such."""
+    on a passed fit they say nothing of it, and ``predict --mass-change-kg`` runs on it; an lsq
+    fit directory is named as such."""
     import shutil
 
     failed = tmp_path / "failed"
@@ -207,6 +208,11 @@ def test_commands_on_a_failed_fit_say_so_first(cli_nuts_fit, tmp_path, capsys):
     (passed / "diagnostics.json").write_text(json.dumps(dict(diag, **{"pass": True})))
     assert main(["report", str(passed)]) == 0
     assert "FAILED" not in capsys.readouterr().out
+    # a heavier vehicle (its model read for the tyre terms it fixes) coasts down for longer
+    for kg in (0, 300):
+        assert main(["predict", str(passed), "--mass-change-kg", str(kg), "--out", str(tmp_path / f"m{kg}")]) == 0
+    ends = [pd.read_csv(tmp_path / f"m{kg}" / "predicted_trace.csv")["time_s"].max() for kg in (0, 300)]
+    assert ends[1] > ends[0]
 
 
 def test_predict_on_an_lsq_fit_names_it(campaign_dir, tmp_path, capsys):
