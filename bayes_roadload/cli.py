@@ -442,7 +442,7 @@ def _cmd_fit(args) -> int:
         if not campaign.has_anemometer and args.grouping != "run":
             echo(f"note: no airspeed logged: this least-squares fit of each {args.grouping} takes still air, and a "
                  "wind that differs between the directions biases shared coefficients (more than each run's own "
-                 "fit: --grouping run); the NUTS fit (--method nuts) carries a latent wind per pair")
+                 "fit: --grouping run); the NUTS fit with --model speed_only_wind carries a latent wind per pair")
         echo(f"\nwrote {out / 'summary.csv'}, per_group.csv, fit.json")
         _after_fit(args, out, campaign)
         return 0

@@ -358,6 +358,17 @@ def _air_notes(fit, campaign, extras) -> list[str]:
     return [ambient_line(ambient_record(campaign))]
 
 
+def _trace_air_notes(fit, campaign, extras) -> list[str]:
+    """:func:`_air_notes`, and, when the model took still air for want of an anemometer, that it
+    did and which model estimates the wind instead."""
+    lines = _air_notes(fit, campaign, extras)
+    if fit.problem.spec.resolve_air(campaign) == "still":
+        lines.append("note: no anemometer logged (airspeed_mps, yaw_rad): the fit takes still air, and a wind that "
+                     "differs between the directions biases the coefficients; --model speed_only_wind fits a latent "
+                     "wind per pair")
+    return lines
+
+
 GRADE_TERMS = ("gradient", "gradient_profile")
 """Terms of a model file that carry the track's grade themselves (fitted, not surveyed)."""
 
@@ -443,7 +454,7 @@ KINDS: dict[str, KindEntry] = {e.name: e for e in (
     KindEntry("traces", "speed-trace", Campaign, traces_default_model, _check_traces, _fit_traces,
               trace_report, lsq=True, driveline_channel=off_load_channel, diagnosis="traces",
               diagnosis_model="three_term", type_b=_traces_type_b, default_pooling=traces_default_pooling,
-              lagged_speed_drop=True, notes=_air_notes, input_notes=_trace_input_lines,
+              lagged_speed_drop=True, notes=_trace_air_notes, input_notes=_trace_input_lines,
               default_models={"four_term_tyre_lag_admittance_pitch_shapes":
                                   f"Bayesian fit up to {config.HEAVY_DUTY_MASS_KG:g} kg test mass",
                               "four_term_tyre_lag_admittance_heavy_pitch_shapes":

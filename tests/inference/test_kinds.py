@@ -138,3 +138,24 @@ def test_the_speed_trace_default_takes_a_heavy_vehicles_priors_above_3500_kg():
     for name in ("CD0", "KD"):
         assert heavy.priors[name].loc > light.priors[name].loc + light.priors[name].scale
     assert heavy.fixed["tyre_quadratic_s2_per_m2"] < light.fixed["tyre_quadratic_s2_per_m2"]
+
+
+def test_a_speed_trace_fit_in_still_air_for_want_of_an_anemometer_says_so(small_campaign):
+    """The default model reads the anemometer when the campaign logs it, else takes still air:
+    the second says so after the table and names the model that fits a latent wind; a model that
+    estimates the wind (``speed_only_wind``) or reads the anemometer does not get the note."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from bayes_roadload.inference.spec import load_model_spec
+
+    notes = KINDS["traces"].notes
+    speed_only = dataclasses.replace(small_campaign, runs=small_campaign.runs.drop(columns=["airspeed_mps", "yaw_rad"]))
+
+    def said(campaign, model):
+        fit = SimpleNamespace(problem=SimpleNamespace(spec=load_model_spec(model)))
+        return any("takes still air" in line and "speed_only_wind" in line for line in notes(fit, campaign, {}))
+
+    assert said(speed_only, "four_term")
+    assert not said(speed_only, "speed_only_wind")
+    assert not said(small_campaign, "four_term")
