@@ -546,7 +546,6 @@ def _cmd_dyno(args) -> int:
 
 def _cmd_predict(args) -> int:
     from .analysis.predict import format_cycle_work, run_predict
-
     from .inference.spec import load_model_spec
     from .output import read_fit_dir
 
@@ -556,8 +555,8 @@ def _cmd_predict(args) -> int:
     fixed = load_model_spec(fd.model).fixed if args.mass_change_kg else {}  # the tyre terms it holds fixed
     work, shares, _ = run_predict(args.fit_dir, args.cycle, effective_mass_kg=campaign.vehicle.effective_mass_kg,
                                   temperature_k=args.temperature_k, pressure_pa=args.pressure_pa,
-                                  mass_kg_change=args.mass_change_kg, mass_kg=campaign.vehicle.mass_kg, fixed=fixed, v0_kph=args.v0_kph, power_w=args.power_w,
-                                  out_dir=args.out)
+                                  mass_kg_change=args.mass_change_kg, mass_kg=campaign.vehicle.mass_kg, fixed=fixed,
+                                  v0_kph=args.v0_kph, power_w=args.power_w, out_dir=args.out)
     echo(format_cycle_work(work, shares))
     echo(f"\nwrote the cycle work and the predicted trace in {args.out}")
     return 0
