@@ -41,6 +41,8 @@ COMMON_HELP = {
 }
 """Help of the options that several commands share (set where a command gives none)."""
 STANDARD_NAMES = ("gtr15", "j2263", "j1263", "cfr1066", "cfr1037")
+DYNO_STANDARDS = ("gtr15", "j2263", "j1263")
+"""The standards whose result is road-load coefficients, a dynamometer's target."""
 WRITES_OUT = ("demo", "simulate", "fit", "fit-driveline", "dyno", "predict", "plan", "diagnose", "import-vbox")
 """Commands whose ``--out`` directory must be empty or new (``--force`` replaces an earlier
 output there); ``report`` writes into its fit directory and ``batch`` resumes in its own."""
@@ -538,7 +540,23 @@ def _cmd_dyno(args) -> int:
     from .analysis.dyno import format_dyno, run_dyno
 
     _warn_failed_fit(args.target_fit_dir)
-    result = run_dyno(args.target_fit_dir, args.dyno_coastdown, tolerance_n=args.tolerance_n, out_dir=args.out)
+    target = args.target_fit_dir
+    if args.standard:
+        from .analysis.standards import get_standard, load_draws, mass_scale, standard_coefficients
+        from .output import read_fit_dir
+
+        std = get_standard(args.standard)
+        vehicle = _campaign_of_fit(read_fit_dir(target)).vehicle
+        scale = mass_scale(std, mass_kg=vehicle.mass_kg, effective_mass_kg=vehicle.effective_mass_kg,
+                           rotating_inertia_known=args.rotating_inertia_known,
+                           tyres_in_contact=vehicle.tyres_in_contact if args.tyres_in_contact is None
+                           else args.tyres_in_contact,
+                           mass_in_running_order_kg=vehicle.mass_in_running_order_kg)
+        target = standard_coefficients(load_draws(target), std, scale)
+        echo(f"target: the road load in {std.title}'s terms ({std.temperature_k:g} K, {std.pressure_pa:g} Pa, "
+             f"its mass convention: the fit's forces x {scale:.4f})")
+    result = run_dyno(target, args.dyno_coastdown, tolerance_n=args.tolerance_n, out_dir=args.out,
+                      target_terms=args.standard)
     echo(format_dyno(result))
     echo(f"\nwrote {Path(args.out) / 'dyno_set.csv'}, dyno_checks.csv, dyno.json")
     return 0
@@ -1184,6 +1202,13 @@ def build_parser() -> argparse.ArgumentParser:
                          "consecutive coastdowns at one setting are regressed together (GTR 15 8.1.3.4.2 accepts a "
                          "setting on two)")
     dy.add_argument("--tolerance-n", type=float, default=10.0, help="load tolerance at the check speeds, N")
+    dy.add_argument("--standard", choices=DYNO_STANDARDS, default=None,
+                    help="take the target in the standard's terms (its reference conditions and mass convention, "
+                         "as `report --standard` gives f0, f1, f2) instead of the fit's own reference road load")
+    dy.add_argument("--rotating-inertia-known", action="store_true",
+                    help="with --standard: keep the fit's effective mass (measured), not the standard's convention")
+    dy.add_argument("--tyres-in-contact", type=int, default=None,
+                    help="with --standard of a per-tyre mass convention (default: vehicle.toml)")
     dy.add_argument("--out", required=True, help="directory for dyno_set.csv, dyno_checks.csv, dyno.json")
     dy.set_defaults(func=_cmd_dyno)
 

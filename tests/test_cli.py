@@ -552,11 +552,44 @@ def test_hierarchical_spindown_carries_the_test_to_test_scatter(tmp_path):
 
 
 def test_standard_choices_are_the_standards_table():
-    """``--standard`` offers exactly the standards implemented in analysis.standards."""
+    """``--standard`` offers exactly the standards implemented in analysis.standards; ``dyno
+    --standard`` those whose result is road-load coefficients."""
     from bayes_roadload.analysis.standards import STANDARDS
-    from bayes_roadload.cli import STANDARD_NAMES
+    from bayes_roadload.cli import DYNO_STANDARDS, STANDARD_NAMES
 
     assert STANDARD_NAMES == tuple(STANDARDS)
+    assert DYNO_STANDARDS == tuple(k for k, v in STANDARDS.items() if v.result == "coefficients")
+
+
+def test_dyno_takes_its_target_in_a_standards_terms(cli_nuts_fit, tmp_path, capsys):
+    """``dyno --standard j2263``: the target is the fit's road load at J2263's reference
+    conditions and its M_e = 1.03 M (analysis.standards.standard_coefficients); one coastdown's
+    set coefficients move from the fit-target run's by exactly the difference of the two targets'
+    means (set = target - parasitic, the parasitic losses the same coastdown's)."""
+    import numpy as np
+
+    from bayes_roadload.analysis import standards
+    from bayes_roadload.data.dyno import save_dyno
+    from bayes_roadload.output import fit_campaign, read_fit_dir
+    from bayes_roadload.simulate.dyno import simulate_dyno
+
+    save_dyno(simulate_dyno((100.0, 0.5, 0.03), (10.0, 0.1, 0.002), 1500.0, speed_noise_mps=0.01, seed=1),
+              tmp_path / "d1")
+    fit = str(cli_nuts_fit.fit_dir)
+    runs = {}
+    for name, extra in (("fit", []), ("j2263", ["--standard", "j2263"])):
+        assert main(["dyno", fit, str(tmp_path / "d1"), "--out", str(tmp_path / name), *extra]) == 0
+        runs[name] = json.loads((tmp_path / name / "dyno.json").read_text())
+    assert "target: the road load in SAE J2263" in capsys.readouterr().out
+    assert runs["fit"]["target"] == "fit" and runs["j2263"]["target"] == "j2263"
+    draws = standards.load_draws(fit)
+    vehicle = fit_campaign(read_fit_dir(fit).record).vehicle
+    scale = 1.03 * vehicle.mass_kg / vehicle.effective_mass_kg
+    std = standards.standard_coefficients(draws, "j2263", scale)
+    keys = ("F0_N", "F1_N_per_kph", "F2_N_per_kph2")
+    expected = [float(np.mean(std[k]) - np.mean(draws[k])) for k in keys]
+    np.testing.assert_allclose(np.subtract(runs["j2263"]["set_next"], runs["fit"]["set_next"]), expected,
+                               rtol=1e-9, atol=1e-12)
 
 
 def test_version_and_defaults_in_help(capsys):

@@ -235,6 +235,23 @@ def mass_scale(std: "Standard", *, mass_kg: float | None, effective_mass_kg: flo
     return scale
 
 
+def standard_coefficients(samples: Mapping[str, np.ndarray], standard: str | Standard,
+                          scale: float = 1.0) -> dict[str, np.ndarray]:
+    """The F0/F1/F2 draws (SI, per km/h) in the standard's terms: at its reference temperature,
+    pressure and air density (:func:`to_conditions`), rescaled by ``scale`` to its mass
+    convention (:func:`mass_scale`), and, for a two-term standard, projected onto {1, v^2}
+    over its speed range (:func:`two_term_projection`)."""
+    std = get_standard(standard)
+    c = to_conditions(samples, std.temperature_k, std.pressure_pa, mass_scale=scale,
+                      air_density_kgpm3=std.density_kgpm3)
+    if std.two_term:
+        alpha, beta = two_term_projection(std.speed_range_kph)
+        f1 = np.asarray(c["F1_N_per_kph"], float)
+        c = dict(c, F0_N=np.asarray(c["F0_N"], float) + alpha * f1, F1_N_per_kph=np.zeros_like(f1),
+                 F2_N_per_kph2=np.asarray(c["F2_N_per_kph2"], float) + beta * f1)
+    return c
+
+
 def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard, *,
                     mass_kg: float | None = None, effective_mass_kg: float | None = None,
                     rotating_inertia_known: bool = False, frontal_area_m2: float | None = None,
@@ -266,14 +283,8 @@ def standard_result(samples: Mapping[str, np.ndarray], standard: str | Standard,
     scale = mass_scale(std, mass_kg=mass_kg, effective_mass_kg=effective_mass_kg,
                        rotating_inertia_known=rotating_inertia_known, tyres_in_contact=tyres_in_contact,
                        mass_in_running_order_kg=mass_in_running_order_kg)
-    c = to_conditions(samples, std.temperature_k, std.pressure_pa, mass_scale=scale,
-                      air_density_kgpm3=std.density_kgpm3)
+    c = standard_coefficients(samples, std, scale)
     yaw_deg = std.cda_yaw_deg if yaw_deg is None else yaw_deg
-    if std.two_term:
-        alpha, beta = two_term_projection(std.speed_range_kph)
-        f1 = np.asarray(c["F1_N_per_kph"], float)
-        c = dict(c, F0_N=np.asarray(c["F0_N"], float) + alpha * f1, F1_N_per_kph=np.zeros_like(f1),
-                 F2_N_per_kph2=np.asarray(c["F2_N_per_kph2"], float) + beta * f1)
     rows = []
     if std.units == "SI_kph":
         rows += [_row("f0", "N", c["F0_N"]), _row("f1", "N/(km/h)", c["F1_N_per_kph"]),
