@@ -549,14 +549,15 @@ def _cmd_dyno(args) -> int:
         vehicle = _campaign_of_fit(read_fit_dir(target)).vehicle
         scale = mass_scale(std, mass_kg=vehicle.mass_kg, effective_mass_kg=vehicle.effective_mass_kg,
                            rotating_inertia_known=args.rotating_inertia_known,
-                           tyres_in_contact=vehicle.tyres_in_contact if args.tyres_in_contact is None
-                           else args.tyres_in_contact,
                            mass_in_running_order_kg=vehicle.mass_in_running_order_kg)
         target = standard_coefficients(load_draws(target), std, scale)
+        terms = {"standard": std.name, "mass_scale": scale, "effective_mass_kg": vehicle.effective_mass_kg * scale,
+                 "rotating_inertia_known": bool(args.rotating_inertia_known)}
         echo(f"target: the road load in {std.title}'s terms ({std.temperature_k:g} K, {std.pressure_pa:g} Pa, "
-             f"its mass convention: the fit's forces x {scale:.4f})")
+             f"its mass convention M_e {terms['effective_mass_kg']:.1f} kg: the fit's forces x {scale:.4f}); the "
+             "adjustment and its acceptance stay GTR 15's")
     result = run_dyno(target, args.dyno_coastdown, tolerance_n=args.tolerance_n, out_dir=args.out,
-                      target_terms=args.standard)
+                      target_terms=terms if args.standard else None)
     echo(format_dyno(result))
     echo(f"\nwrote {Path(args.out) / 'dyno_set.csv'}, dyno_checks.csv, dyno.json")
     return 0
@@ -1207,8 +1208,6 @@ def build_parser() -> argparse.ArgumentParser:
                          "as `report --standard` gives f0, f1, f2) instead of the fit's own reference road load")
     dy.add_argument("--rotating-inertia-known", action="store_true",
                     help="with --standard: keep the fit's effective mass (measured), not the standard's convention")
-    dy.add_argument("--tyres-in-contact", type=int, default=None,
-                    help="with --standard of a per-tyre mass convention (default: vehicle.toml)")
     dy.add_argument("--out", required=True, help="directory for dyno_set.csv, dyno_checks.csv, dyno.json")
     dy.set_defaults(func=_cmd_dyno)
 

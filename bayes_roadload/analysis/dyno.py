@@ -215,14 +215,15 @@ def adjust_dyno(target, run_coastdown: Callable[[np.ndarray], pd.DataFrame], ine
 def run_dyno(target: str | os.PathLike | Mapping[str, np.ndarray],
              dyno: str | os.PathLike | DynoCoastdown | Sequence[str | os.PathLike | DynoCoastdown], *,
              tolerance_n: float = DYNO_TOLERANCE_N, out_dir: str | os.PathLike | None = None,
-             target_terms: str | None = None) -> DynoResult:
+             target_terms: Mapping[str, object] | None = None) -> DynoResult:
     """``bayes-roadload dyno TARGET_FIT_DIR DYNO_COASTDOWN [DYNO_COASTDOWN ...] --out DIR``: set
     coefficients from the target fit's posterior draws and measured dynamometer coastdown
     directories at one setting, regressed together (:func:`set_from_coastdown`; two
     consecutive coastdowns are GTR 15 8.1.3.4.2's acceptance).  Coastdowns at different
     settings or inertias are refused.  With ``out_dir``: ``dyno_set.csv`` (set coefficients'
     posterior, parasitic losses), ``dyno_checks.csv`` and ``dyno.json`` (``target``:
-    ``target_terms``, the standard whose terms the target draws are in, "fit" without one)."""
+    ``target_terms``, the standard whose terms the target draws are in with its mass scale and
+    effective mass, or "fit" without one)."""
     draws = load_draws(target) if isinstance(target, (str, os.PathLike)) else target
     many = [dyno] if isinstance(dyno, (str, os.PathLike, DynoCoastdown)) else list(dyno)
     coastdowns = [load_dyno(x) if isinstance(x, (str, os.PathLike)) else x for x in many]
@@ -240,7 +241,7 @@ def run_dyno(target: str | os.PathLike | Mapping[str, np.ndarray],
         res.summary().to_csv(out / "dyno_set.csv", index=False)
         res.checks.to_csv(out / "dyno_checks.csv", index=False)
         (out / "dyno.json").write_text(json.dumps({
-            "target": target_terms or "fit", "inertia_kg": d.inertia_kg, "set_used": list(d.set_coefficients),
+            "target": dict(target_terms) if target_terms else "fit", "inertia_kg": d.inertia_kg, "set_used": list(d.set_coefficients),
             "set_next": [float(x) for x in res.set_coefficients],
             "parasitic": [float(x) for x in res.parasitic_coefficients],
             "parasitic_truth": None if d.parasitic_truth is None else list(d.parasitic_truth),

@@ -362,7 +362,7 @@ def _trace_air_notes(fit, campaign, extras) -> list[str]:
     """:func:`_air_notes`, and, when the model took still air for want of an anemometer, that it
     did and which model estimates the wind instead."""
     lines = _air_notes(fit, campaign, extras)
-    if fit.problem.spec.resolve_air(campaign) == "still":
+    if not campaign.has_anemometer and fit.problem.spec.resolve_air(campaign) == "still":
         lines.append("note: no anemometer logged (airspeed_mps, yaw_rad): the fit takes still air, and a wind that "
                      "differs between the directions biases the coefficients; --model speed_only_wind fits a latent "
                      "wind per pair")

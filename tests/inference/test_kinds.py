@@ -143,7 +143,8 @@ def test_the_speed_trace_default_takes_a_heavy_vehicles_priors_above_3500_kg():
 def test_a_speed_trace_fit_in_still_air_for_want_of_an_anemometer_says_so(small_campaign):
     """The default model reads the anemometer when the campaign logs it, else takes still air:
     the second says so after the table and names the model that fits a latent wind; a model that
-    estimates the wind (``speed_only_wind``) or reads the anemometer does not get the note."""
+    estimates the wind (``speed_only_wind``), reads the anemometer, or takes still air by its own
+    choice on a campaign that logs one (``split_f0_f2``: ``air = "still"``) does not get it."""
     import dataclasses
     from types import SimpleNamespace
 
@@ -159,3 +160,4 @@ def test_a_speed_trace_fit_in_still_air_for_want_of_an_anemometer_says_so(small_
     assert said(speed_only, "four_term")
     assert not said(speed_only, "speed_only_wind")
     assert not said(small_campaign, "four_term")
+    assert load_model_spec("split_f0_f2").air == "still" and not said(small_campaign, "split_f0_f2")
