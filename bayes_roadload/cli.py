@@ -542,15 +542,16 @@ def _cmd_dyno(args) -> int:
     _warn_failed_fit(args.target_fit_dir)
     target = args.target_fit_dir
     if args.standard:
-        from .analysis.standards import get_standard, load_draws, mass_scale, standard_coefficients
+        from .analysis.standards import flat_draws, get_standard, mass_scale, standard_coefficients
         from .output import read_fit_dir
 
         std = get_standard(args.standard)
-        vehicle = _campaign_of_fit(read_fit_dir(target)).vehicle
+        fd = read_fit_dir(target)
+        vehicle = _campaign_of_fit(fd).vehicle
         scale = mass_scale(std, mass_kg=vehicle.mass_kg, effective_mass_kg=vehicle.effective_mass_kg,
                            rotating_inertia_known=args.rotating_inertia_known,
                            mass_in_running_order_kg=vehicle.mass_in_running_order_kg)
-        target = standard_coefficients(load_draws(target), std, scale)
+        target = standard_coefficients(flat_draws(fd.samples, fd.path / "posterior.nc"), std, scale)
         terms = {"standard": std.name, "mass_scale": scale, "effective_mass_kg": vehicle.effective_mass_kg * scale,
                  "rotating_inertia_known": bool(args.rotating_inertia_known)}
         echo(f"target: the road load in {std.title}'s terms ({std.temperature_k:g} K, {std.pressure_pa:g} Pa, "
@@ -565,6 +566,7 @@ def _cmd_dyno(args) -> int:
 
 def _cmd_predict(args) -> int:
     from .analysis.predict import format_cycle_work, run_predict
+    from .analysis.standards import flat_draws
     from .inference.spec import load_model_spec
     from .output import read_fit_dir
 
@@ -572,7 +574,8 @@ def _cmd_predict(args) -> int:
     fd = read_fit_dir(args.fit_dir)
     campaign = _campaign_of_fit(fd)
     fixed = load_model_spec(fd.model).fixed if args.mass_change_kg else {}  # the tyre terms it holds fixed
-    work, shares, _ = run_predict(args.fit_dir, args.cycle, effective_mass_kg=campaign.vehicle.effective_mass_kg,
+    draws = flat_draws(fd.samples, fd.path / "posterior.nc")  # the directory's posterior, read once
+    work, shares, _ = run_predict(draws, args.cycle, effective_mass_kg=campaign.vehicle.effective_mass_kg,
                                   temperature_k=args.temperature_k, pressure_pa=args.pressure_pa,
                                   mass_kg_change=args.mass_change_kg, mass_kg=campaign.vehicle.mass_kg, fixed=fixed,
                                   v0_kph=args.v0_kph, power_w=args.power_w, out_dir=args.out)

@@ -241,7 +241,8 @@ def run_dyno(target: str | os.PathLike | Mapping[str, np.ndarray],
         res.summary().to_csv(out / "dyno_set.csv", index=False)
         res.checks.to_csv(out / "dyno_checks.csv", index=False)
         (out / "dyno.json").write_text(json.dumps({
-            "target": dict(target_terms) if target_terms else "fit", "inertia_kg": d.inertia_kg, "set_used": list(d.set_coefficients),
+            "target": dict(target_terms) if target_terms else "fit", "inertia_kg": d.inertia_kg,
+            "set_used": list(d.set_coefficients),
             "set_next": [float(x) for x in res.set_coefficients],
             "parasitic": [float(x) for x in res.parasitic_coefficients],
             "parasitic_truth": None if d.parasitic_truth is None else list(d.parasitic_truth),

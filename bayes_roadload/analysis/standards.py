@@ -441,13 +441,16 @@ def load_draws(fit_dir: str | Path) -> dict[str, np.ndarray]:
     if not path.is_file():
         raise ValueError(f"{fit_dir}: no posterior.nc (a NUTS fit directory from `bayes-roadload fit`)")
     post = az.from_netcdf(str(path)).posterior
-    out = {}
-    for name, da in post.data_vars.items():
-        if da.ndim == 2:  # chain, draw
-            out[str(name)] = np.asarray(da.values, float).reshape(-1)
+    return flat_draws({str(name): da.values for name, da in post.data_vars.items()}, path)
+
+
+def flat_draws(samples: Mapping[str, np.ndarray], where: str | Path) -> dict[str, np.ndarray]:
+    """The scalar parameters of posterior ``samples`` ([chain, draw] arrays; others left out)
+    flattened over chains, refused naming ``where`` when the road-load coefficients are missing."""
+    out = {k: np.asarray(v, float).reshape(-1) for k, v in samples.items() if np.ndim(v) == 2}
     missing = [k for k in COEFFICIENTS if k not in out]
     if missing:
-        raise ValueError(f"{path}: posterior lacks {', '.join(missing)}")
+        raise ValueError(f"{where}: posterior lacks {', '.join(missing)}")
     return out
 
 
