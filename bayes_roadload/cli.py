@@ -575,11 +575,11 @@ def _cmd_predict(args) -> int:
     campaign = _campaign_of_fit(fd)
     fixed = load_model_spec(fd.model).fixed if args.mass_change_kg else {}  # the tyre terms it holds fixed
     draws = flat_draws(fd.samples, fd.path / "posterior.nc")  # the directory's posterior, read once
-    work, shares, _ = run_predict(draws, args.cycle, effective_mass_kg=campaign.vehicle.effective_mass_kg,
-                                  temperature_k=args.temperature_k, pressure_pa=args.pressure_pa,
-                                  mass_kg_change=args.mass_change_kg, mass_kg=campaign.vehicle.mass_kg, fixed=fixed,
-                                  v0_kph=args.v0_kph, power_w=args.power_w, out_dir=args.out)
-    echo(format_cycle_work(work, shares))
+    pred = run_predict(draws, args.cycle, effective_mass_kg=campaign.vehicle.effective_mass_kg,
+                       temperature_k=args.temperature_k, pressure_pa=args.pressure_pa,
+                       mass_kg_change=args.mass_change_kg, mass_kg=campaign.vehicle.mass_kg, fixed=fixed,
+                       v0_kph=args.v0_kph, power_w=args.power_w, out_dir=args.out)
+    echo(format_cycle_work(pred.work, pred.shares, pred.work_mass_changed))
     echo(f"\nwrote the cycle work and the predicted trace in {args.out}")
     return 0
 
@@ -1222,7 +1222,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "or a CSV with time_s, speed_kph")
     pr.add_argument("--temperature-k", type=float, default=293.15, help="ambient temperature of the predicted trace, K")
     pr.add_argument("--pressure-pa", type=float, default=100000.0, help="ambient pressure of the predicted trace, Pa")
-    pr.add_argument("--mass-change-kg", type=float, default=0.0, help="test mass change of the predicted trace, kg")
+    pr.add_argument("--mass-change-kg", type=float, default=0.0,
+                    help="test mass change, kg, of the predicted trace and of a second cycle work "
+                         "(cycle_work_mass_changed.csv)")
     pr.add_argument("--v0-kph", type=float, default=120.0, help="start speed of the predicted trace, km/h")
     pr.add_argument("--power-w", type=float, default=0.0,
                     help="constant tractive power of the predicted trace, W (0: a coastdown)")

@@ -219,6 +219,12 @@ def test_commands_on_a_failed_fit_say_so_first(cli_nuts_fit, tmp_path, capsys, m
         assert main(["predict", str(passed), "--mass-change-kg", str(kg), "--out", str(tmp_path / f"m{kg}")]) == 0
     ends = [pd.read_csv(tmp_path / f"m{kg}" / "predicted_trace.csv")["time_s"].max() for kg in (0, 300)]
     assert ends[1] > ends[0]
+    # and its cycle work, written beside the fitted vehicle's, is larger (more rolling loss)
+    assert not (tmp_path / "m0" / "cycle_work_mass_changed.csv").exists()
+    work, heavier = (pd.read_csv(tmp_path / "m300" / f).set_index("quantity")["mean"]
+                     for f in ("cycle_work.csv", "cycle_work_mass_changed.csv"))
+    assert heavier["road_load_work"] > work["road_load_work"]
+    assert "with the test mass +300 kg" in capsys.readouterr().out
     model = json.loads((passed / "fit.json").read_text())["model"]
     assert given == [{}, load_model_spec(model).fixed]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Mapping
+from typing import Mapping, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -61,24 +61,40 @@ def mass_changed(draws: Mapping[str, np.ndarray], mass_kg_change: float, *,
             "F2_N_per_kph2": f2 + weight * cr * kph**2}
 
 
+class Prediction(NamedTuple):
+    """What :func:`run_predict` computes: the cycle work of the fitted vehicle (``work``,
+    ``shares``), the predicted trace (``trace``) and, for a mass change, the cycle work of the
+    changed vehicle (``work_mass_changed``; None without one)."""
+
+    work: pd.DataFrame
+    shares: pd.DataFrame
+    trace: pd.DataFrame
+    work_mass_changed: pd.DataFrame | None = None
+
+
 def run_predict(source: str | os.PathLike | Mapping[str, np.ndarray], cycle: str, *, effective_mass_kg: float,
                 temperature_k: float = config.REFERENCE_TEMPERATURE_K,
                 pressure_pa: float = config.REFERENCE_PRESSURE_PA, mass_kg_change: float = 0.0,
                 mass_kg: float | None = None, fixed: Mapping[str, object] | None = None,
                 v0_kph: float = 120.0, duration_s: float = 300.0, power_w: float = 0.0,
-                out_dir: str | os.PathLike | None = None) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+                out_dir: str | os.PathLike | None = None) -> Prediction:
     """Cycle work (at reference conditions, :func:`~.cycles.cycle_work`) and a predicted trace
     of a coastdown (``power_w`` 0) or constant-power run at ``temperature_k`` / ``pressure_pa``
     of the vehicle ``mass_kg_change`` kg heavier (:func:`mass_changed`: the rolling loss
     carries the weight; the effective mass, which the trace decelerates, gains the same kg, the
-    rotating inertia unchanged).  ``mass_kg``: the fit's test mass; ``fixed``: the fit's model's
-    fixed parameter values (its tyre coefficients where they are not sampled).  With ``out_dir``:
-    ``cycle_work.csv``, ``cycle_work_shares.csv``, ``predicted_trace.csv``.
-
-    Returns (work, shares, trace)."""
+    rotating inertia unchanged).  With a mass change the cycle work of the changed vehicle too
+    (reference conditions, its F0-F2 from :func:`mass_changed`, its inertia M_e + dM; column
+    ``mass_change_kg``).  ``mass_kg``: the fit's test mass; ``fixed``: the fit's model's fixed
+    parameter values (its tyre coefficients where they are not sampled).  With ``out_dir``:
+    ``cycle_work.csv``, ``cycle_work_shares.csv``, ``predicted_trace.csv`` and, with a mass
+    change, ``cycle_work_mass_changed.csv``."""
     draws = load_draws(source) if isinstance(source, (str, os.PathLike)) else source
     work, shares = cycle_work(draws, cycle, effective_mass_kg=effective_mass_kg)
     heavier = mass_changed(draws, mass_kg_change, mass_kg=mass_kg, effective_mass_kg=effective_mass_kg, fixed=fixed)
+    work_changed = None
+    if mass_kg_change != 0.0:
+        work_changed, _ = cycle_work(heavier, cycle, effective_mass_kg=effective_mass_kg + mass_kg_change)
+        work_changed["mass_change_kg"] = float(mass_kg_change)
     cond = to_conditions(heavier, temperature_k, pressure_pa)
     trace = predict_speed_trace(cond, effective_mass_kg + mass_kg_change, v0_kph=v0_kph, duration_s=duration_s,
                                 power_w=power_w)
@@ -88,14 +104,22 @@ def run_predict(source: str | os.PathLike | Mapping[str, np.ndarray], cycle: str
         work.to_csv(out / "cycle_work.csv", index=False)
         shares.to_csv(out / "cycle_work_shares.csv", index=False)
         trace.to_csv(out / "predicted_trace.csv", index=False)
-    return work, shares, trace
+        if work_changed is not None:
+            work_changed.to_csv(out / "cycle_work_mass_changed.csv", index=False)
+    return Prediction(work, shares, trace, work_changed)
 
 
-def format_cycle_work(work: pd.DataFrame, shares: pd.DataFrame) -> str:
-    """Plain-text cycle work (mean [2.5 %, 97.5 %]) and the variance shares."""
+def format_cycle_work(work: pd.DataFrame, shares: pd.DataFrame, work_mass_changed: pd.DataFrame | None = None) -> str:
+    """Plain-text cycle work (mean [2.5 %, 97.5 %]) and the variance shares; with
+    ``work_mass_changed``, the changed vehicle's work after them."""
     lines = [f"  {work['cycle'].iloc[0]} road-load work:"]
     for _, r in work.iterrows():
         lines.append(f"  {r['quantity']:<24} {r['mean']:10.5g} {r['unit']:<6} [{r['q2.5']:.5g}, {r['q97.5']:.5g}]")
     lines.append("  variance share: " + ", ".join(f"{p} {s:.0%}" for p, s in
                                                    zip(shares["parameter"], shares["variance_share"])))
+    if work_mass_changed is not None:
+        dm = float(work_mass_changed["mass_change_kg"].iloc[0])
+        lines.append(f"  with the test mass {dm:+g} kg (reference conditions):")
+        for _, r in work_mass_changed.iterrows():
+            lines.append(f"  {r['quantity']:<24} {r['mean']:10.5g} {r['unit']:<6} [{r['q2.5']:.5g}, {r['q97.5']:.5g}]")
     return "\n".join(lines)

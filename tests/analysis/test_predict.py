@@ -1,6 +1,7 @@
 """predict: cycle work and the trace of a manoeuvre at other conditions or mass."""
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from bayes_roadload.analysis.predict import format_cycle_work, mass_changed, run_predict
@@ -14,8 +15,8 @@ def test_coastdown_at_other_temperature_and_mass_by_hand(tmp_path):
     """f0 = 300 N at 293.2 K; at 283.2 K the tyre factor is 1 - 0.0086 (283.2 - 293.2) = 1.086 and
     with M_e 1500 + 150 kg, f0 scales by 1650/1500 (tyre load ~ mass): F = 300*1.086*1.1 N,
     decel F/1650 = 0.19548 m/s^2, so from 72 km/h (20 m/s) at t = 50 s: 20 - 9.774 m/s."""
-    work, shares, trace = run_predict(_draws(), "hwfet", effective_mass_kg=1500.0, temperature_k=283.2,
-                                      mass_kg_change=150.0, v0_kph=72.0, duration_s=80.0, out_dir=tmp_path)
+    work, shares, trace, heavier = run_predict(_draws(), "hwfet", effective_mass_kg=1500.0, temperature_k=283.2,
+                                               mass_kg_change=150.0, v0_kph=72.0, duration_s=80.0, out_dir=tmp_path)
     decel = 300.0 * 1.086 * 1.1 / 1650.0
     row = trace.loc[np.isclose(trace["time_s"], 50.0)].iloc[0]
     assert row["mean_kph"] == pytest.approx((20.0 - decel * 50.0) * 3.6, abs=1e-6)
@@ -23,6 +24,14 @@ def test_coastdown_at_other_temperature_and_mass_by_hand(tmp_path):
     assert work.set_index("quantity").loc["road_load_work_per_km", "mean"] == pytest.approx(300.0, rel=1e-12)
     assert (tmp_path / "predicted_trace.csv").is_file()
     assert "hwfet road-load work" in format_cycle_work(work, shares)
+    # the heavier vehicle's work, at reference conditions: 300 N x 1650/1500 = 330 N per km
+    written = pd.read_csv(tmp_path / "cycle_work_mass_changed.csv").set_index("quantity")
+    assert written.loc["road_load_work_per_km", "mean"] == pytest.approx(330.0, rel=1e-12)
+    assert (written["mass_change_kg"] == 150.0).all()
+    assert heavier.set_index("quantity").loc["road_load_work_per_km", "mean"] == pytest.approx(330.0, rel=1e-12)
+    assert "with the test mass +150 kg" in format_cycle_work(work, shares, heavier)
+    unchanged = run_predict(_draws(), "hwfet", effective_mass_kg=1500.0, out_dir=tmp_path / "same")
+    assert unchanged.work_mass_changed is None and not (tmp_path / "same" / "cycle_work_mass_changed.csv").exists()
     assert shares["variance_share"].isna().all()  # constant draws: no variance to share
 
 
