@@ -43,10 +43,11 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_roadload import config  # noqa: E402
 from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
+from bayes_roadload.analysis.effects import EFFECT_NAMES  # noqa: E402
 from studies.proof_suite import (INDEPENDENT_BASE_EFFECTS, INDEPENDENT_INJECTIONS,  # noqa: E402
                                  INDEPENDENT_MEAN_WIND_MPS, PROOF_DESIGNS, proof_design, withheld_effect_jobs)
-from studies.proof_scoring import (confusion, outcome, read_records, summarise, true_gain,  # noqa: E402
-                                   true_rank, true_visible)
+from studies.proof_scoring import (cause_of, confusion, outcome, read_records, summarise,  # noqa: E402
+                                   true_distinct, true_gain, true_rank, true_visible)
 from studies.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
 
 OUT = ROOT / "docs" / "sim_to_real"
@@ -307,7 +308,10 @@ def independent_section(label: str, records: pd.DataFrame, earlier: str | None =
              f"{_fmt(c['true_first_pct'])} %; the true candidate gains >= "
              f"{config.DEFAULT_DIAGNOSIS.support_delta_elpd:g} at all in {_fmt(c['true_visible_pct'])} % "
              f"({c['true_visible']} campaigns: the most any rule on this library could claim), "
-             f"{_fmt(c['true_first_pct_of_visible'])} % of those claimed",
+             f"{_fmt(c['true_first_pct_of_visible'])} % of those claimed; visible and ahead of every rival by "
+             f"the ambiguity margin ({config.DEFAULT_DIAGNOSIS.ambiguity_margin:g}) in "
+             f"{_fmt(c.get('true_distinct_pct'))} % ({c.get('true_distinct')} campaigns: the most any rule with "
+             "that margin could claim)",
              (c["true_first_pct"] or 0) >= tgt["claimed"]),
             ("true effect ranked first", f">= {tgt['ranked_first']:g} %", f"{_fmt(c['true_ranked_first_pct'])} %",
              (c["true_ranked_first_pct"] or 0) >= tgt["ranked_first"]),
@@ -397,6 +401,20 @@ def reading_lines(records: pd.DataFrame) -> list[str]:
                     or "none")
                  + ": at its plausible size such an effect leaves no trace a candidate can fit on this campaign, "
                  "whatever the ranking rules; its `needs` name the test that would show it.")
+    close = eff[visible & ~eff.apply(true_distinct, axis=1)]
+    if len(close):
+        margin = config.DEFAULT_DIAGNOSIS.ambiguity_margin
+
+        def rivals(row) -> str:  # the other effects' candidates within the margin of the true one, or ahead
+            mine = true_gain(row)
+            near = [e for e in EFFECT_NAMES if cause_of(e) != row["true_effect"]
+                    and float(row.get(f"delta_elpd_{e}", float("nan"))) > mine - margin]
+            return ", ".join(near)
+
+        lines.append(f"- Visible but within {margin:g} of a rival or behind it (no rule with the margin claims "
+                     "these): " + "; ".join(
+                         f"`{t}` {len(g)} (" + "; ".join(sorted({rivals(r) for _, r in g.iterrows()})) + ")"
+                         for t, g in close.groupby("true_effect")) + ".")
     if "category" in eff:
         seeds = eff.drop_duplicates("seed")["category"].astype(str).value_counts()
         claimed = eff.groupby(eff["category"].astype(str))["outcome"].agg(lambda o: f"{int((o == 'correct').sum())} "
@@ -445,7 +463,7 @@ def side_by_side(by_design: dict[str, pd.DataFrame]) -> list[str]:
         sub = rec[phase_of(rec) == "confirmatory"]
         if len(sub):
             cols[f"{label} (confirmatory)"] = summarise(sub)
-    keys = ("effect_campaigns", "true_visible_pct", "true_ranked_first_pct", "true_first_pct", "wrong_claim", "null_campaigns",
+    keys = ("effect_campaigns", "true_visible_pct", "true_distinct_pct", "true_ranked_first_pct", "true_first_pct", "wrong_claim", "null_campaigns",
             "null_false_claims", "median_trend_shrink_pct_when_correct")
     lines = ["## The designs side by side", "",
              "`standard` and `identifying` inject each effect with the candidates' own terms (the same formulas "

@@ -91,6 +91,18 @@ def true_visible(row) -> bool:
     return bool(np.isfinite(value) and value >= config.DEFAULT_DIAGNOSIS.support_delta_elpd)
 
 
+def true_distinct(row) -> bool:
+    """Whether the true effect is visible (:func:`true_visible`) and its best form's delta_elpd
+    exceeds every other effect's candidate by ``DiagnosisConfig.ambiguity_margin``: the rules
+    claim nothing within that margin of a rival, so the share of such campaigns bounds the share
+    any rule with this margin could claim, however the other tests are set."""
+    if not true_visible(row):
+        return False
+    mine = true_gain(row)
+    rivals = [v for e, v in _scores(row).items() if cause_of(e) != row["true_effect"] and np.isfinite(v)]
+    return not rivals or mine >= max(rivals) + config.DEFAULT_DIAGNOSIS.ambiguity_margin
+
+
 def rank_one(row) -> str:
     """The candidate at rank 1 of ``diagnosis.json``: the supported top, else the best by
     delta_elpd (supported or not); "none" when no candidate was scored."""
@@ -116,6 +128,7 @@ def summarise(records: pd.DataFrame) -> dict:
     nulls = ok[ok["true_effect"] == "null"]
     shrink = effects.loc[effects["outcome"] == "correct", "shrink_trend_rms_mps"].astype(float)
     visible = effects.apply(true_visible, axis=1) if len(effects) else pd.Series(dtype=bool)
+    distinct = effects.apply(true_distinct, axis=1) if len(effects) else pd.Series(dtype=bool)
     first = (effects.apply(lambda r: cause_of(rank_one(r)), axis=1) == effects["true_effect"]) if len(effects) \
         else pd.Series(dtype=bool)
     return {
@@ -128,6 +141,8 @@ def summarise(records: pd.DataFrame) -> dict:
         "true_top_by_delta_elpd": int((effects["true_rank"] == 1).sum()),
         "true_visible": int(visible.sum()),
         "true_visible_pct": 100.0 * float(visible.mean()) if len(effects) else None,
+        "true_distinct": int(distinct.sum()),
+        "true_distinct_pct": 100.0 * float(distinct.mean()) if len(effects) else None,
         "true_first_pct_of_visible": 100.0 * float((effects.loc[visible, "outcome"] == "correct").mean())
         if visible.any() else None,
         "flagged_not_identifiable": int((effects["outcome"] == "flagged").sum()),

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from bayes_roadload import config
-from studies.proof_scoring import CAUSES, outcome, read_records, summarise, true_rank, true_visible
+from studies.proof_scoring import CAUSES, outcome, read_records, summarise, true_distinct, true_rank, true_visible
 
 RECORDS = Path(__file__).resolve().parents[2] / "docs" / "sim_to_real"
 THRESHOLD = config.DEFAULT_DIAGNOSIS.support_delta_elpd
@@ -27,6 +27,27 @@ def test_an_effect_is_visible_when_its_own_candidate_reaches_the_support_thresho
 
 def test_a_missing_score_is_not_visible():
     assert true_visible(_row()) is False
+
+
+MARGIN = config.DEFAULT_DIAGNOSIS.ambiguity_margin
+
+
+@pytest.mark.parametrize("rival, distinct", [(None, True), (20.0 - MARGIN, True), (20.0 - MARGIN + 1e-9, False),
+                                             (25.0, False)])
+def test_an_effect_is_distinct_when_it_leads_every_rival_by_the_margin(rival, distinct):
+    """Visible at 20 and ahead of the rival by at least the ambiguity margin; a rival within it,
+    or ahead, leaves nothing any rule with that margin could claim."""
+    row = _row(delta_elpd_track_gradient=20.0, **({} if rival is None else {"delta_elpd_spatial_wind": rival}))
+    assert true_distinct(row) is distinct
+    assert true_distinct(_row(delta_elpd_track_gradient=THRESHOLD - 1e-9)) is False  # not visible
+
+
+def test_the_distinct_campaigns_bound_the_claims_of_the_committed_records():
+    """Every claim of the committed independent-design records was of a distinct effect (the
+    rules claim nothing within the margin), so the distinct share bounds the claimed share."""
+    for path in sorted(RECORDS.glob("records_independent_p*.csv")):
+        s = summarise(read_records(path))
+        assert s["true_first"] <= s["true_distinct"] <= s["true_visible"], path.name
 
 
 @pytest.mark.parametrize("kw, expected", [
