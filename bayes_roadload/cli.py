@@ -41,6 +41,7 @@ COMMON_HELP = {
 }
 """Help of the options that several commands share (set where a command gives none)."""
 STANDARD_NAMES = ("gtr15", "j2263", "j1263", "cfr1066", "cfr1037")
+"""``--standard`` choices (:data:`bayes_roadload.analysis.standards.STANDARDS`)."""
 DYNO_STANDARDS = ("gtr15", "j2263", "j1263")
 """The standards whose result is road-load coefficients, a dynamometer's target."""
 WRITES_OUT = ("demo", "simulate", "fit", "fit-driveline", "dyno", "predict", "plan", "diagnose", "import-vbox")
@@ -115,7 +116,6 @@ class Stages:
 def echo(text: str = "") -> None:
     """A line of a command's output (standard output through logging: ``--quiet`` silences it)."""
     _output.info(text)
-"""``--standard`` choices (:data:`bayes_roadload.analysis.standards.STANDARDS`)."""
 
 
 def _no_markers(args) -> None:
@@ -498,14 +498,23 @@ def _cmd_fit_driveline(args) -> int:
     return 0 if report.diagnostics["pass"] else EXIT_GATES_FAILED
 
 
-def _warn_failed_fit(fit_dir) -> None:
+FAILED_FIT_CONSEQUENCE = "the figures below come from draws that are not trustworthy"
+
+
+def _failed_fit_line(which: str, failed, what: str = FAILED_FIT_CONSEQUENCE) -> str:
+    """The line that says, before any figure drawn from it, that ``which`` fit failed the gates
+    ``failed``, and ``what`` follows for the output."""
+    return (f"!! {which} FAILED its diagnostic gates ({', '.join(failed or []) or 'see diagnostics.json'}): "
+            f"{what}; refit with more draws (see `fit`)")
+
+
+def _warn_failed_fit(fit_dir, which: str = "the fit", what: str = FAILED_FIT_CONSEQUENCE) -> None:
     """Print, before any figure drawn from it, that a fit directory's fit failed its gates
-    (``diagnostics.json`` ``pass``)."""
+    (``diagnostics.json`` ``pass``; :func:`_failed_fit_line`)."""
     f = Path(fit_dir) / "diagnostics.json"
     diag = json.loads(f.read_text()) if f.is_file() else {}
     if not diag.get("pass", True):
-        echo(f"!! the fit {fit_dir} FAILED its diagnostic gates ({', '.join(diag.get('failed', [])) or 'see diagnostics.json'}): "
-             "the figures below come from draws that are not trustworthy; refit with more draws (see `fit`)")
+        echo(_failed_fit_line(f"{which} {fit_dir}", diag.get("failed"), what))
 
 
 def _cmd_report(args) -> int:
@@ -719,9 +728,7 @@ def _plan_population(args, out: Path):
     if is_fit_dir(src):
         source = read_fit_dir(src)
         campaign = fit_campaign(source.record)
-        if not source.passed:
-            echo(f"!! the source fit {src} FAILED its diagnostic gates: the plan draws from a posterior that is "
-                  "not trustworthy; refit with more draws (see `fit`)")
+        _warn_failed_fit(src, "the source fit", "the plan below draws from a posterior that is not trustworthy")
         return population_from_samples(source.samples, source.record["free"], source.model, campaign,
                                        source=f"{source.record['pooling']} fit {src}"), campaign
     campaign = _load_with_units(src, args)
@@ -732,8 +739,8 @@ def _plan_population(args, out: Path):
     write_fit_dir(report, out / "fit", record=fit_record(fit, src), provenance=_provenance(args, campaign, src))
     diag = report.diagnostics
     if not diag["pass"]:
-        echo(f"!! the source fit FAILED its gates ({', '.join(diag['failed'])}): the plan below draws from a "
-              "posterior that is not trustworthy; refit with more draws (see `fit`)")
+        echo(_failed_fit_line("the source fit", diag["failed"],
+                              "the plan below draws from a posterior that is not trustworthy"))
     return population_from_fit(fit, campaign), campaign
 
 

@@ -105,10 +105,15 @@ def test_plan_from_a_fit_directory_writes_the_contract_files(tmp_path, capsys, m
     assert int(f50["n_sims"]) == len(records) == (2 if first_met else 1)
     assert ("undecided after 1 simulations at [2] pairs" in printed) == first_met
 
-    # every target below its floor: answered from the floors alone, nothing refitted
+    # every target below its floor: answered from the floors alone, nothing refitted; a source
+    # fit that failed its gates is named first, with the gates it failed
+    (fit_dir / "diagnostics.json").write_text(json.dumps({"pass": False, "failed": ["rhat"]}))
     code = main(["plan", str(fit_dir), "--target", "CD0=1%", "--pairs", "2", "--simulations", "2", "--workers", "1",
                  "--out", str(tmp_path / "floor_only")])
+    (fit_dir / "diagnostics.json").unlink()
     printed = capsys.readouterr().out
+    assert printed.startswith(f"!! the source fit {fit_dir} FAILED its diagnostic gates (rhat): the plan below draws "
+                              "from a posterior that is not trustworthy")
     assert code == 0 and "nothing simulated" in printed and "refitting" not in printed
     only = pd.read_csv(tmp_path / "floor_only" / "recommendation.csv").set_index("quantity")
     assert not only.loc["CD0", "reached"] and not only.loc["CD0", "reachable"]
