@@ -587,8 +587,64 @@ def validity_section(fd: FitDirectory) -> Section | None:
     return s
 
 
+BUDGET_SOURCES_SHOWN = 5
+"""Type B sources the budget figure names (those with the largest share of any quantity's
+variance); the others are drawn together."""
+
+
+def budget_parts(budget: pd.DataFrame) -> tuple[list[str], list[tuple[str, np.ndarray]]]:
+    """The quantities of ``budget.csv`` (in its order) and the parts of their variance the budget
+    figure draws, each (label, share per quantity): the data's own share (the posterior's
+    variance before the Type B draws), the :data:`BUDGET_SOURCES_SHOWN` Type B sources with the
+    largest share of any quantity, and the other sources together.  Rows without a quantity
+    (sources left out, with the reason) are not drawn."""
+    rows = budget[budget["quantity"].fillna("").astype(str).str.len().gt(0) & budget["variance_share"].notna()]
+    if rows.empty:
+        return [], []
+    quantities = list(dict.fromkeys(rows["quantity"]))
+    shares = rows.pivot_table(index="quantity", columns="source", values="variance_share", aggfunc="sum",
+                              fill_value=0.0).reindex(quantities).fillna(0.0)
+    sources = [c for c in shares.max().sort_values(ascending=False, kind="stable").index if c != "data"]
+    named, rest = sources[:BUDGET_SOURCES_SHOWN], sources[BUDGET_SOURCES_SHOWN:]
+    parts = [("data (the posterior's own)", shares["data"].to_numpy(float) if "data" in shares
+              else np.zeros(len(quantities)))]
+    parts += [(s, shares[s].to_numpy(float)) for s in named]
+    if rest:
+        parts.append((f"{len(rest)} other sources", shares[rest].sum(axis=1).to_numpy(float)))
+    return quantities, parts
+
+
+def budget_figure(budget: pd.DataFrame) -> Figure | None:
+    """Each quantity's variance split by its sources as stacked bars (:func:`budget_parts`);
+    None when the budget has no quantity rows."""
+    quantities, parts = budget_parts(budget)
+    if not quantities:
+        return None
+    fig, ax = plt.subplots(figsize=(8.0, 0.45 * len(quantities) + 1.2))
+    y = np.arange(len(quantities))
+    left = np.zeros(len(quantities))
+    colours = plt.get_cmap("tab10").colors
+    for i, (label, v) in enumerate(parts):
+        ax.barh(y, v, left=left, color=colours[i % len(colours)], label=label, edgecolor="white", linewidth=0.5)
+        for yi, (l0, w) in enumerate(zip(left, v)):
+            if w >= 0.08:
+                ax.text(l0 + w / 2, yi, f"{100 * w:.0f} %", ha="center", va="center", fontsize=8, color="white")
+        left += v
+    ax.set_yticks(y, quantities)
+    ax.invert_yaxis()
+    ax.set_xlim(0.0, 1.0)
+    ax.xaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
+    ax.set_xlabel("share of the variance")
+    ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, frameon=False)
+    return Figure("budget", "Uncertainty budget", _png(fig),
+                  "each quantity's variance by source: the data's own (the posterior before the Type B draws) and "
+                  "each Type B source's c^2 u^2 (budget.csv); a large source share means the interval's width is "
+                  "that source's declared uncertainty, which more runs do not reduce")
+
+
 def table_sections(fd: FitDirectory) -> list[Section]:
-    """The other tables of the fit directory: the known ones in a fixed order, then the rest."""
+    """The other tables of the fit directory: the known ones in a fixed order, then the rest
+    (``budget.csv`` with its figure, :func:`budget_figure`)."""
     skip = {"summary.csv", "validity.csv"}
     files = [fd.path / n for n in TABLE_TITLES if (fd.path / n).is_file()]
     files += sorted(p for p in fd.path.glob("*.csv") if p.name not in skip and p.name not in TABLE_TITLES)
@@ -597,7 +653,10 @@ def table_sections(fd: FitDirectory) -> list[Section]:
         t = pd.read_csv(f)
         title = TABLE_TITLES.get(f.name) or (f"Standards' results ({f.name})" if f.name.startswith("standards")
                                              else f.name)
-        out.append(Section("table-" + f.stem.replace("_", "-"), title, [Table(t.map(fmt))]))
+        blocks: list = [Table(t.map(fmt))]
+        if f.name == "budget.csv" and (fig := budget_figure(t)) is not None:
+            blocks.insert(0, fig)
+        out.append(Section("table-" + f.stem.replace("_", "-"), title, blocks))
     return out
 
 

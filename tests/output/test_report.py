@@ -358,3 +358,33 @@ def test_report_of_a_real_interval_campaign_in_a_headless_browser(tmp_path):
     finally:
         driver.quit()
         shutil.rmtree(profile, ignore_errors=True)
+
+
+def test_the_budget_figure_draws_every_source_s_share():
+    """Two quantities, seven sources: the data's share, the five sources with the largest share
+    of either quantity, the other two together; each quantity's parts add up to its whole
+    variance, and the row of a source left out (no quantity) is not drawn."""
+    from bayes_roadload.output.report import BUDGET_SOURCES_SHOWN, budget_figure, budget_parts
+
+    share = {"AD": {"data": 0.1, "s1": 0.5, "s2": 0.2, "s3": 0.1, "s4": 0.05, "s5": 0.03, "s6": 0.02},
+             "CD0": {"data": 0.3, "s7": 0.6, "s1": 0.1}}
+    rows = [{"quantity": q, "source": s, "variance_share": v} for q, d in share.items() for s, v in d.items()]
+    rows.append({"quantity": "", "source": "left_out", "variance_share": float("nan")})
+    budget = pd.DataFrame(rows)
+    quantities, parts = budget_parts(budget)
+    assert quantities == ["AD", "CD0"]
+    labels = [label for label, _ in parts]
+    assert BUDGET_SOURCES_SHOWN == 5 and labels == ["data (the posterior's own)", "s7", "s1", "s2", "s3", "s4",
+                                                    "2 other sources"]
+    np.testing.assert_allclose(sum(v for _, v in parts), [1.0, 1.0])
+    np.testing.assert_allclose(dict(parts)["2 other sources"], [0.05, 0.0])
+    assert budget_figure(budget).png.startswith(PNG_SIGNATURE)
+    assert budget_figure(budget[budget["quantity"] == ""]) is None
+
+
+def test_the_budget_section_opens_with_its_figure(fits):
+    """The NUTS fit's budget.csv is drawn in its own section, before its table."""
+    assert (fits["nuts"] / FILES_DIR / "budget.png").is_file()
+    md = (fits["nuts"] / "report.md").read_text()
+    section = md[md.index("Uncertainty budget (budget.csv)"):]
+    assert section.index(f"]({FILES_DIR}/budget.png)") < section.index("| quantity |")
