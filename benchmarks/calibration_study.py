@@ -38,6 +38,8 @@ with one Type B source's uncertainty scaled, printed as a markdown table, nothin
 
     python benchmarks/calibration_study.py --from-records --records RECORDS \
         --rescale tyre_quadratic_s2_per_m2=1,0.75,0.54
+    python benchmarks/calibration_study.py --from-records --records RECORDS \
+        --rescale yaw_levelling_per_rad2=1,0.5 --one-sided above   # records with the signed columns
 """
 
 from __future__ import annotations
@@ -128,17 +130,20 @@ def resume_from(partial: Path, jobs: list) -> tuple[pd.DataFrame, list]:
     return before, [j for j in jobs if j.name not in finished]
 
 
-def rescaled_markdown(records: pd.DataFrame, spec: str) -> str:
-    """``--rescale SOURCE=F,F,...``: :func:`budget_rescaled` of the records as a markdown table."""
+def rescaled_markdown(records: pd.DataFrame, spec: str, one_sided: str | None = None) -> str:
+    """``--rescale SOURCE=F,F,... [--one-sided above|below]``: :func:`budget_rescaled` of the
+    records as a markdown table."""
     source, _, factors = spec.partition("=")
     try:
         values = [float(f) for f in factors.split(",")]
     except ValueError:
         raise SystemExit(f"--rescale {spec!r}: give SOURCE=F,F,... (factors as numbers)") from None
-    table = budget_rescaled(records, source, values)
+    table = budget_rescaled(records, source, values, one_sided=one_sided)
     if table.empty:
-        raise SystemExit(f"--rescale: the records carry no budget column for the source {source!r}")
-    lines = [f"The records' intervals with the Type B source `{source}` scaled (a reading in the normal "
+        raise SystemExit(f"--rescale: the records carry no budget column for the source {source!r}"
+                         + (" with its sign (records written before the signed columns)" if one_sided else ""))
+    how = "scaled" if one_sided is None else f"made one-sided ({one_sided} the declared value) and scaled"
+    lines = [f"The records' intervals with the Type B source `{source}` {how} (a reading in the normal "
              f"approximation, `analysis.calibration.budget_rescaled`; the {int(table['n'].max())} of the "
              f"{len(successful(records))} fits whose records carry the source):", "",
              "| quantity | campaigns | source's median share | factor | 95 % coverage | sd(z) | mean z |",
@@ -177,12 +182,17 @@ def main(argv=None) -> int:
     ap.add_argument("--rescale", default=None, metavar="SOURCE=F,F,...",
                     help="with --from-records: only the intervals with the Type B source's uncertainty scaled by "
                          "each factor (analysis.calibration.budget_rescaled), as a markdown table")
+    ap.add_argument("--one-sided", choices=("above", "below"), default=None,
+                    help="with --rescale: read the source as a uniform on that side of its declared value (its "
+                         "sign from the records' signed budget columns)")
     ap.add_argument("--fill-test-mass", action="store_true",
                     help="with --from-records: add the declared test mass (test_mass_kg) to the records that lack it, "
                          "by simulating those campaigns again, and write it back to --records")
     args = ap.parse_args(argv)
     if args.rescale is not None and not args.from_records:
         ap.error("--rescale reads the records without fitting: give --from-records")
+    if args.one_sided is not None and args.rescale is None:
+        ap.error("--one-sided reads a source of --rescale: give --rescale SOURCE=F,...")
     t0 = time.perf_counter()
     wall = None
     if args.from_records:
@@ -219,7 +229,7 @@ def main(argv=None) -> int:
         print(comparison_markdown(pd.read_csv(args.compare), records))
         return 0
     if args.rescale is not None:
-        print(rescaled_markdown(records, args.rescale))
+        print(rescaled_markdown(records, args.rescale, args.one_sided))
         return 0
     if "error" not in records:
         records["error"] = np.nan

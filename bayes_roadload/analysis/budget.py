@@ -245,8 +245,10 @@ def budget_table(typeb: TypeB, data_sd: dict[str, float]) -> pd.DataFrame:
 def budget_record(typeb: TypeB, data_sd: dict[str, float]) -> dict[str, float]:
     """The budget of each quantity of ``data_sd`` as flat columns of a study's record:
     ``{q}_sd_data`` (the posterior's own sd), ``{q}_sd_typeb_{source}`` (|c_s| u_s, the sd its
-    draws add; a uniform source's sd is its u as well) and, for a source above the analysis'
-    value, ``{q}_mean_shift_{source}`` (:func:`mean_shift`).  With them a study can read which
+    draws add; a uniform source's sd is its u as well), ``{q}_signed_typeb_{source}`` (c_s u_s
+    with its sign: which way the quantity moves when the source's true value lies above the
+    analysis', so a study can read the source made one-sided) and, for a source above the
+    analysis' value, ``{q}_mean_shift_{source}`` (:func:`mean_shift`).  With them a study can read which
     sources make its intervals too wide or too narrow: the interval's sd is about
     sqrt(sd_data^2 + sum of the sources' sd^2) (the sources' draws are independent of the
     posterior's)."""
@@ -255,6 +257,7 @@ def budget_record(typeb: TypeB, data_sd: dict[str, float]) -> dict[str, float]:
         out[f"{q}_sd_data"] = float(sd)
         for s, c in typeb.sensitivity.get(q, {}).items():
             out[f"{q}_sd_typeb_{s}"] = abs(float(c)) * typeb.u[s]
+            out[f"{q}_signed_typeb_{s}"] = float(c) * typeb.u[s]
             if source_distribution(s) == "above":
                 out[f"{q}_mean_shift_{s}"] = mean_shift(typeb, q, s)
     return out

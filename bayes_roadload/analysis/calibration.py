@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from typing import Iterable
 
 import numpy as np
@@ -314,32 +315,49 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
                                        "z_sd_without", "coverage95_without", "z_mean_without"])
 
 
+ONE_SIDED = {"above": 1.0, "below": -1.0}
+"""``budget_rescaled``'s ``one_sided``: the side of the declared value the source's true value
+is read to lie on, as the sign of the mean it then adds."""
+
+
 def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float],
-                    quantities: Iterable[str] = QUANTITIES) -> pd.DataFrame:
+                    quantities: Iterable[str] = QUANTITIES, one_sided: str | None = None) -> pd.DataFrame:
     """What the intervals would be with one Type B source's distribution scaled about the
     declared value by each of ``factors`` (1: as fitted), read from the budget columns of the
     records as :func:`budget_attribution` reads a source left out: the interval's sd becomes
     sqrt(sd^2 - (1 - f^2) sd_s^2) and its mean moves by -(1 - f) shift_s (the source's
     first-order share and mean shift, exact where the source enters the quantity linearly and
     the fit holds it at its declared value), z = (mean - truth) / that sd, covered when |z| <=
-    1.96.  Per quantity and factor: the campaigns ``n`` whose records carry the source, the
-    source's median share of the variance as fitted, ``coverage95``, ``z_sd`` and ``z_mean``.
-    A reading for designing a budget (on design seeds), not a verdict: a fit with the scaled
-    budget is what a confirmatory run scores."""
+    1.96.  With ``one_sided`` ("above" or "below") a source fitted as a normal about the declared
+    value is read as a uniform on that side of it with the same standard uncertainty f u (as
+    the budget draws a source "above", :func:`~bayes_roadload.analysis.budget.type_b_draws`):
+    the variance as for the factor, and the mean moves by +-sqrt(3) f c u (the records' signed
+    column ``{q}_signed_typeb_{source}``, c u; records without it give no row).  Per quantity
+    and factor: the campaigns ``n`` whose records carry the source, the source's median share
+    of the variance as fitted, ``coverage95``, ``z_sd`` and ``z_mean``.  A reading for
+    designing a budget (on design seeds), not a verdict: a fit with the scaled budget is what a
+    confirmatory run scores."""
+    if one_sided is not None and one_sided not in ONE_SIDED:
+        raise ValueError(f"one_sided {one_sided!r}: one of {', '.join(ONE_SIDED)}")
     rows = []
     for q in quantities:
         col = f"{q}_sd_typeb_{source}"
-        if col not in records:
+        signed = f"{q}_signed_typeb_{source}"
+        if col not in records or (one_sided is not None and signed not in records):
             continue
-        rec = _scored(records, q, col)
+        rec = _scored(records, q, signed if one_sided is not None else col)
         if rec.empty:
             continue
         mean, sd, truth = (rec[f"{q}_{c}"].astype(float).to_numpy() for c in ("mean", "sd", "truth"))
         var_s = rec[col].to_numpy(float) ** 2
         shift = _mean_shift(rec, q, source)
+        if one_sided is not None and np.any(shift != 0.0):
+            raise ValueError(f"{source} is one-sided in these fits already (column {q}_mean_shift_{source})")
         for f in factors:
             sd_f = np.sqrt(np.maximum(sd**2 - (1.0 - f * f) * var_s, 1e-300))
-            z = (mean - (1.0 - f) * shift - truth) / sd_f
+            moved = -(1.0 - f) * shift if one_sided is None else \
+                ONE_SIDED[one_sided] * math.sqrt(3.0) * f * rec[signed].to_numpy(float)
+            z = (mean + moved - truth) / sd_f
             rows.append({"quantity": q, "factor": float(f), "n": len(rec),
                          "median_share": float(np.median(var_s / sd**2)),
                          "coverage95": float(np.mean(np.abs(z) <= Z975)), "z_sd": float(np.std(z, ddof=1)),

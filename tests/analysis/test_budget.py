@@ -602,6 +602,8 @@ def test_budget_record_gives_each_sources_sd_and_the_interval_it_adds_up_to():
     assert rec["CD0_sd_typeb_relative_humidity_unlogged_pct"] == pytest.approx(2e-5 * 100 / np.sqrt(12))
     assert rec["CD0_mean_shift_relative_humidity_unlogged_pct"] == pytest.approx(2e-5 * 50.0)
     assert "CD0_mean_shift_airspeed_factor_rel" not in rec  # a normal source adds no mean
+    assert rec["CD0_signed_typeb_airspeed_factor_rel"] == pytest.approx(-0.8 * 0.005)  # c u, its sign kept
+    assert rec["CD0_signed_typeb_relative_humidity_unlogged_pct"] == pytest.approx(2e-5 * 100 / np.sqrt(12))
     n = 400_000
     posterior = {"CD0": np.random.default_rng(1).normal(0.4, 0.002, (2, n // 2))}
     drawn = add_type_b(posterior, typeb, seed=3)["CD0"]
