@@ -90,16 +90,24 @@ class TypeB:
 
     ``u``: source -> standard uncertainty (key's unit); ``sensitivity``: quantity -> source ->
     dx/ds; ``notes``: source -> why it is not propagated ("not applicable", "sampled by the
-    model", "switched off"); ``time_s``: the least-squares refits' wall time."""
+    model", "switched off"); ``time_s``: the least-squares refits' wall time; ``distribution``:
+    model constant -> its distribution where the model file states one
+    (:data:`~bayes_roadload.inference.spec.UNCERTAINTY_DISTRIBUTIONS`)."""
 
     u: dict[str, float]
     sensitivity: dict[str, dict[str, float]]
     notes: dict[str, str] = field(default_factory=dict)
     time_s: float = 0.0
+    distribution: dict[str, str] = field(default_factory=dict)
 
     @property
     def sources(self) -> list[str]:
         return [s for s in self.u if s not in self.notes]
+
+    def distribution_of(self, source: str) -> str:
+        """The distribution of ``source``'s error: the model file's for a model constant, else
+        the campaign source's (:func:`~bayes_roadload.data.uncertainty.source_distribution`)."""
+        return self.distribution.get(source) or source_distribution(source)
 
     def variances(self, quantity: str) -> dict[str, float]:
         """Source -> the variance (c_s u_s)^2 it gives ``quantity`` (empty: no sensitivity)."""
@@ -179,7 +187,8 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
             if c is None or not math.isfinite(c):
                 continue
             sens.setdefault(q, {})[key] = c
-    return TypeB(u=u, sensitivity=sens, notes=notes, time_s=time.perf_counter() - t0)
+    return TypeB(u=u, sensitivity=sens, notes=notes, time_s=time.perf_counter() - t0,
+                 distribution=dict(spec.uncertainty_distribution))
 
 
 def type_b_draws(typeb: TypeB, shape: tuple[int, ...], seed: int = 0) -> dict[str, np.ndarray]:
@@ -187,7 +196,7 @@ def type_b_draws(typeb: TypeB, shape: tuple[int, ...], seed: int = 0) -> dict[st
     U(0, sqrt(12) u_s) for a source whose true value lies above the analysis' (distribution
     "above", :class:`~bayes_roadload.data.uncertainty.UncertaintySource`)."""
     rng = np.random.default_rng([seed, 20240])
-    return {s: (rng.uniform(0.0, math.sqrt(12.0) * typeb.u[s], shape) if source_distribution(s) == "above"
+    return {s: (rng.uniform(0.0, math.sqrt(12.0) * typeb.u[s], shape) if typeb.distribution_of(s) == "above"
                 else rng.normal(0.0, typeb.u[s], shape)) for s in typeb.sources}
 
 
@@ -195,7 +204,7 @@ def mean_shift(typeb: TypeB, quantity: str, source: str) -> float:
     """The mean of the draws ``source`` adds to ``quantity``: c sqrt(3) u for a source above the
     analysis' value, 0 for a normal one."""
     c = typeb.sensitivity.get(quantity, {}).get(source)
-    if c is None or source_distribution(source) != "above":
+    if c is None or typeb.distribution_of(source) != "above":
         return 0.0
     return c * math.sqrt(3.0) * typeb.u[source]
 
@@ -231,7 +240,7 @@ def budget_table(typeb: TypeB, data_sd: dict[str, float]) -> pd.DataFrame:
         rows.append({"quantity": q, "source": "data", "standard_uncertainty": math.nan, "sensitivity": math.nan,
                      "variance": sd**2, "variance_share": sd**2 / total, "note": "", "mean_shift": math.nan})
         for s in sorted(var, key=var.get, reverse=True):
-            above = source_distribution(s) == "above"
+            above = typeb.distribution_of(s) == "above"
             rows.append({"quantity": q, "source": s, "standard_uncertainty": typeb.u[s], "sensitivity": row[s],
                          "variance": var[s], "variance_share": var[s] / total,
                          "note": "uniform above the analysis' value" if above else "",
@@ -258,7 +267,7 @@ def budget_record(typeb: TypeB, data_sd: dict[str, float]) -> dict[str, float]:
         for s, c in typeb.sensitivity.get(q, {}).items():
             out[f"{q}_sd_typeb_{s}"] = abs(float(c)) * typeb.u[s]
             out[f"{q}_signed_typeb_{s}"] = float(c) * typeb.u[s]
-            if source_distribution(s) == "above":
+            if typeb.distribution_of(s) == "above":
                 out[f"{q}_mean_shift_{s}"] = mean_shift(typeb, q, s)
     return out
 

@@ -25,10 +25,13 @@ analysis treats specially (``NAME`` a contract name from :data:`bayes_roadload.c
     [parameters.tyre_quadratic_s2_per_m2]
     fixed = 1.0e-6
     uncertainty = 0.8e-6                     # standard uncertainty (SI) of a fixed number
+    uncertainty_distribution = "normal"      # optional: "above" (the true value lies above it)
 
 A fixed number with an ``uncertainty`` is a Type B source of the fit's uncertainty budget (a
 model constant known to +-u, GUM 4.3): the posterior holds it at its value, and
-:mod:`bayes_roadload.analysis.budget` carries its spread into every draw and ``budget.csv``.
+:mod:`bayes_roadload.analysis.budget` carries its spread into every draw and ``budget.csv``;
+with ``uncertainty_distribution = "above"`` the spread is one-sided, uniform over
+[value, value + sqrt(12) u] (:data:`UNCERTAINTY_DISTRIBUTIONS`).
 
 Meaning of the ``[model]`` switches (resolved against a campaign by :meth:`ModelSpec.build`):
 
@@ -114,7 +117,13 @@ _DATA_TERMS = {
 """Terms a campaign's data add (:meth:`ModelSpec.build`); listed in a model file they would read
 zeros without those data."""
 _MODEL_KEYS = ("name", "description", "terms", "driveline", "lift", "air", "admittance")
-_PARAMETER_KEYS = ("free", "fixed", "fallback", "initial", "prior", "uncertainty")
+_PARAMETER_KEYS = ("free", "fixed", "fallback", "initial", "prior", "uncertainty", "uncertainty_distribution")
+UNCERTAINTY_DISTRIBUTIONS = ("normal", "above")
+"""A model constant's ``uncertainty_distribution``: "normal" about the fixed number (the
+default), or "above" it: the true value lies above the fixed number, uniform over
+[fixed, fixed + sqrt(12) u] (mean shift sqrt(3) u; GUM 4.3.7's rectangular distribution with
+standard uncertainty u), as the budget draws the data sources of that distribution
+(:func:`~bayes_roadload.analysis.budget.type_b_draws`)."""
 _AIR_PARAMETERS = tuple(
     sorted({k for air in AIR_MODELS.values() for k in air.defaults})
 )
@@ -358,6 +367,8 @@ class ModelSpec:
         table lacks it.
     uncertainty : fixed parameter -> its standard uncertainty (SI, >= 0; 0 switches it off):
         a Type B source of the budget (module docstring); only for a fixed number.
+    uncertainty_distribution : fixed parameter with an ``uncertainty`` -> "above" when its true
+        value lies above the fixed number (:data:`UNCERTAINTY_DISTRIBUTIONS`); absent: normal.
     source : the file the spec was read from (None when built in code).
     """
 
@@ -374,6 +385,7 @@ class ModelSpec:
     initial: dict[str, float] = field(default_factory=dict)
     fallback: dict[str, float] = field(default_factory=dict)
     uncertainty: dict[str, float] = field(default_factory=dict)
+    uncertainty_distribution: dict[str, str] = field(default_factory=dict)
     source: str | None = None
 
     def __post_init__(self):
@@ -567,6 +579,13 @@ def _validate(spec: ModelSpec, where: str) -> None:
         if isinstance(u, bool) or not isinstance(u, (int, float)) or not math.isfinite(u) or u < 0.0:
             raise ModelSpecError(f"{where}: [parameters.{p}].uncertainty: {u!r} is not a finite "
                                  "standard uncertainty >= 0")
+    for p, d in spec.uncertainty_distribution.items():
+        if p not in spec.uncertainty:
+            raise ModelSpecError(f"{where}: [parameters.{p}].uncertainty_distribution: only beside an "
+                                 "uncertainty")
+        if d not in UNCERTAINTY_DISTRIBUTIONS:
+            raise ModelSpecError(f"{where}: [parameters.{p}].uncertainty_distribution: {d!r}; one of "
+                                 f"{', '.join(UNCERTAINTY_DISTRIBUTIONS)}")
 
 
 # ----------------------------------------------------------------------------- loading
@@ -600,6 +619,7 @@ def parse_model_spec(doc: Mapping[str, Any], where: str, default_name: str = "mo
     initial: dict[str, float] = {}
     fallback: dict[str, float] = {}
     uncertainty: dict[str, float] = {}
+    distribution: dict[str, str] = {}
     params = doc.get("parameters", {})
     if not isinstance(params, Mapping):
         raise ModelSpecError(f"{where}: [parameters] must be a table of [parameters.NAME] tables")
@@ -631,6 +651,8 @@ def parse_model_spec(doc: Mapping[str, Any], where: str, default_name: str = "mo
             fallback[p] = _number(table["fallback"], f"{where}: {key} fallback")
         if "uncertainty" in table:
             uncertainty[p] = _number(table["uncertainty"], f"{where}: {key} uncertainty")
+        if "uncertainty_distribution" in table:
+            distribution[p] = table["uncertainty_distribution"]
         if "initial" in table:
             initial[p] = _number(table["initial"], f"{where}: {key} initial")
         if "prior" in table:
@@ -654,6 +676,7 @@ def parse_model_spec(doc: Mapping[str, Any], where: str, default_name: str = "mo
         initial=initial,
         fallback=fallback,
         uncertainty=uncertainty,
+        uncertainty_distribution=distribution,
         source=where,
     )
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bayes_roadload.analysis.budget import (TypeB, add_type_b, budget_record, budget_table, format_budget,
-                                            type_b_sensitivities)
+                                            type_b_draws, type_b_sensitivities)
 from bayes_roadload.data.uncertainty import SOURCES
 from bayes_roadload.inference.lsq import fit_lsq
 from bayes_roadload.simulate import simulate_campaign
@@ -533,11 +533,13 @@ def test_a_model_constants_shift_is_the_model_file_with_its_value_moved():
                 assert a == pytest.approx(b, rel=1e-12, abs=1e-9)
                 assert a != pytest.approx(before, rel=1e-9)   # the shift changes the posterior
         quiet = dataclasses.replace(campaign, meta=dict(campaign.meta, uncertainty={k: 0.0 for k in SOURCES}))
-        without = type_b_sensitivities(quiet, spec, ["CD0", "F2_N_per_kph2"])   # the campaign's sources off
+        without = type_b_sensitivities(quiet, dataclasses.replace(spec, uncertainty_distribution={name: "above"}),
+                                       ["CD0", "F2_N_per_kph2"])   # the campaign's sources off
         # least-squares refits (method="refit") have no model constant to shift, even beside a fit
         fitted = SimpleNamespace(problem=problem, map=object())
         refit = type_b_sensitivities(quiet, spec, ["CD0", "F2_N_per_kph2"], method="refit", fit=fitted)
     assert without.sources == [] and "no fit given" in without.notes[name]
+    assert without.distribution_of(name) == "above"   # the model file's distribution goes with the budget
     assert refit.sources == [] and "least-squares refits have no model constants" in refit.notes[name]
 
 
@@ -588,6 +590,30 @@ def test_a_model_constant_with_an_uncertainty_is_a_source_of_the_budget():
     weight = campaign.vehicle.mass_kg * 9.81 / 3.6**2   # N per (km/h)^2 per unit C_R
     for sensitivity in (typeb.sensitivity["F2_N_per_kph2"][name], full["F2_N_per_kph2"]):
         assert 0.5 * weight < sensitivity <= 1.05 * weight
+
+
+def test_a_model_constant_stated_above_its_value_is_drawn_one_sided():
+    """A model constant whose file says ``uncertainty_distribution = "above"`` is drawn as the
+    data sources of that distribution are: uniform over [0, sqrt(12) u], so its draws shift the
+    quantity by c sqrt(3) u (budget.csv ``mean_shift`` and its note, the record's column) with
+    the same sd c u; the same constant without it stays a normal about the fixed number."""
+    name = "yaw_levelling_per_rad2"
+    sens = {"KD": {name: 0.4}}
+    above = TypeB(u={name: 1.0}, sensitivity=sens, distribution={name: "above"})
+    normal = TypeB(u={name: 1.0}, sensitivity=sens)
+    assert above.distribution_of(name) == "above" and normal.distribution_of(name) == "normal"
+    deltas = type_b_draws(above, (2, 50_000), seed=1)[name]
+    assert deltas.min() >= 0.0 and deltas.max() <= np.sqrt(12.0)
+    assert type_b_draws(normal, (2, 50_000), seed=1)[name].min() < 0.0
+    table = budget_table(above, {"KD": 0.05}).set_index("source")
+    assert table.loc[name, "mean_shift"] == pytest.approx(0.4 * np.sqrt(3.0))
+    assert table.loc[name, "note"] == "uniform above the analysis' value"
+    assert budget_record(above, {"KD": 0.05})[f"KD_mean_shift_{name}"] == pytest.approx(0.4 * np.sqrt(3.0))
+    assert f"KD_mean_shift_{name}" not in budget_record(normal, {"KD": 0.05})
+    drawn = add_type_b({"KD": np.full((2, 50_000), 0.6)}, above, seed=2)["KD"]
+    # uniform's mean and sd: SE of the mean 0.4 / sqrt(1e5) ~ 0.0013 (5 SE), of the sd ~0.2 %
+    assert np.mean(drawn) == pytest.approx(0.6 + 0.4 * np.sqrt(3.0), abs=0.007)
+    assert np.std(drawn) == pytest.approx(0.4, rel=0.01)
 
 
 def test_budget_record_gives_each_sources_sd_and_the_interval_it_adds_up_to():

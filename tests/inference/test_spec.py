@@ -142,6 +142,10 @@ def test_a_good_file_loads(tmp_path):
     with_u = load_model_spec(_write(tmp_path, GOOD.replace("fixed = 0.614", "fixed = 0.614\nuncertainty = 0.2"),
                                     "mine_u.toml"))
     assert with_u.uncertainty == {"KD": 0.2} and with_u.fixed == {"KD": 0.614}
+    assert with_u.uncertainty_distribution == {}  # normal about the fixed number
+    above = load_model_spec(_write(tmp_path, GOOD.replace(
+        "fixed = 0.614", 'fixed = 0.614\nuncertainty = 0.2\nuncertainty_distribution = "above"'), "mine_a.toml"))
+    assert above.uncertainty_distribution == {"KD": "above"}
 
 
 @pytest.mark.parametrize("edit, key, message", [
@@ -167,6 +171,10 @@ def test_a_good_file_loads(tmp_path):
     (("free = true\nprior", "free = true\nuncertainty = 0.001\nprior"), "[parameters.AD].uncertainty",
      "only for a parameter fixed at a number"),
     (("fixed = 0.614", 'fixed = 0.614\nuncertainty = "0.1"'), "[parameters.KD] uncertainty", "not a finite number"),
+    (("fixed = 0.614", 'fixed = 0.614\nuncertainty_distribution = "above"'), "[parameters.KD].uncertainty_distribution",
+     "only beside an uncertainty"),
+    (("fixed = 0.614", 'fixed = 0.614\nuncertainty = 0.1\nuncertainty_distribution = "below"'),
+     "[parameters.KD].uncertainty_distribution", "one of normal, above"),
 ])
 def test_bad_specs_are_refused_naming_file_and_key(tmp_path, edit, key, message):
     old, new = edit
