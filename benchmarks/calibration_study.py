@@ -40,6 +40,8 @@ with one Type B source's uncertainty scaled, printed as a markdown table, nothin
         --rescale tyre_quadratic_s2_per_m2=1,0.75,0.54
     python benchmarks/calibration_study.py --from-records --records RECORDS \
         --rescale yaw_levelling_per_rad2=1,0.5 --one-sided above   # records with the signed columns
+    python benchmarks/calibration_study.py --from-records --records RECORDS \
+        --rescale tyre_quadratic_s2_per_m2=1,0.75,0.54 --with yaw_levelling_per_rad2=1:above
 """
 
 from __future__ import annotations
@@ -130,20 +132,38 @@ def resume_from(partial: Path, jobs: list) -> tuple[pd.DataFrame, list]:
     return before, [j for j in jobs if j.name not in finished]
 
 
-def rescaled_markdown(records: pd.DataFrame, spec: str, one_sided: str | None = None) -> str:
-    """``--rescale SOURCE=F,F,... [--one-sided above|below]``: :func:`budget_rescaled` of the
-    records as a markdown table."""
+def parse_also(specs: list[str] | None) -> dict[str, tuple[float, str | None]]:
+    """``--with SOURCE=F[:above|below]`` (repeatable): source -> (factor, side or None)."""
+    out: dict[str, tuple[float, str | None]] = {}
+    for spec in specs or []:
+        source, _, rest = spec.partition("=")
+        factor, _, side = rest.partition(":")
+        try:
+            out[source] = (float(factor), side or None)
+        except ValueError:
+            raise SystemExit(f"--with {spec!r}: give SOURCE=F or SOURCE=F:above|below") from None
+        if side and side not in ("above", "below"):
+            raise SystemExit(f"--with {spec!r}: the side is above or below")
+    return out
+
+
+def rescaled_markdown(records: pd.DataFrame, spec: str, one_sided: str | None = None,
+                      also: dict[str, tuple[float, str | None]] | None = None) -> str:
+    """``--rescale SOURCE=F,F,... [--one-sided above|below] [--with OTHER=F[:side] ...]``:
+    :func:`budget_rescaled` of the records as a markdown table."""
     source, _, factors = spec.partition("=")
     try:
         values = [float(f) for f in factors.split(",")]
     except ValueError:
         raise SystemExit(f"--rescale {spec!r}: give SOURCE=F,F,... (factors as numbers)") from None
-    table = budget_rescaled(records, source, values, one_sided=one_sided)
+    table = budget_rescaled(records, source, values, one_sided=one_sided, also=also)
     if table.empty:
         raise SystemExit(f"--rescale: the records carry no budget column for the source {source!r}"
-                         + (" with its sign (records written before the signed columns)" if one_sided else ""))
+                         + (" with its sign (records written before the signed columns)"
+                            if one_sided or any(o for _, o in (also or {}).values()) else ""))
     how = "scaled" if one_sided is None else f"made one-sided ({one_sided} the declared value) and scaled"
-    lines = [f"The records' intervals with the Type B source `{source}` {how} (a reading in the normal "
+    beside = "".join(f"; beside it `{k}` x {f:g}" + (f", one-sided {o}" if o else "") for k, (f, o) in (also or {}).items())
+    lines = [f"The records' intervals with the Type B source `{source}` {how}{beside} (a reading in the normal "
              f"approximation, `analysis.calibration.budget_rescaled`; the {int(table['n'].max())} of the "
              f"{len(successful(records))} fits whose records carry the source):", "",
              "| quantity | campaigns | source's median share | factor | 95 % coverage | sd(z) | mean z |",
@@ -185,14 +205,16 @@ def main(argv=None) -> int:
     ap.add_argument("--one-sided", choices=("above", "below"), default=None,
                     help="with --rescale: read the source as a uniform on that side of its declared value (its "
                          "sign from the records' signed budget columns)")
+    ap.add_argument("--with", dest="also", action="append", default=None, metavar="SOURCE=F[:above|below]",
+                    help="with --rescale: another source changed beside it in every row (repeatable)")
     ap.add_argument("--fill-test-mass", action="store_true",
                     help="with --from-records: add the declared test mass (test_mass_kg) to the records that lack it, "
                          "by simulating those campaigns again, and write it back to --records")
     args = ap.parse_args(argv)
     if args.rescale is not None and not args.from_records:
         ap.error("--rescale reads the records without fitting: give --from-records")
-    if args.one_sided is not None and args.rescale is None:
-        ap.error("--one-sided reads a source of --rescale: give --rescale SOURCE=F,...")
+    if (args.one_sided is not None or args.also) and args.rescale is None:
+        ap.error("--one-sided and --with read sources beside --rescale: give --rescale SOURCE=F,...")
     t0 = time.perf_counter()
     wall = None
     if args.from_records:
@@ -229,7 +251,7 @@ def main(argv=None) -> int:
         print(comparison_markdown(pd.read_csv(args.compare), records))
         return 0
     if args.rescale is not None:
-        print(rescaled_markdown(records, args.rescale, args.one_sided))
+        print(rescaled_markdown(records, args.rescale, args.one_sided, parse_also(args.also)))
         return 0
     if "error" not in records:
         records["error"] = np.nan

@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from typing import Iterable
+from typing import Iterable, Mapping
 
 import numpy as np
 import pandas as pd
@@ -320,8 +320,30 @@ ONE_SIDED = {"above": 1.0, "below": -1.0}
 is read to lie on, as the sign of the mean it then adds."""
 
 
+def _source_change(rec: pd.DataFrame, quantity: str, source: str, factor: float,
+                   one_sided: str | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """What scaling ``source`` by ``factor`` (and reading it ``one_sided``) does to
+    ``quantity``'s intervals in the records ``rec``: (the change of their variance, the move of
+    their mean), :func:`budget_rescaled`; zeros where the records carry no such source for the
+    quantity, None where a one-sided reading lacks the signed column."""
+    col, signed = f"{quantity}_sd_typeb_{source}", f"{quantity}_signed_typeb_{source}"
+    if col not in rec:
+        return np.zeros(len(rec)), np.zeros(len(rec))
+    var_s = rec[col].fillna(0.0).to_numpy(float) ** 2
+    shift = _mean_shift(rec, quantity, source)
+    if one_sided is None:
+        return -(1.0 - factor * factor) * var_s, -(1.0 - factor) * shift
+    if signed not in rec:
+        return None
+    if np.any(shift != 0.0):
+        raise ValueError(f"{source} is one-sided in these fits already (column {quantity}_mean_shift_{source})")
+    moved = ONE_SIDED[one_sided] * math.sqrt(3.0) * factor * rec[signed].fillna(0.0).to_numpy(float)
+    return -(1.0 - factor * factor) * var_s, moved
+
+
 def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float],
-                    quantities: Iterable[str] = QUANTITIES, one_sided: str | None = None) -> pd.DataFrame:
+                    quantities: Iterable[str] = QUANTITIES, one_sided: str | None = None,
+                    also: Mapping[str, tuple[float, str | None]] | None = None) -> pd.DataFrame:
     """What the intervals would be with one Type B source's distribution scaled about the
     declared value by each of ``factors`` (1: as fitted), read from the budget columns of the
     records as :func:`budget_attribution` reads a source left out: the interval's sd becomes
@@ -332,32 +354,41 @@ def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float]
     value is read as a uniform on that side of it with the same standard uncertainty f u (as
     the budget draws a source "above", :func:`~bayes_roadload.analysis.budget.type_b_draws`):
     the variance as for the factor, and the mean moves by +-sqrt(3) f c u (the records' signed
-    column ``{q}_signed_typeb_{source}``, c u; records without it give no row).  Per quantity
-    and factor: the campaigns ``n`` whose records carry the source, the source's median share
-    of the variance as fitted, ``coverage95``, ``z_sd`` and ``z_mean``.  A reading for
-    designing a budget (on design seeds), not a verdict: a fit with the scaled budget is what a
+    column ``{q}_signed_typeb_{source}``, c u; records without it give no row).  ``also``:
+    other sources changed the same way in every row, source -> (factor, one_sided or None)
+    (the changes add: the variances' changes and the means' moves).  Per quantity and factor:
+    the campaigns ``n`` whose records carry the source, the source's median share of the
+    variance as fitted, ``coverage95``, ``z_sd`` and ``z_mean``.  A reading for designing a
+    budget (on design seeds), not a verdict: a fit with the scaled budget is what a
     confirmatory run scores."""
-    if one_sided is not None and one_sided not in ONE_SIDED:
-        raise ValueError(f"one_sided {one_sided!r}: one of {', '.join(ONE_SIDED)}")
+    for side in [one_sided] + [o for _, o in (also or {}).values()]:
+        if side is not None and side not in ONE_SIDED:
+            raise ValueError(f"one_sided {side!r}: one of {', '.join(ONE_SIDED)}")
     rows = []
     for q in quantities:
         col = f"{q}_sd_typeb_{source}"
-        signed = f"{q}_signed_typeb_{source}"
-        if col not in records or (one_sided is not None and signed not in records):
+        if col not in records:
             continue
-        rec = _scored(records, q, signed if one_sided is not None else col)
+        rec = _scored(records, q, col)
+        # a one-sided reading needs each such source's sign: campaigns without it are left out
+        for src, side in [(source, one_sided)] + [(k, o) for k, (_, o) in (also or {}).items()]:
+            signed = f"{q}_signed_typeb_{src}"
+            if side is not None and f"{q}_sd_typeb_{src}" in rec:
+                rec = rec[rec[signed].notna()] if signed in rec else rec.iloc[:0]
         if rec.empty:
             continue
         mean, sd, truth = (rec[f"{q}_{c}"].astype(float).to_numpy() for c in ("mean", "sd", "truth"))
         var_s = rec[col].to_numpy(float) ** 2
-        shift = _mean_shift(rec, q, source)
-        if one_sided is not None and np.any(shift != 0.0):
-            raise ValueError(f"{source} is one-sided in these fits already (column {q}_mean_shift_{source})")
+        fixed = [_source_change(rec, q, s, f, o) for s, (f, o) in (also or {}).items()]
+        if any(c is None for c in fixed):
+            continue
         for f in factors:
-            sd_f = np.sqrt(np.maximum(sd**2 - (1.0 - f * f) * var_s, 1e-300))
-            moved = -(1.0 - f) * shift if one_sided is None else \
-                ONE_SIDED[one_sided] * math.sqrt(3.0) * f * rec[signed].to_numpy(float)
-            z = (mean + moved - truth) / sd_f
+            changed = _source_change(rec, q, source, f, one_sided)
+            if changed is None:
+                break
+            dvar = changed[0] + sum(c[0] for c in fixed)
+            moved = changed[1] + sum(c[1] for c in fixed)
+            z = (mean + moved - truth) / np.sqrt(np.maximum(sd**2 + dvar, 1e-300))
             rows.append({"quantity": q, "factor": float(f), "n": len(rec),
                          "median_share": float(np.median(var_s / sd**2)),
                          "coverage95": float(np.mean(np.abs(z) <= Z975)), "z_sd": float(np.std(z, ddof=1)),

@@ -161,6 +161,16 @@ def test_a_normal_source_read_as_one_sided_moves_the_mean_by_its_sign():
                            one_sided="above").empty
     with pytest.raises(ValueError, match="one-sided in these fits already"):
         budget_rescaled(rec.assign(CD0_mean_shift_lev=0.3), "lev", (1.0,), quantities=("CD0",), one_sided="above")
+    # campaigns fitted before the signed column (a resumed run's older rows) are left out, not read as 0
+    mixed = rec.assign(CD0_signed_typeb_lev=np.where(np.arange(n) < n // 2, np.nan, c))
+    assert budget_rescaled(mixed, "lev", (1.0,), quantities=("CD0",), one_sided="above").iloc[0]["n"] == n - n // 2
+    # another source changed beside the one scanned: a second source of sd 0.5 whose true value is
+    # always its declared one, fitted as a normal, read at factor 0 (left out) brings sd(z) back to
+    # what the first alone gives; the changes add
+    two = rec.assign(CD0_sd=np.sqrt(1.0 + c * c + 0.25), CD0_sd_typeb_tyre=0.5, CD0_signed_typeb_tyre=0.5)
+    both = budget_rescaled(two, "lev", (1.0,), quantities=("CD0",), one_sided="above",
+                           also={"tyre": (0.0, None)}).iloc[0]
+    assert both["z_sd"] == pytest.approx(above["z_sd"], rel=1e-9) and both["z_mean"] == pytest.approx(above["z_mean"])
 
 
 def test_the_gates_are_read_apart_by_the_code_that_fitted_them():
