@@ -712,8 +712,8 @@ def _cmd_demo(args) -> int:
           f"under {out}")
     echo("\nGTR 15 target coefficients (reference conditions of the standard):")
     echo(format_standard(*run_standard(fit_dir, "gtr15", campaign=campaign, out_dir=fit_dir)))
-    work, shares, _ = run_predict(fit_dir, "wltc3b", effective_mass_kg=campaign.vehicle.effective_mass_kg)
-    echo(format_cycle_work(work, shares))
+    pred = run_predict(fit_dir, "wltc3b", effective_mass_kg=campaign.vehicle.effective_mass_kg)
+    echo(format_cycle_work(pred.work, pred.shares))
     return 0 if diag["pass"] else EXIT_GATES_FAILED
 
 
@@ -739,7 +739,7 @@ def _plan_population(args, out: Path):
     write_fit_dir(report, out / "fit", record=fit_record(fit, src), provenance=_provenance(args, campaign, src))
     diag = report.diagnostics
     if not diag["pass"]:
-        echo(_failed_fit_line("the source fit", diag["failed"],
+        echo(_failed_fit_line(f"the source fit {out / 'fit'}", diag["failed"],
                               "the plan below draws from a posterior that is not trustworthy"))
     return population_from_fit(fit, campaign), campaign
 

@@ -156,7 +156,10 @@ def rescaled_markdown(records: pd.DataFrame, spec: str, one_sided: str | None = 
         values = [float(f) for f in factors.split(",")]
     except ValueError:
         raise SystemExit(f"--rescale {spec!r}: give SOURCE=F,F,... (factors as numbers)") from None
-    table = budget_rescaled(records, source, values, one_sided=one_sided, also=also)
+    try:
+        table = budget_rescaled(records, source, values, one_sided=one_sided, also=also)
+    except ValueError as e:
+        raise SystemExit(f"--rescale {spec!r}: {e}") from None
     if table.empty:
         raise SystemExit(f"--rescale: the records carry no budget column for the source {source!r}"
                          + (" with its sign (records written before the signed columns)"

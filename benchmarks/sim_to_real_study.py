@@ -503,7 +503,11 @@ def markdown(by_design: dict[str, pd.DataFrame], args_text: str) -> str:
              "Outcomes: *correct* = a form of the true effect ranked first and supported (nulls: nothing claimed); "
              "*flagged* = nothing claimed and the true effect reported 'not identifiable here'; *indistinct* = nothing "
              "claimed, the true effect among candidates reported 'not distinguishable here'; *none* = nothing "
-             "claimed; *wrong* = another effect claimed.  *true rank*: the true effect's place by delta_elpd alone.", ""]
+             "claimed; *wrong* = another effect claimed.  *true rank*: the true effect's place by delta_elpd alone.  "
+             "*true_visible*: the true effect's own candidate reaches the support threshold (delta_elpd >= 5); "
+             "*true_distinct*: visible and ahead of every other effect's candidate by the ambiguity margin (2), "
+             "which no rule with that margin can do without (a bound on the claims, not the rules' own "
+             "'not distinguishable' verdict).", ""]
     lines += side_by_side(by_design)
     for design, records in by_design.items():
         lines += (independent_section(design, records) if design.startswith("independent")

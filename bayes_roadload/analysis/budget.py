@@ -31,8 +31,9 @@ fixed at their declared values.  They are marginalised to first order after the 
   drawn once per draw and shared by all quantities (so their correlations through a common
   source are kept) -- the law of propagation of uncertainty (GUM eq. 10) applied draw by draw;
   a source whose true value lies above the analysis' (the humidity where it is not logged: the
-  analysis takes dry air) draws ``delta_s ~ U(0, sqrt(12) u_s)`` instead, so that its draws
-  also carry its mean, ``c_{x,s} sqrt(3) u_s`` (budget column ``mean_shift``);
+  analysis takes dry air; a model constant whose file says ``uncertainty_distribution =
+  "above"``) draws ``delta_s ~ U(0, sqrt(12) u_s)`` instead, so that its draws also carry its
+  mean, ``c_{x,s} sqrt(3) u_s`` (budget column ``mean_shift``);
 * **budget**: the share of each source in the variance of each quantity,
   ``c_{x,s}^2 u_s^2 / (var_data + sum_s c_{x,s}^2 u_s^2)``, and the share of the data (the
   posterior's own variance).  The shares sum to 1.
@@ -45,8 +46,8 @@ steps, keyed by its parameter name; it needs the fit (planning's least-squares f
 out).  A source the model samples itself (a free ``airspeed_factor`` or ``yaw_factor`` of a
 ``*_calibrated`` model) is left to the posterior; a source the campaign has nothing for (no
 temperature channel, no driveline channel) is not applicable.  First order and independent
-sources: a source whose effect is not linear over +-2 u, or two sources that share an error,
-are outside this budget.
+sources: a source whose effect is not linear over +-2 u (over [0, sqrt(12) u] for a one-sided
+one), or two sources that share an error, are outside this budget.
 """
 
 from __future__ import annotations
@@ -194,7 +195,9 @@ def type_b_sensitivities(campaign, spec: ModelSpec | str, quantities: Sequence[s
 def type_b_draws(typeb: TypeB, shape: tuple[int, ...], seed: int = 0) -> dict[str, np.ndarray]:
     """``delta_s`` for every propagated source, one per draw (``shape``): N(0, u_s^2), or
     U(0, sqrt(12) u_s) for a source whose true value lies above the analysis' (distribution
-    "above", :class:`~bayes_roadload.data.uncertainty.UncertaintySource`)."""
+    "above", :meth:`TypeB.distribution_of`: a campaign source's
+    :class:`~bayes_roadload.data.uncertainty.UncertaintySource`, or a model file's
+    ``uncertainty_distribution``)."""
     rng = np.random.default_rng([seed, 20240])
     return {s: (rng.uniform(0.0, math.sqrt(12.0) * typeb.u[s], shape) if typeb.distribution_of(s) == "above"
                 else rng.normal(0.0, typeb.u[s], shape)) for s in typeb.sources}

@@ -354,13 +354,17 @@ def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float]
     value is read as a uniform on that side of it with the same standard uncertainty f u (as
     the budget draws a source "above", :func:`~bayes_roadload.analysis.budget.type_b_draws`):
     the variance as for the factor, and the mean moves by +-sqrt(3) f c u (the records' signed
-    column ``{q}_signed_typeb_{source}``, c u; records without it give no row).  ``also``:
+    column ``{q}_signed_typeb_{source}``, c u, written since the signed columns were added;
+    campaigns without it are left out, records without it give no row; "below" is a reading
+    only, a model file states "above").  ``also``:
     other sources changed the same way in every row, source -> (factor, one_sided or None)
     (the changes add: the variances' changes and the means' moves).  Per quantity and factor:
     the campaigns ``n`` whose records carry the source, the source's median share of the
     variance as fitted, ``coverage95``, ``z_sd`` and ``z_mean``.  A reading for designing a
     budget (on design seeds), not a verdict: a fit with the scaled budget is what a
     confirmatory run scores."""
+    if source in (also or {}):
+        raise ValueError(f"{source} is the source scanned: give it in factors, not in also")
     for side in [one_sided] + [o for _, o in (also or {}).values()]:
         if side is not None and side not in ONE_SIDED:
             raise ValueError(f"one_sided {side!r}: one of {', '.join(ONE_SIDED)}")
@@ -372,9 +376,10 @@ def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float]
         rec = _scored(records, q, col)
         # a one-sided reading needs each such source's sign: campaigns without it are left out
         for src, side in [(source, one_sided)] + [(k, o) for k, (_, o) in (also or {}).items()]:
-            signed = f"{q}_signed_typeb_{src}"
-            if side is not None and f"{q}_sd_typeb_{src}" in rec:
-                rec = rec[rec[signed].notna()] if signed in rec else rec.iloc[:0]
+            sd_col, signed = f"{q}_sd_typeb_{src}", f"{q}_signed_typeb_{src}"
+            if side is not None and sd_col in rec:
+                lacking = rec[sd_col].notna() & (rec[signed].isna() if signed in rec else True)
+                rec = rec[~lacking]
         if rec.empty:
             continue
         mean, sd, truth = (rec[f"{q}_{c}"].astype(float).to_numpy() for c in ("mean", "sd", "truth"))

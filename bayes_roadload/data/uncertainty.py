@@ -269,8 +269,9 @@ def uncertainty_from_toml(table: Mapping[str, Any] | None, where: str) -> dict[s
 
 
 def source_distribution(key: str) -> str:
-    """The distribution of source ``key``'s error (:attr:`UncertaintySource.distribution`);
-    "normal" for a key that is no campaign source (a model constant's uncertainty)."""
+    """The distribution of campaign source ``key``'s error (:attr:`UncertaintySource.distribution`);
+    "normal" for a key that is no campaign source (a model constant, whose model file may say
+    otherwise: :meth:`bayes_roadload.analysis.budget.TypeB.distribution_of` reads both)."""
     return SOURCES[key].distribution if key in SOURCES else "normal"
 
 

@@ -80,6 +80,7 @@ import numpy as np
 
 from .. import config
 from .. import thesis
+from ..data.uncertainty import DISTRIBUTIONS
 from ..physics.admittance import felt_air_readings
 from ..physics.model import AIR_MODELS, DragModel, model_from_names
 from ..physics.terms import TERMS
@@ -118,7 +119,7 @@ _DATA_TERMS = {
 zeros without those data."""
 _MODEL_KEYS = ("name", "description", "terms", "driveline", "lift", "air", "admittance")
 _PARAMETER_KEYS = ("free", "fixed", "fallback", "initial", "prior", "uncertainty", "uncertainty_distribution")
-UNCERTAINTY_DISTRIBUTIONS = ("normal", "above")
+UNCERTAINTY_DISTRIBUTIONS = DISTRIBUTIONS
 """A model constant's ``uncertainty_distribution``: "normal" about the fixed number (the
 default), or "above" it: the true value lies above the fixed number, uniform over
 [fixed, fixed + sqrt(12) u] (mean shift sqrt(3) u; GUM 4.3.7's rectangular distribution with

@@ -171,6 +171,18 @@ def test_a_normal_source_read_as_one_sided_moves_the_mean_by_its_sign():
     both = budget_rescaled(two, "lev", (1.0,), quantities=("CD0",), one_sided="above",
                            also={"tyre": (0.0, None)}).iloc[0]
     assert both["z_sd"] == pytest.approx(above["z_sd"], rel=1e-9) and both["z_mean"] == pytest.approx(above["z_mean"])
+    # the other source read one-sided moves the mean by its own sqrt(3) c u; campaigns without
+    # that source at all are kept, those with it but without its sign left out
+    shifted = budget_rescaled(two, "lev", (1.0,), quantities=("CD0",), one_sided="above",
+                              also={"tyre": (1.0, "above")}).iloc[0]
+    assert shifted["z_mean"] == pytest.approx(above["z_mean"] * sd / np.sqrt(1.25 + 0.25)
+                                              + np.sqrt(3.0) * 0.5 / np.sqrt(1.25 + 0.25), abs=1e-9)
+    partly = two.assign(CD0_sd_typeb_tyre=np.where(np.arange(n) < 100, np.nan, 0.5),
+                        CD0_signed_typeb_tyre=np.where(np.arange(n) < 200, np.nan, 0.5))
+    kept = budget_rescaled(partly, "lev", (1.0,), quantities=("CD0",), one_sided="above", also={"tyre": (1.0, "above")})
+    assert kept.iloc[0]["n"] == n - 100
+    with pytest.raises(ValueError, match="the source scanned"):
+        budget_rescaled(two, "lev", (1.0,), quantities=("CD0",), also={"lev": (0.5, None)})
 
 
 def test_the_gates_are_read_apart_by_the_code_that_fitted_them():

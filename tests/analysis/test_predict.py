@@ -29,6 +29,16 @@ def test_coastdown_at_other_temperature_and_mass_by_hand(tmp_path):
     assert written.loc["road_load_work_per_km", "mean"] == pytest.approx(330.0, rel=1e-12)
     assert (written["mass_change_kg"] == 150.0).all()
     assert heavier.set_index("quantity").loc["road_load_work_per_km", "mean"] == pytest.approx(330.0, rel=1e-12)
+    # its inertia is M_e + dM: the energy demand equals that of a 330 N vehicle of 1650 kg and
+    # exceeds that of the same forces on the fitted 1500 kg
+    from bayes_roadload.analysis.cycles import cycle_work
+
+    forces = dict(_draws(), F0_N=np.full(6, 330.0))
+    by_mass = {m: cycle_work(forces, "hwfet", effective_mass_kg=m)[0].set_index("quantity")["mean"]
+               for m in (1500.0, 1650.0)}
+    got = heavier.set_index("quantity")["mean"]
+    for q in ("tractive_work_positive", "cycle_energy_demand"):
+        assert got[q] == pytest.approx(by_mass[1650.0][q], rel=1e-12) and got[q] > by_mass[1500.0][q] * 1.01, q
     assert "with the test mass +150 kg" in format_cycle_work(work, shares, heavier)
     unchanged = run_predict(_draws(), "hwfet", effective_mass_kg=1500.0, out_dir=tmp_path / "same")
     assert unchanged.work_mass_changed is None and not (tmp_path / "same" / "cycle_work_mass_changed.csv").exists()
