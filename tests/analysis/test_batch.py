@@ -250,6 +250,7 @@ def test_caches_are_cleared_when_the_process_nears_its_mapping_limit(monkeypatch
     assert (maps[0] > batch.CLEAR_JAX_CACHES_ABOVE_MAP_SHARE * maps[1]) is cleared
 
 
+@pytest.mark.slow  # a cross-check kept out of the default run's 10 minutes
 def test_a_laplace_record_carries_the_model_constants_type_b(tmp_path):
     """A MAP + Laplace job's intervals carry the Type B uncertainty of the model's constants, as
     the NUTS record and ``fit`` do: the pitch default's K_alpha (0.9 rad^-1) with a standard

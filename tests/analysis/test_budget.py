@@ -126,6 +126,7 @@ def test_a_source_above_the_analysis_value_adds_its_mean_and_its_variance():
     assert f"shifts it by {expected_mean:+.4g}" in format_budget(budget)
 
 
+@pytest.mark.slow  # a cross-check kept out of the default run's 10 minutes
 def test_the_unlogged_humidity_moves_cd0_up_as_the_moist_air_lightens():
     """On a campaign that logs temperature and pressure but not the humidity (the independent
     simulator's), C_D0's sensitivity to the relative humidity is the moist air's relative

@@ -335,6 +335,7 @@ def test_a_study_can_log_the_humidity_too():
         calibration_jobs([1], 1, 1, log=["humidty"])
 
 
+@pytest.mark.slow  # a cross-check kept out of the default run's 10 minutes
 def test_a_study_can_state_the_anemometers_yaw_calibration():
     """``state_yaw_calibration``: the same runs under the same name, whose vehicle.toml states
     the simulator's own airspeed factor against yaw (0 where the effect is withheld)."""

@@ -283,6 +283,7 @@ def test_the_rules_fingerprint_sees_a_family_but_not_the_unused_option():
     assert json.loads(frozen.read_text())["library_sha256"] == base
 
 
+@pytest.mark.slow  # a cross-check kept out of the default run's 10 minutes
 def test_the_linearisation_keeps_the_values_the_users_model_holds_for_a_candidates_terms():
     """A model with the pitch term holds K_alpha and the pitch gain fixed; the pitch candidate
     is then a change of those values, so the linearisation point (every candidate at its null)

@@ -280,6 +280,7 @@ def test_a_top_up_adds_new_campaigns_with_the_seeds_of_a_full_run(conditions):
         == "plan-three_term-laplace-n1-0"
 
 
+@pytest.mark.slow  # a cross-check kept out of the default run's 10 minutes
 def test_the_type_b_floor_counts_the_model_constants_the_refits_carry(small_campaign):
     """A refit's draws carry the Type B uncertainty of the model file's constants (a shape's
     time constant, K_alpha, the yaw drag's levelling: ``fixed_shifts``) as well as the

@@ -74,6 +74,7 @@ def test_same_shaped_campaigns_share_one_compilation(two_campaigns):
     assert c2 < 0.1 * c1, (c1, c2)
 
 
+@pytest.mark.slow  # a cross-check kept out of the default run's 10 minutes
 def test_the_potential_of_many_draws_goes_in_batches_and_equals_one_by_one(two_campaigns, monkeypatch):
     """``potential_many`` (the importance draws' potential) runs over the draws in batches of
     results.PER_DRAW_BATCH_ELEMENTS / samples (results.draws_at_once); with batches of 3 draws, 7 draws give exactly

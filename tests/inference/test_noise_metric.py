@@ -70,6 +70,7 @@ def test_the_funnels_draws_in_the_scaled_coordinates_are_the_posterior():
     assert var_x1 == pytest.approx(np.exp(2.0 * C ** 2 * 0.25), rel=0.03)  # E exp(2 C x0), x0 ~ N(0, 0.25)
 
 
+@pytest.mark.slow  # a cross-check kept out of the default run's 10 minutes
 def test_a_fit_in_the_scaled_coordinates_has_the_same_posterior(small_campaign, pooled_fit):
     """The option through fit_nuts: the default fit (in the noise-scaled coordinates) and one in
     the Laplace coordinates alone agree: the latter's posterior medians lie inside the default

@@ -211,6 +211,7 @@ def test_two_interval_steps_keep_every_input(n_samples):
     assert np.max(np.abs(two - one)) < 5e-5, np.max(np.abs(two - one))
 
 
+@pytest.mark.slow  # a cross-check kept out of the default run's 10 minutes
 def test_linear_equation_of_motion_is_solved_in_parallel_with_the_same_result():
     """With measured air the thesis' terms (tyres, lift unloading, aero with yaw, side-force
     slip, pitch attitude, measured driveline, undriven wheels) make the deceleration affine in

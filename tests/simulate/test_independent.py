@@ -192,6 +192,7 @@ def test_a_realisation_keeps_the_campaign_and_redraws_the_runs():
     assert np.max(np.abs(va - vb)) > 0.05
 
 
+@pytest.mark.slow  # a cross-check kept out of the default run's 10 minutes
 def test_a_realisations_runs_keep_their_draws_when_an_effect_is_withheld():
     """With ``realisation`` each run draws from its own stream: withholding an effect that
     changes the first run's length leaves the second run's draws as they were; with the one
@@ -209,6 +210,7 @@ def test_a_realisations_runs_keep_their_draws_when_an_effect_is_withheld():
         assert (draws(every, 1) == draws(withheld, 1)) is same
 
 
+@pytest.mark.slow  # a cross-check kept out of the default run's 10 minutes
 def test_withholding_an_effect_keeps_every_other_draw():
     """Each effect withheld in turn (its draws made and discarded): the vehicle, site, mean wind,
     Type B errors, declared values and, with ``realisation``, every run's own draws are those of
@@ -301,6 +303,7 @@ def test_set_errors_and_mean_wind_replace_the_draws():
         simulate_independent(3, pairs=1, effects=(), errors={"speed_scale": 0.01})
 
 
+@pytest.mark.slow  # a cross-check kept out of the default run's 10 minutes
 def test_an_overflowing_trial_step_of_the_stiff_wind_filter_is_rejected_not_raised():
     """Seed 6155 at 4 pairs draws a 30 t, 16 m truck in gusty wind: a trial step of DOP853 on
     the body's wind filter (time constant length / airspeed) overflowed the airspeed, and
