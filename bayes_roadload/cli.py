@@ -499,6 +499,7 @@ def _cmd_fit_driveline(args) -> int:
 
 
 FAILED_FIT_CONSEQUENCE = "the figures below come from draws that are not trustworthy"
+FAILED_SOURCE_CONSEQUENCE = "the plan below draws from a posterior that is not trustworthy"
 
 
 def _failed_fit_line(which: str, failed, what: str = FAILED_FIT_CONSEQUENCE) -> str:
@@ -728,7 +729,7 @@ def _plan_population(args, out: Path):
     if is_fit_dir(src):
         source = read_fit_dir(src)
         campaign = fit_campaign(source.record)
-        _warn_failed_fit(src, "the source fit", "the plan below draws from a posterior that is not trustworthy")
+        _warn_failed_fit(src, "the source fit", FAILED_SOURCE_CONSEQUENCE)
         return population_from_samples(source.samples, source.record["free"], source.model, campaign,
                                        source=f"{source.record['pooling']} fit {src}"), campaign
     campaign = _load_with_units(src, args)
@@ -739,8 +740,7 @@ def _plan_population(args, out: Path):
     write_fit_dir(report, out / "fit", record=fit_record(fit, src), provenance=_provenance(args, campaign, src))
     diag = report.diagnostics
     if not diag["pass"]:
-        echo(_failed_fit_line(f"the source fit {out / 'fit'}", diag["failed"],
-                              "the plan below draws from a posterior that is not trustworthy"))
+        echo(_failed_fit_line(f"the source fit {out / 'fit'}", diag["failed"], FAILED_SOURCE_CONSEQUENCE))
     return population_from_fit(fit, campaign), campaign
 
 

@@ -43,10 +43,9 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_roadload import config  # noqa: E402
 from bayes_roadload.analysis.batch import batch_client, run_batch  # noqa: E402
-from bayes_roadload.analysis.effects import EFFECT_NAMES  # noqa: E402
 from studies.proof_suite import (INDEPENDENT_BASE_EFFECTS, INDEPENDENT_INJECTIONS,  # noqa: E402
                                  INDEPENDENT_MEAN_WIND_MPS, PROOF_DESIGNS, proof_design, withheld_effect_jobs)
-from studies.proof_scoring import (cause_of, confusion, outcome, read_records, summarise,  # noqa: E402
+from studies.proof_scoring import (close_rivals, confusion, outcome, read_records, summarise,  # noqa: E402
                                    true_distinct, true_gain, true_rank, true_visible)
 from studies.replay import REPLAY_SIZES, THESIS_SIMULATED_SPREAD_PCT, replay  # noqa: E402
 
@@ -403,18 +402,10 @@ def reading_lines(records: pd.DataFrame) -> list[str]:
                  "whatever the ranking rules; its `needs` name the test that would show it.")
     close = eff[visible & ~eff.apply(true_distinct, axis=1)]
     if len(close):
-        margin = config.DEFAULT_DIAGNOSIS.ambiguity_margin
-
-        def rivals(row) -> str:  # the other effects' candidates within the margin of the true one, or ahead
-            mine = true_gain(row)
-            near = [e for e in EFFECT_NAMES if cause_of(e) != row["true_effect"]
-                    and float(row.get(f"delta_elpd_{e}", float("nan"))) > mine - margin]
-            return ", ".join(near)
-
-        lines.append(f"- Visible but within {margin:g} of a rival or behind it (no rule with the margin claims "
-                     "these): " + "; ".join(
-                         f"`{t}` {len(g)} (" + "; ".join(sorted({rivals(r) for _, r in g.iterrows()})) + ")"
-                         for t, g in close.groupby("true_effect")) + ".")
+        lines.append(f"- Visible but within {config.DEFAULT_DIAGNOSIS.ambiguity_margin:g} of a rival or behind it "
+                     "(no rule with the margin claims these): " + "; ".join(
+                         f"`{t}` {len(g)} (" + "; ".join(sorted({", ".join(close_rivals(r)) for _, r in g.iterrows()}))
+                         + ")" for t, g in close.groupby("true_effect")) + ".")
     if "category" in eff:
         seeds = eff.drop_duplicates("seed")["category"].astype(str).value_counts()
         claimed = eff.groupby(eff["category"].astype(str))["outcome"].agg(lambda o: f"{int((o == 'correct').sum())} "
@@ -504,8 +495,9 @@ def markdown(by_design: dict[str, pd.DataFrame], args_text: str) -> str:
              "*flagged* = nothing claimed and the true effect reported 'not identifiable here'; *indistinct* = nothing "
              "claimed, the true effect among candidates reported 'not distinguishable here'; *none* = nothing "
              "claimed; *wrong* = another effect claimed.  *true rank*: the true effect's place by delta_elpd alone.  "
-             "*true_visible*: the true effect's own candidate reaches the support threshold (delta_elpd >= 5); "
-             "*true_distinct*: visible and ahead of every other effect's candidate by the ambiguity margin (2), "
+             "*true_visible*: the true effect's own candidate reaches the support threshold (delta_elpd >= "
+             f"{config.DEFAULT_DIAGNOSIS.support_delta_elpd:g}); *true_distinct*: visible and ahead of every other "
+             f"effect's candidate by the ambiguity margin ({config.DEFAULT_DIAGNOSIS.ambiguity_margin:g}), "
              "which no rule with that margin can do without (a bound on the claims, not the rules' own "
              "'not distinguishable' verdict).", ""]
     lines += side_by_side(by_design)

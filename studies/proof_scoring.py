@@ -91,16 +91,22 @@ def true_visible(row) -> bool:
     return bool(np.isfinite(value) and value >= config.DEFAULT_DIAGNOSIS.support_delta_elpd)
 
 
+def close_rivals(row) -> list[str]:
+    """The other effects' candidates whose delta_elpd comes within
+    ``DiagnosisConfig.ambiguity_margin`` of the true effect's best form, or beats it."""
+    mine = true_gain(row)
+    margin = config.DEFAULT_DIAGNOSIS.ambiguity_margin
+    return [e for e, v in _scores(row).items()
+            if cause_of(e) != row["true_effect"] and np.isfinite(v) and v > mine - margin]
+
+
 def true_distinct(row) -> bool:
     """Whether the true effect is visible (:func:`true_visible`) and its best form's delta_elpd
-    exceeds every other effect's candidate by ``DiagnosisConfig.ambiguity_margin``: the rules
-    claim nothing within that margin of a rival, so the share of such campaigns bounds the share
-    any rule with this margin could claim, however the other tests are set."""
-    if not true_visible(row):
-        return False
-    mine = true_gain(row)
-    rivals = [v for e, v in _scores(row).items() if cause_of(e) != row["true_effect"] and np.isfinite(v)]
-    return not rivals or mine >= max(rivals) + config.DEFAULT_DIAGNOSIS.ambiguity_margin
+    exceeds every other effect's candidate by ``DiagnosisConfig.ambiguity_margin`` (no
+    :func:`close_rivals`): the rules claim nothing within that margin of a rival, so the share
+    of such campaigns bounds the share any rule with this margin could claim, however the other
+    tests are set."""
+    return true_visible(row) and not close_rivals(row)
 
 
 def rank_one(row) -> str:

@@ -112,14 +112,14 @@ def run_predict(source: str | os.PathLike | Mapping[str, np.ndarray], cycle: str
 def format_cycle_work(work: pd.DataFrame, shares: pd.DataFrame, work_mass_changed: pd.DataFrame | None = None) -> str:
     """Plain-text cycle work (mean [2.5 %, 97.5 %]) and the variance shares; with
     ``work_mass_changed``, the changed vehicle's work after them."""
-    lines = [f"  {work['cycle'].iloc[0]} road-load work:"]
-    for _, r in work.iterrows():
-        lines.append(f"  {r['quantity']:<24} {r['mean']:10.5g} {r['unit']:<6} [{r['q2.5']:.5g}, {r['q97.5']:.5g}]")
+    def rows(frame: pd.DataFrame) -> list[str]:
+        return [f"  {r['quantity']:<24} {r['mean']:10.5g} {r['unit']:<6} [{r['q2.5']:.5g}, {r['q97.5']:.5g}]"
+                for _, r in frame.iterrows()]
+
+    lines = [f"  {work['cycle'].iloc[0]} road-load work:", *rows(work)]
     lines.append("  variance share: " + ", ".join(f"{p} {s:.0%}" for p, s in
                                                    zip(shares["parameter"], shares["variance_share"])))
     if work_mass_changed is not None:
         dm = float(work_mass_changed["mass_change_kg"].iloc[0])
-        lines.append(f"  with the test mass {dm:+g} kg (reference conditions):")
-        for _, r in work_mass_changed.iterrows():
-            lines.append(f"  {r['quantity']:<24} {r['mean']:10.5g} {r['unit']:<6} [{r['q2.5']:.5g}, {r['q97.5']:.5g}]")
+        lines += [f"  with the test mass {dm:+g} kg (reference conditions):", *rows(work_mass_changed)]
     return "\n".join(lines)
