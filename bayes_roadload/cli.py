@@ -512,10 +512,11 @@ def _failed_fit_line(which: str, failed, what: str = FAILED_FIT_CONSEQUENCE) -> 
 def _warn_failed_fit(fit_dir, which: str = "the fit", what: str = FAILED_FIT_CONSEQUENCE) -> None:
     """Print, before any figure drawn from it, that a fit directory's fit failed its gates
     (``diagnostics.json`` ``pass``; :func:`_failed_fit_line`)."""
-    f = Path(fit_dir) / "diagnostics.json"
-    diag = json.loads(f.read_text()) if f.is_file() else {}
-    if not diag.get("pass", True):
-        echo(_failed_fit_line(f"{which} {fit_dir}", diag.get("failed"), what))
+    from .output import fit_gates
+
+    passed, failed = fit_gates(fit_dir)
+    if not passed:
+        echo(_failed_fit_line(f"{which} {fit_dir}", failed, what))
 
 
 def _cmd_report(args) -> int:

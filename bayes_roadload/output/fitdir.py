@@ -162,12 +162,14 @@ class FitDir:
     record : ``fit.json``.
     samples : posterior draws, site -> [chain, draw, ...] array.
     passed : the fit passed its gates (``diagnostics.json`` ``pass``; True when absent).
+    failed : the gates it failed (``diagnostics.json`` ``failed``), in the file's order.
     """
 
     path: Path
     record: dict[str, Any]
     samples: dict[str, np.ndarray]
     passed: bool
+    failed: tuple[str, ...] = ()
 
     @property
     def model(self) -> str:
@@ -195,6 +197,15 @@ def is_fit_dir(path: str | os.PathLike) -> bool:
     return (Path(path) / "posterior.nc").is_file()
 
 
+def fit_gates(path: str | os.PathLike) -> tuple[bool, tuple[str, ...]]:
+    """Whether the fit in directory ``path`` passed its gates, and the gates it failed, from its
+    ``diagnostics.json`` (``pass``, ``failed``); a directory without one (a least-squares fit)
+    passed."""
+    f = Path(path) / "diagnostics.json"
+    diag = json.loads(f.read_text()) if f.is_file() else {}
+    return bool(diag.get("pass", True)), tuple(diag.get("failed") or ())
+
+
 def read_fit_dir(path: str | os.PathLike) -> FitDir:
     """Read a fit directory written by :func:`write_fit_dir`; refuses one without ``fit.json``
     or without the campaign path in it."""
@@ -211,6 +222,5 @@ def read_fit_dir(path: str | os.PathLike) -> FitDir:
         raise ValueError(f"{meta_file}: no campaign path recorded; give the campaign directory instead")
     post = az.from_netcdf(str(src / "posterior.nc")).posterior
     samples = {k: post[k].values for k in post.data_vars}
-    diag_file = src / "diagnostics.json"
-    passed = not diag_file.is_file() or bool(json.loads(diag_file.read_text()).get("pass", True))
-    return FitDir(path=src, record=record, samples=samples, passed=passed)
+    passed, failed = fit_gates(src)
+    return FitDir(path=src, record=record, samples=samples, passed=passed, failed=failed)

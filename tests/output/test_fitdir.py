@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from bayes_roadload.inference.results import SUMMARY_COLUMNS, FitReport
-from bayes_roadload.output import FIT_FILES, fit_record, is_fit_dir, read_fit_dir, write_fit_dir
+from bayes_roadload.output import FIT_FILES, fit_gates, fit_record, is_fit_dir, read_fit_dir, write_fit_dir
 
 
 def _report(runs: bool) -> FitReport:
@@ -18,7 +18,7 @@ def _report(runs: bool) -> FitReport:
                          coords={"run": ["1", "2", "3"]}, dims={"v0_mps": ["run"]})
     summary = pd.DataFrame([{c: (0.5 if c != "parameter" else "AD") for c in SUMMARY_COLUMNS}])
     table = pd.DataFrame([{c: (0.1 if c != "parameter" else "v0_mps[1]") for c in SUMMARY_COLUMNS}])
-    return FitReport(idata=idata, summary=summary, runs=table if runs else None, diagnostics={"pass": False})
+    return FitReport(idata=idata, summary=summary, runs=table if runs else None, diagnostics={"pass": False, "failed": ["rhat", "ess_bulk"]})
 
 
 def _fit(tmp_path):
@@ -55,6 +55,9 @@ def test_fit_record_and_read_back(tmp_path):
     assert is_fit_dir(out) and not is_fit_dir(tmp_path)
     back = read_fit_dir(out)
     assert back.record == dict(record, provenance=prov) and back.passed is False
+    assert back.failed == ("rhat", "ess_bulk") == fit_gates(out)[1]
+    (out / "diagnostics.json").unlink()   # as a least-squares fit directory: no gates, none failed
+    assert fit_gates(out) == (True, ()) and read_fit_dir(out).passed
     assert back.model == "three_term"   # the model file does not exist: its name
     assert back.samples["v0_mps"].shape == (2, 10, 3)
 
