@@ -138,6 +138,8 @@ def parse_also(specs: list[str] | None) -> dict[str, tuple[float, str | None]]:
     for spec in specs or []:
         source, _, rest = spec.partition("=")
         factor, _, side = rest.partition(":")
+        if not source or source in out:
+            raise SystemExit(f"--with {spec!r}: " + ("name the source" if not source else f"{source} given twice"))
         try:
             out[source] = (float(factor), side or None)
         except ValueError:
@@ -145,6 +147,12 @@ def parse_also(specs: list[str] | None) -> dict[str, tuple[float, str | None]]:
         if side and side not in ("above", "below"):
             raise SystemExit(f"--with {spec!r}: the side is above or below")
     return out
+
+
+def _counts(n: pd.Series) -> str:
+    """The campaigns a table's rows count: one number, or their range when rows differ."""
+    lo, hi = int(n.min()), int(n.max())
+    return f"{hi}" if lo == hi else f"{lo}-{hi}"
 
 
 def rescaled_markdown(records: pd.DataFrame, spec: str, one_sided: str | None = None,
@@ -167,7 +175,7 @@ def rescaled_markdown(records: pd.DataFrame, spec: str, one_sided: str | None = 
     how = "scaled" if one_sided is None else f"made one-sided ({one_sided} the declared value) and scaled"
     beside = "".join(f"; beside it `{k}` x {f:g}" + (f", one-sided {o}" if o else "") for k, (f, o) in (also or {}).items())
     lines = [f"The records' intervals with the Type B source `{source}` {how}{beside} (a reading in the normal "
-             f"approximation, `analysis.calibration.budget_rescaled`; the {int(table['n'].max())} of the "
+             f"approximation, `analysis.calibration.budget_rescaled`; the {_counts(table['n'])} of the "
              f"{len(successful(records))} fits whose records carry the source):", "",
              "| quantity | campaigns | source's median share | factor | 95 % coverage | sd(z) | mean z |",
              "|---|---|---|---|---|---|---|"]

@@ -268,16 +268,33 @@ def _mean_shift(rec: pd.DataFrame, quantity: str, source: str) -> np.ndarray:
     return rec[col].fillna(0.0).to_numpy(float) if col in rec else np.zeros(len(rec))
 
 
+def _changed_sd(rec: pd.DataFrame, quantity: str, sd: np.ndarray, dvar: np.ndarray) -> np.ndarray:
+    """The interval's sd with its Type B variance changed by ``dvar`` (first order, (c u)^2 of the
+    records' ``{q}_sd_typeb_*`` columns): the recorded sd scaled by the change's part of the
+    first-order budget B = sd_data^2 + sum (c u)^2, sd sqrt((B + dvar) / B).  The recorded sd^2
+    and B differ by a few per cent (the draws' Monte Carlo error, the sensitivities' higher
+    orders); subtracting ``dvar`` from sd^2 instead could leave less than the posterior's own
+    variance, or none, where one source holds nearly all of B.  Records without ``{q}_sd_data``:
+    B = sd^2 (the subtraction, floored at 0)."""
+    prefix = f"{quantity}_sd_typeb_"
+    if f"{quantity}_sd_data" in rec:
+        budget = rec[f"{quantity}_sd_data"].astype(float).to_numpy() ** 2 + sum(
+            (rec[c].fillna(0.0).to_numpy(float) ** 2 for c in rec.columns if c.startswith(prefix)), np.zeros(len(rec)))
+    else:
+        budget = sd**2
+    return sd * np.sqrt(np.maximum((budget + dvar) / budget, 0.0))
+
+
 def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTITIES) -> pd.DataFrame:
     """Which Type B source makes the intervals too wide or too narrow, from the budget columns of
     the records (:func:`~bayes_roadload.analysis.budget.budget_record`; fits without them are left
     out).  Per quantity and source (and ``data only``, every source left out): the campaigns
     ``n``, the source's median share of the interval's variance (sd_s^2 / sd^2), and sd(z) and 95 %
     coverage with the source left out, read in the normal approximation: z = (mean - shift_s -
-    truth) / sqrt(sd^2 - sd_s^2), covered when |z| <= 1.96 (``shift_s``: the source's mean shift,
-    0 for a normal source); ``data only`` divides by the posterior's own recorded sd
-    (``{q}_sd_data``), which the first-order sources' sum can exceed the interval's variance
-    without.  Beside them the same with every source in (``z_sd``,
+    truth) / sd', sd' the recorded sd less the source's part of the first-order budget
+    (:func:`_changed_sd`: sd sqrt(1 - sd_s^2 / B)), covered when |z| <= 1.96 (``shift_s``: the
+    source's mean shift, 0 for a normal source); ``data only`` divides by the posterior's own
+    recorded sd (``{q}_sd_data``).  Beside them the same with every source in (``z_sd``,
     ``coverage95``), so the change is the source's alone.  A reading: the sources' sds are first
     order and the normal approximation is not the recorded interval."""
     rows = []
@@ -297,7 +314,7 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
 
         def row(label: str, var_out: np.ndarray, shift: np.ndarray, sd_wo: np.ndarray | None = None) -> dict:
             if sd_wo is None:
-                sd_wo = np.sqrt(np.maximum(sd**2 - var_out, 1e-300))
+                sd_wo = _changed_sd(rec, q, sd, -var_out)
             z = (mean - shift - truth) / sd_wo
             return {"quantity": q, "source": label, "n": len(rec),
                     "median_share": float(np.median(var_out / sd**2)),
@@ -346,9 +363,9 @@ def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float]
                     also: Mapping[str, tuple[float, str | None]] | None = None) -> pd.DataFrame:
     """What the intervals would be with one Type B source's distribution scaled about the
     declared value by each of ``factors`` (1: as fitted), read from the budget columns of the
-    records as :func:`budget_attribution` reads a source left out: the interval's sd becomes
-    sqrt(sd^2 - (1 - f^2) sd_s^2) and its mean moves by -(1 - f) shift_s (the source's
-    first-order share and mean shift, exact where the source enters the quantity linearly and
+    records as :func:`budget_attribution` reads a source left out: the interval's variance loses
+    (1 - f^2) sd_s^2 of its first-order budget (:func:`_changed_sd`) and its mean moves by
+    -(1 - f) shift_s (the source's first-order share and mean shift, exact where the source enters the quantity linearly and
     the fit holds it at its declared value), z = (mean - truth) / that sd, covered when |z| <=
     1.96.  With ``one_sided`` ("above" or "below") a source fitted as a normal about the declared
     value is read as a uniform on that side of it with the same standard uncertainty f u (as
@@ -362,9 +379,20 @@ def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float]
     the campaigns ``n`` whose records carry the source, the source's median share of the
     variance as fitted, ``coverage95``, ``z_sd`` and ``z_mean``.  A reading for designing a
     budget (on design seeds), not a verdict: a fit with the scaled budget is what a
-    confirmatory run scores."""
+    confirmatory run scores.  Refused: a factor that is not a finite number >= 0, and an ``also``
+    source no quantity's records carry (a misspelt name would otherwise change nothing)."""
+    factors, quantities = list(factors), tuple(quantities)
     if source in (also or {}):
         raise ValueError(f"{source} is the source scanned: give it in factors, not in also")
+    for name, f in [(source, f) for f in factors] + [(k, f) for k, (f, _) in (also or {}).items()]:
+        if not (math.isfinite(f) and f >= 0.0):
+            raise ValueError(f"{name}: factor {f!r} is not a finite number >= 0 (a standard uncertainty's scale)")
+    for name in also or {}:
+        if not any(f"{q}_sd_typeb_{name}" in records for q in quantities):
+            raise ValueError(f"{name}: no quantity's records carry this Type B source (columns "
+                             f"{{quantity}}_sd_typeb_{name}); sources in the records: "
+                             + ", ".join(sorted({c.split("_sd_typeb_", 1)[1] for c in records.columns
+                                                 if "_sd_typeb_" in c})))
     for side in [one_sided] + [o for _, o in (also or {}).values()]:
         if side is not None and side not in ONE_SIDED:
             raise ValueError(f"one_sided {side!r}: one of {', '.join(ONE_SIDED)}")
@@ -393,7 +421,7 @@ def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float]
                 break
             dvar = changed[0] + sum(c[0] for c in fixed)
             moved = changed[1] + sum(c[1] for c in fixed)
-            z = (mean + moved - truth) / np.sqrt(np.maximum(sd**2 + dvar, 1e-300))
+            z = (mean + moved - truth) / _changed_sd(rec, q, sd, dvar)
             rows.append({"quantity": q, "factor": float(f), "n": len(rec),
                          "median_share": float(np.median(var_s / sd**2)),
                          "coverage95": float(np.mean(np.abs(z) <= Z975)), "z_sd": float(np.std(z, ddof=1)),

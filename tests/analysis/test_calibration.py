@@ -185,6 +185,61 @@ def test_a_normal_source_read_as_one_sided_moves_the_mean_by_its_sign():
         budget_rescaled(two, "lev", (1.0,), quantities=("CD0",), also={"lev": (0.5, None)})
 
 
+def test_a_one_sided_reading_is_what_the_budget_draws_for_a_source_stated_above():
+    """The same source, sensitivity c, standard uncertainty u: records of a fit that took it as a
+    normal (``budget_record``: its signed column c u) read one-sided above give the z of records
+    of a fit whose model file states it "above" (``budget_record``: the mean shift c sqrt(3) u
+    that ``add_type_b``'s draws add, the same sd): the reading and the budget agree on the sign
+    and size of the move, to rounding."""
+    from bayes_roadload.analysis.budget import TypeB, budget_record
+
+    rng = np.random.default_rng(3)
+    n, c, u = 500, -0.4, 0.8
+    normal = TypeB(u={"lev": u}, sensitivity={"CD0": {"lev": c}})
+    above = TypeB(u={"lev": u}, sensitivity={"CD0": {"lev": c}}, distribution={"lev": "above"})
+    rec_n, rec_a = budget_record(normal, {"CD0": 1.0}), budget_record(above, {"CD0": 1.0})
+    assert rec_a["CD0_mean_shift_lev"] == pytest.approx(np.sqrt(3.0) * rec_n["CD0_signed_typeb_lev"])
+    assert rec_a["CD0_sd_typeb_lev"] == rec_n["CD0_sd_typeb_lev"] == pytest.approx(abs(c) * u)
+    sd = np.sqrt(1.0 + (c * u) ** 2)
+    base = pd.DataFrame({"seed": np.arange(n), "pairs": 3, "error": np.nan, "gate_pass": True,
+                         "CD0_truth": 0.0, "CD0_mean": rng.standard_normal(n) * sd, "CD0_sd": sd})
+    fitted_normal = base.assign(**rec_n)
+    fitted_above = base.assign(**rec_a, CD0_mean=base["CD0_mean"] + rec_a["CD0_mean_shift_lev"])
+    read = budget_rescaled(fitted_normal, "lev", (1.0,), quantities=("CD0",), one_sided="above").iloc[0]
+    as_fitted = budget_rescaled(fitted_above, "lev", (1.0,), quantities=("CD0",)).iloc[0]
+    assert read["z_mean"] == pytest.approx(as_fitted["z_mean"], abs=1e-12)
+    assert read["z_sd"] == pytest.approx(as_fitted["z_sd"], abs=1e-12)
+    assert read["z_mean"] - budget_rescaled(fitted_normal, "lev", (1.0,), quantities=("CD0",)).iloc[0]["z_mean"] \
+        == pytest.approx(np.sqrt(3.0) * c * u / sd)
+
+
+def test_a_source_holding_nearly_all_of_a_budget_larger_than_the_interval_is_read_in_proportion():
+    """Records whose first-order budget B = sd_data^2 + (c u)^2 = 1 + 1.1^2 exceeds the interval's
+    recorded variance 2 (correlated sources, Monte Carlo error): the source left out (factor 0)
+    leaves the interval sd sqrt(2 / 2.21) (its part of B removed), not sqrt(2 - 1.21), less than
+    the posterior's own sd 1; a source of 99.99 % of B leaves a finite, positive sd.  Factors that
+    are not finite numbers >= 0 and a misspelt ``also`` source are refused."""
+    rng = np.random.default_rng(5)
+    n = 400
+    err = rng.standard_normal(n)
+    rec = pd.DataFrame({"seed": np.arange(n), "pairs": 3, "error": np.nan, "gate_pass": True,
+                        "CD0_truth": 0.0, "CD0_mean": err, "CD0_sd": np.sqrt(2.0), "CD0_sd_data": 1.0,
+                        "CD0_sd_typeb_tyre": 1.1, "CD0_signed_typeb_tyre": 1.1})
+    r = budget_rescaled(rec, "tyre", (0.0, 1.0), quantities=("CD0",)).set_index("factor")
+    assert r.loc[0.0, "z_sd"] == pytest.approx(np.std(err / np.sqrt(2.0 / 2.21), ddof=1))
+    assert r.loc[1.0, "z_sd"] == pytest.approx(np.std(err / np.sqrt(2.0), ddof=1))
+    a = budget_attribution(rec, quantities=("CD0",)).set_index("source")
+    assert a.loc["tyre", "z_sd_without"] == pytest.approx(r.loc[0.0, "z_sd"])
+    nearly_all = rec.assign(CD0_sd_data=0.01, CD0_sd=1.0, CD0_sd_typeb_tyre=1.0)
+    z = budget_rescaled(nearly_all, "tyre", (0.0,), quantities=("CD0",)).iloc[0]
+    assert np.isfinite(z["z_sd"]) and z["z_sd"] == pytest.approx(np.std(err / np.sqrt(1e-4 / (1e-4 + 1.0)), ddof=1))
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="finite number >= 0"):
+            budget_rescaled(rec, "tyre", (bad,), quantities=("CD0",))
+    with pytest.raises(ValueError, match="tyres: no quantity's records carry"):
+        budget_rescaled(rec.assign(CD0_sd_typeb_lev=0.1), "lev", (1.0,), quantities=("CD0",), also={"tyres": (0.0, None)})
+
+
 def test_the_gates_are_read_apart_by_the_code_that_fitted_them():
     """Records fitted by two commits (column ``code``): the section counts each commit's gates
     and first-time passes on its own campaigns; one commit adds no such lines."""
