@@ -274,14 +274,14 @@ def _changed_sd(rec: pd.DataFrame, quantity: str, sd: np.ndarray, dvar: np.ndarr
     first-order budget B = sd_data^2 + sum (c u)^2, sd sqrt((B + dvar) / B).  The recorded sd^2
     and B differ by a few per cent (the draws' Monte Carlo error, the sensitivities' higher
     orders); subtracting ``dvar`` from sd^2 instead could leave less than the posterior's own
-    variance, or none, where one source holds nearly all of B.  Records without ``{q}_sd_data``:
-    B = sd^2 (the subtraction, floored at 0)."""
+    variance, or none, where one source holds nearly all of B.  Records (or rows) without
+    ``{q}_sd_data``: B = sd^2 (the subtraction, floored at 0)."""
     prefix = f"{quantity}_sd_typeb_"
+    budget = sd**2
     if f"{quantity}_sd_data" in rec:
-        budget = rec[f"{quantity}_sd_data"].astype(float).to_numpy() ** 2 + sum(
+        first_order = rec[f"{quantity}_sd_data"].astype(float).to_numpy() ** 2 + sum(
             (rec[c].fillna(0.0).to_numpy(float) ** 2 for c in rec.columns if c.startswith(prefix)), np.zeros(len(rec)))
-    else:
-        budget = sd**2
+        budget = np.where(np.isfinite(first_order), first_order, budget)
     return sd * np.sqrt(np.maximum((budget + dvar) / budget, 0.0))
 
 

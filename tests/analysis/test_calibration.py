@@ -233,6 +233,11 @@ def test_a_source_holding_nearly_all_of_a_budget_larger_than_the_interval_is_rea
     nearly_all = rec.assign(CD0_sd_data=0.01, CD0_sd=1.0, CD0_sd_typeb_tyre=1.0)
     z = budget_rescaled(nearly_all, "tyre", (0.0,), quantities=("CD0",)).iloc[0]
     assert np.isfinite(z["z_sd"]) and z["z_sd"] == pytest.approx(np.std(err / np.sqrt(1e-4 / (1e-4 + 1.0)), ddof=1))
+    # a row without the posterior's own sd (records of an older commit) is read against sd^2
+    older = rec.assign(CD0_sd_data=np.where(np.arange(n) < 10, np.nan, 1.0))
+    z_older = budget_rescaled(older, "tyre", (0.0,), quantities=("CD0",)).iloc[0]["z_sd"]
+    expected = np.where(np.arange(n) < 10, np.sqrt(2.0 - 1.21), np.sqrt(2.0 / 2.21))
+    assert z_older == pytest.approx(np.std(err / expected, ddof=1))
     for bad in (-1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="finite number >= 0"):
             budget_rescaled(rec, "tyre", (bad,), quantities=("CD0",))
