@@ -232,16 +232,23 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 @contextlib.contextmanager
 def benchmark_script(name: str):
     """``benchmarks/<name>.py`` imported as a module, registered in ``sys.modules`` while in use
-    (its dataclasses look their module up) and removed after."""
+    (its dataclasses look their module up) and removed after; the benchmarks' folder is on
+    ``sys.path`` meanwhile, as it is for a script run from it (its sibling modules, e.g.
+    ``doc_sections``, import)."""
     path = BENCHMARKS / f"{name}.py"
     spec = importlib.util.spec_from_file_location(f"{name}_benchmark", path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module
+    added = str(BENCHMARKS) not in sys.path
+    if added:
+        sys.path.insert(0, str(BENCHMARKS))
     try:
         spec.loader.exec_module(module)
         yield module
     finally:
         sys.modules.pop(spec.name, None)
+        if added and str(BENCHMARKS) in sys.path:
+            sys.path.remove(str(BENCHMARKS))
 
 
 def with_fixed(spec, values: dict[str, float]):

@@ -1,23 +1,17 @@
 """benchmarks/calibration_study.py's readings of records: ``--with`` parsed and refused, and
 ``--rescale``'s table naming the campaigns it reads."""
 
-import sys
-
 import numpy as np
 import pandas as pd
 import pytest
 
-from .conftest import BENCHMARKS, benchmark_script
+from .conftest import benchmark_script
 
 
 @pytest.fixture(scope="module")
 def study():
-    sys.path.insert(0, str(BENCHMARKS))   # the script imports its sibling doc_sections
-    try:
-        with benchmark_script("calibration_study") as module:
-            yield module
-    finally:
-        sys.path.remove(str(BENCHMARKS))
+    with benchmark_script("calibration_study") as module:
+        yield module
 
 
 def test_with_specs_are_parsed_and_bad_ones_refused(study):

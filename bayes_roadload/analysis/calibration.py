@@ -268,20 +268,26 @@ def _mean_shift(rec: pd.DataFrame, quantity: str, source: str) -> np.ndarray:
     return rec[col].fillna(0.0).to_numpy(float) if col in rec else np.zeros(len(rec))
 
 
-def _changed_sd(rec: pd.DataFrame, quantity: str, sd: np.ndarray, dvar: np.ndarray) -> np.ndarray:
+def _first_order_budget(rec: pd.DataFrame, quantity: str, sd: np.ndarray) -> np.ndarray:
+    """The first-order budget B = sd_data^2 + sum (c u)^2 of ``quantity``'s intervals in the
+    records (``{q}_sd_data``, ``{q}_sd_typeb_*``); sd^2 in records (or rows) without
+    ``{q}_sd_data``."""
+    prefix = f"{quantity}_sd_typeb_"
+    if f"{quantity}_sd_data" not in rec:
+        return sd**2
+    first_order = rec[f"{quantity}_sd_data"].astype(float).to_numpy() ** 2 + sum(
+        (rec[c].fillna(0.0).to_numpy(float) ** 2 for c in rec.columns if c.startswith(prefix)), np.zeros(len(rec)))
+    return np.where(np.isfinite(first_order), first_order, sd**2)
+
+
+def _changed_sd(sd: np.ndarray, budget: np.ndarray, dvar: np.ndarray) -> np.ndarray:
     """The interval's sd with its Type B variance changed by ``dvar`` (first order, (c u)^2 of the
     records' ``{q}_sd_typeb_*`` columns): the recorded sd scaled by the change's part of the
-    first-order budget B = sd_data^2 + sum (c u)^2, sd sqrt((B + dvar) / B).  The recorded sd^2
-    and B differ by a few per cent (the draws' Monte Carlo error, the sensitivities' higher
+    first-order budget B (:func:`_first_order_budget`), sd sqrt((B + dvar) / B).  The recorded
+    sd^2 and B differ by a few per cent (the draws' Monte Carlo error, the sensitivities' higher
     orders); subtracting ``dvar`` from sd^2 instead could leave less than the posterior's own
-    variance, or none, where one source holds nearly all of B.  Records (or rows) without
-    ``{q}_sd_data``: B = sd^2 (the subtraction, floored at 0)."""
-    prefix = f"{quantity}_sd_typeb_"
-    budget = sd**2
-    if f"{quantity}_sd_data" in rec:
-        first_order = rec[f"{quantity}_sd_data"].astype(float).to_numpy() ** 2 + sum(
-            (rec[c].fillna(0.0).to_numpy(float) ** 2 for c in rec.columns if c.startswith(prefix)), np.zeros(len(rec)))
-        budget = np.where(np.isfinite(first_order), first_order, budget)
+    variance, or none, where one source holds nearly all of B.  Where B is sd^2 this is the
+    subtraction, floored at 0."""
     return sd * np.sqrt(np.maximum((budget + dvar) / budget, 0.0))
 
 
@@ -305,6 +311,7 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
         if rec.empty:
             continue
         mean, sd, truth = (rec[f"{q}_{c}"].astype(float).to_numpy() for c in ("mean", "sd", "truth"))
+        budget = _first_order_budget(rec, q, sd)
         z_all = (mean - truth) / sd
         prefix = f"{q}_sd_typeb_"
         sources = [c[len(prefix):] for c in rec.columns if c.startswith(prefix) and rec[c].notna().any()]
@@ -314,7 +321,7 @@ def budget_attribution(records: pd.DataFrame, quantities: Iterable[str] = QUANTI
 
         def row(label: str, var_out: np.ndarray, shift: np.ndarray, sd_wo: np.ndarray | None = None) -> dict:
             if sd_wo is None:
-                sd_wo = _changed_sd(rec, q, sd, -var_out)
+                sd_wo = _changed_sd(sd, budget, -var_out)
             z = (mean - shift - truth) / sd_wo
             return {"quantity": q, "source": label, "n": len(rec),
                     "median_share": float(np.median(var_out / sd**2)),
@@ -411,6 +418,7 @@ def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float]
         if rec.empty:
             continue
         mean, sd, truth = (rec[f"{q}_{c}"].astype(float).to_numpy() for c in ("mean", "sd", "truth"))
+        budget = _first_order_budget(rec, q, sd)
         var_s = rec[col].to_numpy(float) ** 2
         fixed = [_source_change(rec, q, s, f, o) for s, (f, o) in (also or {}).items()]
         if any(c is None for c in fixed):
@@ -421,7 +429,7 @@ def budget_rescaled(records: pd.DataFrame, source: str, factors: Iterable[float]
                 break
             dvar = changed[0] + sum(c[0] for c in fixed)
             moved = changed[1] + sum(c[1] for c in fixed)
-            z = (mean + moved - truth) / _changed_sd(rec, q, sd, dvar)
+            z = (mean + moved - truth) / _changed_sd(sd, budget, dvar)
             rows.append({"quantity": q, "factor": float(f), "n": len(rec),
                          "median_share": float(np.median(var_s / sd**2)),
                          "coverage95": float(np.mean(np.abs(z) <= Z975)), "z_sd": float(np.std(z, ddof=1)),

@@ -454,12 +454,11 @@ def test_smoke_one_independent_campaign_through_the_study():
     assert set(table.loc[table["group"] == "all", "quantity"]) == set(QUANTITIES)
 
 
-def test_the_study_resumes_from_its_partial_records(tmp_path, monkeypatch):
+def test_the_study_resumes_from_its_partial_records(tmp_path):
     """An interrupted study (``benchmarks/calibration_study.py``) keeps the records it wrote and
     fits only the campaigns they do not hold."""
-    from ..conftest import BENCHMARKS, benchmark_script
+    from ..conftest import benchmark_script
 
-    monkeypatch.syspath_prepend(str(BENCHMARKS))   # its sibling doc_sections, as when run as a script
     with benchmark_script("calibration_study") as study:
         jobs = calibration_jobs([1000, 1001, 1002], 1, 3)
         partial = tmp_path / "records.partial.csv"
@@ -476,12 +475,11 @@ def test_the_study_resumes_from_its_partial_records(tmp_path, monkeypatch):
         assert [j.name for j in pending] == ["ind-1000", "ind-1002"]
 
 
-def test_the_comparison_counts_held_intervals_and_first_time_gates(monkeypatch):
+def test_the_comparison_counts_held_intervals_and_first_time_gates():
     """``calibration_study.py --compare``: on the campaigns both record sets hold, the held
     intervals of each and which fits passed every gate first time (a retried fit did not)."""
-    from ..conftest import BENCHMARKS, benchmark_script
+    from ..conftest import benchmark_script
 
-    monkeypatch.syspath_prepend(str(BENCHMARKS))
     first = _records(1.0, n=4, seed=1).assign(retries=[0, 1, 0, 0], retry_failed=[None, "divergences", None, None])
     second = _records(1.0, n=3, seed=2).assign(retries=0, retry_failed=None)
     for rec in (first, second):
@@ -526,12 +524,11 @@ def test_a_candidate_defaults_heavy_file_takes_the_campaigns_above_the_heavy_dut
         assert job_model(auto, c, options) == KINDS["traces"].default_model(c, options)
 
 
-def test_a_partial_records_summary_names_the_command_that_resumes_it(tmp_path, monkeypatch, capsys):
+def test_a_partial_records_summary_names_the_command_that_resumes_it(tmp_path, capsys):
     """``--from-records`` on a ``.partial.csv``: the header's resume command starts at the
     records' first seed (an earlier run's records, not the current confirmatory seed)."""
-    from ..conftest import BENCHMARKS, benchmark_script
+    from ..conftest import benchmark_script
 
-    monkeypatch.syspath_prepend(str(BENCHMARKS))
     rec = _records(1.0, n=20)
     rec["seed"] += 4000
     partial = tmp_path / "records.partial.csv"
@@ -547,15 +544,14 @@ def test_a_partial_records_summary_names_the_command_that_resumes_it(tmp_path, m
     assert "--seed0 4000 --log survey --records" in capsys.readouterr().err
 
 
-def test_fill_test_mass_writes_the_campaigns_masses_back_and_the_section_reads_them(tmp_path, monkeypatch, capsys):
+def test_fill_test_mass_writes_the_campaigns_masses_back_and_the_section_reads_them(tmp_path, capsys):
     """``--from-records --fill-test-mass``: records written before the mass was recorded get each
     campaign's declared test mass (the campaign simulated again from its seed and size), written
     back to the file, and the section shows the reading by test mass."""
     from bayes_roadload.simulate.independent import simulate_independent
 
-    from ..conftest import BENCHMARKS, benchmark_script
+    from ..conftest import benchmark_script
 
-    monkeypatch.syspath_prepend(str(BENCHMARKS))
     rec = _records(1.0, n=2)
     rec["seed"], rec["pairs"] = [8, 9], [1, 1]
     records = tmp_path / "records.csv"
