@@ -730,7 +730,8 @@ def _plan_population(args, out: Path):
     if is_fit_dir(src):
         source = read_fit_dir(src)
         campaign = fit_campaign(source.record)
-        _warn_failed_fit(src, "the source fit", FAILED_SOURCE_CONSEQUENCE)
+        if not source.passed:
+            echo(_failed_fit_line(f"the source fit {src}", source.failed, FAILED_SOURCE_CONSEQUENCE))
         return population_from_samples(source.samples, source.record["free"], source.model, campaign,
                                        source=f"{source.record['pooling']} fit {src}"), campaign
     campaign = _load_with_units(src, args)
