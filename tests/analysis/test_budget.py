@@ -491,6 +491,7 @@ def test_a_posterior_type_b_step_that_fails_falls_back_to_least_squares(clean, c
         assert got[key]["F50_N"] == pytest.approx(want[key]["F50_N"], rel=1e-9)
 
 
+@pytest.mark.slow
 def test_a_model_constants_shift_is_the_model_file_with_its_value_moved():
     """A constant the model file fixes with an ``uncertainty`` (the tyre's v^2 coefficient C_R
     of ``four_term_tyre_lag_j2452_typeb``, 1.0e-6 +- 0.8e-6 s^2/m^2) is a Type B source shifted

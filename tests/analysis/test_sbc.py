@@ -97,6 +97,7 @@ def test_a_model_with_the_tyre_lag_draws_and_simulates_its_gain():
     assert len(still.runs) != len(lagged.runs) or not np.allclose(still.runs["speed_mps"], lagged.runs["speed_mps"])
 
 
+@pytest.mark.slow
 def test_the_drawn_speed_of_the_lag_model_is_the_likelihoods_fixed_point():
     """The lag model integrates with the lagged speed drop of the logged speed, so an exact draw
     must satisfy v = v_model(theta; L(v)) + noise: checked to 1e-8 m/s, where one step from the
@@ -384,6 +385,7 @@ def test_fast_subset_calibrated_and_control(fast_subset):
     assert (bad["CD0_mean"] > bad["CD0_truth"]).all() and (bad["AD_mean"] > bad["AD_truth"]).all()
 
 
+@pytest.mark.slow
 def test_the_exact_draws_truth_states_the_constants_the_data_were_drawn_with():
     """The default's SBC model holds the tyre's v^2 coefficient at its J2452 mean, which the
     exact draw integrates with; the project's simulator (the template) states 0 for it.  The

@@ -244,6 +244,7 @@ def test_linear_equation_of_motion_is_solved_in_parallel_with_the_same_result():
     assert float(jax.grad(loss(par))(0.4)) == pytest.approx(float(jax.grad(loss(seq))(0.4)), rel=1e-10)
 
 
+@pytest.mark.slow
 def test_the_stage_coefficients_are_computed_once_in_the_compiled_gradient():
     """The parallel solution holds the runs' stage coefficients in one conditional
     (``integrate._hold``) so that XLA does not copy the force terms' arithmetic into every
