@@ -321,14 +321,13 @@ def test_a_model_with_the_admittance_makes_the_filter_candidate_not_applicable()
     said why; the same problem without the model's filter keeps the candidate."""
     from bayes_roadload.analysis.batch import SimulatedCampaign
     from bayes_roadload.inference.bayes import build_problem
-    from bayes_roadload.inference.nuts import initial_values
     from bayes_roadload.simulate.cases import get_case
 
     campaign = SimulatedCampaign(get_case(1), pairs=1, seed=0)()
     problem = build_problem(campaign, "four_term_tyre_lag_admittance_pitch")
     length = problem.spec.resolve_admittance(campaign)
     assert length > 0.0
-    init = initial_values(problem, campaign)
+    init = problem.initial  # availability reads no fitted value: the model's starting values serve
     library = fx.load_library()
     _, available, _, effects, _ = fx.linearisation_point(problem, init, library, length)
     assert "applies the vehicle's admittance already" in available["aero_admittance"]

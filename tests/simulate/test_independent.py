@@ -326,6 +326,8 @@ def test_humidity_is_logged_on_request_and_leaves_every_other_draw_alone(tmp_pat
     assert "humidity" in CHANNELS and "humidity" not in DEFAULT_CHANNELS
     plain = simulate_independent(7, pairs=1)
     logged = simulate_independent(7, pairs=1, channels=DEFAULT_CHANNELS + ("humidity",))
+    back = load_campaign(save_campaign(logged, tmp_path / "c"))
+    assert "relative_humidity_pct" in back.runs
     rh = logged.runs.pop("relative_humidity_pct").to_numpy()
     assert logged.runs.equals(plain.runs)
     true_pct = 100.0 * logged.truth["meta"]["relative_humidity"]
@@ -333,9 +335,6 @@ def test_humidity_is_logged_on_request_and_leaves_every_other_draw_alone(tmp_pat
     # bias within +-2 %, noise 0.3 % (5 sd), rounding 0.05 %
     assert np.all(np.abs(rh - true_pct) <= sens.HUMIDITY_ACCURACY_PCT + 5 * 0.3 + 0.05)
     assert abs(rh.mean() - true_pct - logged.truth["meta"]["hygrometer"]["bias_pct"]) < 0.1
-    back = load_campaign(save_campaign(simulate_independent(7, pairs=1, channels=DEFAULT_CHANNELS + ("humidity",)),
-                                       tmp_path / "c"))
-    assert "relative_humidity_pct" in back.runs
     dry = simulate_independent(7, pairs=1, withhold=("humidity",), channels=DEFAULT_CHANNELS + ("humidity",))
     assert "relative_humidity_pct" not in dry.runs
 
