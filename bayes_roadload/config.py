@@ -321,6 +321,13 @@ class SamplerConfig:
         aerodynamic admittance and a heavy vehicle's priors"); a problem without exactly one
         q (interval times, steady states, a noise intensity per run) is sampled in the
         Laplace coordinates.
+    coordinates : "auto" (default): a problem is sampled in its own coordinates, and in its
+        alternative ones (:meth:`bayes_roadload.inference.problem.Problem.alternative_coordinates`;
+        the tyre-lag model: A_D, B_D, C_D0 directly instead of the apparent coefficients) from the
+        start only where its MAP's Laplace approximation reaches a wall
+        (:data:`MAX_BEYOND_SUPPORT_SHARE`) or on the retry after divergences; "alternative": in
+        the alternative coordinates from the start wherever the problem has them (the same
+        posterior; a design option, measured by ``benchmarks/coordinates_study.py``).
     """
 
     num_warmup: int = 300
@@ -340,12 +347,15 @@ class SamplerConfig:
     retry: bool = True
     posterior_predictive_draws: int = 200
     noise_scaled_metric: bool = True
+    coordinates: str = "auto"
 
     def __post_init__(self):
         if self.precondition not in ("laplace", "none"):
             raise ValueError("precondition must be 'laplace' or 'none'")
         if self.mass_matrix not in ("auto", "diag", "dense", "identity"):
             raise ValueError("mass_matrix must be 'auto', 'diag', 'dense' or 'identity'")
+        if self.coordinates not in ("auto", "alternative"):
+            raise ValueError("coordinates must be 'auto' or 'alternative'")
         if min(self.num_warmup, self.num_samples, self.num_chains) < 1:
             raise ValueError("num_warmup, num_samples and num_chains must be positive")
         if not self.heartbeat_s >= 0.0:

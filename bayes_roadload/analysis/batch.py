@@ -337,6 +337,8 @@ def _fit_record(job: FitJob, campaign: Campaign, fit) -> dict[str, Any]:
         "mean_tree_depth": float(diag["mean_tree_depth"]),
         "map_converged": bool(fit.map.success) if fit.map is not None else None,
         **retry_fields(fit.retries),
+        # the first attempt's coordinates when not the problem's own ("": its own)
+        "coordinates": fit.coordinates,
         # the acceptance of the reported run: the job's, or the small-campaign / quiet-trace
         # value (nuts.campaign_sampler, nuts.quiet_trace_sampler), or the retry's
         "target_accept_sampled": float(fit.sampler.target_accept),
@@ -420,7 +422,9 @@ def run_fit_job(job: FitJob) -> dict[str, Any]:
           (NUTS: and ``q_mps_per_sqrt_s_truth`` when the campaign's truth states it);
         * gates: ``gate_pass, gates_failed, divergences, max_r_hat, min_ess_bulk,
           min_ess_tail, mean_tree_depth, map_converged``, ``noise_scaled_max_rate`` (the
-          largest rate of the noise-scaled coordinates, NaN when not sampled in them); for
+          largest rate of the noise-scaled coordinates, NaN when not sampled in them),
+          ``coordinates`` (the first attempt's coordinates when not the problem's own, with
+          why: :func:`~bayes_roadload.inference.nuts.start_coordinates`; "" its own); for
           ``method="laplace"`` only
           ``gate_pass`` (the MAP converged, its Hessian is positive definite and the
           importance weights' Pareto k is at most ``config.LAPLACE_MAX_PARETO_K``),

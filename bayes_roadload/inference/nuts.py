@@ -1161,25 +1161,22 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
     sampler, after divergences in the problem's alternative coordinates where it has them
     (:func:`retry_coordinates`); ``fit.retries`` records which.  A problem whose MAP's Laplace
     approximation puts :data:`~bayes_roadload.config.MAX_BEYOND_SUPPORT_SHARE` or more beyond a
-    coefficient's support in the sampled coordinates (:meth:`~.problem.Problem.beyond_support`)
-    is sampled in its alternative coordinates from the start, with their own MAP
-    (``fit.coordinates`` says so)."""
+    coefficient's support in the sampled coordinates (:meth:`~.problem.Problem.beyond_support`),
+    or every problem that has them when ``sampler.coordinates`` is "alternative", is sampled in
+    its alternative coordinates from the start, with their own MAP (:func:`start_coordinates`;
+    ``fit.coordinates`` says so)."""
     sampler = campaign_sampler(sampler, problem)
     map_result = post = None
     walled = ""
     if sampler.precondition == "laplace":
         post = unconstrained_posterior(problem, init)
         map_result = find_map(problem, {}, posterior=post, progress=sampler.progress_bar)
-        beyond = problem.beyond_support(map_result.z, map_result.cov)
-        other = problem.alternative_coordinates(map_result.constrained) \
-            if beyond >= config.MAX_BEYOND_SUPPORT_SHARE else None
+        other, why = start_coordinates(problem, map_result, sampler)
         if other is not None:
             first_map_s = map_result.time_s
-            log.warning("MAP: %.1f %% of its Laplace approximation lies where a coefficient leaves its prior's "
-                        "support (a wall in the sampled coordinates, on which NUTS diverges): %s", 100 * beyond, other[2])
             problem, post, map_result, walled = _in_coordinates(other, sampler)
             map_result.time_s += first_map_s
-            walled = f"{walled} ({100 * beyond:.1f} % of the Laplace approximation beyond a support)"
+            walled = f"{walled} ({why})"
         sampler = quiet_trace_sampler(sampler, map_result)
     checked: dict[str, Any] = {}
 
@@ -1230,6 +1227,30 @@ def sample_problem(problem: Problem, init: dict[str, Any], sampler: config.Sampl
     fit.coordinates = walled
     fit.truth = truth
     return fit
+
+
+def start_coordinates(problem: Problem, map_result: MapResult, sampler: config.SamplerConfig
+                      ) -> tuple[tuple[Problem, dict[str, Any], str] | None, str]:
+    """The coordinates a first attempt samples in, other than the problem's own: its
+    alternative ones (:meth:`~.problem.Problem.alternative_coordinates`, started from the MAP
+    ``map_result``) when ``sampler.coordinates`` is "alternative", or when the MAP's Laplace
+    approximation puts :data:`~bayes_roadload.config.MAX_BEYOND_SUPPORT_SHARE` or more beyond a
+    coefficient's support in the problem's own (:meth:`~.problem.Problem.beyond_support`: a wall
+    in the sampled space, on which NUTS diverges); with why.  ``(None, "")``: its own."""
+    if sampler.coordinates == "alternative":
+        other = problem.alternative_coordinates(map_result.constrained)
+        if other is None:
+            return None, ""
+        log.info("sampled in %s (sampler coordinates \"alternative\")", other[2])
+        return other, "sampler coordinates \"alternative\""
+    beyond = problem.beyond_support(map_result.z, map_result.cov)
+    if beyond < config.MAX_BEYOND_SUPPORT_SHARE:
+        return None, ""
+    other = problem.alternative_coordinates(map_result.constrained)
+    if other is not None:
+        log.warning("MAP: %.1f %% of its Laplace approximation lies where a coefficient leaves its prior's "
+                    "support (a wall in the sampled coordinates, on which NUTS diverges): %s", 100 * beyond, other[2])
+    return other, f"{100 * beyond:.1f} % of the Laplace approximation beyond a support"
 
 
 def _in_coordinates(other: tuple[Problem, dict[str, Any], str], sampler: config.SamplerConfig

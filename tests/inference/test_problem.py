@@ -146,3 +146,33 @@ def test_the_laplace_share_beyond_a_support_of_the_apparent_coefficients(small_c
     assert 0.45 <= lag.beyond_support(z_of(at_bound), cov) <= 0.55
     direct, _, _ = lag.alternative_coordinates({})
     assert direct.beyond_support(z_of(at_bound), cov) == 0.0
+
+
+def test_the_first_attempts_coordinates_follow_the_wall_share_or_the_samplers_choice(small_campaign, monkeypatch):
+    """``start_coordinates``: the problem's own coordinates below the wall share, its alternative
+    ones at or above it (with the share said) or whenever the sampler asks for them
+    (``coordinates = "alternative"``); a problem without alternative coordinates keeps its own
+    either way."""
+    from types import SimpleNamespace
+
+    from bayes_roadload import config
+    from bayes_roadload.inference.bayes import build_problem, with_apparent
+    from bayes_roadload.inference.nuts import start_coordinates
+
+    lag = build_problem(small_campaign, "four_term_tyre_lag")
+    values = with_apparent(lag, {"AD": 0.01, "BD": 2e-4, "CD0": 0.35, "tyre_lag_gain_per_mps": 0.005, "KD": 0.5})
+    at_map = SimpleNamespace(constrained=values, z={}, cov=np.zeros((0, 0)))
+    share = {"value": 0.0}
+    monkeypatch.setattr(FitProblem, "beyond_support", lambda self, z, cov: share["value"])
+    auto, alternative = config.DEFAULT_SAMPLER, dataclasses.replace(config.DEFAULT_SAMPLER, coordinates="alternative")
+    assert start_coordinates(lag, at_map, auto) == (None, "")
+    share["value"] = config.MAX_BEYOND_SUPPORT_SHARE
+    other, why = start_coordinates(lag, at_map, auto)
+    assert other[0].apparent is None and "beyond a support" in why and why.startswith("0.1 %")
+    share["value"] = 0.0
+    other, why = start_coordinates(lag, at_map, alternative)
+    assert other[0].apparent is None and "directly" in other[2] and "alternative" in why
+    plain = build_problem(small_campaign, "four_term")
+    assert start_coordinates(plain, SimpleNamespace(constrained={}, z={}, cov=None), alternative) == (None, "")
+    with pytest.raises(ValueError, match="coordinates"):
+        dataclasses.replace(config.DEFAULT_SAMPLER, coordinates="direct")
