@@ -327,7 +327,8 @@ class SamplerConfig:
         start only where its MAP's Laplace approximation reaches a wall
         (:data:`MAX_BEYOND_SUPPORT_SHARE`) or on the retry after divergences; "alternative": in
         the alternative coordinates from the start wherever the problem has them (the same
-        posterior; a design option, measured by ``benchmarks/coordinates_study.py``).
+        posterior, from their own MAP: with ``precondition = "laplace"`` only; a design option,
+        measured by ``benchmarks/coordinates_study.py``).
     """
 
     num_warmup: int = 300
@@ -356,6 +357,8 @@ class SamplerConfig:
             raise ValueError("mass_matrix must be 'auto', 'diag', 'dense' or 'identity'")
         if self.coordinates not in ("auto", "alternative"):
             raise ValueError("coordinates must be 'auto' or 'alternative'")
+        if self.coordinates == "alternative" and self.precondition != "laplace":
+            raise ValueError("coordinates 'alternative' start from the Laplace MAP: give precondition 'laplace'")
         if min(self.num_warmup, self.num_samples, self.num_chains) < 1:
             raise ValueError("num_warmup, num_samples and num_chains must be positive")
         if not self.heartbeat_s >= 0.0:

@@ -29,6 +29,9 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from gradient_cost import commit_of  # noqa: E402
 
 
 def wall_share(job) -> dict:
@@ -67,14 +70,15 @@ def main(argv=None) -> int:
     if args.names:
         rec = rec[rec["name"].isin(args.names)]
     rows = []
+    code = commit_of(ROOT)
     for _, r in rec.iterrows():
         log = tuple(str(r["logged"]).split()) if "logged" in r and isinstance(r["logged"], str) else ()
         (job,) = calibration_jobs([int(r["seed"])], log=log)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             row = wall_share(job)
-        row.update(pairs=int(r["pairs"]), diverged_first=r.get("retry_failed") == "divergences",
-                   record_model=r["model"])
+        row.update(pairs=int(r["pairs"]), diverged_first="divergences" in str(r.get("retry_failed")),
+                   record_model=r["model"], code=code)
         rows.append(row)
         print(f"{row['name']}: {row['pairs']} pairs, {row['pooling']}, {row['model']}: "
               f"{100 * row['beyond_support']:.3f} % beyond a support; first attempt diverged: "

@@ -252,7 +252,8 @@ def _job_fields(job: FitJob) -> dict[str, Any]:
     out = {"name": job.name, "method": job.method, "model": job.model, "pooling": job.pooling, "noise": job.noise,
            "robust": bool(job.robust), "num_warmup": job.sampler.num_warmup,
            "num_samples": job.sampler.num_samples, "num_chains": job.sampler.num_chains,
-           "target_accept": job.sampler.target_accept, "noise_scaled_metric": bool(job.sampler.noise_scaled_metric)}
+           "target_accept": job.sampler.target_accept, "noise_scaled_metric": bool(job.sampler.noise_scaled_metric),
+           "sampler_coordinates": job.sampler.coordinates}
     out.update({str(k): v for k, v in job.tags.items()})
     return out
 

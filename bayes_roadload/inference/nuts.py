@@ -152,8 +152,9 @@ class NutsFit:
     in those coordinates, else None."""
     coordinates: str = ""
     """What :func:`sample_problem` changed in the sampled coordinates before the first attempt
-    (the problem's alternative coordinates when its MAP's Laplace approximation reached a wall:
-    :meth:`~bayes_roadload.inference.problem.Problem.beyond_support`); "" when nothing."""
+    (the problem's alternative coordinates when its MAP's Laplace approximation reached a wall,
+    :meth:`~bayes_roadload.inference.problem.Problem.beyond_support`, or when the sampler asked
+    for them: :func:`start_coordinates`), with why; "" when nothing."""
 
 
 def _site_scales(problem: Problem, z: dict[str, Any]) -> dict[str, Any]:
@@ -1247,9 +1248,10 @@ def start_coordinates(problem: Problem, map_result: MapResult, sampler: config.S
     if beyond < config.MAX_BEYOND_SUPPORT_SHARE:
         return None, ""
     other = problem.alternative_coordinates(map_result.constrained)
-    if other is not None:
-        log.warning("MAP: %.1f %% of its Laplace approximation lies where a coefficient leaves its prior's "
-                    "support (a wall in the sampled coordinates, on which NUTS diverges): %s", 100 * beyond, other[2])
+    if other is None:
+        return None, ""
+    log.warning("MAP: %.1f %% of its Laplace approximation lies where a coefficient leaves its prior's "
+                "support (a wall in the sampled coordinates, on which NUTS diverges): %s", 100 * beyond, other[2])
     return other, f"{100 * beyond:.1f} % of the Laplace approximation beyond a support"
 
 

@@ -176,3 +176,5 @@ def test_the_first_attempts_coordinates_follow_the_wall_share_or_the_samplers_ch
     assert start_coordinates(plain, SimpleNamespace(constrained={}, z={}, cov=None), alternative) == (None, "")
     with pytest.raises(ValueError, match="coordinates"):
         dataclasses.replace(config.DEFAULT_SAMPLER, coordinates="direct")
+    with pytest.raises(ValueError, match="precondition"):  # they start from the Laplace MAP
+        dataclasses.replace(config.DEFAULT_SAMPLER, coordinates="alternative", precondition="none")
