@@ -509,12 +509,14 @@ def _failed_fit_line(which: str, failed, what: str = FAILED_FIT_CONSEQUENCE) -> 
             f"{what}; refit with more draws (see `fit`)")
 
 
-def _warn_failed_fit(fit_dir, which: str = "the fit", what: str = FAILED_FIT_CONSEQUENCE) -> None:
+def _warn_failed_fit(fit_dir, which: str = "the fit", what: str = FAILED_FIT_CONSEQUENCE,
+                     gates: tuple[bool, tuple[str, ...]] | None = None) -> None:
     """Print, before any figure drawn from it, that a fit directory's fit failed its gates
-    (``diagnostics.json`` ``pass``; :func:`_failed_fit_line`)."""
+    (``diagnostics.json`` ``pass``, or ``gates``, the ``(passed, failed)`` of a
+    :class:`~bayes_roadload.output.FitDir` already read; :func:`_failed_fit_line`)."""
     from .output import fit_gates
 
-    passed, failed = fit_gates(fit_dir)
+    passed, failed = fit_gates(fit_dir) if gates is None else gates
     if not passed:
         echo(_failed_fit_line(f"{which} {fit_dir}", failed, what))
 
@@ -581,8 +583,8 @@ def _cmd_predict(args) -> int:
     from .inference.spec import load_model_spec
     from .output import read_fit_dir
 
-    _warn_failed_fit(args.fit_dir)
     fd = read_fit_dir(args.fit_dir)
+    _warn_failed_fit(args.fit_dir, gates=(fd.passed, fd.failed))
     campaign = _campaign_of_fit(fd)
     fixed = load_model_spec(fd.model).fixed if args.mass_change_kg else {}  # the tyre terms it holds fixed
     draws = flat_draws(fd.samples, fd.path / "posterior.nc")  # the directory's posterior, read once
@@ -730,8 +732,7 @@ def _plan_population(args, out: Path):
     if is_fit_dir(src):
         source = read_fit_dir(src)
         campaign = fit_campaign(source.record)
-        if not source.passed:
-            echo(_failed_fit_line(f"the source fit {src}", source.failed, FAILED_SOURCE_CONSEQUENCE))
+        _warn_failed_fit(src, "the source fit", FAILED_SOURCE_CONSEQUENCE, gates=(source.passed, source.failed))
         return population_from_samples(source.samples, source.record["free"], source.model, campaign,
                                        source=f"{source.record['pooling']} fit {src}"), campaign
     campaign = _load_with_units(src, args)

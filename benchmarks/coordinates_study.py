@@ -49,6 +49,16 @@ from calibration_study import resume_from  # noqa: E402
 from gradient_cost import commit_of  # noqa: E402
 
 
+def record_jobs(records: pd.DataFrame, options: FitOptions | None = None) -> list:
+    """One fit job per record, its campaign built as the study built it (``calibration_jobs``
+    with the record's seed and logged channels), fitted with ``options``."""
+    jobs = []
+    for _, r in records.iterrows():
+        log = tuple(str(r["logged"]).split()) if isinstance(r.get("logged"), str) else ()
+        jobs += calibration_jobs([int(r["seed"])], options=options, log=log)
+    return jobs
+
+
 def first_divergences(rec: pd.DataFrame) -> pd.Series:
     """Per record: did the first attempt fail on divergences (a retry for them, or kept)."""
     failed = rec["retry_failed"].fillna("").astype(str).str.contains("divergences")
@@ -101,10 +111,7 @@ def main(argv=None) -> int:
     before = before[before["error"].isna() & (before["pairs"] <= args.max_pairs)]
     if not args.from_records:
         sampler = dataclasses.replace(DEFAULT_SAMPLER, coordinates=args.coordinates)
-        jobs = []
-        for _, r in before.iterrows():
-            log = tuple(str(r["logged"]).split()) if isinstance(r.get("logged"), str) else ()
-            jobs += calibration_jobs([int(r["seed"])], options=FitOptions(sampler=sampler), log=log)
+        jobs = record_jobs(before, FitOptions(sampler=sampler))
         partial = args.out.with_suffix(".partial.csv")
         args.out.parent.mkdir(parents=True, exist_ok=True)
         done_before, jobs = resume_from(partial, jobs)

@@ -7,8 +7,9 @@ did not?
 ``sample_problem`` samples a fit in the direct coordinates (A_D, B_D, C_D0) from the start when
 the share reaches ``config.MAX_BEYOND_SUPPORT_SHARE``; a lower share leaves the wall inside the
 sampled space, which a first attempt may meet.  Each campaign is rebuilt as the study built it
-(``calibration_jobs`` with the records' logged channels, the model ``fit`` takes for it), its
-start and MAP computed as ``fit_nuts`` computes them; nothing is sampled.
+(``coordinates_study.record_jobs``: ``calibration_jobs`` with the records' logged channels; the
+model ``fit`` takes for it), its start and MAP computed as ``fit_nuts`` computes them; nothing
+is sampled.
 
     python benchmarks/wall_share_probe.py --records docs/calibration/survey_records.csv \
         --max-pairs 3 --out benchmarks/records/gates/wall_share_survey.csv
@@ -57,7 +58,7 @@ def wall_share(job) -> dict:
 
 
 def main(argv=None) -> int:
-    from bayes_roadload.analysis.calibration import calibration_jobs
+    from coordinates_study import record_jobs
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--records", type=Path, required=True, help="a calibration study's records (CSV)")
@@ -71,9 +72,7 @@ def main(argv=None) -> int:
         rec = rec[rec["name"].isin(args.names)]
     rows = []
     code = commit_of(ROOT)
-    for _, r in rec.iterrows():
-        log = tuple(str(r["logged"]).split()) if "logged" in r and isinstance(r["logged"], str) else ()
-        (job,) = calibration_jobs([int(r["seed"])], log=log)
+    for job, (_, r) in zip(record_jobs(rec), rec.iterrows()):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             row = wall_share(job)
